@@ -1,0 +1,520 @@
+"""Lower a validated line (and its operating programme) into a :class:`CompiledLine`.
+
+States are laid out along the web path: for each element its own states (roll length and
+unstretched length, angular speed, drive torque, controller integrators, sensor filters),
+then the strain of the span that leaves it. Only neighbours interact, so the Jacobian is
+banded; the exact pattern is obtained from the kernel itself (``MODE_TOUCH``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InputError
+from ..schema.line import Line
+from . import kernels
+from .layout import (
+    AUX_CTRL, AUX_NODE, AUX_SENS, AUX_SPAN, C_SPEED, C_TENSION_TORQUE, C_TENSION_TRIM, CI_CH,
+    CI_NODE, CI_RSENSOR, CI_SENSOR, CI_TYPE, CI_X, CP_DRAW, CP_FF, CP_KAW, CP_KI, CP_KP, CP_LIM,
+    CP_SIGN, DRV_IDEAL, DRV_NONE, DRV_TORQUE, EV_BREAK, EV_CAPSTAN, EV_EMPTY, EV_SLACK, H_MAXD,
+    H_MAXPTS, H_MODEL, H_NAUX, H_NC, H_NCH, H_NEV, H_NN, H_NPAT, H_NQ, H_NS, H_NSE, H_NY,
+    H_OFF_CI, H_OFF_CP, H_OFF_EV, H_OFF_NI, H_OFF_NP, H_OFF_PAT, H_OFF_RT, H_OFF_SCHN,
+    H_OFF_SCHT, H_OFF_SCHV, H_OFF_SEI, H_OFF_SEP, H_OFF_SI, H_OFF_SP, HEADER, MODE_JAC,
+    MODE_RHS, MODE_TOUCH, NCI, NCP, NEVI, NI, NI_DRIVE, NI_KIND, NI_S, NI_SPAN_DN, NI_SPAN_UP,
+    NI_SPEEDC, NI_TAU, NI_TENSC, NI_U, NI_W, NK_REWIND, NK_ROLLER, NK_UNWIND, NP, NP_B, NP_CW,
+    NP_DRAW, NP_EMB, NP_EPSW, NP_J, NP_JC, NP_R, NP_R0, NP_RC, NP_RHOW, NP_TC, NP_TLAG,
+    NP_TMAX, NP_WEPS, NSEI, NSEP, NSI, NSP, SE_DIAMETER, SE_ENCODER, SE_LOADCELL, SEI_F,
+    SEI_NODE, SEI_TYPE, SEP_CIN, SEP_COUT, SEP_GAIN, SEP_OFF, SEP_TAU, SEP_WIN, SEP_WOUT,
+    SI_DN, SI_E, SI_UP, SP_EA, SP_L, SP_TBRK,
+)
+
+MAXD = 16  # gradient slots per intermediate quantity
+
+#: event kind -> name used in the event log
+EVENT_NAMES = {EV_SLACK: "slack", EV_BREAK: "web_break", EV_CAPSTAN: "slip_risk",
+               EV_EMPTY: "roll_empty"}
+
+
+@dataclass
+class Programme:
+    """Piecewise-linear set-point tables. Channel 0 is line speed [m/s]; channel c >= 1 the
+    tension set-point [N] of a tension controller. ``breakpoints`` are the times where a
+    set-point or its slope jumps: the solver stops and re-initialises there."""
+
+    names: list[str]
+    times: list[list[float]]
+    values: list[list[float]]
+    breakpoints: list[float] = field(default_factory=list)
+
+    @classmethod
+    def constant(cls, line: Line, line_speed: float = 0.0) -> Programme:
+        names = ["line_speed"] + [c.id for c in line.controllers if c.type == "tension_pi"]
+        vals = [line_speed] + [c.setpoint for c in line.controllers if c.type == "tension_pi"]
+        return cls(names, [[0.0] for _ in names], [[v] for v in vals], [])
+
+    @classmethod
+    def from_steps(cls, line: Line, steps, file: str = "<scenario>") -> Programme:
+        """Build the tables from scenario programme steps (validated, time-ordered)."""
+        prog = cls.constant(line)
+        chan = {n: i for i, n in enumerate(prog.names)}
+        busy_until = [0.0] * len(prog.names)
+        busy_by = [""] * len(prog.names)
+        for i, st in enumerate(steps):
+            changes = []
+            if st.line_speed is not None:
+                changes.append((0, st.line_speed))
+            for cid, val in (st.tension or {}).items():
+                changes.append((chan[cid], val))
+            for ch, new in changes:
+                ts, vs = prog.times[ch], prog.values[ch]
+                old = vs[-1]
+                if st.at < busy_until[ch] - 1e-12:
+                    raise InputError(f"starts at {st.at:g} s, before the ramp of {busy_by[ch]} "
+                                     f"ends at {busy_until[ch]:g} s", file=file,
+                                     path=f"programme[{i}].at")
+                if st.rate is not None and ch == 0:
+                    dur = abs(new - old) / st.rate
+                else:
+                    dur = st.ramp or 0.0
+                if st.at == 0.0 and dur == 0.0:
+                    vs[-1] = new  # initial value
+                    continue
+                if st.at > ts[-1]:
+                    ts.append(st.at)
+                    vs.append(old)
+                ts.append(st.at + dur)
+                vs.append(new)
+                busy_until[ch] = st.at + dur
+                busy_by[ch] = f"programme[{i}]"
+        bps = sorted({t for ts in prog.times for t in ts if t > 0.0})
+        prog.breakpoints = bps
+        return prog
+
+    def value(self, name: str, t: float) -> float:
+        """Set-point value at time t (right-continuous), evaluated in Python."""
+        ch = self.names.index(name)
+        ts, vs = self.times[ch], self.values[ch]
+        k = max(m for m in range(len(ts)) if ts[m] <= t)
+        if k >= len(ts) - 1:
+            return vs[-1]
+        dt = ts[k + 1] - ts[k]
+        return vs[k] if dt <= 0 else vs[k] + (vs[k + 1] - vs[k]) * (t - ts[k]) / dt
+
+
+@dataclass
+class CompiledLine:
+    """A line lowered to flat arrays, ready for the solver.
+
+    Attributes
+    ----------
+    line : Line
+    I, P : ndarray
+        Flat int64 topology/index array and float64 parameter vector read by the kernel.
+    n_states : int
+    state_names : list of str
+        ``<component>.<state>`` for every state, in web order.
+    state_units : list of str
+    atol : ndarray
+        Per-state absolute tolerances.
+    pattern : (rows, cols)
+        Jacobian sparsity pattern (exact, from the kernel).
+    lband, uband : int
+        Band widths of the pattern.
+    aux_names, aux_units : list of str
+        Names of the algebraic outputs (columns of :meth:`outputs`).
+    event_names : list of (kind, component)
+    """
+
+    line: Line
+    programme: Programme
+    I: np.ndarray
+    P: np.ndarray
+    n_states: int
+    state_names: list[str]
+    state_units: list[str]
+    state_kinds: list[str]
+    atol: np.ndarray
+    aux_names: list[str]
+    aux_units: list[str]
+    event_kinds: list[int]
+    event_components: list[str]
+    node_ids: list[str]
+    span_ids: list[str]
+    sensors: list
+    controllers: list
+    pattern: tuple[np.ndarray, np.ndarray] = (np.zeros(0, np.int64), np.zeros(0, np.int64))
+    lband: int = 0
+    uband: int = 0
+
+    def __post_init__(self):
+        nq = int(self.I[H_NQ])
+        self._W = np.zeros(4 * self.n_states + 16 * (len(self.node_ids) + len(self.span_ids))
+                           + 8 * (len(self.sensors) + len(self.controllers)) + 16)
+        self._GI = np.zeros(nq * MAXD, np.int64)
+        self._GC = np.zeros(nq, np.int64)
+        self._GV = np.zeros(nq * MAXD)
+        self._J1 = np.zeros((1, 1))
+        self._aux0 = np.zeros(0)
+        self._yd = np.zeros(self.n_states)
+
+    # ---- the callbacks ------------------------------------------------------------------
+    def make_rhs(self):
+        """Return ``rhs(t, y, yp)`` filling yp in place (the form scikit-sundae calls)."""
+        ev, I, P, W, GI, GC, GV, J1, a0 = (kernels.evaluate, self.I, self.P, self._W, self._GI,
+                                            self._GC, self._GV, self._J1, self._aux0)
+
+        def rhs(t, y, yp):
+            ev(t, y, yp, J1, MODE_RHS, I, P, W, GI, GC, GV, a0)
+
+        return rhs
+
+    def make_jac(self):
+        """Return ``jac(t, y, yp, JJ)`` writing the pattern entries of the (n, n) array JJ."""
+        ev, I, P, W, GI, GC, GV, a0 = (kernels.evaluate, self.I, self.P, self._W, self._GI,
+                                        self._GC, self._GV, self._aux0)
+        ydw = np.zeros(self.n_states)
+
+        def jac(t, y, yp, JJ):
+            ev(t, y, ydw, JJ, MODE_JAC, I, P, W, GI, GC, GV, a0)
+
+        return jac
+
+    def rhs(self, t: float, y: np.ndarray) -> np.ndarray:
+        """dy/dt at (t, y) (allocates; for analysis, not the solver path)."""
+        yd = np.zeros(self.n_states)
+        kernels.evaluate(float(t), np.ascontiguousarray(y, float), yd, self._J1, MODE_RHS,
+                         self.I, self.P, self._W, self._GI, self._GC, self._GV, self._aux0)
+        return yd
+
+    def jacobian(self, t: float, y: np.ndarray) -> np.ndarray:
+        """Analytic Jacobian d(dy/dt)/dy at (t, y) as a dense array."""
+        n = self.n_states
+        JJ = np.zeros((n, n))
+        kernels.evaluate(float(t), np.ascontiguousarray(y, float), np.zeros(n), JJ, MODE_JAC,
+                         self.I, self.P, self._W, self._GI, self._GC, self._GV, self._aux0)
+        return JJ
+
+    def linearise(self, t: float, y: np.ndarray):
+        """Linearisation at (t, y): the Jacobian and its eigenvalues [1/s]."""
+        A = self.jacobian(t, y)
+        return A, np.linalg.eigvals(A)
+
+    def outputs(self, t: np.ndarray, Y: np.ndarray) -> np.ndarray:
+        """Algebraic outputs (columns :attr:`aux_names`) for each row of a state matrix."""
+        Y = np.ascontiguousarray(Y, float)
+        t = np.ascontiguousarray(np.broadcast_to(t, (Y.shape[0],)), float)
+        AUX = np.empty((Y.shape[0], len(self.aux_names)))
+        kernels.outputs_rows(t, Y, AUX, self.I, self.P, self._W, self._GI, self._GC, self._GV,
+                             np.zeros(self.n_states), self._J1)
+        return AUX
+
+    def events(self, Y: np.ndarray) -> np.ndarray:
+        """Event-function values for each row of a state matrix (condition holds where < 0)."""
+        Y = np.atleast_2d(np.ascontiguousarray(Y, float))
+        G = np.empty((Y.shape[0], len(self.event_kinds)))
+        kernels.event_values_rows(Y, G, self.I, self.P)
+        return G
+
+    def set_segment_start(self, t0: float) -> None:
+        """Tell the kernel which piece of the programme is active (see ``kernels.setpoint``)."""
+        self.P[self.I[H_OFF_RT]] = t0
+
+    def index(self, name: str) -> int:
+        """Index of a state by name, e.g. ``span2.strain``."""
+        return self.state_names.index(name)
+
+    def aux_index(self, name: str) -> int:
+        """Column of an algebraic output by name, e.g. ``span2.tension_N``."""
+        return self.aux_names.index(name)
+
+    def describe(self) -> str:
+        """Human-readable summary of the state layout."""
+        lines = [f"{self.n_states} states, Jacobian nnz {len(self.pattern[0])}, "
+                 f"band (lower {self.lband}, upper {self.uband})"]
+        lines += [f"  {i:4d}  {n} [{u}]" for i, (n, u) in
+                  enumerate(zip(self.state_names, self.state_units, strict=True))]
+        return "\n".join(lines)
+
+
+def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine:
+    """Compile a validated line.
+
+    Parameters
+    ----------
+    line : Line
+    programme : Programme, optional
+        Set-point tables; default: constant set-points (line speed 0, the controllers'
+        tension set-points).
+
+    Returns
+    -------
+    CompiledLine
+    """
+    prog = programme or Programme.constant(line)
+    web = line.web
+    EA = web.EA
+    els = line.elements
+    nN, nS = len(els), len(line.spans)
+    sensors = list(line.sensors)
+    ctrls = list(line.controllers)
+    nSe, nC = len(sensors), len(ctrls)
+    sens_idx = {s.id: j for j, s in enumerate(sensors)}
+    node_idx = {e.id: k for k, e in enumerate(els)}
+    tension_ctrls = [c.id for c in ctrls if c.type == "tension_pi"]
+    T_scale = max([c.setpoint for c in ctrls if c.type == "tension_pi"] + [0.01 * EA * 1e-3, 1.0])
+
+    names: list[str] = []
+    units: list[str] = []
+    kinds: list[str] = []
+    atol: list[float] = []
+
+    def add(name, unit, kind, tol):
+        names.append(name)
+        units.append(unit)
+        kinds.append(kind)
+        atol.append(tol)
+        return len(names) - 1
+
+    node_I = np.full((nN, NI), -1, np.int64)
+    node_P = np.zeros((nN, NP))
+    span_I = np.full((nS, NSI), -1, np.int64)
+    span_P = np.zeros((nS, NSP))
+    sens_I = np.full((max(nSe, 0), NSEI), -1, np.int64)
+    sens_P = np.zeros((max(nSe, 0), NSEP))
+    ctrl_I = np.full((max(nC, 0), NCI), -1, np.int64)
+    ctrl_P = np.zeros((max(nC, 0), NCP))
+
+    speed_of = {c.element: j for j, c in enumerate(ctrls) if c.type == "speed_pi"}
+    tens_of = {c.element: j for j, c in enumerate(ctrls) if c.type == "tension_pi"}
+
+    for k, e in enumerate(els):
+        f = e.friction
+        ni, npr = node_I[k], node_P[k]
+        ni[NI_KIND] = {"unwind": NK_UNWIND, "rewind": NK_REWIND}.get(e.type, NK_ROLLER)
+        drive = getattr(e, "drive", None)
+        ni[NI_DRIVE] = DRV_NONE if drive is None else (
+            DRV_IDEAL if drive.type == "ideal_speed" else DRV_TORQUE)
+        ni[NI_SPAN_UP] = k - 1 if k > 0 else -1
+        ni[NI_SPAN_DN] = k if k < nN - 1 else -1
+        ni[NI_SPEEDC] = speed_of.get(e.id, -1)
+        ni[NI_TENSC] = tens_of.get(e.id, -1)
+        npr[NP_B], npr[NP_TC], npr[NP_WEPS] = f.viscous, f.coulomb, f.smoothing_speed
+        npr[NP_TMAX] = math.inf
+        if drive is not None:
+            npr[NP_TLAG] = drive.torque_lag
+            npr[NP_TMAX] = drive.torque_max if drive.torque_max is not None else math.inf
+            npr[NP_DRAW] = drive.draw
+        if e.wrap_angle is not None and e.friction_coefficient is not None:
+            npr[NP_EMB] = math.exp(e.friction_coefficient * e.wrap_angle)
+        if e.type in ("unwind", "rewind"):
+            r = e.roll
+            cw = r.build_per_wrap if r.build_per_wrap is not None else web.thickness
+            npr[NP_R0], npr[NP_RC], npr[NP_JC], npr[NP_CW] = (r.outer_radius, r.core_radius,
+                                                              r.core_inertia, cw)
+            # wound density from mass conservation: rho_r·c_w = rho·t_w (physics.md 1.4)
+            npr[NP_RHOW] = web.density * web.thickness / cw * web.width
+            npr[NP_EPSW] = r.wound_in_strain
+            npr[NP_R] = r.outer_radius
+            ni[NI_S] = add(f"{e.id}.length", "m", "roll_length", 1e-6)
+            ni[NI_U] = add(f"{e.id}.unstretched_length", "m", "material", 1e-6)
+        elif e.type == "nip":
+            pr = e.pressure_roller
+            ratio = e.radius / pr.radius
+            npr[NP_R] = e.radius
+            npr[NP_J] = e.inertia + pr.inertia * ratio**2
+            npr[NP_B] = f.viscous + pr.friction.viscous * ratio**2
+            npr[NP_TC] = f.coulomb + pr.friction.coulomb * ratio
+        else:
+            npr[NP_R], npr[NP_J] = e.radius, e.inertia
+        if ni[NI_DRIVE] != DRV_IDEAL:
+            ni[NI_W] = add(f"{e.id}.speed", "rad/s", "speed", 1e-6)
+        if ni[NI_DRIVE] == DRV_TORQUE and drive.torque_lag > 0:
+            ni[NI_TAU] = add(f"{e.id}.drive_torque", "N*m", "torque", 1e-4)
+        for j, c in enumerate(ctrls):
+            if c.element != e.id:
+                continue
+            ci, cp = ctrl_I[j], ctrl_P[j]
+            ci[CI_NODE] = k
+            cp[CP_KP], cp[CP_KI] = c.kp, c.ki
+            cp[CP_KAW] = c.anti_windup_gain if c.anti_windup_gain is not None else (
+                c.ki / c.kp if c.kp > 0 else 1.0)
+            cp[CP_LIM] = math.inf
+            if c.type == "speed_pi":
+                ci[CI_TYPE] = C_SPEED
+                ci[CI_SENSOR] = sens_idx[c.encoder] if c.encoder else -1
+                cp[CP_DRAW] = c.draw
+                cp[CP_FF] = 1.0 if c.torque_feedforward else 0.0
+                out_tol = 1e-4  # N m
+            else:
+                roll = e.type in ("unwind", "rewind")
+                ci[CI_TYPE] = C_TENSION_TORQUE if (roll and drive.type == "torque") \
+                    else C_TENSION_TRIM
+                ci[CI_SENSOR] = sens_idx[c.sensor]
+                ci[CI_RSENSOR] = sens_idx[c.radius_sensor] if c.radius_sensor else -1
+                ci[CI_CH] = 1 + tension_ctrls.index(c.id)
+                cp[CP_LIM] = c.output_limit if c.output_limit is not None else math.inf
+                cp[CP_FF] = 1.0 if c.feedforward else 0.0
+                # a trim raises the tension of a span upstream of the node, lowers one downstream
+                meas = node_idx[sensors[sens_idx[c.sensor]].element]
+                cp[CP_SIGN] = 1.0 if meas <= k else -1.0
+                out_tol = 1e-4 if ci[CI_TYPE] == C_TENSION_TORQUE else 1e-8
+            if c.ki > 0:
+                ci[CI_X] = add(f"{c.id}.integral", "", "controller", out_tol / c.ki)
+        for j, s in enumerate(sensors):
+            if s.element != e.id:
+                continue
+            si, sp = sens_I[j], sens_P[j]
+            si[SEI_NODE] = k
+            sp[SEP_GAIN], sp[SEP_OFF], sp[SEP_TAU] = s.gain, s.offset, s.filter
+            if s.type == "load_cell":
+                si[SEI_TYPE] = SE_LOADCELL
+                beta = s.wrap_angle or e.wrap_angle or math.pi
+                half = 0.5 * (math.pi - beta)
+                cin = math.cos(half - s.axis_angle) if k > 0 else 0.0
+                cout = math.cos(half + s.axis_angle) if k < nN - 1 else 0.0
+                if cin + cout <= 1e-9:
+                    raise InputError(f"load cell '{s.id}': its measuring axis sees no tension",
+                                     path=f"sensors[{j}].axis_angle")
+                sp[SEP_CIN], sp[SEP_COUT] = cin, cout
+                sp[SEP_WIN], sp[SEP_WOUT] = cin / (cin + cout), cout / (cin + cout)
+                unit, tol = "N", 1e-4
+            elif s.type == "encoder":
+                si[SEI_TYPE] = SE_ENCODER
+                unit, tol = "rad/s", 1e-6
+            else:
+                si[SEI_TYPE] = SE_DIAMETER
+                unit, tol = "m", 1e-8
+            if s.filter > 0:
+                si[SEI_F] = add(f"{s.id}.filtered", unit, "sensor_filter", tol)
+        if k < nS:
+            si_ = span_I[k]
+            si_[SI_UP], si_[SI_DN] = k, k + 1
+            span_P[k, SP_L] = line.spans[k].length
+            span_P[k, SP_EA] = EA
+            span_P[k, SP_TBRK] = web.break_tension
+            # strain tolerance ~1e-4 N of tension (physics.md 1.2, solver.md 6)
+            si_[SI_E] = add(f"{line.spans[k].id}.strain", "", "strain", 1e-4 / EA)
+
+    # events: slack and break per span, capstan per monitored interior roller, empty unwind
+    ev_kinds: list[int] = []
+    ev_comp: list[str] = []
+    ev_I: list[tuple[int, int]] = []
+    for i, sp in enumerate(line.spans):
+        ev_I.append((EV_SLACK, i))
+        ev_kinds.append(EV_SLACK)
+        ev_comp.append(sp.id)
+        if math.isfinite(web.break_tension):
+            ev_I.append((EV_BREAK, i))
+            ev_kinds.append(EV_BREAK)
+            ev_comp.append(sp.id)
+    for k, e in enumerate(els):
+        if 0 < k < nN - 1 and node_P[k, NP_EMB] > 0:
+            ev_I.append((EV_CAPSTAN, k))
+            ev_kinds.append(EV_CAPSTAN)
+            ev_comp.append(e.id)
+        if e.type == "unwind":
+            ev_I.append((EV_EMPTY, k))
+            ev_kinds.append(EV_EMPTY)
+            ev_comp.append(e.id)
+
+    # algebraic output names
+    aux_names, aux_units = [], []
+    for sp in line.spans:
+        aux_names += [f"{sp.id}.tension_N", f"{sp.id}.geometric_strain"]
+        aux_units += ["N", "1"]
+    for e in els:
+        aux_names += [f"{e.id}.surface_speed_m_s", f"{e.id}.speed_rad_s", f"{e.id}.radius_m",
+                      f"{e.id}.inertia_kg_m2", f"{e.id}.web_mass_kg", f"{e.id}.torque_N_m",
+                      f"{e.id}.torque_command_N_m", f"{e.id}.tension_ratio"]
+        aux_units += ["m/s", "rad/s", "m", "kg*m^2", "kg", "N*m", "N*m", "1"]
+    for s in sensors:
+        u = {"load_cell": "N", "encoder": "rad_s", "roll_diameter": "m"}[s.type]
+        q = {"load_cell": "tension", "encoder": "speed", "roll_diameter": "diameter"}[s.type]
+        aux_names += [f"{s.id}.{q}_{u}", f"{s.id}.{q}_seen_{u}", f"{s.id}.force_N"]
+        aux_units += [u.replace("_", "/"), u.replace("_", "/"), "N"]
+    for c in ctrls:
+        if c.type == "speed_pi":
+            aux_names += [f"{c.id}.error_rad_s", f"{c.id}.output_N_m", f"{c.id}.integral"]
+            aux_units += ["rad/s", "N*m", "rad"]
+        else:
+            out_u = "N" if ctrl_I[ctrls.index(c), CI_TYPE] == C_TENSION_TORQUE else "m_s"
+            aux_names += [f"{c.id}.error_N", f"{c.id}.output_{out_u}", f"{c.id}.integral"]
+            aux_units += ["N", out_u.replace("_", "/"), "N*s"]
+    aux_names += ["setpoint.line_speed_m_s", "setpoint.line_acceleration_m_s2"]
+    aux_units += ["m/s", "m/s^2"]
+    for cid in tension_ctrls:
+        aux_names.append(f"setpoint.{cid}.tension_N")
+        aux_units.append("N")
+
+    # the programme tables
+    nch = len(prog.names)
+    maxpts = max(len(t) for t in prog.times)
+    sch_n = np.array([len(t) for t in prog.times], np.int64)
+    sch_t = np.zeros((nch, maxpts))
+    sch_v = np.zeros((nch, maxpts))
+    for ch in range(nch):
+        sch_t[ch, : sch_n[ch]] = prog.times[ch]
+        sch_v[ch, : sch_n[ch]] = prog.values[ch]
+        sch_t[ch, sch_n[ch]:] = math.inf
+
+    # ---- pack I and P
+    blocks_I = [node_I.ravel(), span_I.ravel(), sens_I.ravel(), ctrl_I.ravel(), sch_n,
+                np.array(ev_I, np.int64).reshape(-1, NEVI).ravel()]
+    offs_I, pos = [], HEADER
+    for b in blocks_I:
+        offs_I.append(pos)
+        pos += b.size
+    blocks_P = [node_P.ravel(), span_P.ravel(), sens_P.ravel(), ctrl_P.ravel(), sch_t.ravel(),
+                sch_v.ravel(), np.zeros(4)]
+    offs_P, ppos = [], 0
+    for b in blocks_P:
+        offs_P.append(ppos)
+        ppos += b.size
+    P = np.concatenate(blocks_P)
+    n = len(names)
+    nq = nS + 7 * nN + 2 * nSe + 2 * nC
+    header = np.zeros(HEADER, np.int64)
+    header[H_NN], header[H_NS], header[H_NSE], header[H_NC], header[H_NY] = nN, nS, nSe, nC, n
+    header[H_OFF_NI], header[H_OFF_SI], header[H_OFF_SEI], header[H_OFF_CI] = offs_I[:4]
+    header[H_OFF_SCHN], header[H_OFF_EV] = offs_I[4], offs_I[5]
+    header[H_OFF_NP], header[H_OFF_SP], header[H_OFF_SEP], header[H_OFF_CP] = offs_P[:4]
+    header[H_OFF_SCHT], header[H_OFF_SCHV], header[H_OFF_RT] = offs_P[4:7]
+    header[H_MODEL] = 1 if line.span_model == "linear" else 0
+    header[H_NCH], header[H_MAXPTS] = nch, maxpts
+    header[H_NQ], header[H_MAXD] = nq, MAXD
+    header[H_NAUX] = len(aux_names)
+    header[H_NEV] = len(ev_I)
+    I = np.concatenate([header] + blocks_I)
+
+    cl = CompiledLine(
+        line=line, programme=prog, I=I, P=P, n_states=n, state_names=names, state_units=units,
+        state_kinds=kinds, atol=np.array(atol), aux_names=aux_names, aux_units=aux_units,
+        event_kinds=ev_kinds, event_components=ev_comp, node_ids=[e.id for e in els],
+        span_ids=[s.id for s in line.spans], sensors=sensors, controllers=ctrls,
+    )
+    assert len(aux_names) == AUX_SPAN * nS + AUX_NODE * nN + AUX_SENS * nSe + AUX_CTRL * nC \
+        + 2 + (nch - 1)
+    _attach_pattern(cl)
+    return cl
+
+
+def _attach_pattern(cl: CompiledLine) -> None:
+    """Mark the Jacobian pattern with the kernel (MODE_TOUCH) and store it in I."""
+    n = cl.n_states
+    touch = np.zeros((n, n))
+    y = np.zeros(n)
+    kernels.evaluate(0.0, y, np.zeros(n), touch, MODE_TOUCH, cl.I, cl.P, cl._W, cl._GI, cl._GC,
+                     cl._GV, cl._aux0)
+    rows, cols = np.nonzero(touch)
+    cl.pattern = (rows.astype(np.int64), cols.astype(np.int64))
+    cl.lband = int(max(0, (rows - cols).max(initial=0)))
+    cl.uband = int(max(0, (cols - rows).max(initial=0)))
+    cl.I[H_NPAT] = len(rows)
+    cl.I[H_OFF_PAT] = len(cl.I)
+    cl.I = np.concatenate([cl.I, cl.pattern[0], cl.pattern[1]])
+
+
+_ = (MODE_JAC, CP_FF)

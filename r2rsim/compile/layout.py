@@ -1,0 +1,70 @@
+"""Field offsets of the flat arrays a compiled line is lowered to.
+
+The kernel reads everything from two flat arrays: ``I`` (int64: counts, offsets, state
+indices, topology) and ``P`` (float64: every parameter, the set-point tables and a small
+runtime block). Records of one kind (node, span, sensor, controller) have a fixed number of
+fields; the constants below name them. Kept in one module so the compiler and the kernel
+cannot disagree.
+"""
+
+# ---- header of I (offsets of the record blocks and counts) ----
+H_NN, H_NS, H_NSE, H_NC, H_NY = 0, 1, 2, 3, 4          # nodes, spans, sensors, controllers, states
+H_OFF_NI, H_OFF_SI, H_OFF_SEI, H_OFF_CI = 5, 6, 7, 8    # record blocks in I
+H_OFF_NP, H_OFF_SP, H_OFF_SEP, H_OFF_CP = 9, 10, 11, 12  # record blocks in P
+H_MODEL = 13             # 0 exact span model, 1 linear
+H_NCH = 14               # number of set-point channels (0 = line speed)
+H_OFF_SCHN = 15          # I block: number of points per channel
+H_OFF_SCHT, H_OFF_SCHV = 16, 17  # P blocks: times, values (H_MAXPTS per channel)
+H_MAXPTS = 18
+H_OFF_RT = 19            # P block: runtime values (segment start time)
+H_NPAT, H_OFF_PAT = 20, 21  # Jacobian pattern (rows then cols) in I
+H_NQ, H_MAXD = 22, 23    # gradient scratch: number of quantities, slots per quantity
+H_OFF_W = 24             # (unused placeholder)
+H_NAUX = 25              # length of one row of algebraic outputs
+H_NEV = 26               # number of event functions
+H_OFF_EV = 27            # I block: event records
+HEADER = 32
+
+# ---- node records ----
+NK_UNWIND, NK_REWIND, NK_ROLLER = 0, 1, 2
+DRV_NONE, DRV_TORQUE, DRV_IDEAL = 0, 1, 2
+NI_KIND, NI_DRIVE, NI_W, NI_S, NI_U, NI_TAU = 0, 1, 2, 3, 4, 5
+NI_SPAN_UP, NI_SPAN_DN, NI_SPEEDC, NI_TENSC = 6, 7, 8, 9
+NI = 10
+(NP_R, NP_J, NP_B, NP_TC, NP_WEPS, NP_R0, NP_RC, NP_JC, NP_CW, NP_RHOW, NP_EPSW,
+ NP_TLAG, NP_TMAX, NP_DRAW, NP_EMB) = range(15)
+NP = 15
+
+# ---- span records ----
+SI_E, SI_UP, SI_DN = 0, 1, 2
+NSI = 3
+SP_L, SP_EA, SP_TBRK = 0, 1, 2
+NSP = 3
+
+# ---- sensor records ----
+SE_LOADCELL, SE_ENCODER, SE_DIAMETER = 1, 2, 3
+SEI_TYPE, SEI_NODE, SEI_F = 0, 1, 2
+NSEI = 3
+SEP_WIN, SEP_WOUT, SEP_GAIN, SEP_OFF, SEP_TAU, SEP_CIN, SEP_COUT = range(7)
+NSEP = 7
+
+# ---- controller records ----
+C_SPEED, C_TENSION_TORQUE, C_TENSION_TRIM = 1, 2, 3
+CI_TYPE, CI_NODE, CI_X, CI_SENSOR, CI_RSENSOR, CI_CH = 0, 1, 2, 3, 4, 5
+NCI = 6
+CP_KP, CP_KI, CP_KAW, CP_LIM, CP_DRAW, CP_FF, CP_SIGN = range(7)
+NCP = 7
+
+# ---- event records (I block, 3 ints each: kind, index, sign convention) ----
+EV_SLACK, EV_BREAK, EV_CAPSTAN, EV_EMPTY = 1, 2, 3, 4
+NEVI = 2
+
+# ---- algebraic outputs, per record ----
+AUX_SPAN = 2      # tension, geometric strain
+AUX_NODE = 8      # v, omega, R, J, m, tau_applied, tau_cmd, capstan margin ratio
+AUX_SENS = 3      # physical value, controller-visible value, bearing force (load cell)
+AUX_CTRL = 3      # error, output, integrator
+# set-points after the records: line speed, line acceleration, one per channel >= 1
+
+# ---- evaluation modes ----
+MODE_RHS, MODE_JAC, MODE_TOUCH = 0, 1, 2

@@ -1,0 +1,61 @@
+"""Column naming of the samples table: ``<kind>.<component>.<quantity>_<unit>``.
+
+kinds: ``meas`` (measured: what algorithms see), ``true`` (noise-free shadow of a measured
+channel; never for algorithms), ``state`` (hidden physical states), ``act``/``cmd`` (applied
+and commanded actuation), ``sp`` (set-points), ``ctrl`` (controller internals), ``label``.
+"""
+
+from __future__ import annotations
+
+from ..compile.compiler import CompiledLine
+
+_NODE_DESC = {
+    "surface_speed_m_s": "surface speed of the web on the element",
+    "speed_rad_s": "angular speed",
+    "radius_m": "radius (roll radius for unwind/rewind)",
+    "inertia_kg_m2": "rotating inertia J(R)",
+    "web_mass_kg": "mass of web wound on the roll",
+    "torque_N_m": "drive torque applied at the shaft",
+    "torque_command_N_m": "drive torque commanded by the controllers (before saturation/lag)",
+    "tension_ratio": "T_hi/T_lo of the two spans (capstan margin)",
+}
+
+
+def true_state_columns(cl: CompiledLine) -> list[dict]:
+    """Describe each algebraic output written to the samples table.
+
+    Returns a list of dicts: ``aux`` (column in ``cl.outputs``), ``column``, ``kind``,
+    ``component``, ``quantity``, ``unit``, ``description``.
+    """
+    out = []
+    for j, name in enumerate(cl.aux_names):
+        comp, _, q = name.partition(".")
+        unit = cl.aux_units[j]
+        if comp in cl.span_ids:
+            kind = "state"
+            desc = {"tension_N": "span tension (true)",
+                    "geometric_strain": "geometric strain L/l - 1 (< 0: slack)"}[q]
+        elif comp in cl.node_ids:
+            kind = {"torque_N_m": "act", "torque_command_N_m": "cmd"}.get(q, "state")
+            desc = _NODE_DESC[q]
+            if kind != "state":
+                q = "torque_N_m"
+        elif comp == "setpoint":
+            kind = "sp"
+            desc = "set-point from the operating programme"
+            comp, _, q = q.rpartition(".") if "." in q else ("line", "", q)
+        elif any(comp == s.id for s in cl.sensors):
+            if "_seen_" in q:
+                kind, desc = "ctrl", "signal the controllers see (calibrated, filtered, no noise)"
+            elif q == "force_N":
+                kind, desc = "state", "bearing force along the load-cell axis (true)"
+            else:
+                continue  # the true shadow is written by the measurement stage
+        else:
+            kind = "ctrl"
+            desc = {"error": "controller error", "output": "controller output",
+                    "integral": "integrator state"}[q.split("_")[0]]
+        col = f"{kind}.{comp}.{q}" if comp != "line" else f"{kind}.{q}"
+        out.append({"aux": j, "column": col, "kind": kind, "component": comp, "quantity": q,
+                    "unit": unit, "description": desc})
+    return out

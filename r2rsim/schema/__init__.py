@@ -1,0 +1,9 @@
+"""Stage 1 of the pipeline: validate input files and resolve units to SI."""
+
+from .line import Line, check_line
+from .loader import json_schema, load_line, load_scenario, read_yaml
+from .materials import MATERIALS
+from .scenario import Scenario
+
+__all__ = ["Line", "Scenario", "MATERIALS", "check_line", "json_schema", "load_line",
+           "load_scenario", "read_yaml"]

@@ -1,0 +1,99 @@
+"""Pydantic models of a scenario file (DESIGN.md §4.2; the minimal form of issue 2).
+
+A scenario names a line, a duration, a record rate, a seed, an output location, the initial
+state and an operating programme of set-point changes. Faults and events come later.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import Field, model_validator
+
+from .line import Id, Strict
+from .quantities import Acceleration, Force, Frequency, Speed, Time
+
+
+class ProgrammeStep(Strict):
+    """A set-point change at time ``at``: line speed and/or tension set-points.
+
+    A change is a step unless ``ramp`` (duration) or ``rate`` (line-speed acceleration) is
+    given, in which case the set-point moves linearly to its new value.
+    """
+
+    at: Annotated[Time, Field(ge=0)]
+    line_speed: Speed | None = None
+    tension: dict[Id, Annotated[Force, Field(ge=0)]] | None = Field(
+        None, description="new set-points of tension controllers, by controller id"
+    )
+    ramp: Annotated[Time, Field(ge=0)] | None = Field(None, description="ramp duration [s]")
+    rate: Annotated[Acceleration, Field(gt=0)] | None = Field(
+        None, description="line-speed ramp rate [m/s^2] (instead of ramp)"
+    )
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.line_speed is None and not self.tension:
+            raise ValueError("a programme step must change line_speed or tension")
+        if self.ramp is not None and self.rate is not None:
+            raise ValueError("give either ramp (a duration) or rate, not both")
+        return self
+
+
+class Initial(Strict):
+    """Initial state. ``steady``: solve for the steady state at the t = 0 set-points (default).
+    ``nominal``: all nodes at line speed, every span at ``tension`` (overridable per span)."""
+
+    state: Literal["steady", "nominal"] = "steady"
+    tension: Annotated[Force, Field(ge=0)] | None = Field(
+        None, description="nominal mode: tension of every span [N]; default the first "
+        "tension set-point, else 0"
+    )
+    span_tension: dict[Id, Annotated[Force, Field(ge=0)]] = Field(default_factory=dict)
+
+
+class SolverOptions(Strict):
+    """Integrator settings (solver.md §6)."""
+
+    backend: Literal["cvode", "radau"] = "cvode"
+    rtol: Annotated[float, Field(gt=0, lt=1)] = 1e-6
+    atol_scale: Annotated[float, Field(gt=0)] = Field(
+        1.0, description="multiplies the per-state absolute tolerances"
+    )
+    max_order: Annotated[int, Field(ge=1, le=5)] = Field(
+        2, description="BDF order limit; 2 is A-stable (orders 3-5 are unstable on web modes)"
+    )
+    chunk_memory_mb: Annotated[float, Field(gt=0)] = Field(
+        64.0, description="memory for one integration chunk of dense output"
+    )
+
+
+class Scenario(Strict):
+    """An operating scenario for a line."""
+
+    name: str | None = None
+    description: str | None = None
+    line: str = Field(description="path of the line file, relative to the scenario file")
+    duration: Annotated[Time, Field(gt=0)]
+    record_rate: Annotated[Frequency, Field(gt=0)] = Field(1000.0, description="[Hz]")
+    seed: Annotated[int, Field(ge=0)] = 0
+    output: str | None = Field(
+        None, description="output directory (relative to the working directory); "
+        "default runs/<scenario name>"
+    )
+    initial: Initial = Field(default_factory=Initial)
+    programme: list[ProgrammeStep] = Field(default_factory=list)
+    solver: SolverOptions = Field(default_factory=SolverOptions)
+    warmup: Annotated[Time, Field(ge=0)] = Field(
+        0.0, description="initial period labelled 'warmup' in the dataset [s]"
+    )
+
+    @model_validator(mode="after")
+    def _check(self):
+        last = -1.0
+        for i, step in enumerate(self.programme):
+            if step.at < last:
+                raise ValueError(f"@programme[{i}].at@ steps must be in time order "
+                                 f"({step.at:g} s comes after {last:g} s)")
+            last = step.at
+        return self

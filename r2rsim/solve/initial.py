@@ -1,0 +1,123 @@
+"""Initial states: nominal (everything at line speed and a given tension) or steady."""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+
+from ..compile.compiler import CompiledLine
+from ..compile.layout import (
+    C_SPEED, C_TENSION_TORQUE, CI_NODE, CI_TYPE, CI_X, CP_DRAW, CP_FF, CP_KI, H_NC, H_OFF_CI,
+    H_OFF_CP, NCI, NCP,
+)
+
+
+def nominal_state(cl: CompiledLine, tension: float | None = None,
+                  span_tension: dict[str, float] | None = None) -> np.ndarray:
+    """All nodes at the t = 0 line speed (times their draw), every span at ``tension``.
+
+    Drive torques and speed-loop integrators are set so that every roller is in torque
+    balance; tension-loop integrators so that their torque matches.
+    """
+    line = cl.line
+    y = np.zeros(cl.n_states)
+    V0 = cl.programme.value("line_speed", 0.0)
+    A0 = 0.0
+    tension_sps = [c.setpoint for c in line.controllers if c.type == "tension_pi"]
+    T0 = tension if tension is not None else (tension_sps[0] if tension_sps else 0.0)
+    EA = line.web.EA
+    T = [T0 for _ in line.spans]
+    for i, sp in enumerate(line.spans):
+        if span_tension and sp.id in span_tension:
+            T[i] = span_tension[sp.id]
+        y[cl.index(f"{sp.id}.strain")] = T[i] / EA
+    draw = {}
+    for c in line.controllers:
+        if c.type == "speed_pi":
+            draw[c.element] = c.draw
+    needed_torque = {}
+    for k, e in enumerate(line.elements):
+        drive = getattr(e, "drive", None)
+        if drive is not None and drive.type == "ideal_speed":
+            continue
+        R = e.roll.outer_radius if e.type in ("unwind", "rewind") else e.radius
+        v = V0 * (1.0 + draw.get(e.id, 0.0))
+        om = v / R
+        y[cl.index(f"{e.id}.speed")] = om
+        Tup = T[k - 1] if k > 0 else 0.0
+        Tdn = T[k] if k < len(line.spans) else 0.0
+        f = e.friction
+        tf = f.viscous * om + f.coulomb * math.tanh(om / f.smoothing_speed)
+        needed_torque[e.id] = -R * (Tdn - Tup) + tf
+        if f"{e.id}.drive_torque" in cl.state_names:
+            y[cl.index(f"{e.id}.drive_torque")] = needed_torque[e.id]
+    # integrators so that the PI outputs produce the needed torque at zero error
+    aux = cl.outputs(0.0, y[None, :])[0]
+    I, P = cl.I, cl.P
+    for c_idx, c in enumerate(line.controllers):
+        b = I[H_OFF_CI] + c_idx * NCI
+        ix = I[b + CI_X]
+        if ix < 0:
+            continue
+        ki = P[I[H_OFF_CP] + c_idx * NCP + CP_KI]
+        eid = c.element
+        if I[b + CI_TYPE] == C_SPEED:
+            y[ix] = needed_torque.get(eid, 0.0) / ki
+        elif I[b + CI_TYPE] == C_TENSION_TORQUE:
+            # torque = cmd_ff + sgn·R·u at u = 0; solve for u
+            tau_ff = aux[cl.aux_index(f"{eid}.torque_command_N_m")]
+            R = aux[cl.aux_index(f"{eid}.radius_m")]
+            sgn = -1.0 if line.element(eid).type == "unwind" else 1.0
+            u = (needed_torque.get(eid, 0.0) - tau_ff) / (sgn * R)
+            y[ix] = u / ki
+    _ = (A0, CP_DRAW, CP_FF, CI_NODE, H_NC)
+    # sensor filters start at their input
+    for _ in range(2):
+        aux = cl.outputs(0.0, y[None, :])[0]
+        for s in cl.sensors:
+            name = f"{s.id}.filtered"
+            if name in cl.state_names:
+                q = {"load_cell": "tension_N", "encoder": "speed_rad_s",
+                     "roll_diameter": "diameter_m"}[s.type]
+                y[cl.index(name)] = s.gain * aux[cl.aux_index(f"{s.id}.{q}")] + s.offset
+    return y
+
+
+def steady_state(cl: CompiledLine, y_guess: np.ndarray, tol: float = 1e-10,
+                 max_iter: int = 60) -> np.ndarray | None:
+    """Newton's method on dy/dt = 0 at t = 0 for every state except the roll lengths.
+
+    Returns None when no steady state is found (for example a line at rest, where span
+    strains are not determined by the speeds).
+    """
+    free = np.array([k not in ("roll_length", "material") for k in cl.state_kinds])
+    scale = np.abs(y_guess) + 1e3 * cl.atol
+    y = y_guess.copy()
+    cl.set_segment_start(0.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for _ in range(max_iter):
+            f = cl.rhs(0.0, y)[free]
+            Jf = cl.jacobian(0.0, y)[np.ix_(free, free)]
+            try:
+                dx = np.linalg.solve(Jf, -f)
+            except np.linalg.LinAlgError:
+                return None
+            if not np.all(np.isfinite(dx)):
+                return None
+            lam = 1.0
+            f0 = np.linalg.norm(f)
+            for _ls in range(20):
+                y_try = y.copy()
+                y_try[free] += lam * dx
+                if np.linalg.norm(cl.rhs(0.0, y_try)[free]) <= (1 - 1e-4 * lam) * f0 or f0 == 0:
+                    break
+                lam *= 0.5
+            y = y_try
+            if np.max(np.abs(lam * dx) / scale[free]) < tol:
+                if np.linalg.cond(Jf) > 1e14:
+                    return None
+                return y
+    return None
