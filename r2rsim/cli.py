@@ -1,0 +1,167 @@
+"""The ``r2rsim`` command line: a thin layer over the Python API.
+
+Errors are one line on stderr and a non-zero exit code; ``--debug`` shows the traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from ._version import __version__
+from .errors import InputError, R2RError
+
+EXIT_INPUT = 2
+EXIT_FAILURE = 1
+
+ELEMENTS = {
+    "unwind": "roll paying out web: roll (core/outer radius, core inertia, build per wrap, "
+              "wound-in strain), friction, drive (torque with lag/saturation, or ideal_speed)",
+    "rewind": "roll taking up web (same keys as unwind)",
+    "idler": "undriven roller: radius, inertia, friction, wrap_angle, friction_coefficient",
+    "driven": "motor-driven roller: radius, inertia, friction, drive",
+    "nip": "nip pair as one degree of freedom: radius, inertia, drive, pressure_roller",
+}
+SENSORS = {
+    "load_cell": "bearing force of a roller -> indicated tension (wrap_angle, axis_angle)",
+    "encoder": "angular speed (counts_per_rev for quantisation)",
+    "roll_diameter": "ultrasonic/laser diameter of an unwind/rewind roll",
+}
+CONTROLLERS = {
+    "speed_pi": "speed PI on a torque drive, torque feed-forward, draw; one master node",
+    "tension_pi": "tension PI on a load cell: torque mode on unwind/rewind (T_ref·R feed-"
+                  "forward + trim), speed trim on speed-controlled elements",
+}
+
+
+def _cmd_run(args) -> int:
+    from .run import run_scenario
+
+    bar = None
+    progress = None
+    if sys.stderr.isatty() and not args.quiet:
+        from tqdm import tqdm
+
+        bar = tqdm(total=0, unit="s", desc="simulating", leave=False,
+                   bar_format="{desc}: {n:.1f}/{total:.1f} s sim [{elapsed}<{remaining}]")
+
+        def progress(t):
+            if bar.total == 0:
+                bar.total = args.duration or _scenario_duration(args.scenario)
+            bar.n = t
+            bar.refresh()
+    try:
+        summary = run_scenario(args.scenario, output=args.output, seed=args.seed,
+                               duration=args.duration, progress=progress)
+    finally:
+        if bar is not None:
+            bar.close()
+    print(summary.format())
+    return 0
+
+
+def _scenario_duration(path) -> float:
+    from .schema import load_scenario
+
+    return load_scenario(path)[0].duration
+
+
+def _cmd_validate(args) -> int:
+    from pydantic import ValidationError  # noqa: F401
+
+    from .schema import load_line, load_scenario, read_yaml
+
+    status = 0
+    for f in args.files:
+        path = Path(f)
+        if path.is_dir() and (path / "manifest.json").exists():
+            print(f"{f}: dataset (label validation arrives with the fault catalogue)")
+            continue
+        try:
+            data = read_yaml(path)
+            if "elements" in data:
+                load_line(path)
+                kind = "line"
+            else:
+                load_scenario(path)
+                kind = "scenario"
+            print(f"{f}: valid {kind}")
+        except InputError as exc:
+            status = EXIT_INPUT
+            problems = getattr(exc, "problems", None)
+            if problems:
+                for p, msg in problems:
+                    print(InputError(msg, file=exc.file, path=p or None).format(),
+                          file=sys.stderr)
+            else:
+                print(exc.format(), file=sys.stderr)
+    return status
+
+
+def _cmd_schema(args) -> int:
+    from .schema import json_schema
+
+    print(json_schema(args.kind))
+    return 0
+
+
+def _cmd_list(args) -> int:
+    tables = {"elements": ELEMENTS, "sensors": SENSORS, "controllers": CONTROLLERS}
+    for name, desc in tables[args.what].items():
+        print(f"{name:<14} {desc}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="r2rsim", description="Roll-to-roll web-handling line "
+                                "simulator with labelled Parquet datasets.")
+    p.add_argument("--version", action="version", version=f"r2rsim {__version__}")
+    p.add_argument("--debug", action="store_true", help="show tracebacks on errors")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    r = sub.add_parser("run", help="run a scenario and write its dataset")
+    r.add_argument("scenario")
+    r.add_argument("-o", "--output", help="dataset directory (default: from the scenario)")
+    r.add_argument("--seed", type=int, help="root seed (overrides the scenario)")
+    r.add_argument("--duration", type=float, help="simulated time [s] (overrides the scenario)")
+    r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    r.set_defaults(func=_cmd_run)
+
+    v = sub.add_parser("validate", help="check line and scenario files, list every problem")
+    v.add_argument("files", nargs="+")
+    v.set_defaults(func=_cmd_validate)
+
+    s = sub.add_parser("schema", help="print the JSON Schema of a line or scenario file")
+    s.add_argument("kind", choices=["line", "scenario"])
+    s.set_defaults(func=_cmd_schema)
+
+    ls = sub.add_parser("list", help="list element, sensor or controller types")
+    ls.add_argument("what", choices=["elements", "sensors", "controllers"])
+    ls.set_defaults(func=_cmd_list)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``r2rsim`` console script."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except InputError as exc:
+        if args.debug:
+            raise
+        print(f"error: {exc.format()}", file=sys.stderr)
+        return EXIT_INPUT
+    except (R2RError, OSError) as exc:
+        if args.debug:
+            raise
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+    except KeyboardInterrupt:
+        print("interrupted; no dataset written", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

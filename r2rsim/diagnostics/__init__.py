@@ -1,0 +1,1 @@
+"""Later pipeline stage (diagnostics): arrives with its issue."""

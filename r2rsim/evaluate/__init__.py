@@ -1,0 +1,1 @@
+"""Later pipeline stage (evaluate): arrives with its issue."""

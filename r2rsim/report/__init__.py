@@ -1,0 +1,1 @@
+"""Later pipeline stage (report): arrives with its issue."""

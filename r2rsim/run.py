@@ -1,0 +1,247 @@
+"""Run a scenario end to end: load → compile → initial state → solve → measure → dataset.
+
+This is the Python API behind ``r2rsim run``::
+
+    from r2rsim import run_scenario
+    summary = run_scenario("scenarios/quickstart.yaml", output="runs/qs")
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import yaml
+
+from ._version import __version__
+from .compile import Programme, compile_line
+from .dataset import DatasetWriter, true_state_columns
+from .dataset.writer import EVENTS_SCHEMA, FAULTS_SCHEMA
+from .errors import InputError
+from .measure import MeasurementModel
+from .schema import load_scenario
+from .solve import SolverSettings, nominal_state, simulate, steady_state
+
+
+@dataclass
+class RunSummary:
+    """What ``r2rsim run`` reports at the end."""
+
+    output: Path
+    run_id: str
+    simulated_s: float
+    wall_s: float
+    n_samples: int
+    tension_stats: dict[str, tuple[float, float, float]]
+    events: list
+    terminated: bool
+    termination_reason: str | None
+    termination_time: float | None
+    initial_state: str
+    solver_stats: dict = field(default_factory=dict)
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.simulated_s / self.wall_s if self.wall_s > 0 else math.inf
+
+    def format(self) -> str:
+        lines = [f"dataset      {self.output}",
+                 f"simulated    {self.simulated_s:.3f} s in {self.wall_s:.2f} s wall "
+                 f"(real-time factor {self.real_time_factor:.0f}), {self.n_samples} samples",
+                 f"solver       {self.solver_stats.get('solver', '')}, "
+                 f"{self.solver_stats.get('nfev', 0)} RHS evaluations; initial state "
+                 f"{self.initial_state}"]
+        if self.terminated:
+            lines.append(f"TERMINATED   {self.termination_reason} at "
+                         f"t = {self.termination_time:.4f} s")
+        lines.append("tension [N]  span        min       mean        max")
+        for sid, (lo, mean, hi) in self.tension_stats.items():
+            lines.append(f"             {sid:<8} {lo:9.2f}  {mean:9.2f}  {hi:9.2f}")
+        if self.events:
+            lines.append(f"events       {len(self.events)}")
+            for ev in self.events[:20]:
+                lines.append(f"  t = {ev.t:10.4f} s  {ev.kind:<10} {ev.message}")
+            if len(self.events) > 20:
+                lines.append(f"  ... {len(self.events) - 20} more in events.parquet")
+        else:
+            lines.append("events       none")
+        return "\n".join(lines)
+
+
+def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
+                 seed: int | None = None, duration: float | None = None,
+                 progress=None) -> RunSummary:
+    """Run a scenario file and write its dataset.
+
+    Parameters
+    ----------
+    scenario_path : str or Path
+    output : str or Path, optional
+        Dataset directory (default: the scenario's ``output``, else ``runs/<name>``).
+    seed : int, optional
+        Overrides the scenario's root seed.
+    duration : float, optional
+        Overrides the scenario's duration [s].
+    progress : callable, optional
+        Called with the simulated time reached.
+
+    Returns
+    -------
+    RunSummary
+
+    Raises
+    ------
+    InputError
+        For any problem with the input files; nothing is written.
+    """
+    scenario_path = Path(scenario_path)
+    scenario, line, line_path = load_scenario(scenario_path)
+    if duration is not None:
+        if not duration > 0:
+            raise InputError(f"--duration must be > 0, got {duration:g}")
+        scenario.duration = duration
+    if seed is not None:
+        if seed < 0:
+            raise InputError(f"--seed must be >= 0, got {seed}")
+        scenario.seed = seed
+    name = scenario.name or scenario_path.stem
+    out = Path(output) if output is not None else Path(scenario.output or f"runs/{name}")
+
+    prog = Programme.from_steps(line, scenario.programme, file=str(scenario_path))
+    cl = compile_line(line, prog)
+    init = scenario.initial
+    y_nom = nominal_state(cl, init.tension, init.span_tension)
+    init_mode = "nominal"
+    if init.state == "steady":
+        y_ss = steady_state(cl, y_nom)
+        if y_ss is not None:
+            y0, init_mode = y_ss, "steady"
+        else:
+            y0, init_mode = y_nom, "nominal (no steady state at the t = 0 set-points)"
+    else:
+        y0 = y_nom
+
+    scenario_text = scenario_path.read_text(encoding="utf-8")
+    line_text = line_path.read_text(encoding="utf-8")
+    scenario_sha = hashlib.sha256((scenario_text + "\0" + line_text).encode()).hexdigest()
+    root = np.random.SeedSequence(scenario.seed)
+    ss_process, ss_meas, ss_faults = root.spawn(3)
+    run_id = f"{name}__s{scenario.seed}"
+    meta = {"r2rsim.schema_version": "0.1", "r2rsim.version": __version__,
+            "r2rsim.scenario_sha256": scenario_sha, "r2rsim.root_seed": str(scenario.seed)}
+    writer = DatasetWriter(out, run_id, meta)
+    try:
+        meas = MeasurementModel(cl, scenario.record_rate, ss_meas)
+        cols = true_state_columns(cl)
+        aux_idx = np.array([c["aux"] for c in cols], dtype=np.int64)
+        span_cols = [cl.aux_index(f"{s}.tension_N") for s in cl.span_ids]
+        stats = {"min": np.full(len(span_cols), np.inf), "max": np.full(len(span_cols), -np.inf),
+                 "sum": np.zeros(len(span_cols)), "n": 0}
+        k0 = [0]
+
+        def on_chunk(t, Y, A):
+            n = len(t)
+            data = {"k": np.arange(k0[0], k0[0] + n, dtype=np.int64), "t_s": t}
+            data.update(meas.measure(t, A))
+            for c, j in zip(cols, aux_idx, strict=True):
+                data[c["column"]] = A[:, j]
+            data["label.is_faulty"] = np.zeros(n, bool)
+            data["label.phase"] = np.where(t < scenario.warmup, "warmup", "normal")
+            data["label.score_mask"] = t >= scenario.warmup
+            writer.write_chunk(data)
+            T = A[:, span_cols]
+            stats["min"] = np.minimum(stats["min"], T.min(axis=0))
+            stats["max"] = np.maximum(stats["max"], T.max(axis=0))
+            stats["sum"] += T.sum(axis=0)
+            stats["n"] += n
+            k0[0] += n
+
+        wall0 = time.perf_counter()
+        res = simulate(cl, scenario.duration, scenario.record_rate, y0,
+                       SolverSettings.from_options(scenario.solver), on_chunk=on_chunk,
+                       progress=progress, initial_state_mode=init_mode)
+        wall = time.perf_counter() - wall0
+        sim_end = res.termination_time if res.terminated else scenario.duration
+
+        # channels.parquet: the dictionary of every samples column
+        ch_rows = [("k", "index", "", "", "sample index from 0", None),
+                   ("t_s", "index", "s", "", "simulation time", None)]
+        for mc in meas.channels:
+            s = mc["sensor"]
+            unit = mc["name"].rsplit("_", 1)[-1].replace("rad_s", "rad/s")
+            rate = mc["rate"]
+            ch_rows.append((mc["name"], "measured", unit, s.element,
+                            f"{s.type} '{s.id}' on {s.element}: measured (noise, sampling)",
+                            rate))
+            ch_rows.append((mc["true"], "true", unit, s.element,
+                            f"noise-free shadow of {mc['name']} (never give to algorithms)",
+                            rate))
+        for c in cols:
+            ch_rows.append((c["column"], c["kind"], c["unit"], c["component"], c["description"],
+                            scenario.record_rate))
+        ch_rows += [("label.is_faulty", "label", "", "", "any fault active", None),
+                    ("label.phase", "label", "", "", "warmup / normal", None),
+                    ("label.score_mask", "label", "", "", "false during warm-up", None)]
+        ch_table = pa.table({
+            "channel": [r[0] for r in ch_rows], "kind": [r[1] for r in ch_rows],
+            "unit": [r[2] for r in ch_rows], "component": [r[3] for r in ch_rows],
+            "description": [r[4] for r in ch_rows],
+            "rate_hz": pa.array([r[5] if r[5] is not None else scenario.record_rate
+                                 for r in ch_rows], pa.float64()),
+        })
+        writer.write_table("channels", ch_table)
+        writer.write_table("faults", FAULTS_SCHEMA.empty_table())
+        writer.write_table("events", pa.table({
+            "run_id": [run_id] * len(res.events), "t_s": [e.t for e in res.events],
+            "kind": [e.kind for e in res.events], "component": [e.component for e in res.events],
+            "state": [e.state for e in res.events], "message": [e.message for e in res.events],
+            "values_json": [json.dumps(e.values) for e in res.events]}, schema=EVENTS_SCHEMA))
+        import platform
+
+        seeds = {"process": int(ss_process.generate_state(1, np.uint64)[0]),
+                 "measurement": int(ss_meas.generate_state(1, np.uint64)[0]),
+                 "fault_sampling": int(ss_faults.generate_state(1, np.uint64)[0])}
+        runs = pa.table({
+            "run_id": [run_id], "scenario_id": [name], "scenario_sha256": [scenario_sha],
+            "seed": pa.array([scenario.seed], pa.uint64()),
+            "seed_streams": pa.array([seeds], pa.struct([("process", pa.uint64()),
+                                                         ("measurement", pa.uint64()),
+                                                         ("fault_sampling", pa.uint64())])),
+            "split": pa.array([None], pa.string()),
+            "line_config": [line.name or line_path.stem],
+            "operating_mode": pa.array([None], pa.string()),
+            "sample_period_s": [1.0 / scenario.record_rate],
+            "duration_s": [scenario.duration], "n_samples": pa.array([writer.n_rows], pa.int64()),
+            "warmup_s": [scenario.warmup], "has_fault": [False],
+            "n_faults": pa.array([0], pa.int16()), "terminated": [res.terminated],
+            "termination_reason": pa.array([res.termination_reason], pa.string()),
+            "termination_t_s": pa.array([res.termination_time], pa.float64()),
+            "simulated_s": [float(sim_end)],
+            "initial_state": [init_mode], "solver": [res.stats["solver"]],
+            "rhs_evaluations": pa.array([res.stats["nfev"]], pa.int64()),
+            "r2rsim_version": [__version__], "python_version": [platform.python_version()],
+            "numpy_version": [np.__version__], "wallclock_s": [wall],
+        })
+        writer.write_table("runs", runs)
+        writer.write_text(f"scenario/{scenario_path.name}", scenario_text)
+        writer.write_text(f"scenario/{line_path.name}", line_text)
+        writer.write_text(f"scenario/{name}.normalised.yaml",
+                          yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=True))
+        path = writer.commit({"run_ids": [run_id], "scenario_sha256": scenario_sha,
+                              "root_seed": scenario.seed, "scenario": scenario_path.name,
+                              "line": line_path.name})
+    except BaseException:
+        writer.abort()
+        raise
+    n = max(stats["n"], 1)
+    tstats = {sid: (float(stats["min"][i]), float(stats["sum"][i] / n), float(stats["max"][i]))
+              for i, sid in enumerate(cl.span_ids)}
+    return RunSummary(path, run_id, float(sim_end), wall, writer.n_rows, tstats, res.events,
+                      res.terminated, res.termination_reason, res.termination_time, init_mode,
+                      res.stats)
