@@ -337,6 +337,9 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
             if len(cl.event_kinds):
                 G = cl.events(Y)
                 cond = G < 0
+                # the first row is the chunk's start, whose conditions are known (after an
+                # event it sits on a root, where the sign of g is not meaningful)
+                cond[0] = flags
                 prev = np.vstack([flags[None, :], cond[:-1]])
                 changed = np.nonzero(np.any(cond != prev, axis=1))[0]
                 if len(changed):

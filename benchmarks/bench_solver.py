@@ -1,0 +1,501 @@
+"""Solver benchmark on the DESIGN.md §8 / solver.md §2 chain line: r2rsim vs scipy Radau.
+
+For each number of spans N the script builds the chain line (unwind roll -> N-1 rollers ->
+rewind roll, PET web, random span lengths), runs the scenario (60 s of line time, 1 kHz
+output, line speed ramping 1 -> 5 m/s over 0...20 s) with
+
+* r2rsim: :func:`r2rsim.simulate` (CVODE BDF, ``max_order=2``, band, analytic Jacobian),
+* the peer: ``scipy.integrate.solve_ivp(method="Radau")`` fed the same compiled numba RHS
+  and the analytic sparse Jacobian, integrated segment by segment like ``simulate`` does,
+
+and compares both against a tight reference (``simulate`` at rtol 1e-10, atol x 1e-4).
+It prints one table row per N with PASS/FAIL against the DESIGN.md §8 targets.
+
+Usage::
+
+    python benchmarks/bench_solver.py            # N = 20, 100, 500
+    python benchmarks/bench_solver.py --quick    # N = 20 only (< 1 min)
+    python benchmarks/bench_solver.py --n 20 100 --repeat 5
+
+Timing notes
+------------
+* Both solvers run after a warm-up call (numba JIT / cache load, imports), in the same
+  process, interleaved (r2rsim, Radau, r2rsim, Radau, ...); the reported wall time is the
+  median of ``--repeat`` runs.
+* r2rsim is run the way :func:`r2rsim.run_scenario` runs it: with an ``on_chunk`` callback
+  (memory stays flat; at N = 500 keeping every output column at 1 kHz would need ~3 GB).
+  Its wall time therefore includes the algebraic outputs of every sample (all tensions,
+  speeds, torques, ... at 1 kHz) and event detection on the sample grid. The Radau wall time
+  is the bare ``solve_ivp`` calls (states at 1 kHz); the tensions for the error are computed
+  afterwards, untimed, on the 100 Hz subsample only. This favours the peer.
+"""
+
+from __future__ import annotations
+
+import os
+
+# Pin BLAS/OpenMP/numba threads before numpy is imported (shared 2-core machines).
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+             "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS", "NUMBA_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import argparse  # noqa: E402
+import math  # noqa: E402
+import platform  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+import warnings  # noqa: E402
+from dataclasses import dataclass, field  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import scipy  # noqa: E402
+import scipy.sparse as sps  # noqa: E402
+from scipy.integrate import solve_ivp  # noqa: E402
+
+# Benchmark the checkout this file lives in (also works when the editable install is stale).
+_REPO = Path(__file__).resolve().parents[1]
+if str(_REPO) not in sys.path:
+    sys.path.insert(0, str(_REPO))
+
+import r2rsim  # noqa: E402
+from r2rsim.compile import kernels  # noqa: E402
+from r2rsim.schema.scenario import ProgrammeStep  # noqa: E402
+
+# ---- the scenario (solver.md §2, DESIGN.md §8) ------------------------------------------
+DURATION = 60.0  # s of line time
+RECORD_RATE = 1000.0  # Hz
+ERROR_RATE = 100.0  # Hz, subsample on which errors are measured
+V_START, V_END, RAMP = 1.0, 5.0, 20.0  # m/s, m/s, s
+T_SET = 200.0  # N, tension set-points
+RTOL = 1e-6
+REF_RTOL, REF_ATOL_SCALE = 1e-10, 1e-4
+WARMUP_S = 0.05
+
+# ---- DESIGN.md §8 targets ---------------------------------------------------------------
+RTF_TARGETS = {20: 200.0, 100: 100.0, 500: 50.0}
+RATIO_TARGET = 2.0
+ABS_ERR_OK = 0.05  # N; accuracy accepted if not better than Radau but below this
+
+
+# =========================================================================================
+# the line
+# =========================================================================================
+def chain_line_dict(n_spans: int, seed: int = 0) -> dict:
+    """The chain line of solver.md §2 (without the dancer) as a line-file mapping.
+
+    Parameters
+    ----------
+    n_spans : int
+        Number of spans N (>= 2): unwind, N - 1 rollers ``roller1 ... roller{N-1}``, rewind.
+    seed : int
+        Seed of ``numpy.random.default_rng`` for the span lengths.
+
+    Returns
+    -------
+    dict
+        A mapping accepted by :func:`r2rsim.load_line`.
+
+    Notes
+    -----
+    Span free lengths are uniform in 0.1...2 m, the first and last span 1 m. Rollers 2, 12,
+    22, ... are speed-PI driven rollers (R 0.10 m, J 0.02 kg m^2, 20 Hz speed loop; the first
+    one is the master), all others idlers (R 0.05 m, J 1e-3 kg m^2, viscous 1e-5 N m s,
+    Coulomb 2e-3 N m). Unwind and rewind are torque-mode tension-PI stands reading a load cell
+    on roller 1 and on the rewind.
+    """
+    if n_spans < 2:
+        raise ValueError("the chain line needs at least 2 spans")
+    rng = np.random.default_rng(seed)
+    lengths = rng.uniform(0.1, 2.0, n_spans)
+    lengths[0] = lengths[-1] = 1.0
+
+    stand = {"friction": {"viscous": 0.01}, "drive": {"torque_lag": 1e-3}}
+    elements: list[dict] = [{
+        "id": "unwind", "type": "unwind",
+        "roll": {"core_radius": 0.076, "outer_radius": 0.3, "core_inertia": 0.5}, **stand,
+    }]
+    controllers: list[dict] = []
+    master = True
+    for k in range(1, n_spans):
+        rid = f"roller{k}"
+        if k >= 2 and (k - 2) % 10 == 0:
+            J = 0.02
+            kp = J * 2 * math.pi * 20.0
+            ki = kp * 2 * math.pi * 20.0 / 4.0
+            elements.append({"id": rid, "type": "driven", "radius": 0.10, "inertia": J,
+                             "drive": {"torque_lag": 1e-3}})
+            ctrl = {"id": f"{rid}_speed", "type": "speed_pi", "element": rid, "kp": kp,
+                    "ki": ki}
+            ctrl.update({"master": True} if master else {"draw": 0.0})
+            controllers.append(ctrl)
+            master = False
+        else:
+            elements.append({"id": rid, "type": "idler", "radius": 0.05, "inertia": 1e-3,
+                             "friction": {"viscous": 1e-5, "coulomb": 2e-3}})
+    elements.append({
+        "id": "rewind", "type": "rewind",
+        "roll": {"core_radius": 0.076, "outer_radius": 0.1, "core_inertia": 0.5}, **stand,
+    })
+    sensors = [
+        {"id": "lc_in", "type": "load_cell", "element": "roller1", "wrap_angle": 3.1416,
+         "filter": 0.0},
+        {"id": "lc_rewind", "type": "load_cell", "element": "rewind", "filter": 0.0},
+    ]
+    tension = {"type": "tension_pi", "setpoint": T_SET, "kp": 0.1, "ki": 0.5,
+               "output_limit": 150.0}
+    controllers += [
+        {"id": "unwind_tension", "element": "unwind", "sensor": "lc_in", **tension},
+        {"id": "rewind_tension", "element": "rewind", "sensor": "lc_rewind", **tension},
+    ]
+    return {
+        "name": f"chain_{n_spans}",
+        "description": "solver.md §2 chain line (no dancer)",
+        "web": {"material": "PET", "modulus": 4e9, "thickness": 50e-6, "width": 0.5,
+                "density": 1390.0},
+        "elements": elements,
+        "spans": [{"length": float(x)} for x in lengths],
+        "sensors": sensors,
+        "controllers": controllers,
+    }
+
+
+def build_case(n_spans: int):
+    """Load, programme and compile the chain line; find its initial state.
+
+    Parameters
+    ----------
+    n_spans : int
+
+    Returns
+    -------
+    cl : r2rsim.CompiledLine
+    y0 : ndarray
+        Steady state at t = 0 (or the nominal state when no steady state is found).
+    init_mode : str
+        ``"steady"`` or ``"nominal"``.
+    """
+    line = r2rsim.load_line(chain_line_dict(n_spans))
+    steps = [ProgrammeStep(at=0.0, line_speed=V_START),
+             ProgrammeStep(at=0.0, line_speed=V_END, ramp=RAMP)]
+    prog = r2rsim.Programme.from_steps(line, steps)
+    cl = r2rsim.compile_line(line, prog)
+    y_nom = r2rsim.nominal_state(cl)
+    y_ss = r2rsim.steady_state(cl, y_nom)
+    if y_ss is None:
+        return cl, y_nom, "nominal"
+    return cl, y_ss, "steady"
+
+
+def tension_columns(cl) -> np.ndarray:
+    """Columns of ``cl.outputs`` holding the span tensions, in span order."""
+    return np.array([cl.aux_index(f"{s}.tension_N") for s in cl.span_ids], np.int64)
+
+
+# =========================================================================================
+# runs
+# =========================================================================================
+@dataclass
+class RunResult:
+    """Timing, counters and the tensions on the error subsample of one run."""
+
+    wall: float
+    nfev: int
+    njev: int
+    k: np.ndarray  # sample indices (1 kHz grid) of the subsample rows
+    T: np.ndarray  # (len(k), N) span tensions [N]
+    extra: dict = field(default_factory=dict)
+
+
+class _TensionRecorder:
+    """``on_chunk`` callback keeping the span tensions on the error subsample."""
+
+    def __init__(self, cols: np.ndarray, rate: float, sub_every: int):
+        self.cols, self.rate, self.every = cols, rate, sub_every
+        self.k: list[np.ndarray] = []
+        self.T: list[np.ndarray] = []
+
+    def __call__(self, t: np.ndarray, Y: np.ndarray, A: np.ndarray) -> None:
+        k = np.rint(t * self.rate).astype(np.int64)
+        m = k % self.every == 0
+        if np.any(m):
+            self.k.append(k[m])
+            self.T.append(A[np.ix_(m, self.cols)])
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        if not self.k:
+            return np.zeros(0, np.int64), np.zeros((0, len(self.cols)))
+        return np.concatenate(self.k), np.concatenate(self.T)
+
+
+def run_r2rsim(cl, y0: np.ndarray, settings) -> RunResult:
+    """One timed :func:`r2rsim.simulate` run of the scenario.
+
+    Parameters
+    ----------
+    cl : r2rsim.CompiledLine
+    y0 : ndarray
+    settings : r2rsim.SolverSettings
+
+    Returns
+    -------
+    RunResult
+    """
+    every = int(round(RECORD_RATE / ERROR_RATE))
+    rec = _TensionRecorder(tension_columns(cl), RECORD_RATE, every)
+    t0 = time.perf_counter()
+    res = r2rsim.simulate(cl, DURATION, RECORD_RATE, y0, settings, on_chunk=rec)
+    wall = time.perf_counter() - t0
+    k, T = rec.arrays()
+    extra = {"terminated": res.terminated, "reason": res.termination_reason,
+             "inner_wall": res.stats["wall_s"], "restarts": res.stats["restarts"],
+             "events": len(res.events)}
+    return RunResult(wall, int(res.stats["nfev"]), int(res.stats["njev"]), k, T, extra)
+
+
+def radau_callbacks(cl):
+    """``fun(t, y)`` and sparse ``jac(t, y)`` for ``solve_ivp`` from the compiled kernels.
+
+    Parameters
+    ----------
+    cl : r2rsim.CompiledLine
+
+    Returns
+    -------
+    fun, jac : callable
+    """
+    n = cl.n_states
+    f = cl.make_rhs()
+    rows, cols = cl.pattern
+    JJ = np.zeros((n, n))
+    yd = np.zeros(n)
+    vals = np.zeros(len(rows))
+
+    def fun(t, y):
+        yp = np.empty(n)
+        f(t, y, yp)
+        return yp
+
+    def jac(t, y):
+        kernels.jac_values(t, y, JJ, cl.I, cl.P, cl._W, cl._GI, cl._GC, cl._GV, yd, vals)
+        return sps.csc_matrix((vals.copy(), (rows, cols)), shape=(n, n))
+
+    return fun, jac
+
+
+def _segments(cl, duration: float) -> list[tuple[float, float]]:
+    """Integration segments between programme breakpoints (as ``simulate`` uses them)."""
+    bps = [b for b in cl.programme.breakpoints if 0.0 < b < duration]
+    edges = [0.0, *bps, duration]
+    return list(zip(edges[:-1], edges[1:], strict=True))
+
+
+def _radau_solve(cl, y0, duration, fun, jac, rtol, atol):
+    """Integrate [0, duration] with Radau, one ``solve_ivp`` call per programme segment.
+
+    Returns the sample indices, the states at those samples (n_samples, n) and counters.
+    """
+    n_samples = int(math.floor(duration * RECORD_RATE + 1e-9)) + 1
+    sample_t = np.arange(n_samples) / RECORD_RATE
+    y = np.array(y0, float)
+    ks, Ys = [], []
+    nfev = njev = nlu = 0
+    k_next = 0
+    for a, b in _segments(cl, duration):
+        cl.set_segment_start(a)
+        k_end = int(np.searchsorted(sample_t, b + 1e-9, side="right"))
+        kk = np.arange(k_next, k_end)
+        t_eval = np.clip(sample_t[kk], a, b)
+        off_grid = len(t_eval) == 0 or t_eval[-1] < b  # breakpoint between two samples
+        if off_grid:
+            t_eval = np.append(t_eval, b)
+        sol = solve_ivp(fun, (a, b), y, method="Radau", t_eval=t_eval, jac=jac, rtol=rtol,
+                        atol=atol)
+        if not sol.success:
+            raise RuntimeError(f"Radau failed on [{a:g}, {b:g}] s: {sol.message}")
+        nfev, njev, nlu = nfev + sol.nfev, njev + sol.njev, nlu + sol.nlu
+        y = sol.y[:, -1].copy()
+        ks.append(kk)
+        Ys.append(sol.y.T[: len(kk)])
+        k_next = k_end
+    return ks, Ys, nfev, njev, nlu
+
+
+def run_radau(cl, y0: np.ndarray, rtol: float = RTOL) -> RunResult:
+    """One timed scipy Radau run of the scenario with the compiled RHS and Jacobian.
+
+    Parameters
+    ----------
+    cl : r2rsim.CompiledLine
+    y0 : ndarray
+    rtol : float
+
+    Returns
+    -------
+    RunResult
+        ``wall`` covers the ``solve_ivp`` calls only; ``extra["outputs_s"]`` is the untimed
+        cost of computing the tensions on the error subsample.
+    """
+    fun, jac = radau_callbacks(cl)
+    atol = cl.atol
+    t0 = time.perf_counter()
+    ks, Ys, nfev, njev, nlu = _radau_solve(cl, y0, DURATION, fun, jac, rtol, atol)
+    wall = time.perf_counter() - t0
+    # tensions on the subsample, per segment (the set-point outputs read the segment start)
+    t1 = time.perf_counter()
+    every = int(round(RECORD_RATE / ERROR_RATE))
+    cols = tension_columns(cl)
+    k_out, T_out = [], []
+    for (a, _b), kk, Y in zip(_segments(cl, DURATION), ks, Ys, strict=True):
+        m = kk % every == 0
+        cl.set_segment_start(a)
+        A = cl.outputs(kk[m] / RECORD_RATE, Y[m])
+        k_out.append(kk[m])
+        T_out.append(A[:, cols])
+    outputs_s = time.perf_counter() - t1
+    cl.set_segment_start(0.0)
+    return RunResult(wall, nfev, njev, np.concatenate(k_out), np.concatenate(T_out),
+                     {"nlu": nlu, "outputs_s": outputs_s})
+
+
+def warm_up(cl, y0: np.ndarray) -> None:
+    """Short untimed runs of both solvers (numba compile / cache load, imports)."""
+    r2rsim.simulate(cl, WARMUP_S, RECORD_RATE, y0, r2rsim.SolverSettings(rtol=RTOL),
+                    on_chunk=lambda t, Y, A: None)
+    fun, jac = radau_callbacks(cl)
+    cl.set_segment_start(0.0)
+    solve_ivp(fun, (0.0, WARMUP_S), y0, method="Radau", jac=jac, rtol=RTOL, atol=cl.atol,
+              t_eval=np.linspace(0.0, WARMUP_S, 6))
+    cl.outputs(np.zeros(2), np.vstack([y0, y0]))
+
+
+def tension_errors(run: RunResult, ref: RunResult) -> tuple[float, float]:
+    """Max |T - T_ref| over all spans on the common subsample, and at the last sample.
+
+    Returns
+    -------
+    max_err, end_err : float
+        ``inf`` if the run does not cover the reference's samples.
+    """
+    common, i_run, i_ref = np.intersect1d(run.k, ref.k, return_indices=True)
+    if len(common) != len(ref.k):
+        return math.inf, math.inf
+    d = np.abs(run.T[i_run] - ref.T[i_ref])
+    return float(np.max(d)), float(np.max(d[-1]))
+
+
+# =========================================================================================
+# one benchmark case
+# =========================================================================================
+def bench_case(n_spans: int, repeat: int, log) -> dict:
+    """Run the whole comparison for one N and return the table row as a dict."""
+    t_build = time.perf_counter()
+    cl, y0, init_mode = build_case(n_spans)
+    log(f"N={n_spans}: {cl.n_states} states, Jacobian nnz {len(cl.pattern[0])}, band "
+        f"({cl.lband}, {cl.uband}), {len(cl.aux_names)} outputs, initial state {init_mode} "
+        f"(built in {time.perf_counter() - t_build:.1f} s)")
+    warm_up(cl, y0)
+
+    settings = r2rsim.SolverSettings(rtol=RTOL)
+    runs_r, runs_p = [], []
+    for i in range(repeat):
+        runs_r.append(run_r2rsim(cl, y0, settings))
+        runs_p.append(run_radau(cl, y0))
+        log(f"  run {i + 1}/{repeat}: r2rsim {runs_r[-1].wall:.3f} s, "
+            f"Radau {runs_p[-1].wall:.3f} s")
+    wall_r = float(np.median([r.wall for r in runs_r]))
+    wall_p = float(np.median([r.wall for r in runs_p]))
+    rr, rp = runs_r[-1], runs_p[-1]
+    if rr.extra["terminated"]:
+        log(f"  WARNING: r2rsim run terminated early: {rr.extra['reason']}")
+
+    t_ref = time.perf_counter()
+    ref = run_r2rsim(cl, y0, r2rsim.SolverSettings(rtol=REF_RTOL, atol_scale=REF_ATOL_SCALE))
+    log(f"  reference (rtol {REF_RTOL:g}, atol x {REF_ATOL_SCALE:g}): "
+        f"{time.perf_counter() - t_ref:.1f} s, {ref.nfev} RHS evals")
+    err_r, end_r = tension_errors(rr, ref)
+    err_p, end_p = tension_errors(rp, ref)
+    log(f"  r2rsim: {rr.nfev} RHS, {rr.njev} Jac, {rr.extra['restarts']} solver calls, "
+        f"inner wall {rr.extra['inner_wall']:.3f} s; Radau: {rp.nfev} RHS, {rp.njev} Jac, "
+        f"{rp.extra['nlu']} LU; Radau tensions on the {ERROR_RATE:g} Hz subsample "
+        f"(untimed) {rp.extra['outputs_s']:.3f} s")
+    return {
+        "N": n_spans, "n": cl.n_states,
+        "r_wall": wall_r, "r_rtf": DURATION / wall_r, "r_nfev": rr.nfev, "r_err": err_r,
+        "r_end": end_r,
+        "p_wall": wall_p, "p_rtf": DURATION / wall_p, "p_nfev": rp.nfev, "p_err": err_p,
+        "p_end": end_p,
+        "ratio": wall_p / wall_r,
+    }
+
+
+def verdicts(row: dict) -> tuple[str, str]:
+    """PASS/FAIL of the real-time-factor target and of the speed-ratio + accuracy target."""
+    target = RTF_TARGETS.get(row["N"])
+    rtf = "n/a" if target is None else (
+        f"{'PASS' if row['r_rtf'] >= target else 'FAIL'} (>={target:g})")
+    if row["r_err"] <= row["p_err"]:
+        acc_ok, acc = True, "err<=Radau"
+    elif row["r_err"] <= ABS_ERR_OK:
+        acc_ok, acc = True, f"err<={ABS_ERR_OK:g}N"
+    else:
+        acc_ok, acc = False, f"err>Radau&>{ABS_ERR_OK:g}N"
+    ok = row["ratio"] >= RATIO_TARGET and acc_ok
+    return rtf, f"{'PASS' if ok else 'FAIL'} (x{row['ratio']:.2f}, {acc})"
+
+
+def format_table(rows: list[dict]) -> str:
+    """The results table (one row per N)."""
+    head = (f"{'N':>4} {'states':>6} | {'r2r wall s':>10} {'RTF':>7} {'RHS':>7} "
+            f"{'maxTerr N':>9} {'endTerr':>8} | {'Radau wall':>10} {'RTF':>7} {'nfev':>7} "
+            f"{'maxTerr N':>9} {'endTerr':>8} | {'ratio':>6} | {'RTF target':<16} "
+            f"{'ratio>=2 & accuracy':<30}")
+    out = [head, "-" * len(head)]
+    for r in rows:
+        v_rtf, v_ratio = verdicts(r)
+        out.append(
+            f"{r['N']:>4} {r['n']:>6} | {r['r_wall']:>10.3f} {r['r_rtf']:>7.1f} "
+            f"{r['r_nfev']:>7d} {r['r_err']:>9.2e} {r['r_end']:>8.1e} | "
+            f"{r['p_wall']:>10.3f} {r['p_rtf']:>7.1f} {r['p_nfev']:>7d} {r['p_err']:>9.2e} "
+            f"{r['p_end']:>8.1e} | {r['ratio']:>6.2f} | {v_rtf:<16} {v_ratio:<30}")
+    return "\n".join(out)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point; returns 0 if every target passed, else 1."""
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--n", type=int, nargs="+", default=[20, 100, 500], metavar="N",
+                    help="numbers of spans (default: 20 100 500)")
+    ap.add_argument("--quick", action="store_true", help="N = 20 only, one timed run")
+    ap.add_argument("--repeat", type=int, default=None,
+                    help="timed runs per solver, median reported (default 3; 1 with --quick)")
+    args = ap.parse_args(argv)
+    ns = [20] if args.quick else args.n
+    repeat = args.repeat if args.repeat is not None else (1 if args.quick else 3)
+
+    def log(msg: str) -> None:
+        print(msg, flush=True)
+
+    log(f"r2rsim {r2rsim.__version__} ({Path(r2rsim.__file__).parent}), numpy "
+        f"{np.__version__}, scipy {scipy.__version__}, Python {platform.python_version()}, "
+        f"{os.cpu_count()} CPUs")
+    log(f"scenario: {DURATION:g} s, {RECORD_RATE:g} Hz output, line speed {V_START:g} -> "
+        f"{V_END:g} m/s over 0...{RAMP:g} s, rtol {RTOL:g}; errors on a {ERROR_RATE:g} Hz "
+        f"subsample vs rtol {REF_RTOL:g} / atol x {REF_ATOL_SCALE:g}; median of {repeat} run(s)")
+    rows = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        for n in ns:
+            rows.append(bench_case(n, repeat, log))
+    print()
+    print(format_table(rows))
+    print("RTF = simulated s / wall s. maxTerr: max |T - T_ref| over all spans and the "
+          f"{ERROR_RATE:g} Hz subsample; endTerr: at t = {DURATION:g} s. ratio = Radau wall / "
+          "r2rsim wall.")
+    all_ok = all(not v.startswith("FAIL") for r in rows for v in verdicts(r))
+    return 0 if all_ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
