@@ -170,7 +170,9 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
         sim_end = res.termination_time if res.terminated else scenario.duration
 
         # channels.parquet: the dictionary of every samples column
-        ch_rows = [("k", "index", "", "", "sample index from 0", None),
+        ch_rows = [("run_id", "index", "", "", "run id (the hive partition key of samples/)",
+                    None),
+                   ("k", "index", "", "", "sample index from 0", None),
                    ("t_s", "index", "s", "", "simulation time", None)]
         for mc in meas.channels:
             s = mc["sensor"]

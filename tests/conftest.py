@@ -65,6 +65,6 @@ def run_line(path: Path, *, duration: float, rate: float = 1000.0, steps=(), ten
     return cl, res
 
 
-@pytest.fixture
+@pytest.fixture(scope="session")
 def repo() -> Path:
     return REPO

@@ -311,18 +311,22 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
                 if ix >= 0:
                     _g_add(GI, GC, GV, maxd, qTCMD + k, ix, ki)
                 if kind != NK_ROLLER:
-                    Rc = P[bn + NP_RC]
                     dJdR = 2.0 * PI * P[bn + NP_RHOW] * R ** 3
                     _g_axpy(GI, GC, GV, maxd, qTCMD + k,
                             ff * (dJdR * aref - J * aref / R), qR + k)
-                    _ = Rc
         else:  # torque-mode tension control of a roll
             sgn = -1.0 if kind == NK_UNWIND else 1.0
             rs = I[oCI + c * NCI + CI_RSENSOR]
             Rh = 0.5 * W[oYS + rs] if rs >= 0 else W[oR + k]
+            Rc = P[bn + NP_RC]
+            # the radius estimate is never below the core (a failed sensor reading 0 must not
+            # divide by zero); clamped, it no longer depends on the states
+            live = 1.0
+            if Rh < Rc:
+                Rh = Rc
+                live = 0.0
             Tref, _ = setpoint(I, P, I[oCI + c * NCI + CI_CH], t)
             u = W[oU + c]
-            Rc = P[bn + NP_RC]
             Jh = P[bn + NP_JC] + 0.5 * PI * P[bn + NP_RHOW] * (Rh ** 4 - Rc ** 4)
             dJh = 2.0 * PI * P[bn + NP_RHOW] * Rh ** 3
             cw = P[bn + NP_CW]
@@ -336,7 +340,7 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             tau = sgn * Rh * (ff * Tref + u) + ff * (Jh * alpha + tf)
             W[oTCMD + k] += tau
             if jac:
-                dRh = sgn * (ff * Tref + u) + ff * (dJh * alpha + Jh * dalpha)
+                dRh = live * (sgn * (ff * Tref + u) + ff * (dJh * alpha + Jh * dalpha))
                 if rs >= 0:
                     _g_axpy(GI, GC, GV, maxd, qTCMD + k, 0.5 * dRh, qY + rs)
                 else:

@@ -36,6 +36,8 @@ def true_state_columns(cl: CompiledLine) -> list[dict]:
             desc = {"tension_N": "span tension (true)",
                     "geometric_strain": "geometric strain L/l - 1 (< 0: slack)"}[q]
         elif comp in cl.node_ids:
+            if q == "tension_ratio" and comp in (cl.node_ids[0], cl.node_ids[-1]):
+                continue  # an end roll has one span: no capstan ratio
             kind = {"torque_N_m": "act", "torque_command_N_m": "cmd"}.get(q, "state")
             desc = _NODE_DESC[q]
             if kind != "state":
@@ -48,6 +50,8 @@ def true_state_columns(cl: CompiledLine) -> list[dict]:
             if "_seen_" in q:
                 kind, desc = "ctrl", "signal the controllers see (calibrated, filtered, no noise)"
             elif q == "force_N":
+                if next(s for s in cl.sensors if s.id == comp).type != "load_cell":
+                    continue
                 kind, desc = "state", "bearing force along the load-cell axis (true)"
             else:
                 continue  # the true shadow is written by the measurement stage

@@ -1,0 +1,140 @@
+"""The analytic Jacobian of every element, drive, controller and sensor against central finite
+differences, at states that exercise every branch (taut and slack spans, forward and reverse
+web motion, saturated and unsaturated controllers). Also: no finite-difference entry lies
+outside the compiled pattern, and the band is what the web ordering promises."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import r2rsim
+from conftest import REPO, write
+from r2rsim.schema.scenario import ProgrammeStep
+
+FULL = """\
+span_model: {model}
+web: {{material: PET, thickness: 50 um, width: 1 m}}
+elements:
+  - id: unwind
+    type: unwind
+    roll: {{core_radius: 0.076, outer_radius: 0.4, core_inertia: 0.5, wound_in_strain: 1e-4}}
+    friction: {{viscous: 0.01, coulomb: 0.2}}
+    drive: {{torque_lag: 1 ms, torque_max: 150}}
+  - {{id: idler1, type: idler, radius: 0.05, inertia: 0.011, friction: {{viscous: 5e-4,
+     coulomb: 0.02}}, wrap_angle: 90 deg, friction_coefficient: 0.3}}
+  - id: nip
+    type: nip
+    radius: 0.1
+    inertia: 0.15
+    friction: {{viscous: 0.01}}
+    drive: {{torque_lag: 0}}
+    pressure_roller: {{radius: 0.08, inertia: 0.03, friction: {{viscous: 0.002, coulomb: 0.1}}}}
+  - {{id: pull, type: driven, radius: 0.1, inertia: 0.2, drive: {{torque_lag: 2 ms}}}}
+  - {{id: trim_roll, type: driven, radius: 0.1, inertia: 0.2, drive: {{type: ideal_speed,
+     draw: 0.001}}}}
+  - id: rewind
+    type: rewind
+    roll: {{core_radius: 0.076, outer_radius: 0.1, core_inertia: 0.5}}
+    drive: {{torque_lag: 1 ms}}
+spans: [{{length: 1.5}}, {{length: 1.0}}, {{length: 0.1}}, {{length: 3.0}}, {{length: 1.5}}]
+sensors:
+  - {{id: lc1, type: load_cell, element: idler1, filter: 2 ms, gain: 1.05, offset: 3}}
+  - {{id: lc2, type: load_cell, element: pull, axis_angle: 10 deg}}
+  - {{id: lc3, type: load_cell, element: rewind, filter: 5 ms}}
+  - {{id: enc, type: encoder, element: pull, filter: 1 ms}}
+  - {{id: enc_ideal, type: encoder, element: trim_roll, filter: 1 ms}}
+  - {{id: dia, type: roll_diameter, element: unwind, filter: 20 ms}}
+controllers:
+  - {{id: c_pull, type: speed_pi, element: pull, master: true, kp: 25, ki: 790, encoder: enc}}
+  - {{id: c_nip, type: speed_pi, element: nip, kp: 18, ki: 590, draw: 0.0005,
+     torque_feedforward: false}}
+  - {{id: c_unw, type: tension_pi, element: unwind, sensor: lc1, setpoint: 260, kp: 0.1,
+     ki: 0.5, output_limit: {limit}, radius_sensor: dia}}
+  - {{id: c_nip_t, type: tension_pi, element: nip, sensor: lc2, setpoint: 250, kp: 1e-4,
+     ki: 3e-4}}
+  - {{id: c_trim, type: tension_pi, element: trim_roll, sensor: lc3, setpoint: 240, kp: 1e-4,
+     ki: 3e-4, output_limit: 0.5}}
+  - {{id: c_rew, type: tension_pi, element: rewind, sensor: lc3, setpoint: 240, kp: 0.1,
+     ki: 0.5, feedforward: false}}
+"""
+
+
+def _state(cl, rng, *, slack=(), reverse=False):
+    y = np.zeros(cl.n_states)
+    typical = {"strain": 1.1e-3, "speed": 50.0, "roll_length": 200.0, "material": 199.0,
+               "torque": 20.0, "controller": 3.0, "sensor_filter": 250.0}
+    for i, (name, kind) in enumerate(zip(cl.state_names, cl.state_kinds, strict=True)):
+        y[i] = typical[kind] * (1 + 0.2 * rng.standard_normal())
+        if name == "dia.filtered":
+            y[i] = 0.75
+        if name in ("enc.filtered", "enc_ideal.filtered"):
+            y[i] = 48.0
+    for sp in slack:
+        y[cl.index(f"{sp}.strain")] = -2e-4
+    if reverse:
+        for i, kind in enumerate(cl.state_kinds):
+            if kind == "speed":
+                y[i] = -abs(y[i])
+    return y
+
+
+def _fd(cl, t, y):
+    n = cl.n_states
+    J = np.zeros((n, n))
+    for j in range(n):
+        h = 1e-6 * max(1.0, abs(y[j])) if cl.state_kinds[j] != "strain" else 1e-10
+        yp, ym = y.copy(), y.copy()
+        yp[j] += h
+        ym[j] -= h
+        J[:, j] = (cl.rhs(t, yp) - cl.rhs(t, ym)) / (2 * h)
+    return J
+
+
+@pytest.mark.parametrize("model", ["exact", "linear"])
+@pytest.mark.parametrize("case", ["taut", "slack", "reverse", "saturated"])
+def test_every_element_jacobian_against_finite_differences(tmp_path, model, case):
+    limit = 1e-3 if case == "saturated" else 200
+    path = write(tmp_path / "full.yaml", FULL.format(model=model, limit=limit))
+    line = r2rsim.load_line(path)
+    prog = r2rsim.Programme.from_steps(line, [
+        ProgrammeStep(at=0, line_speed=2.0), ProgrammeStep(at=0.5, line_speed=5.0, ramp=4.0)])
+    cl = r2rsim.compile_line(line, prog)
+    cl.set_segment_start(0.5)
+    rng = np.random.default_rng(3)
+    y = _state(cl, rng, slack=("span2", "span4") if case == "slack" else (),
+               reverse=case == "reverse")
+    J = cl.jacobian(1.7, y)
+    Jfd = _fd(cl, 1.7, y)
+    scale = np.abs(Jfd).max(axis=1, keepdims=True) + 1e-300
+    err = np.abs(J - Jfd) / (np.abs(Jfd) + 1e-7 * scale + 1e-12)
+    bad = np.argwhere(err > 1e-4)
+    detail = [(cl.state_names[i], cl.state_names[j], J[i, j], Jfd[i, j]) for i, j in bad[:5]]
+    assert not len(bad), detail
+    mask = np.zeros_like(J, dtype=bool)
+    mask[cl.pattern] = True
+    assert np.all(Jfd[~mask] == 0.0), "finite differences found entries outside the pattern"
+
+
+def test_band_of_line_a(repo):
+    cl = r2rsim.compile_line(r2rsim.load_line(REPO / "lines" / "pet_film_line.yaml"))
+    # the unwind's tension loop reads the load cell on the next idler: the widest coupling
+    assert (cl.lband, cl.uband) == (6, 4)
+    rows, cols = cl.pattern
+    assert np.all(np.abs(rows - cols) <= 6)
+
+
+def test_chain_band_does_not_grow_with_length(tmp_path):
+    def chain(n):
+        idlers = "\n".join(f"  - {{id: i{k}, type: idler, radius: 0.05, inertia: 0.001}}"
+                           for k in range(n))
+        text = ("web: {material: PET, thickness: 50 um, width: 1 m}\nelements:\n"
+                "  - {id: u, type: unwind, roll: {core_radius: 0.07, outer_radius: 0.3, "
+                "core_inertia: 0.5}}\n" + idlers +
+                "\n  - {id: r, type: rewind, roll: {core_radius: 0.07, outer_radius: 0.1, "
+                "core_inertia: 0.5}}\nspans:\n" + "\n".join("  - {length: 1}"
+                                                             for _ in range(n + 1)) + "\n")
+        cl = r2rsim.compile_line(r2rsim.load_line(write(tmp_path / f"c{n}.yaml", text)))
+        return cl.lband, cl.uband
+
+    assert chain(5) == chain(50)

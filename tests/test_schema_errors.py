@@ -1,0 +1,166 @@
+"""Bad input: one message naming the file, the YAML path and the problem; a non-zero exit
+code; no output directory (DESIGN.md §4.1, §9)."""
+
+from __future__ import annotations
+
+import copy
+import subprocess
+import sys
+
+import pytest
+import yaml
+
+from r2rsim.cli import main
+
+LINE = {
+    "name": "small",
+    "web": {"material": "PET", "thickness": "50 um", "width": "1 m"},
+    "elements": [
+        {"id": "unwind", "type": "unwind",
+         "roll": {"core_radius": "76 mm", "outer_radius": "0.3 m", "core_inertia": 0.5}},
+        {"id": "idler1", "type": "idler", "radius": 0.05, "inertia": 0.011},
+        {"id": "pull", "type": "driven", "radius": 0.1, "inertia": 0.2},
+        {"id": "rewind", "type": "rewind",
+         "roll": {"core_radius": "76 mm", "outer_radius": "0.1 m", "core_inertia": 0.5}},
+    ],
+    "spans": [{"length": "1.5 m"}, {"length": 1.0}, {"length": 1.0}],
+    "sensors": [{"id": "lc", "type": "load_cell", "element": "idler1"}],
+    "controllers": [
+        {"id": "speed", "type": "speed_pi", "element": "pull", "master": True, "kp": 25,
+         "ki": 790},
+        {"id": "tens", "type": "tension_pi", "element": "unwind", "sensor": "lc",
+         "setpoint": "200 N", "kp": 0.1, "ki": 0.5},
+    ],
+}
+SCENARIO = {"line": "line.yaml", "duration": "0.2 s", "record_rate": "100 Hz",
+            "programme": [{"at": 0, "line_speed": "1 m/s"}]}
+
+
+def _line(mutate):
+    d = copy.deepcopy(LINE)
+    mutate(d)
+    return d
+
+
+def _scen(mutate):
+    d = copy.deepcopy(SCENARIO)
+    mutate(d)
+    return d
+
+
+def _set(path, value):
+    def f(d):
+        node = d
+        for p in path[:-1]:
+            node = node[p]
+        node[path[-1]] = value
+    return f
+
+
+def _del(path):
+    def f(d):
+        node = d
+        for p in path[:-1]:
+            node = node[p]
+        del node[path[-1]]
+    return f
+
+
+CASES = [
+    # (name, line dict or None, scenario dict or None, file, yaml path, words in the message)
+    ("unknown key", _line(_set(["elements", 1, "radios"], 0.05)), None, "line.yaml",
+     "elements[1].radios", "unknown key 'radios'"),
+    ("unknown element type", _line(_set(["elements", 1, "type"], "roller")), None, "line.yaml",
+     "elements[1].type", "unknown type 'roller'"),
+    ("missing reference", _line(_set(["sensors", 0, "element"], "idler9")), None, "line.yaml",
+     "sensors[0].element", "no element with id 'idler9'"),
+    ("negative length", _line(_set(["spans", 1, "length"], "-1 m")), None, "line.yaml",
+     "spans[1].length", "must be > 0"),
+    ("core radius >= roll radius", _line(_set(["elements", 3, "roll", "core_radius"], "0.2 m")),
+     None, "line.yaml", "elements[3].roll.core_radius", "must be smaller"),
+    ("bad unit string", _line(_set(["spans", 0, "length"], "1.5 meterz")), None, "line.yaml",
+     "spans[0].length", "cannot read '1.5 meterz'"),
+    ("wrong dimension", _line(_set(["spans", 2, "length"], "3 N")), None, "line.yaml",
+     "spans[2].length", "expected a length"),
+    ("missing required key", _line(_del(["elements", 2, "radius"])), None, "line.yaml",
+     "elements[2].radius", "missing required key 'radius'"),
+    ("duplicate id", _line(_set(["elements", 2, "id"], "idler1")), None, "line.yaml",
+     "elements[2].id", "duplicate id 'idler1'"),
+    ("controller on an idler", _line(_set(["controllers", 0, "element"], "idler1")), None,
+     "line.yaml", "controllers[0].element", "no drive"),
+    ("wrong span count", _line(lambda d: d["spans"].pop()), None, "line.yaml", "spans",
+     "expected 3 spans"),
+    ("first element not an unwind", _line(lambda d: d["elements"].reverse()), None,
+     "line.yaml", "elements[0].type", "must be an unwind"),
+    ("unknown material", _line(_set(["web", "material"], "kevlar")), None, "line.yaml",
+     "web.material", "kevlar"),
+    ("scenario unknown key", None, _scen(_set(["durations"], 3)), "scen.yaml", "durations",
+     "unknown key"),
+    ("scenario wrong dimension", None, _scen(_set(["duration"], "5 m")), "scen.yaml",
+     "duration", "expected a time"),
+    ("scenario unknown controller", None,
+     _scen(_set(["programme"], [{"at": 1, "tension": {"nope": 100}}])), "scen.yaml",
+     "programme[0].tension.nope", "no tension controller 'nope'"),
+    ("scenario missing line file", None, _scen(_set(["line"], "missing.yaml")), "scen.yaml",
+     "line", "not found"),
+]
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
+def test_bad_input_one_clear_message(tmp_path, capsys, case):
+    _, line, scen, file, ypath, words = case
+    (tmp_path / "line.yaml").write_text(yaml.safe_dump(line or LINE, sort_keys=False))
+    (tmp_path / "scen.yaml").write_text(yaml.safe_dump(scen or SCENARIO, sort_keys=False))
+    out = tmp_path / "out"
+    code = main(["run", str(tmp_path / "scen.yaml"), "-o", str(out), "-q"])
+    err = capsys.readouterr().err.strip()
+    assert code != 0
+    assert len(err.splitlines()) == 1, err
+    assert f"{file}: {ypath}: " in err, err
+    assert words in err, err
+    assert not out.exists()
+    assert not any(p.name.startswith(".out") for p in tmp_path.iterdir())
+
+
+def test_invalid_yaml_names_line_and_column(tmp_path, capsys):
+    (tmp_path / "scen.yaml").write_text("line: x.yaml\nduration: [1, 2\n")
+    assert main(["run", str(tmp_path / "scen.yaml"), "-q"]) != 0
+    err = capsys.readouterr().err
+    assert "scen.yaml: line 3" in err and "invalid YAML" in err
+
+
+def test_yaml_is_loaded_safely(tmp_path, capsys):
+    (tmp_path / "scen.yaml").write_text("line: !!python/object/apply:os.system ['echo hi']\n")
+    assert main(["validate", str(tmp_path / "scen.yaml")]) != 0
+    assert "invalid YAML" in capsys.readouterr().err
+
+
+def test_validate_lists_every_problem(tmp_path, capsys):
+    bad = _line(_set(["spans", 0, "length"], "-1 m"))
+    bad["elements"][1]["radios"] = 1
+    (tmp_path / "line.yaml").write_text(yaml.safe_dump(bad))
+    assert main(["validate", str(tmp_path / "line.yaml")]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 2
+    assert any("spans[0].length" in e for e in err)
+    assert any("elements[1].radios" in e for e in err)
+
+
+def test_real_exit_code_and_debug_traceback(tmp_path):
+    (tmp_path / "line.yaml").write_text(yaml.safe_dump(_line(_set(["spans", 0, "length"], -1))))
+    (tmp_path / "scen.yaml").write_text(yaml.safe_dump(SCENARIO))
+    cmd = [sys.executable, "-m", "r2rsim.cli", "run", str(tmp_path / "scen.yaml"), "-q"]
+    p = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path)
+    assert p.returncode == 2
+    assert p.stderr.startswith("error: ") and "Traceback" not in p.stderr
+    p = subprocess.run(cmd[:3] + ["--debug"] + cmd[3:], capture_output=True, text=True,
+                       cwd=tmp_path)
+    assert p.returncode != 0 and "Traceback" in p.stderr
+    assert not (tmp_path / "runs").exists()
+
+
+def test_valid_files_validate(repo, capsys):
+    files = [repo / "lines" / "pet_film_line.yaml", repo / "scenarios" / "quickstart.yaml"]
+    assert main(["validate", *map(str, files)]) == 0
+    out = capsys.readouterr().out
+    assert "valid line" in out and "valid scenario" in out
