@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 import r2rsim
-from conftest import REPO, write
 from r2rsim.schema.scenario import ProgrammeStep
+
+from conftest import REPO, write
 
 FULL = """\
 span_model: {model}

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import r2rsim
+
 from conftest import kinematic_line, run_line, write
 
 MODELS = ["linear", "exact"]

@@ -17,13 +17,13 @@ from .materials import MATERIALS
 from .quantities import (
     Angle,
     AngularSpeed,
+    Density,
     Dimensionless,
     Force,
     Frequency,
     Inertia,
     Length,
     Pressure,
-    Density,
     Time,
     Torque,
     ViscousTorque,
@@ -324,7 +324,8 @@ def check_line(line: Line) -> list[tuple[str, str]]:
     out: list[tuple[str, str]] = []
     els = line.elements
     if els[0].type != "unwind":
-        out.append(("elements[0].type", f"the first element must be an unwind, got '{els[0].type}'"))
+        out.append(("elements[0].type",
+                    f"the first element must be an unwind, got '{els[0].type}'"))
     if els[-1].type != "rewind":
         out.append((f"elements[{len(els) - 1}].type",
                     f"the last element must be a rewind, got '{els[-1].type}'"))
@@ -390,7 +391,8 @@ def check_line(line: Line) -> list[tuple[str, str]]:
                     out.append((f"{p}.encoder", f"encoder '{s.id}' is on '{s.element}', not on "
                                                 f"'{c.element}'"))
             if c.master and c.draw != 0:
-                out.append((f"{p}.draw", "the master speed node defines line speed: draw must be 0"))
+                out.append((f"{p}.draw",
+                            "the master speed node defines line speed: draw must be 0"))
         else:
             s = sensors.get(c.sensor)
             if s is None or s.type != "load_cell":

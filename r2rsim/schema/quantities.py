@@ -1,4 +1,5 @@
-"""Annotated float types for schema fields: SI number or unit string, parsed by :mod:`r2rsim.units`."""
+"""Annotated float types for schema fields: an SI number or a unit string, parsed by
+:mod:`r2rsim.units`."""
 
 from __future__ import annotations
 

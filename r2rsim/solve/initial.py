@@ -9,8 +9,19 @@ import numpy as np
 
 from ..compile.compiler import CompiledLine
 from ..compile.layout import (
-    C_SPEED, C_TENSION_TORQUE, CI_NODE, CI_TYPE, CI_X, CP_DRAW, CP_FF, CP_KI, H_NC, H_OFF_CI,
-    H_OFF_CP, NCI, NCP,
+    C_SPEED,
+    C_TENSION_TORQUE,
+    CI_NODE,
+    CI_TYPE,
+    CI_X,
+    CP_DRAW,
+    CP_FF,
+    CP_KI,
+    H_NC,
+    H_OFF_CI,
+    H_OFF_CP,
+    NCI,
+    NCP,
 )
 
 
