@@ -16,6 +16,7 @@ Usage::
     python benchmarks/bench_solver.py            # N = 20, 100, 500
     python benchmarks/bench_solver.py --quick    # N = 20 only (< 1 min)
     python benchmarks/bench_solver.py --n 20 100 --repeat 5
+    python benchmarks/bench_solver.py --quick --profile --strict
 
 Timing notes
 ------------
@@ -521,7 +522,7 @@ def format_table(rows: list[dict]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Command-line entry point; returns 0 if every target passed, else 1."""
+    """Command-line entry point; returns 1 with ``--strict`` if a target failed, else 0."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, nargs="+", default=[20, 100, 500], metavar="N",
@@ -535,6 +536,9 @@ def main(argv: list[str] | None = None) -> int:
                     help=f"Radau relative tolerance (default {RTOL:g})")
     ap.add_argument("--profile", action="store_true",
                     help="cProfile one extra r2rsim run per N and print where time goes")
+    ap.add_argument("--strict", action="store_true",
+                    help="exit with status 1 if any target FAILs (default: report only, since "
+                         "timings on shared machines are noisy)")
     args = ap.parse_args(argv)
     ns = [20] if args.quick else args.n
     repeat = args.repeat if args.repeat is not None else 3
@@ -562,7 +566,7 @@ def main(argv: list[str] | None = None) -> int:
           f"{ERROR_RATE:g} Hz subsample; endTerr: at t = {DURATION:g} s. ratio = Radau wall / "
           "r2rsim wall.")
     all_ok = all(not v.startswith("FAIL") for r in rows for v in verdicts(r))
-    return 0 if all_ok else 1
+    return 0 if all_ok or not args.strict else 1
 
 
 if __name__ == "__main__":

@@ -81,6 +81,7 @@ from .layout import (
     NI_S,
     NI_SPAN_DN,
     NI_SPAN_UP,
+    NI_SPEEDC,
     NI_TAU,
     NI_U,
     NI_W,
@@ -426,7 +427,7 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             dalpha = -A / (Rh * Rh) + 3.0 * sgn * cw * V * V / (2.0 * PI * Rh ** 4)
             om = W[oOM + k]
             weps = P[bn + NP_WEPS]
-            th = math.tanh(om / weps)
+            th = _tanh(om / weps)
             tf = P[bn + NP_B] * om + P[bn + NP_TC] * th
             dtf = P[bn + NP_B] + P[bn + NP_TC] * (1.0 - th * th) / weps
             tau = sgn * Rh * (ff * Tref + u) + ff * (Jh * alpha + tf)
@@ -463,12 +464,9 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             if jac:
                 _g_axpy(GI, GC, GV, maxd, qTM + k, act, qTCMD + k)
         # speed-PI anti-windup sees the drive saturation
-        for c in range(nC):
-            if I[oCI + c * NCI + CI_TYPE] != C_SPEED or I[oCI + c * NCI + CI_NODE] != k:
-                continue
+        c = I[oNI + k * NI + NI_SPEEDC]
+        if c >= 0 and I[oCI + c * NCI + CI_X] >= 0:
             ix = I[oCI + c * NCI + CI_X]
-            if ix < 0:
-                continue
             kaw = P[oCP + c * NCP + CP_KAW] / P[oCP + c * NCP + CP_KI]
             yd[ix] = W[oE + c] + kaw * (ts - tc)
             if jac:
@@ -519,7 +517,7 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         J = W[oJ + k]
         om = y[iw]
         weps = P[b + NP_WEPS]
-        th = math.tanh(om / weps)
+        th = _tanh(om / weps)
         tf = P[b + NP_B] * om + P[b + NP_TC] * th
         dtf = P[b + NP_B] + P[b + NP_TC] * (1.0 - th * th) / weps
         num = R * (Tdn - Tup) + W[oTM + k] - tf
@@ -696,6 +694,16 @@ def _sensor_raw(j, typ, node, g, off, win, wout, I, oNI, W, oT, oR, oOM, oRAW, j
 
 
 @njit(cache=True)
+def _tanh(x):
+    """tanh, exact to double precision: beyond |x| = 19.1 it is +-1 (and costly to compute)."""
+    if x > 20.0:
+        return 1.0
+    if x < -20.0:
+        return -1.0
+    return math.tanh(x)
+
+
+@njit(cache=True)
 def _f(e, linear):
     return 1.0 - e if linear else 1.0 / (1.0 + e)
 
@@ -786,3 +794,41 @@ def jac_values(t, y, JJ, I, P, W, GI, GC, GV, yd, vals):
 
 
 _ = (np, MODE_JAC, CI_RSENSOR, SEP_TAU, SEP_CIN, SEP_COUT, H_NCH, EV_EMPTY)
+
+
+@njit(cache=True)
+def rhs_rows(T, Y, F, I, P, W, GI, GC, GV, JJ, aux0):
+    """dy/dt for every row of a state matrix."""
+    for r in range(Y.shape[0]):
+        evaluate(T[r], Y[r], F[r], JJ, MODE_RHS, I, P, W, GI, GC, GV, aux0)
+
+
+@njit(cache=True)
+def hermite(ts, ys, fs, tq, out):
+    """Cubic Hermite interpolation of solver steps (ts, ys, dy/dt = fs) at sorted times tq.
+
+    Exact derivatives at both ends of each step make it fourth-order accurate, better than the
+    BDF2 solution it interpolates; at a step time it returns the step state exactly.
+    """
+    n = ys.shape[1]
+    j = 0
+    last = ts.shape[0] - 1
+    for r in range(tq.shape[0]):
+        t = tq[r]
+        while j < last - 1 and ts[j + 1] < t:
+            j += 1
+        h = ts[j + 1] - ts[j]
+        if h <= 0.0:
+            for i in range(n):
+                out[r, i] = ys[j + 1, i]
+            continue
+        s = (t - ts[j]) / h
+        s2 = s * s
+        s3 = s2 * s
+        h00 = 2.0 * s3 - 3.0 * s2 + 1.0
+        h10 = s3 - 2.0 * s2 + s
+        h01 = -2.0 * s3 + 3.0 * s2
+        h11 = s3 - s2
+        for i in range(n):
+            out[r, i] = (h00 * ys[j, i] + h10 * h * fs[j, i] + h01 * ys[j + 1, i]
+                         + h11 * h * fs[j + 1, i])
