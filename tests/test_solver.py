@@ -88,3 +88,26 @@ def test_overlapping_ramps_are_rejected(repo):
         r2rsim.Programme.from_steps(line, [ProgrammeStep(at=0, line_speed=1.0),
                                            ProgrammeStep(at=0.5, line_speed=2.0, ramp=1.0),
                                            ProgrammeStep(at=1.0, line_speed=3.0)])
+
+
+def test_drive_torque_ripple_forces_the_roller_span_mode(tmp_path):
+    # a torque-driven roller between two ideal-speed nodes (V7's geometry) with no controller:
+    # the ripple A sin(w t) is balanced by R (T2 - T1) below the span mode w_n (quasi-static
+    # forced response with the undamped dynamic amplification 1 / (1 - (w / w_n)^2))
+    from conftest import kinematic_line, run_line
+
+    A, f = 0.5, 7.0
+    roller = ("type: driven, radius: 0.05, inertia: 0.01, "
+              f"drive: {{torque_lag: 0, torque_ripple: {{amplitude: {A}, frequency: {f} Hz}}}}")
+    path = kinematic_line(tmp_path, model="linear", EA=1e5, spans=[1.0, 1.0], draws=[0, 0, 0],
+                          wound_strain=1e-3, middle=[roller])
+    _, res = run_line(path, duration=20.0, rate=1000.0, steps=[{"at": 0, "line_speed": 5.0}],
+                      tension=100.0, rtol=1e-8)
+    late = res.t > 10.0  # transients (time constant L/v = 0.2 s) have died out
+    dT = (res["span2.tension_N"] - res["span1.tension_N"])[late]
+    spec = np.abs(np.fft.rfft(dT - dT.mean()))
+    freqs = np.fft.rfftfreq(len(dT), 1e-3)
+    assert freqs[np.argmax(spec)] == pytest.approx(f, abs=0.11)
+    w, wn = 2 * np.pi * f, 0.05 * np.sqrt((1e5 - 100.0) * 2.0 / 0.01)
+    amp = 0.5 * (dT.max() - dT.min())
+    assert amp == pytest.approx(A / 0.05 / (1 - (w / wn) ** 2), rel=0.02)

@@ -104,6 +104,8 @@ from .layout import (
     NP_R0,
     NP_RC,
     NP_RHOW,
+    NP_RIPA,
+    NP_RIPW,
     NP_TC,
     NP_TLAG,
     NP_TMAX,
@@ -408,6 +410,9 @@ def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine
             npr[NP_TLAG] = drive.torque_lag
             npr[NP_TMAX] = drive.torque_max if drive.torque_max is not None else math.inf
             npr[NP_DRAW] = drive.draw
+            if drive.torque_ripple is not None:
+                npr[NP_RIPA] = drive.torque_ripple.amplitude
+                npr[NP_RIPW] = 2.0 * math.pi * drive.torque_ripple.frequency
         if e.wrap_angle is not None and e.friction_coefficient is not None:
             npr[NP_EMB] = math.exp(e.friction_coefficient * e.wrap_angle)
         if e.type in ("unwind", "rewind"):

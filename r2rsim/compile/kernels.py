@@ -99,6 +99,8 @@ from .layout import (
     NP_R0,
     NP_RC,
     NP_RHOW,
+    NP_RIPA,
+    NP_RIPW,
     NP_TC,
     NP_TLAG,
     NP_TMAX,
@@ -521,6 +523,8 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         tf = P[b + NP_B] * om + P[b + NP_TC] * th
         dtf = P[b + NP_B] + P[b + NP_TC] * (1.0 - th * th) / weps
         num = R * (Tdn - Tup) + W[oTM + k] - tf
+        if P[b + NP_RIPA] != 0.0:
+            num += P[b + NP_RIPA] * math.sin(P[b + NP_RIPW] * t)
         yd[iw] = num / J
         if jac:
             if dn >= 0:

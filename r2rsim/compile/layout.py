@@ -32,8 +32,8 @@ NI_KIND, NI_DRIVE, NI_W, NI_S, NI_U, NI_TAU = 0, 1, 2, 3, 4, 5
 NI_SPAN_UP, NI_SPAN_DN, NI_SPEEDC, NI_TENSC = 6, 7, 8, 9
 NI = 10
 (NP_R, NP_J, NP_B, NP_TC, NP_WEPS, NP_R0, NP_RC, NP_JC, NP_CW, NP_RHOW, NP_EPSW,
- NP_TLAG, NP_TMAX, NP_DRAW, NP_EMB) = range(15)
-NP = 15
+ NP_TLAG, NP_TMAX, NP_DRAW, NP_EMB, NP_RIPA, NP_RIPW) = range(17)
+NP = 17
 
 # ---- span records ----
 SI_E, SI_UP, SI_DN = 0, 1, 2

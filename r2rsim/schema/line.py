@@ -93,6 +93,13 @@ class Friction(Strict):
     )
 
 
+class TorqueRipple(Strict):
+    """A sinusoidal disturbance torque amplitude·sin(2π·frequency·t) at a drive's shaft."""
+
+    amplitude: Annotated[Torque, Field(ge=0)]
+    frequency: Annotated[Frequency, Field(gt=0)]
+
+
 class Drive(Strict):
     """A motor drive. ``torque``: first-order torque lag and saturation, commanded by the
     element's controllers. ``ideal_speed``: the surface speed is imposed (line speed x
@@ -104,6 +111,10 @@ class Drive(Strict):
         None, description="torque saturation |tau| <= torque_max [N m]"
     )
     draw: Dimensionless = Field(0.0, description="ideal_speed only: relative speed offset")
+    torque_ripple: TorqueRipple | None = Field(
+        None, description="sinusoidal torque disturbance added at the shaft (cogging, "
+        "gear mesh, an eccentric load)"
+    )
 
 
 class Roll(Strict):

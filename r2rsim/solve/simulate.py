@@ -159,10 +159,10 @@ class _CVODEBackend:
             keep = tspan <= ts[-1]
             out = np.empty((int(keep.sum()), cl.n_states))
             kernels.hermite(ts, ys, fs, tspan[keep], out)
-            return tspan[keep], out, res.message
+            return tspan[keep], out, res.message, ts, ys
         out = np.empty((len(tspan), cl.n_states))
         kernels.hermite(ts, ys, fs, np.ascontiguousarray(tspan), out)
-        return tspan, out, None
+        return tspan, out, None, ts, ys
 
     def locate(self, t0, y0, t1):
         """Integrate [t0, t1] with root-finding; return (t, y, event indices) or None."""
@@ -219,7 +219,8 @@ class _RadauBackend:
         self.njev += int(res.njev)
         self.steps += len(res.t)  # samples, not steps: scipy does not report them
         msg = None if res.success else res.message
-        return np.asarray(res.t), np.asarray(res.y).T, msg
+        tt, Y = np.asarray(res.t), np.ascontiguousarray(np.asarray(res.y).T)
+        return tt, Y, msg, tt, Y  # scipy's steps are not exposed: detect on the samples
 
     def locate(self, t0, y0, t1):
         cl = self.cl
@@ -264,7 +265,7 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
              y0: np.ndarray | None = None, settings: SolverSettings | None = None,
              on_chunk: ChunkCallback | None = None,
              progress: Callable[[float], None] | None = None,
-             initial_state_mode: str = "given") -> SimulationResult:
+             initial_state_mode: str = "given", outputs: bool = True) -> SimulationResult:
     """Integrate a compiled line over ``[0, duration]`` and sample it at ``record_rate``.
 
     Parameters
@@ -282,6 +283,9 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
         holds no arrays (memory stays flat in run length).
     progress : callable, optional
         Called with the simulated time reached.
+    outputs : bool
+        Compute the algebraic outputs (tensions, speeds, torques, ...) of every sample. With
+        False, ``on_chunk`` receives ``None`` for them and the result holds states only.
 
     Returns
     -------
@@ -310,7 +314,7 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
     def emit(t, Y):
         if len(t) == 0:
             return
-        A = cl.outputs(t, Y)
+        A = cl.outputs(t, Y) if outputs else None
         if keep:
             kept_t.append(t.copy())
             kept_y.append(Y.copy())
@@ -345,18 +349,16 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
                 tspan = np.append(tspan, t_chunk_end)
             if len(tspan) < 3:  # scikit-sundae: 2 points means "every step"; pad
                 tspan = np.array([t, 0.5 * (t + tspan[-1]), tspan[-1]])
-            tt, Y, err = backend.solve(tspan, y)
+            tt, Y, err, ts, ys = backend.solve(tspan, y)
             restarts += 1
             if err is not None:
-                good = tt <= tt[-1]
-                _emit_samples(emit, sample_t, k_next, tt[good], Y[good])
-                terminated, reason, t_term = True, f"solver_failure: {err}", float(tt[-1])
+                k_next = _emit_samples(emit, sample_t, k_next, tt, Y)
+                terminated, reason, t_term = True, f"solver_failure: {err}", float(ts[-1])
                 break
-            # event detection on the sample grid
+            # event detection at the solver's steps (as CVODE's own root finding does)
             hit_row = None
             if len(cl.event_kinds):
-                G = cl.events(Y)
-                cond = G < 0
+                cond = cl.events(ys) < 0
                 # the first row is the chunk's start, whose conditions are known (after an
                 # event it sits on a root, where the sign of g is not meaningful)
                 cond[0] = flags
@@ -370,18 +372,20 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
                 if progress:
                     progress(t)
                 continue
-            # an event between rows hit_row-1 and hit_row: emit before, then locate exactly
+            # an event between steps hit_row-1 and hit_row: locate it exactly from the earlier
+            # step, then emit the samples before it
             r0 = hit_row - 1
-            k_next = _emit_samples(emit, sample_t, k_next, tt[: r0 + 1], Y[: r0 + 1])
-            found = backend.locate(float(tt[r0]), Y[r0].copy(), float(tt[hit_row]))
-            if found is None:
-                t_ev, y_ev = float(tt[hit_row]), Y[hit_row].copy()
-            else:
-                t_ev, y_ev, _ = found
-            g_ev = cl.events(y_ev)[0]
-            new_flags = cond[hit_row].copy()
-            # events whose condition changed (use the sample after, robust to g = 0 at root)
-            which = np.nonzero(new_flags != flags)[0]
+            found = backend.locate(float(ts[r0]), ys[r0].copy(), float(ts[hit_row]))
+            if found is None:  # no root seen by CVODE (g grazing 0): take the step itself
+                t_ev, y_ev = float(ts[hit_row]), ys[hit_row].copy()
+                which = np.nonzero(cond[hit_row] != flags)[0]
+            else:  # only the events found at this root flip; others are seen from here on
+                t_ev, y_ev, which = found
+                which = np.array([m for m in which if cond[hit_row, m] != flags[m]] or which)
+            before = tt < t_ev - 1e-12
+            k_next = _emit_samples(emit, sample_t, k_next, tt[before], Y[before])
+            new_flags = flags.copy()
+            new_flags[which] = ~flags[which]
             aux_ev = cl.outputs(np.array([t_ev]), y_ev[None, :])[0]
             for m in which:
                 kind = cl.event_kinds[m]
@@ -393,7 +397,6 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
                     reason = EVENT_NAMES[kind]
                     t_term = t_ev
             flags = new_flags
-            _ = g_ev
             if terminated:
                 break
             t, y = t_ev, y_ev
@@ -403,7 +406,7 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
     if keep and kept_t:
         T_all = np.concatenate(kept_t)
         Y_all = np.concatenate(kept_y)
-        A_all = np.concatenate(kept_a)
+        A_all = np.concatenate(kept_a) if outputs else np.zeros((len(T_all), 0))
     else:
         T_all = np.zeros(0)
         Y_all = np.zeros((0, cl.n_states))
