@@ -622,5 +622,3 @@ def _attach_pattern(cl: CompiledLine) -> None:
     cl.I[H_OFF_PAT] = len(cl.I)
     cl.I = np.concatenate([cl.I, cl.pattern[0], cl.pattern[1]])
 
-
-_ = (MODE_JAC, CP_FF)

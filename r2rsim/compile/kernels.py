@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import njit
 
 from .layout import (
@@ -796,8 +795,6 @@ def jac_values(t, y, JJ, I, P, W, GI, GC, GV, yd, vals):
     for m in range(npat):
         vals[m] = JJ[I[op + m], I[op + npat + m]]
 
-
-_ = (np, MODE_JAC, CI_RSENSOR, SEP_TAU, SEP_CIN, SEP_COUT, H_NCH, EV_EMPTY)
 
 
 @njit(cache=True)

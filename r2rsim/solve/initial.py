@@ -11,13 +11,9 @@ from ..compile.compiler import CompiledLine
 from ..compile.layout import (
     C_SPEED,
     C_TENSION_TORQUE,
-    CI_NODE,
     CI_TYPE,
     CI_X,
-    CP_DRAW,
-    CP_FF,
     CP_KI,
-    H_NC,
     H_OFF_CI,
     H_OFF_CP,
     NCI,
@@ -35,7 +31,6 @@ def nominal_state(cl: CompiledLine, tension: float | None = None,
     line = cl.line
     y = np.zeros(cl.n_states)
     V0 = cl.programme.value("line_speed", 0.0)
-    A0 = 0.0
     tension_sps = [c.setpoint for c in line.controllers if c.type == "tension_pi"]
     T0 = tension if tension is not None else (tension_sps[0] if tension_sps else 0.0)
     EA = line.web.EA
@@ -83,7 +78,6 @@ def nominal_state(cl: CompiledLine, tension: float | None = None,
             sgn = -1.0 if line.element(eid).type == "unwind" else 1.0
             u = (needed_torque.get(eid, 0.0) - tau_ff) / (sgn * R)
             y[ix] = u / ki
-    _ = (A0, CP_DRAW, CP_FF, CI_NODE, H_NC)
     # sensor filters start at their input
     for _ in range(2):
         aux = cl.outputs(0.0, y[None, :])[0]

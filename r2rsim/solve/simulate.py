@@ -21,7 +21,6 @@ import numpy as np
 
 from ..compile.compiler import EVENT_NAMES, CompiledLine
 from ..compile.layout import EV_BREAK, EV_CAPSTAN, EV_EMPTY, EV_SLACK
-from ..errors import SimulationError
 
 TERMINAL = {EV_BREAK, EV_EMPTY}
 
@@ -125,10 +124,9 @@ class _CVODEBackend:
                       linsolver="band", lband=max(cl.lband, 0), uband=max(cl.uband, 0),
                       jacfn=jac, max_order=s.max_order, max_num_steps=200000)
         self.solver = CVODE(rhs, **common)
-        gbuf = np.empty(len(cl.event_kinds))
 
         def eventsfn(t, y, g):
-            g[:] = cl.events(y)[0] if len(g) else gbuf
+            g[:] = cl.events(y)[0]
 
         if len(cl.event_kinds):
             eventsfn.terminal = [True] * len(cl.event_kinds)
@@ -225,7 +223,6 @@ class _RadauBackend:
     def locate(self, t0, y0, t1):
         cl = self.cl
         m = len(cl.event_kinds)
-        g0 = cl.events(y0)[0]
         evs = []
         for i in range(m):
             def ev(t, y, i=i):
@@ -239,7 +236,6 @@ class _RadauBackend:
             for i, te in enumerate(res.t_events):
                 if len(te):
                     return float(te[0]), np.asarray(res.y_events[i][0]), np.array([i])
-        _ = g0
         return None
 
 
@@ -431,5 +427,3 @@ def _emit_samples(emit, sample_t, k_next, tt, Y) -> int:
         return int(idx[ok][-1]) + 1
     return k_next
 
-
-_ = SimulationError
