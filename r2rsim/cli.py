@@ -46,9 +46,8 @@ def _cmd_run(args) -> int:
         bar = tqdm(total=0, unit="s", desc="simulating", leave=False,
                    bar_format="{desc}: {n:.1f}/{total:.1f} s sim [{elapsed}<{remaining}]")
 
-        def progress(t):
-            if bar.total == 0:
-                bar.total = args.duration or _scenario_duration(args.scenario)
+        def progress(t, total):
+            bar.total = total
             bar.n = t
             bar.refresh()
     try:
@@ -61,15 +60,7 @@ def _cmd_run(args) -> int:
     return 0
 
 
-def _scenario_duration(path) -> float:
-    from .schema import load_scenario
-
-    return load_scenario(path)[0].duration
-
-
 def _cmd_validate(args) -> int:
-    from pydantic import ValidationError  # noqa: F401
-
     from .schema import load_line, load_scenario, read_yaml
 
     status = 0

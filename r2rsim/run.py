@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import platform
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,7 +27,7 @@ from .dataset.writer import EVENTS_SCHEMA, FAULTS_SCHEMA
 from .errors import InputError
 from .measure import MeasurementModel
 from .schema import load_scenario
-from .solve import SolverSettings, nominal_state, simulate, steady_state
+from .solve import nominal_state, simulate, steady_state
 
 
 @dataclass
@@ -89,7 +90,7 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
     duration : float, optional
         Overrides the scenario's duration [s].
     progress : callable, optional
-        Called with the simulated time reached.
+        Called as ``progress(t, duration)`` with the simulated time reached.
 
     Returns
     -------
@@ -164,8 +165,9 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
 
         wall0 = time.perf_counter()
         res = simulate(cl, scenario.duration, scenario.record_rate, y0,
-                       SolverSettings.from_options(scenario.solver), on_chunk=on_chunk,
-                       progress=progress, initial_state_mode=init_mode)
+                       scenario.solver, on_chunk=on_chunk,
+                       progress=(lambda t: progress(t, scenario.duration)) if progress else None,
+                       initial_state_mode=init_mode)
         wall = time.perf_counter() - wall0
         sim_end = res.termination_time if res.terminated else scenario.duration
 
@@ -204,8 +206,6 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
             "kind": [e.kind for e in res.events], "component": [e.component for e in res.events],
             "state": [e.state for e in res.events], "message": [e.message for e in res.events],
             "values_json": [json.dumps(e.values) for e in res.events]}, schema=EVENTS_SCHEMA))
-        import platform
-
         seeds = {"process": int(ss_process.generate_state(1, np.uint64)[0]),
                  "measurement": int(ss_meas.generate_state(1, np.uint64)[0]),
                  "fault_sampling": int(ss_faults.generate_state(1, np.uint64)[0])}

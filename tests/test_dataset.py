@@ -163,3 +163,12 @@ def test_readable_without_r2rsim(quick_dataset, tmp_path):
 def test_pyarrow_dataset_reads_all_tables(quick_dataset):
     for name in ("runs", "channels", "faults", "events"):
         pads.dataset(quick_dataset / f"{name}.parquet").to_table()
+
+
+def test_progress_bar_on_a_terminal(tmp_path, repo, capsys, monkeypatch):
+    # the bar appears only on a terminal; its total is the scenario's simulated duration
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    assert main(["run", str(repo / "scenarios" / "quickstart.yaml"), "-o",
+                 str(tmp_path / "p"), "--duration", "2"]) == 0
+    err = capsys.readouterr().err
+    assert "simulating: 2.0/2.0 s sim" in err, err[-300:]

@@ -164,3 +164,22 @@ def test_valid_files_validate(repo, capsys):
     assert main(["validate", *map(str, files)]) == 0
     out = capsys.readouterr().out
     assert "valid line" in out and "valid scenario" in out
+
+
+@pytest.mark.parametrize("flag,value,words", [("--duration", "-1", "--duration must be > 0"),
+                                              ("--seed", "-3", "--seed must be >= 0")])
+def test_bad_cli_values(tmp_path, capsys, repo, flag, value, words):
+    out = tmp_path / "out"
+    code = main(["run", str(repo / "scenarios" / "quickstart.yaml"), "-o", str(out), flag, value,
+                 "-q"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and words in err and len(err.splitlines()) == 1
+    assert not out.exists()
+
+
+def test_solver_settings_are_validated():
+    import r2rsim
+
+    with pytest.raises(ValueError, match="rtol"):
+        r2rsim.SolverSettings(rtol=-1.0)
+    assert r2rsim.SolverSettings().max_order == 2

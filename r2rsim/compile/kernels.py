@@ -428,7 +428,7 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             dalpha = -A / (Rh * Rh) + 3.0 * sgn * cw * V * V / (2.0 * PI * Rh ** 4)
             om = W[oOM + k]
             weps = P[bn + NP_WEPS]
-            th = _tanh(om / weps)
+            th = math.tanh(om / weps)
             tf = P[bn + NP_B] * om + P[bn + NP_TC] * th
             dtf = P[bn + NP_B] + P[bn + NP_TC] * (1.0 - th * th) / weps
             tau = sgn * Rh * (ff * Tref + u) + ff * (Jh * alpha + tf)
@@ -518,7 +518,7 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         J = W[oJ + k]
         om = y[iw]
         weps = P[b + NP_WEPS]
-        th = _tanh(om / weps)
+        th = math.tanh(om / weps)
         tf = P[b + NP_B] * om + P[b + NP_TC] * th
         dtf = P[b + NP_B] + P[b + NP_TC] * (1.0 - th * th) / weps
         num = R * (Tdn - Tup) + W[oTM + k] - tf
@@ -694,16 +694,6 @@ def _sensor_raw(j, typ, node, g, off, win, wout, I, oNI, W, oT, oR, oOM, oRAW, j
         W[oRAW + j] = g * 2.0 * W[oR + node] + off
         if jac:
             _g_axpy(GI, GC, GV, maxd, qRAW + j, 2.0 * g, qR + node)
-
-
-@njit(cache=True)
-def _tanh(x):
-    """tanh, exact to double precision: beyond |x| = 19.1 it is +-1 (and costly to compute)."""
-    if x > 20.0:
-        return 1.0
-    if x < -20.0:
-        return -1.0
-    return math.tanh(x)
 
 
 @njit(cache=True)

@@ -19,7 +19,6 @@ H_MAXPTS = 18
 H_OFF_RT = 19            # P block: runtime values (segment start time)
 H_NPAT, H_OFF_PAT = 20, 21  # Jacobian pattern (rows then cols) in I
 H_NQ, H_MAXD = 22, 23    # gradient scratch: number of quantities, slots per quantity
-H_OFF_W = 24             # (unused placeholder)
 H_NAUX = 25              # length of one row of algebraic outputs
 H_NEV = 26               # number of event functions
 H_OFF_EV = 27            # I block: event records

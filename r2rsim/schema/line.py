@@ -325,10 +325,6 @@ class Line(Strict):
         """Return the element with this id."""
         return next(e for e in self.elements if e.id == element_id)
 
-    def element_index(self, element_id: str) -> int:
-        """Position of an element in web order."""
-        return next(i for i, e in enumerate(self.elements) if e.id == element_id)
-
 
 def check_line(line: Line) -> list[tuple[str, str]]:
     """Cross-field checks of a line; returns ``[(yaml_path, message), ...]``."""

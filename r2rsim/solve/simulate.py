@@ -21,29 +21,20 @@ import numpy as np
 
 from ..compile.compiler import EVENT_NAMES, CompiledLine
 from ..compile.layout import EV_BREAK, EV_CAPSTAN, EV_EMPTY, EV_SLACK
+from ..schema.scenario import SolverOptions
 
 TERMINAL = {EV_BREAK, EV_EMPTY}
 
 
-@dataclass
-class SolverSettings:
-    """Integrator settings; see :class:`r2rsim.schema.scenario.SolverOptions`."""
+SolverSettings = SolverOptions
+"""Integrator settings: the scenario's ``solver:`` block (validated), usable on its own."""
 
-    backend: str = "cvode"
-    rtol: float = 1e-6
-    atol_scale: float = 1.0
-    max_order: int = 2
-    chunk_memory_mb: float = 64.0
 
-    @classmethod
-    def from_options(cls, opts) -> SolverSettings:
-        return cls(opts.backend, opts.rtol, opts.atol_scale, opts.max_order,
-                   opts.chunk_memory_mb)
-
-    def describe(self) -> str:
-        if self.backend == "cvode":
-            return (f"CVODE BDF max_order={self.max_order} band analytic-jac rtol={self.rtol:g}")
-        return f"scipy Radau sparse analytic-jac rtol={self.rtol:g}"
+def describe_settings(s: SolverOptions) -> str:
+    """One line naming the integrator and its settings (for logs and runs.parquet)."""
+    if s.backend == "cvode":
+        return f"CVODE BDF max_order={s.max_order} band analytic-jac rtol={s.rtol:g}"
+    return f"scipy Radau sparse analytic-jac rtol={s.rtol:g}"
 
 
 @dataclass
@@ -410,7 +401,7 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
     wall = _time.perf_counter() - wall0
     stats = {"nfev": backend.nfev, "njev": backend.njev, "restarts": restarts, "wall_s": wall,
              "steps": backend.steps if s.backend == "cvode" else None,
-             "solver": s.describe(), "n_samples": int(k_next)}
+             "solver": describe_settings(s), "n_samples": int(k_next)}
     return SimulationResult(cl, T_all, Y_all, A_all, events, terminated, reason, t_term, stats,
                             duration, initial_state_mode, y0)
 
