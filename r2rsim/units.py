@@ -18,6 +18,8 @@ DIMENSIONS: dict[str, tuple[str, str, str]] = {
     "frequency": ("1 / [time]", "Hz", "1 kHz"),
     "force": ("[length] * [mass] / [time] ** 2", "N", "260 N"),
     "force_rate": ("[length] * [mass] / [time] ** 3", "N/s", "100 N/s"),
+    "stiffness": ("[mass] / [time] ** 2", "N/m", "2000 N/m"),
+    "damping": ("[mass] / [time]", "N*s/m", "50 N*s/m"),
     "pressure": ("[mass] / [length] / [time] ** 2", "Pa", "4.5 GPa"),
     "density": ("[mass] / [length] ** 3", "kg/m^3", "1390 kg/m^3"),
     "mass": ("[mass]", "kg", "10 kg"),

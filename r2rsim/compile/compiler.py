@@ -14,132 +14,19 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError
-from ..schema.line import Line
+from ..schema.line import DANCERS, Line
 from . import kernels
-from .layout import (
-    AUX_CTRL,
-    AUX_NODE,
-    AUX_SENS,
-    AUX_SPAN,
-    C_SPEED,
-    C_TENSION_TORQUE,
-    C_TENSION_TRIM,
-    CI_CH,
-    CI_NODE,
-    CI_RSENSOR,
-    CI_SENSOR,
-    CI_TYPE,
-    CI_X,
-    CP_DRAW,
-    CP_FF,
-    CP_KAW,
-    CP_KI,
-    CP_KP,
-    CP_LIM,
-    CP_SIGN,
-    DRV_IDEAL,
-    DRV_NONE,
-    DRV_TORQUE,
-    EV_BREAK,
-    EV_CAPSTAN,
-    EV_EMPTY,
-    EV_SLACK,
-    H_MAXD,
-    H_MAXPTS,
-    H_MODEL,
-    H_NAUX,
-    H_NC,
-    H_NCH,
-    H_NEV,
-    H_NN,
-    H_NPAT,
-    H_NQ,
-    H_NS,
-    H_NSE,
-    H_NY,
-    H_OFF_CI,
-    H_OFF_CP,
-    H_OFF_EV,
-    H_OFF_NI,
-    H_OFF_NP,
-    H_OFF_PAT,
-    H_OFF_RT,
-    H_OFF_SCHN,
-    H_OFF_SCHT,
-    H_OFF_SCHV,
-    H_OFF_SEI,
-    H_OFF_SEP,
-    H_OFF_SI,
-    H_OFF_SP,
-    HEADER,
-    MODE_JAC,
-    MODE_RHS,
-    MODE_TOUCH,
-    NCI,
-    NCP,
-    NEVI,
-    NI,
-    NI_DRIVE,
-    NI_KIND,
-    NI_S,
-    NI_SPAN_DN,
-    NI_SPAN_UP,
-    NI_SPEEDC,
-    NI_TAU,
-    NI_TENSC,
-    NI_U,
-    NI_W,
-    NK_REWIND,
-    NK_ROLLER,
-    NK_UNWIND,
-    NP,
-    NP_B,
-    NP_CW,
-    NP_DRAW,
-    NP_EMB,
-    NP_EPSW,
-    NP_J,
-    NP_JC,
-    NP_R,
-    NP_R0,
-    NP_RC,
-    NP_RHOW,
-    NP_RIPA,
-    NP_RIPW,
-    NP_TC,
-    NP_TLAG,
-    NP_TMAX,
-    NP_WEPS,
-    NSEI,
-    NSEP,
-    NSI,
-    NSP,
-    SE_DIAMETER,
-    SE_ENCODER,
-    SE_LOADCELL,
-    SEI_F,
-    SEI_NODE,
-    SEI_TYPE,
-    SEP_CIN,
-    SEP_COUT,
-    SEP_GAIN,
-    SEP_OFF,
-    SEP_TAU,
-    SEP_WIN,
-    SEP_WOUT,
-    SI_DN,
-    SI_E,
-    SI_UP,
-    SP_EA,
-    SP_L,
-    SP_TBRK,
-)
+from .layout import *  # noqa: F403 - the record field names
 
 MAXD = 16  # gradient slots per intermediate quantity
 
 #: event kind -> name used in the event log
 EVENT_NAMES = {EV_SLACK: "slack", EV_BREAK: "web_break", EV_CAPSTAN: "slip_risk",
-               EV_EMPTY: "roll_empty"}
+               EV_EMPTY: "roll_empty", EV_STOP_LO: "dancer_stop_low",
+               EV_STOP_HI: "dancer_stop_high", EV_JOINT_PASS: "splice_joint",
+               EV_JOINT_BREAK: "splice_break", EV_SPLICE_RADIUS: "splice_trigger",
+               EV_REFILL: "splice_refilled"}
+N_JOINT_SLOTS = 2  # splice joints on the line at once (a joint leaves at the rewind)
 
 
 @dataclass
@@ -249,6 +136,10 @@ class CompiledLine:
     span_ids: list[str]
     sensors: list
     controllers: list
+    mover_ids: list[str] = field(default_factory=list)
+    mover_q0: list[float] = field(default_factory=list)
+    splice_nodes: list[int] = field(default_factory=list)
+    n_joint_slots: int = 0
     pattern: tuple[np.ndarray, np.ndarray] = (np.zeros(0, np.int64), np.zeros(0, np.int64))
     lband: int = 0
     uband: int = 0
@@ -315,11 +206,14 @@ class CompiledLine:
                              np.zeros(self.n_states), self._J1)
         return AUX
 
-    def events(self, Y: np.ndarray) -> np.ndarray:
-        """Event-function values for each row of a state matrix (condition holds where < 0)."""
+    def events(self, t, Y: np.ndarray) -> np.ndarray:
+        """Event-function values at times t for each row of a state matrix (an event's
+        condition holds where its value is < 0)."""
         Y = np.atleast_2d(np.ascontiguousarray(Y, float))
+        t = np.ascontiguousarray(np.broadcast_to(t, (Y.shape[0],)), float)
         G = np.empty((Y.shape[0], len(self.event_kinds)))
-        kernels.event_values_rows(Y, G, self.I, self.P)
+        kernels.event_values_rows(t, Y, G, self.I, self.P, self._W, self._GI, self._GC,
+                                  self._GV, np.zeros(self.n_states), self._J1)
         return G
 
     def set_segment_start(self, t0: float) -> None:
@@ -389,13 +283,67 @@ def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine
     sens_P = np.zeros((max(nSe, 0), NSEP))
     ctrl_I = np.full((max(nC, 0), NCI), -1, np.int64)
     ctrl_P = np.zeros((max(nC, 0), NCP))
+    ctrl_P[:, CP_GATE] = 1.0  # loops are on (a splice gates the dancer loop off)
 
     speed_of = {c.element: j for j, c in enumerate(ctrls) if c.type == "speed_pi"}
     tens_of = {c.element: j for j, c in enumerate(ctrls) if c.type == "tension_pi"}
 
+    # movers: dancers (on a node) and festoon carriages (on a span)
+    span_ids = [sp.id for sp in line.spans]
+    mover_ids = [e.id for e in els if e.type in DANCERS] + [
+        sp.id for sp in line.spans if sp.festoon is not None]
+    nM = len(mover_ids)
+    mover_idx = {m: i for i, m in enumerate(mover_ids)}
+    mov_I = np.full((nM, NMI), -1, np.int64)
+    mov_P = np.zeros((nM, NMP))
+    mover_q0 = [0.0] * nM
+    splice_nodes = [k for k, e in enumerate(els) if getattr(e, "splicer", None) is not None]
+    nJ = N_JOINT_SLOTS if splice_nodes else 0
+
+    def add_mover(mid, kind, k_node, span_u, span_d, mp, q0, unit):
+        m = mover_idx[mid]
+        mov_P[m] = mp
+        mover_q0[m] = q0
+        mov_I[m, MI_NODE] = k_node
+        mov_I[m, MI_SPAN_U], mov_I[m, MI_SPAN_D] = span_u, span_d
+        tol = 1e-7 if unit == "m" else 1e-6
+        mov_I[m, MI_Q] = add(f"{mid}.position", unit, "mover", tol)
+        mov_I[m, MI_QD] = add(f"{mid}.velocity", f"{unit}/s", "mover", 10 * tol)
+        mov_I[m, MI_KIND] = kind
+        # its position loops and position sensors sit next to it (keeps the band narrow)
+        for j, c in enumerate(ctrls):
+            if c.type == "dancer_pi" and c.dancer == mid:
+                ci, cp = ctrl_I[j], ctrl_P[j]
+                ci[CI_TYPE] = C_DANCER
+                ci[CI_NODE] = node_idx[c.element]
+                ci[CI_MOVER] = m
+                ci[CI_SENSOR] = sens_idx[c.sensor] if c.sensor else -1
+                cp[CP_KP], cp[CP_KI] = c.kp, c.ki
+                cp[CP_KAW] = c.anti_windup_gain if c.anti_windup_gain is not None else (
+                    c.ki / c.kp if c.kp > 0 else 1.0)
+                cp[CP_LIM] = c.output_limit if c.output_limit is not None else math.inf
+                cp[CP_SETP] = c.setpoint if c.setpoint is not None else q0
+                cp[CP_GATE] = 1.0
+                # storage grows with q where sum(dL/dq) > 0; a short dancer speeds an
+                # upstream element up or slows a downstream one
+                grow = _storage_slope(mov_P[m], mov_I[m, MI_KIND], q0)
+                upstream = ci[CI_NODE] <= (k_node - 1 if k_node >= 0 else span_u)
+                cp[CP_SIGN] = math.copysign(1.0, grow) * (1.0 if upstream else -1.0)
+                if c.ki > 0:
+                    ci[CI_X] = add(f"{c.id}.integral", "", "controller", 1e-8 / c.ki)
+        for j, sn in enumerate(sensors):
+            if sn.type == "dancer_position" and sn.element == mid:
+                sens_I[j, SEI_TYPE] = SE_DANCER
+                sens_I[j, SEI_NODE] = m
+                sens_P[j, SEP_GAIN], sens_P[j, SEP_OFF], sens_P[j, SEP_TAU] = (
+                    sn.gain, sn.offset, sn.filter)
+                if sn.filter > 0:
+                    sens_I[j, SEI_F] = add(f"{sn.id}.filtered", unit, "sensor_filter", tol)
+
     for k, e in enumerate(els):
         f = e.friction
         ni, npr = node_I[k], node_P[k]
+        npr[NP_VGAIN] = 1.0
         ni[NI_KIND] = {"unwind": NK_UNWIND, "rewind": NK_REWIND}.get(e.type, NK_ROLLER)
         drive = getattr(e, "drive", None)
         ni[NI_DRIVE] = DRV_NONE if drive is None else (
@@ -422,8 +370,11 @@ def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine
                                                               r.core_inertia, cw)
             # wound density from mass conservation: rho_r·c_w = rho·t_w (physics.md 1.4)
             npr[NP_RHOW] = web.density * web.thickness / cw * web.width
-            npr[NP_EPSW] = r.wound_in_strain
+            npr[NP_EPSW], npr[NP_EPSW1], npr[NP_EPSW2] = r.wound_in_coefficients()
             npr[NP_R] = r.outer_radius
+            sp_ = getattr(e, "splicer", None)
+            if sp_ is not None and sp_.trigger_radius is not None:
+                npr[NP_RTRIG] = sp_.trigger_radius
             ni[NI_S] = add(f"{e.id}.length", "m", "roll_length", 1e-6)
             ni[NI_U] = add(f"{e.id}.unstretched_length", "m", "material", 1e-6)
         elif e.type == "nip":
@@ -439,8 +390,12 @@ def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine
             ni[NI_W] = add(f"{e.id}.speed", "rad/s", "speed", 1e-6)
         if ni[NI_DRIVE] == DRV_TORQUE and drive.torque_lag > 0:
             ni[NI_TAU] = add(f"{e.id}.drive_torque", "N*m", "torque", 1e-4)
+        if e.type in DANCERS:
+            mp, kind, q0, unit = _dancer_record(line, k)
+            add_mover(e.id, kind, k, k - 1, k, mp, q0, unit)
+            ni[NI_MOVER] = mover_idx[e.id]
         for j, c in enumerate(ctrls):
-            if c.element != e.id:
+            if c.element != e.id or c.type == "dancer_pi":
                 continue
             ci, cp = ctrl_I[j], ctrl_P[j]
             ci[CI_NODE] = k
@@ -470,7 +425,7 @@ def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine
             if c.ki > 0:
                 ci[CI_X] = add(f"{c.id}.integral", "", "controller", out_tol / c.ki)
         for j, s in enumerate(sensors):
-            if s.element != e.id:
+            if s.element != e.id or s.type == "dancer_position":
                 continue
             si, sp = sens_I[j], sens_P[j]
             si[SEI_NODE] = k
@@ -498,7 +453,17 @@ def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine
         if k < nS:
             si_ = span_I[k]
             si_[SI_UP], si_[SI_DN] = k, k + 1
-            span_P[k, SP_L] = line.spans[k].length
+            fe = line.spans[k].festoon
+            if fe is not None:
+                mp = np.zeros(NMP)
+                mp[MP_MASS] = fe.carriage_mass
+                mp[MP_QMIN], mp[MP_QMAX] = fe.stroke
+                mp[MP_C], mp[MP_FC], mp[MP_EPS] = fe.damping, fe.coulomb, fe.smoothing_speed
+                mp[MP_F0] = fe.force + fe.carriage_mass * fe.gravity
+                mp[MP_NSTR] = 2.0 * fe.moving_rollers
+                add_mover(line.spans[k].id, MV_FESTOON, -1, k, -1, mp, fe.initial_position, "m")
+                si_[SI_MOVER] = mover_idx[line.spans[k].id]
+            span_P[k, SP_L] = line.spans[k].length or 0.0
             span_P[k, SP_EA] = EA
             span_P[k, SP_TBRK] = web.break_tension
             # strain tolerance ~1e-4 N of tension (physics.md 1.2, solver.md 6)
@@ -525,30 +490,65 @@ def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine
             ev_I.append((EV_EMPTY, k))
             ev_kinds.append(EV_EMPTY)
             ev_comp.append(e.id)
+        if k in splice_nodes:
+            ev_I.append((EV_SPLICE_RADIUS, k))
+            ev_kinds.append(EV_SPLICE_RADIUS)
+            ev_comp.append(e.id)
+    for m, mid in enumerate(mover_ids):
+        for kind in (EV_STOP_LO, EV_STOP_HI):
+            ev_I.append((kind, m))
+            ev_kinds.append(kind)
+            ev_comp.append(mid)
+    for js in range(nJ):
+        for kind in (EV_JOINT_PASS, EV_JOINT_BREAK):
+            ev_I.append((kind, js))
+            ev_kinds.append(kind)
+            ev_comp.append(f"splice_joint{js + 1}")
+    for j, c in enumerate(ctrls):
+        if c.type == "dancer_pi" and node_idx[c.element] in splice_nodes:
+            ev_I.append((EV_REFILL, j))
+            ev_kinds.append(EV_REFILL)
+            ev_comp.append(c.element)
 
     # algebraic output names
     aux_names, aux_units = [], []
     for sp in line.spans:
-        aux_names += [f"{sp.id}.tension_N", f"{sp.id}.geometric_strain"]
-        aux_units += ["N", "1"]
+        aux_names += [f"{sp.id}.tension_N", f"{sp.id}.geometric_strain", f"{sp.id}.length_m"]
+        aux_units += ["N", "1", "m"]
     for e in els:
         aux_names += [f"{e.id}.surface_speed_m_s", f"{e.id}.speed_rad_s", f"{e.id}.radius_m",
                       f"{e.id}.inertia_kg_m2", f"{e.id}.web_mass_kg", f"{e.id}.torque_N_m",
                       f"{e.id}.torque_command_N_m", f"{e.id}.tension_ratio"]
         aux_units += ["m/s", "rad/s", "m", "kg*m^2", "kg", "N*m", "N*m", "1"]
+    mover_unit = {mid: units[mov_I[m, MI_Q]] for m, mid in enumerate(mover_ids)}
     for s in sensors:
-        u = {"load_cell": "N", "encoder": "rad_s", "roll_diameter": "m"}[s.type]
-        q = {"load_cell": "tension", "encoder": "speed", "roll_diameter": "diameter"}[s.type]
+        u = {"load_cell": "N", "encoder": "rad_s", "roll_diameter": "m",
+             "dancer_position": mover_unit.get(s.element, "m")}[s.type]
+        q = {"load_cell": "tension", "encoder": "speed", "roll_diameter": "diameter",
+             "dancer_position": "position"}[s.type]
         aux_names += [f"{s.id}.{q}_{u}", f"{s.id}.{q}_seen_{u}", f"{s.id}.force_N"]
         aux_units += [u.replace("_", "/"), u.replace("_", "/"), "N"]
     for c in ctrls:
         if c.type == "speed_pi":
             aux_names += [f"{c.id}.error_rad_s", f"{c.id}.output_N_m", f"{c.id}.integral"]
             aux_units += ["rad/s", "N*m", "rad"]
+        elif c.type == "dancer_pi":
+            u = mover_unit.get(c.dancer, "m")
+            aux_names += [f"{c.id}.error_{u}", f"{c.id}.output_m_s", f"{c.id}.integral"]
+            aux_units += [u, "m/s", f"{u}*s"]
         else:
             out_u = "N" if ctrl_I[ctrls.index(c), CI_TYPE] == C_TENSION_TORQUE else "m_s"
             aux_names += [f"{c.id}.error_N", f"{c.id}.output_{out_u}", f"{c.id}.integral"]
             aux_units += ["N", out_u.replace("_", "/"), "N*s"]
+    for mid in mover_ids:
+        u = mover_unit[mid]
+        f_u = "N" if u == "m" else "N_m"
+        aux_names += [f"{mid}.position_{u}", f"{mid}.velocity_{u}_s", f"{mid}.web_force_{f_u}",
+                      f"{mid}.static_force_{f_u}", f"{mid}.stop_state"]
+        aux_units += [u, f"{u}/s", f_u.replace("_", "*"), f_u.replace("_", "*"), "1"]
+    for js in range(nJ):
+        aux_names += [f"splice_joint{js + 1}.lead_m", f"splice_joint{js + 1}.span_index"]
+        aux_units += ["m", "1"]
     aux_names += ["setpoint.line_speed_m_s", "setpoint.line_acceleration_m_s2"]
     aux_units += ["m/s", "m/s^2"]
     for cid in tension_ctrls:
@@ -557,7 +557,7 @@ def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine
 
     # the programme tables
     nch = len(prog.names)
-    maxpts = max(len(t) for t in prog.times)
+    maxpts = max(len(t) for t in prog.times) + 4  # room for an e-stop ramp
     sch_n = np.array([len(t) for t in prog.times], np.int64)
     sch_t = np.zeros((nch, maxpts))
     sch_v = np.zeros((nch, maxpts))
@@ -568,26 +568,28 @@ def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine
 
     # ---- pack I and P
     blocks_I = [node_I.ravel(), span_I.ravel(), sens_I.ravel(), ctrl_I.ravel(), sch_n,
-                np.array(ev_I, np.int64).reshape(-1, NEVI).ravel()]
+                np.array(ev_I, np.int64).reshape(-1, NEVI).ravel(), mov_I.ravel()]
     offs_I, pos = [], HEADER
     for b in blocks_I:
         offs_I.append(pos)
         pos += b.size
     blocks_P = [node_P.ravel(), span_P.ravel(), sens_P.ravel(), ctrl_P.ravel(), sch_t.ravel(),
-                sch_v.ravel(), np.zeros(4)]
+                sch_v.ravel(), np.zeros(4), mov_P.ravel(), np.zeros(nJ * NJP), np.array([EA])]
     offs_P, ppos = [], 0
     for b in blocks_P:
         offs_P.append(ppos)
         ppos += b.size
     P = np.concatenate(blocks_P)
     n = len(names)
-    nq = nS + 7 * nN + 2 * nSe + 2 * nC
+    nq = 3 * nS + 7 * nN + 2 * nSe + 2 * nC
     header = np.zeros(HEADER, np.int64)
     header[H_NN], header[H_NS], header[H_NSE], header[H_NC], header[H_NY] = nN, nS, nSe, nC, n
     header[H_OFF_NI], header[H_OFF_SI], header[H_OFF_SEI], header[H_OFF_CI] = offs_I[:4]
     header[H_OFF_SCHN], header[H_OFF_EV] = offs_I[4], offs_I[5]
     header[H_OFF_NP], header[H_OFF_SP], header[H_OFF_SEP], header[H_OFF_CP] = offs_P[:4]
     header[H_OFF_SCHT], header[H_OFF_SCHV], header[H_OFF_RT] = offs_P[4:7]
+    header[H_NM], header[H_OFF_MI], header[H_OFF_MP] = nM, offs_I[6], offs_P[7]
+    header[H_NJ], header[H_OFF_JP], header[H_EA] = nJ, offs_P[8], offs_P[9]
     header[H_MODEL] = 1 if line.span_model == "linear" else 0
     header[H_NCH], header[H_MAXPTS] = nch, maxpts
     header[H_NQ], header[H_MAXD] = nq, MAXD
@@ -599,10 +601,11 @@ def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine
         line=line, programme=prog, I=I, P=P, n_states=n, state_names=names, state_units=units,
         state_kinds=kinds, atol=np.array(atol), aux_names=aux_names, aux_units=aux_units,
         event_kinds=ev_kinds, event_components=ev_comp, node_ids=[e.id for e in els],
-        span_ids=[s.id for s in line.spans], sensors=sensors, controllers=ctrls,
+        span_ids=span_ids, sensors=sensors, controllers=ctrls, mover_ids=mover_ids,
+        mover_q0=mover_q0, splice_nodes=splice_nodes, n_joint_slots=nJ,
     )
     assert len(aux_names) == AUX_SPAN * nS + AUX_NODE * nN + AUX_SENS * nSe + AUX_CTRL * nC \
-        + 2 + (nch - 1)
+        + AUX_MOVER * nM + AUX_JOINT * nJ + 2 + (nch - 1)
     _attach_pattern(cl)
     return cl
 
@@ -622,3 +625,101 @@ def _attach_pattern(cl: CompiledLine) -> None:
     cl.I[H_OFF_PAT] = len(cl.I)
     cl.I = np.concatenate([cl.I, cl.pattern[0], cl.pattern[1]])
 
+
+
+def _wrap_sign(e) -> float:
+    """+1 where the web travels counter-clockwise around the roller (it lies on the left)."""
+    return 1.0 if e.wrap == "ccw" else -1.0
+
+
+def _roller_radius(e) -> float:
+    return e.roll.outer_radius if e.type in ("unwind", "rewind") else e.radius
+
+
+def _dancer_record(line: Line, k: int):
+    """Mover parameters of the dancer at element k: (record, initial q, unit of q)."""
+    e = line.elements[k]
+    a, b = line.elements[k - 1], line.elements[k + 1]
+    mp = np.zeros(NMP)
+    sd = _wrap_sign(e)
+    mp[MP_DU] = sd * e.radius - _wrap_sign(a) * _roller_radius(a)
+    mp[MP_DD] = _wrap_sign(b) * _roller_radius(b) - sd * e.radius
+    mp[MP_AX], mp[MP_AY] = a.position
+    mp[MP_BX], mp[MP_BY] = b.position
+    mp[MP_EPS] = e.smoothing_speed
+    mp[MP_C], mp[MP_FC] = e.damping, e.coulomb
+    gx, gy = e.gravity
+    if e.type == "dancer":
+        nx, ny = e.direction
+        nrm = math.hypot(nx, ny)
+        nx, ny = nx / nrm, ny / nrm
+        mp[MP_CX], mp[MP_CY] = e.position
+        mp[MP_NX], mp[MP_NY] = nx, ny
+        mp[MP_MASS] = e.mass
+        mp[MP_QMIN], mp[MP_QMAX] = e.travel_range
+        mp[MP_F0] = e.load_force + e.mass * (gx * nx + gy * ny)
+        mp[MP_K], mp[MP_Q0] = e.spring_stiffness, e.spring_free_travel
+        kind, q0, unit = MV_LINEAR, e.initial_travel, "m"
+    else:
+        arm = e.arm_length
+        mp[MP_CX], mp[MP_CY] = e.pivot
+        mp[MP_NX] = arm
+        mp[MP_MASS] = e.arm_inertia + e.roller_mass * arm ** 2
+        mp[MP_QMIN], mp[MP_QMAX] = e.angle_range
+        mp[MP_F0] = e.torque
+        lever = e.roller_mass * arm + e.arm_mass * (e.arm_com if e.arm_com is not None
+                                                    else 0.5 * arm)
+        mp[MP_G1], mp[MP_G2] = lever * gy, -lever * gx
+        if e.torsion_spring is not None:
+            mp[MP_K], mp[MP_Q0] = e.torsion_spring.stiffness, e.torsion_spring.free_angle
+        if e.cylinder is not None:
+            mp[MP_CYLF] = e.cylinder.force
+            mp[MP_CYLX], mp[MP_CYLY] = e.cylinder.fixed_point
+            mp[MP_CYLA] = e.cylinder.arm_point
+        kind, q0, unit = MV_PIVOT, e.arm_angle, "rad"
+    # reference directions of the two spans at the initial position: there L = free length
+    mp[MP_TUX], mp[MP_TUY], mp[MP_TDX], mp[MP_TDY] = 1.0, 0.0, 1.0, 0.0
+    for q in (mp[MP_QMIN], mp[MP_QMAX], q0):
+        for which, (dist, delta) in enumerate(_centre_distances(mp, kind, q)):
+            if dist <= abs(delta) + 1e-9:
+                side = ("upstream", "downstream")[which]
+                raise InputError(f"at position {q:g} the dancer roller overlaps its {side} "
+                                 f"neighbour (centre distance {dist:.4g} m): check positions "
+                                 f"and ranges", path=f"elements[{k}]")
+    tu, td = _tangents(mp, kind, q0)
+    mp[MP_TUX], mp[MP_TUY] = tu
+    mp[MP_TDX], mp[MP_TDY] = td
+    return mp, kind, q0, unit
+
+
+def _centre(mp, kind, q):
+    if kind == MV_LINEAR:
+        return mp[MP_CX] + q * mp[MP_NX], mp[MP_CY] + q * mp[MP_NY]
+    return mp[MP_CX] + mp[MP_NX] * math.cos(q), mp[MP_CY] + mp[MP_NX] * math.sin(q)
+
+
+def _centre_distances(mp, kind, q):
+    cx, cy = _centre(mp, kind, q)
+    return [(math.hypot(cx - mp[MP_AX], cy - mp[MP_AY]), mp[MP_DU]),
+            (math.hypot(mp[MP_BX] - cx, mp[MP_BY] - cy), mp[MP_DD])]
+
+
+def _tangents(mp, kind, q):
+    """Unit vectors of travel along the upstream and downstream spans at position q."""
+    cx, cy = _centre(mp, kind, q)
+    out = []
+    for (ax, ay, bx, by, delta) in ((mp[MP_AX], mp[MP_AY], cx, cy, mp[MP_DU]),
+                                     (cx, cy, mp[MP_BX], mp[MP_BY], mp[MP_DD])):
+        dx, dy = bx - ax, by - ay
+        d2 = dx * dx + dy * dy
+        lam = math.sqrt(d2 - delta * delta)
+        out.append(((lam * dx + delta * dy) / d2, (lam * dy - delta * dx) / d2))
+    return out
+
+
+def _storage_slope(mp, kind, q):
+    """d(stored length)/dq of a mover at q (sum over its spans)."""
+    if kind == MV_FESTOON:
+        return mp[MP_NSTR]
+    _, dlu, _, dld = kernels.mover_lengths(mp, 0, kind, q)
+    return dlu + dld

@@ -19,114 +19,7 @@ import math
 
 from numba import njit
 
-from .layout import (
-    AUX_CTRL,
-    AUX_NODE,
-    AUX_SENS,
-    AUX_SPAN,
-    C_SPEED,
-    C_TENSION_TRIM,
-    CI_CH,
-    CI_NODE,
-    CI_RSENSOR,
-    CI_SENSOR,
-    CI_TYPE,
-    CI_X,
-    CP_DRAW,
-    CP_FF,
-    CP_KAW,
-    CP_KI,
-    CP_KP,
-    CP_LIM,
-    CP_SIGN,
-    DRV_TORQUE,
-    EV_BREAK,
-    EV_CAPSTAN,
-    EV_EMPTY,
-    EV_SLACK,
-    H_MAXD,
-    H_MAXPTS,
-    H_MODEL,
-    H_NC,
-    H_NCH,
-    H_NEV,
-    H_NN,
-    H_NPAT,
-    H_NS,
-    H_NSE,
-    H_OFF_CI,
-    H_OFF_CP,
-    H_OFF_EV,
-    H_OFF_NI,
-    H_OFF_NP,
-    H_OFF_PAT,
-    H_OFF_RT,
-    H_OFF_SCHN,
-    H_OFF_SCHT,
-    H_OFF_SCHV,
-    H_OFF_SEI,
-    H_OFF_SEP,
-    H_OFF_SI,
-    H_OFF_SP,
-    MODE_JAC,
-    MODE_RHS,
-    MODE_TOUCH,
-    NCI,
-    NCP,
-    NEVI,
-    NI,
-    NI_DRIVE,
-    NI_KIND,
-    NI_S,
-    NI_SPAN_DN,
-    NI_SPAN_UP,
-    NI_SPEEDC,
-    NI_TAU,
-    NI_U,
-    NI_W,
-    NK_ROLLER,
-    NK_UNWIND,
-    NP,
-    NP_B,
-    NP_CW,
-    NP_DRAW,
-    NP_EMB,
-    NP_EPSW,
-    NP_J,
-    NP_JC,
-    NP_R,
-    NP_R0,
-    NP_RC,
-    NP_RHOW,
-    NP_RIPA,
-    NP_RIPW,
-    NP_TC,
-    NP_TLAG,
-    NP_TMAX,
-    NP_WEPS,
-    NSEI,
-    NSEP,
-    NSI,
-    NSP,
-    SE_ENCODER,
-    SE_LOADCELL,
-    SEI_F,
-    SEI_NODE,
-    SEI_TYPE,
-    SEP_CIN,
-    SEP_COUT,
-    SEP_GAIN,
-    SEP_OFF,
-    SEP_TAU,
-    SEP_WIN,
-    SEP_WOUT,
-    SI_DN,
-    SI_E,
-    SI_UP,
-    SP_EA,
-    SP_L,
-    SP_TBRK,
-)
+from .layout import *  # noqa: F403 - the record field names
 
 PI = math.pi
 
@@ -193,6 +86,105 @@ def setpoint(I, P, ch, t):
     return P[bv + k] + slope * (t - P[bt + k]), slope
 
 
+# --------------------------------------------------------------------------- scratch layout
+@njit(cache=True)
+def _offsets(I):
+    """Offsets of the value blocks in the scratch array W and of the gradient quantities."""
+    nN = I[H_NN]
+    nS = I[H_NS]
+    nSe = I[H_NSE]
+    nC = I[H_NC]
+    nM = I[H_NM]
+    oT = 0
+    oEM = oT + nS
+    oL = oEM + nS
+    oLD = oL + nS
+    oLP = oLD + nS
+    oLPP = oLP + nS
+    oEAE = oLPP + nS
+    oV = oEAE + nS
+    oR = oV + nN
+    oOM = oR + nN
+    oJ = oOM + nN
+    oTRIM = oJ + nN
+    oTCMD = oTRIM + nN
+    oTM = oTCMD + nN
+    oRAW = oTM + nN
+    oYS = oRAW + nSe
+    oU = oYS + nSe
+    oE = oU + nC
+    oMF = oE + nC
+    oMW = oMF + nM
+    return (oT, oEM, oL, oLD, oLP, oLPP, oEAE, oV, oR, oOM, oJ, oTRIM, oTCMD, oTM, oRAW, oYS,
+            oU, oE, oMF, oMW)
+
+
+# --------------------------------------------------------------------------- mover geometry
+@njit(cache=True)
+def _span_geo(ax, ay, bx, by, delta, trx, tr_y, sgn, dcx, dcy):
+    """Path length of the web between circle a and circle b (centres, signed radius offset
+    delta = s_b·r_b - s_a·r_a) relative to a reference direction, and its rate per unit
+    motion of the moving centre (physics.md eq. 1.14: dL = -e·dC).
+
+    L = lambda - delta·(psi - psi_ref): the free tangent length plus the wrap arcs gained or
+    lost as the tangent points migrate, so that dL/dq = t·dC/dq exactly.
+    """
+    dx = bx - ax
+    dy = by - ay
+    D2 = dx * dx + dy * dy
+    lam = math.sqrt(max(D2 - delta * delta, 1e-30))
+    tx = (lam * dx + delta * dy) / D2
+    ty = (lam * dy - delta * dx) / D2
+    dpsi = math.atan2(trx * ty - tr_y * tx, trx * tx + tr_y * ty)
+    return lam - delta * dpsi, sgn * (tx * dcx + ty * dcy)
+
+
+@njit(cache=True)
+def mover_lengths(P, bm, kind, q):
+    """(L_up, dL_up/dq, L_down, dL_down/dq) of the two spans at a dancer at coordinate q."""
+    if kind == MV_LINEAR:
+        dcx = P[bm + MP_NX]
+        dcy = P[bm + MP_NY]
+        cx = P[bm + MP_CX] + q * dcx
+        cy = P[bm + MP_CY] + q * dcy
+    else:
+        arm = P[bm + MP_NX]
+        dcx = -arm * math.sin(q)
+        dcy = arm * math.cos(q)
+        cx = P[bm + MP_CX] + arm * math.cos(q)
+        cy = P[bm + MP_CY] + arm * math.sin(q)
+    lu, dlu = _span_geo(P[bm + MP_AX], P[bm + MP_AY], cx, cy, P[bm + MP_DU], P[bm + MP_TUX],
+                        P[bm + MP_TUY], 1.0, dcx, dcy)
+    ld, dld = _span_geo(cx, cy, P[bm + MP_BX], P[bm + MP_BY], P[bm + MP_DD], P[bm + MP_TDX],
+                        P[bm + MP_TDY], -1.0, dcx, dcy)
+    return lu, dlu, ld, dld
+
+
+@njit(cache=True)
+def _mover_load(P, bm, kind, q):
+    """Generalised actuator + spring + gravity force on a mover (without web and friction)."""
+    f = P[bm + MP_F0] - P[bm + MP_K] * (q - P[bm + MP_Q0])
+    if kind == MV_PIVOT:
+        f += P[bm + MP_G1] * math.cos(q) + P[bm + MP_G2] * math.sin(q)
+        fc = P[bm + MP_CYLF]
+        if fc != 0.0:
+            a = P[bm + MP_CYLA]
+            rx = P[bm + MP_CX] + a * math.cos(q) - P[bm + MP_CYLX]
+            ry = P[bm + MP_CY] + a * math.sin(q) - P[bm + MP_CYLY]
+            ylen = math.sqrt(rx * rx + ry * ry)
+            if ylen > 0.0:
+                f += fc * (rx * (-a * math.sin(q)) + ry * (a * math.cos(q))) / ylen
+    return f
+
+
+@njit(cache=True)
+def roll_wound_in_strain(P, b, R):
+    """Wound-in strain of a roll at radius R and its derivative (polynomial in R)."""
+    e1 = P[b + NP_EPSW1]
+    e2 = P[b + NP_EPSW2]
+    return P[b + NP_EPSW] + e1 * R + e2 * R * R, e1 + 2.0 * e2 * R
+
+
 # --------------------------------------------------------------------------- the kernel
 @njit(cache=True)
 def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
@@ -222,35 +214,29 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
     nS = I[H_NS]
     nSe = I[H_NSE]
     nC = I[H_NC]
+    nM = I[H_NM]
     oNI = I[H_OFF_NI]
     oSI = I[H_OFF_SI]
     oSEI = I[H_OFF_SEI]
     oCI = I[H_OFF_CI]
+    oMI = I[H_OFF_MI]
     oNP = I[H_OFF_NP]
     oSP = I[H_OFF_SP]
     oSEP = I[H_OFF_SEP]
     oCP = I[H_OFF_CP]
+    oMP = I[H_OFF_MP]
     linear = I[H_MODEL] == 1
     jac = mode != MODE_RHS
     maxd = I[H_MAXD]
+    EAweb = P[I[H_EA]]
 
-    # scratch value offsets
-    oT = 0
-    oEM = oT + nS
-    oV = oEM + nS
-    oR = oV + nN
-    oOM = oR + nN
-    oJ = oOM + nN
-    oTRIM = oJ + nN
-    oTCMD = oTRIM + nN
-    oTM = oTCMD + nN
-    oRAW = oTM + nN
-    oYS = oRAW + nSe
-    oU = oYS + nSe
-    oE = oU + nC
+    (oT, oEM, oL, oLD, oLP, oLPP, oEAE, oV, oR, oOM, oJ, oTRIM, oTCMD, oTM, oRAW, oYS, oU, oE,
+     oMF, oMW) = _offsets(I)
     # gradient quantity ids
     qT = 0
-    qV = qT + nS
+    qL = qT + nS
+    qLD = qL + nS
+    qV = qLD + nS
     qR = qV + nN
     qOM = qR + nN
     qTRIM = qOM + nN
@@ -273,14 +259,79 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
 
     V, A = setpoint(I, P, 0, t)
 
-    # 1. spans: tension from the material strain (slack: geometric strain < 0 carries none)
+    # 0. span lengths: fixed, or set by a dancer's or festoon carriage's coordinate q
+    for i in range(nS):
+        W[oL + i] = P[oSP + i * NSP + SP_L]
+        W[oLD + i] = 0.0
+        W[oLP + i] = 0.0
+        W[oLPP + i] = 0.0
+        W[oEAE + i] = P[oSP + i * NSP + SP_EA]
+    for m in range(nM):
+        bm = oMP + m * NMP
+        kind = I[oMI + m * NMI + MI_KIND]
+        iq = I[oMI + m * NMI + MI_Q]
+        q = y[iq]
+        su = I[oMI + m * NMI + MI_SPAN_U]
+        sd = I[oMI + m * NMI + MI_SPAN_D]
+        if kind == MV_FESTOON:
+            W[oL + su] = P[oSP + su * NSP + SP_L] + P[bm + MP_NSTR] * q
+            W[oLP + su] = P[bm + MP_NSTR]
+        else:
+            lu, dlu, ld, dld = mover_lengths(P, bm, kind, q)
+            h = 1e-6
+            _, dlu1, _, dld1 = mover_lengths(P, bm, kind, q + h)
+            _, dlu0, _, dld0 = mover_lengths(P, bm, kind, q - h)
+            W[oL + su] = lu
+            W[oLP + su] = dlu
+            W[oLPP + su] = (dlu1 - dlu0) / (2.0 * h)
+            W[oL + sd] = ld
+            W[oLP + sd] = dld
+            W[oLPP + sd] = (dld1 - dld0) / (2.0 * h)
+    for m in range(nM):
+        iq = I[oMI + m * NMI + MI_Q]
+        iqd = I[oMI + m * NMI + MI_QD]
+        for side in range(2):
+            sp = I[oMI + m * NMI + MI_SPAN_U + side]
+            if sp < 0:
+                continue
+            W[oLD + sp] = W[oLP + sp] * y[iqd]
+            if jac:
+                _g_add(GI, GC, GV, maxd, qL + sp, iq, W[oLP + sp])
+                _g_add(GI, GC, GV, maxd, qLD + sp, iq, W[oLPP + sp] * y[iqd])
+                _g_add(GI, GC, GV, maxd, qLD + sp, iqd, W[oLP + sp])
+
+    # splice joints: a span holding joint length l_s has compliance (l - l_s)/EA + l_s/EA_s
+    # (physics.md eq. 1.19). The joint's place is fixed by the unstretched length paid out
+    # since the splice; the Jacobian treats the overlap as constant (it changes only while
+    # the joint crosses a node).
+    oJP = I[H_OFF_JP]
+    for js in range(I[H_NJ]):
+        bj = oJP + js * NJP
+        if P[bj + JP_ACTIVE] == 0.0:
+            continue
+        k0 = int(P[bj + JP_NODE])
+        lead = y[I[oNI + k0 * NI + NI_U]] - P[bj + JP_U0]
+        trail = lead - P[bj + JP_LEN]
+        c0 = 0.0
+        for i in range(nS):
+            ell = W[oL + i] / max(1.0 + y[I[oSI + i * NSI + SI_E]], 1e-6)
+            ov = min(c0 + ell, lead) - max(c0, trail)
+            if ov > 0.0:
+                frac = min(ov / ell, 1.0)
+                W[oEAE + i] = W[oEAE + i] / (1.0 - frac * (1.0 - 1.0 / P[bj + JP_RATIO]))
+            c0 += ell
+            if c0 >= lead:
+                break
+
+    # 1. spans: tension from the material strain (slack: geometric strain < 0 carries none).
+    # The strain carried through the nodes is that of the plain web, T/EA.
     for i in range(nS):
         ie = I[oSI + i * NSI + SI_E]
         e = y[ie]
-        EA = P[oSP + i * NSP + SP_EA]
+        EA = W[oEAE + i]
         em = e if e > 0.0 else 0.0
-        W[oEM + i] = em
         W[oT + i] = EA * em
+        W[oEM + i] = EA * em / EAweb
         if jac:
             _g_add(GI, GC, GV, maxd, qT + i, ie, EA if e > 0.0 else 0.0)
 
@@ -310,6 +361,44 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             if jac:
                 _g_add(GI, GC, GV, maxd, qOM + k, iw, 1.0)
 
+    # 2b. movers (dancer carriage/arm, festoon carriage): M·q'' = -sum T·dL/dq + load
+    #     - c·q' - F_c·tanh(q'/eps); latched at an end stop or seized: q' = 0 and held
+    for m in range(nM):
+        bm = oMP + m * NMP
+        kind = I[oMI + m * NMI + MI_KIND]
+        iq = I[oMI + m * NMI + MI_Q]
+        iqd = I[oMI + m * NMI + MI_QD]
+        q = y[iq]
+        qd = y[iqd]
+        fweb = 0.0
+        kweb = 0.0
+        for side in range(2):
+            sp = I[oMI + m * NMI + MI_SPAN_U + side]
+            if sp >= 0:
+                fweb -= W[oT + sp] * W[oLP + sp]
+                kweb -= W[oT + sp] * W[oLPP + sp]
+        load = _mover_load(P, bm, kind, q)
+        h = 1e-7
+        dload = (_mover_load(P, bm, kind, q + h) - _mover_load(P, bm, kind, q - h)) / (2.0 * h)
+        eps = P[bm + MP_EPS]
+        th = math.tanh(qd / eps)
+        fric = P[bm + MP_C] * qd + P[bm + MP_FC] * th
+        dfric = P[bm + MP_C] + P[bm + MP_FC] * (1.0 - th * th) / eps
+        W[oMW + m] = fweb
+        W[oMF + m] = fweb + load
+        free = 1.0 if P[bm + MP_MODE] == 0.0 else 0.0
+        M = P[bm + MP_MASS]
+        yd[iq] = free * qd
+        yd[iqd] = free * (fweb + load - fric) / M
+        if jac:
+            _j_add(JJ, mode, iq, iqd, free)
+            for side in range(2):
+                sp = I[oMI + m * NMI + MI_SPAN_U + side]
+                if sp >= 0:
+                    _j_axpy(JJ, mode, iqd, -free * W[oLP + sp] / M, GI, GC, GV, maxd, qT + sp)
+            _j_add(JJ, mode, iqd, iq, free * (kweb + dload) / M)
+            _j_add(JJ, mode, iqd, iqd, -free * dfric / M)
+
     # 3. sensor readings that do not need imposed speeds
     for j in range(nSe):
         typ = I[oSEI + j * NSEI + SEI_TYPE]
@@ -319,8 +408,14 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         g = P[b + SEP_GAIN]
         if typ == SE_ENCODER and I[oNI + node * NI + NI_W] < 0:
             continue  # imposed-speed node: read after step 7
-        _sensor_raw(j, typ, node, g, P[b + SEP_OFF], P[b + SEP_WIN], P[b + SEP_WOUT], I, oNI,
-                    W, oT, oR, oOM, oRAW, jac, GI, GC, GV, maxd, qT, qR, qOM, qRAW)
+        if typ == SE_DANCER:  # node holds the mover index
+            iq = I[oMI + node * NMI + MI_Q]
+            W[oRAW + j] = g * y[iq] + P[b + SEP_OFF]
+            if jac:
+                _g_add(GI, GC, GV, maxd, qRAW + j, iq, g)
+        else:
+                _sensor_raw(j, typ, node, g, P[b + SEP_OFF], P[b + SEP_WIN], P[b + SEP_WOUT], I,
+                        oNI, W, oT, oR, oOM, oRAW, jac, GI, GC, GV, maxd, qT, qR, qOM, qRAW)
         if iF >= 0:
             W[oYS + j] = y[iF]
             if jac:
@@ -339,39 +434,52 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         node = I[oCI + c * NCI + CI_NODE]
         ix = I[oCI + c * NCI + CI_X]
         sens = I[oCI + c * NCI + CI_SENSOR]
-        Tref, _ = setpoint(I, P, I[oCI + c * NCI + CI_CH], t)
         kp = P[b + CP_KP]
         ki = P[b + CP_KI]
         lim = P[b + CP_LIM]
-        e = Tref - W[oYS + sens]
+        # the measurement enters with weight -1 through the quantity qmeas (or a state)
+        if typ == C_DANCER:
+            imq = I[oMI + I[oCI + c * NCI + CI_MOVER] * NMI + MI_Q]
+            e = P[b + CP_SETP] - (W[oYS + sens] if sens >= 0 else y[imq])
+        else:
+            Tref, _ = setpoint(I, P, I[oCI + c * NCI + CI_CH], t)
+            e = Tref - W[oYS + sens]
+        # a gated loop (dancer loop during a splice) holds its integrator and outputs 0
+        gate = 1.0 if P[b + CP_GATE] > 0.0 else 0.0
         x = y[ix] if ix >= 0 else 0.0
         upi = kp * e + ki * x
         u = min(max(upi, -lim), lim)
         act = 1.0 if u == upi else 0.0
-        W[oU + c] = u
+        W[oU + c] = gate * u
         W[oE + c] = e
         if jac:
-            _g_axpy(GI, GC, GV, maxd, qU + c, -kp * act, qY + sens)
+            if sens >= 0:
+                _g_axpy(GI, GC, GV, maxd, qU + c, -gate * kp * act, qY + sens)
+            else:
+                _g_add(GI, GC, GV, maxd, qU + c, imq, -gate * kp * act)
             if ix >= 0:
-                _g_add(GI, GC, GV, maxd, qU + c, ix, ki * act)
+                _g_add(GI, GC, GV, maxd, qU + c, ix, gate * ki * act)
         if ix >= 0:
             kaw = P[b + CP_KAW] / ki
-            yd[ix] = e + kaw * (u - upi)
+            yd[ix] = gate * (e + kaw * (u - upi))
             if jac:
                 # d(u - upi) = (act - 1) * d(upi)
-                _j_axpy(JJ, mode, ix, -1.0 + kaw * (act - 1.0) * (-kp), GI, GC, GV, maxd,
-                        qY + sens)
-                _j_add(JJ, mode, ix, ix, kaw * (act - 1.0) * ki)
-        if typ == C_TENSION_TRIM:
+                wm = gate * (-1.0 + kaw * (act - 1.0) * (-kp))
+                if sens >= 0:
+                    _j_axpy(JJ, mode, ix, wm, GI, GC, GV, maxd, qY + sens)
+                else:
+                    _j_add(JJ, mode, ix, imq, wm)
+                _j_add(JJ, mode, ix, ix, gate * kaw * (act - 1.0) * ki)
+        if typ == C_TENSION_TRIM or typ == C_DANCER:
             sgn = P[b + CP_SIGN]
-            W[oTRIM + node] += sgn * u
+            W[oTRIM + node] += sgn * W[oU + c]
             if jac:
                 _g_axpy(GI, GC, GV, maxd, qTRIM + node, sgn, qU + c)
 
     # 5. torque commands: speed PI (+ inertia feed-forward) and torque-mode tension control
     for c in range(nC):
         typ = I[oCI + c * NCI + CI_TYPE]
-        if typ == C_TENSION_TRIM:
+        if typ == C_TENSION_TRIM or typ == C_DANCER:
             continue
         b = oCP + c * NCP
         k = I[oCI + c * NCI + CI_NODE]
@@ -383,7 +491,9 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         kind = I[oNI + k * NI + NI_KIND]
         if typ == C_SPEED:
             R = W[oR + k]
-            vref = V * (1.0 + P[b + CP_DRAW]) + W[oTRIM + k]
+            vg = P[bn + NP_VGAIN]
+            vref = (V * (1.0 + P[b + CP_DRAW]) * vg + P[bn + NP_VOFF]
+                    + P[bn + NP_VSLOPE] * (t - P[bn + NP_VT0]) + W[oTRIM + k])
             wref = vref / R
             sens = I[oCI + c * NCI + CI_SENSOR]
             wm = W[oYS + sens] if sens >= 0 else W[oOM + k]
@@ -391,7 +501,7 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             W[oE + c] = e
             x = y[ix] if ix >= 0 else 0.0
             J = W[oJ + k]
-            aref = A * (1.0 + P[b + CP_DRAW]) / R
+            aref = (A * (1.0 + P[b + CP_DRAW]) * vg + P[bn + NP_VSLOPE]) / R
             tau = kp * e + ki * x + ff * J * aref
             W[oTCMD + k] += tau
             if jac:
@@ -484,7 +594,9 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
                 _g_add(GI, GC, GV, maxd, qV + k, iw, R)
                 _g_axpy(GI, GC, GV, maxd, qV + k, y[iw], qR + k)
         else:  # imposed speed
-            v = V * (1.0 + P[oNP + k * NP + NP_DRAW]) + W[oTRIM + k]
+            bn = oNP + k * NP
+            v = (V * (1.0 + P[bn + NP_DRAW]) * P[bn + NP_VGAIN] + P[bn + NP_VOFF]
+                 + P[bn + NP_VSLOPE] * (t - P[bn + NP_VT0]) + W[oTRIM + k])
             W[oV + k] = v
             W[oOM + k] = v / R
             if jac:
@@ -548,7 +660,7 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         yd[iS] = v
         if kind == NK_UNWIND:
             sp = I[oNI + k * NI + NI_SPAN_DN]
-            esrc_fwd = P[oNP + k * NP + NP_EPSW]
+            esrc_fwd, desrc = roll_wound_in_strain(P, oNP + k * NP, W[oR + k])
             q = _flux(v, esrc_fwd, W[oEM + sp], linear)
         else:
             sp = I[oNI + k * NI + NI_SPAN_UP]
@@ -559,6 +671,8 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             if kind == NK_UNWIND:
                 _j_flux(JJ, mode, iU, 1.0, v, esrc_fwd, W[oEM + sp], -1, sp, linear, I, P,
                         GI, GC, GV, maxd, qV + k, qT, oSP)
+                dq = v * _df(esrc_fwd, linear) * desrc if v >= 0.0 else 0.0
+                _j_axpy(JJ, mode, iU, dq, GI, GC, GV, maxd, qR + k)
             else:
                 _j_flux(JJ, mode, iU, 1.0, v, W[oEM + sp], W[oEM + sp], sp, sp, linear, I,
                         P, GI, GC, GV, maxd, qV + k, qT, oSP)
@@ -568,27 +682,39 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         ie = I[oSI + i * NSI + SI_E]
         a = I[oSI + i * NSI + SI_UP]
         bnode = I[oSI + i * NSI + SI_DN]
-        L = P[oSP + i * NSP + SP_L]
+        L = W[oL + i]
+        Ld = W[oLD + i]
         eg = y[ie]
         # upstream node a: forward flow brings the strain of the span before a
         sp_before = I[oNI + a * NI + NI_SPAN_UP]
+        dwa = 0.0
         if sp_before >= 0:
             ef = W[oEM + sp_before]
         else:
-            ef = P[oNP + a * NP + NP_EPSW]
+            ef, dwa = roll_wound_in_strain(P, oNP + a * NP, W[oR + a])
         qa = _flux(W[oV + a], ef, W[oEM + i], linear)
         sp_after = I[oNI + bnode * NI + NI_SPAN_DN]
         er = W[oEM + sp_after] if sp_after >= 0 else W[oEM + i]
         qb = _flux(W[oV + bnode], W[oEM + i], er, linear)
+        # moving length (dancer, festoon): + (1 + eg)/L·dL/dt (linear model: dL/dt / L)
         if linear:
             fac = 1.0 / L
             dfac = 0.0
+            gl = 1.0 / L
+            dgl = 0.0
         else:
             fac = (1.0 + eg) * (1.0 + eg) / L
             dfac = 2.0 * (1.0 + eg) / L
-        yd[ie] = fac * (qb - qa)
+            gl = (1.0 + eg) / L
+            dgl = 1.0 / L
+        yd[ie] = fac * (qb - qa) + gl * Ld
         if jac:
-            _j_add(JJ, mode, ie, ie, dfac * (qb - qa))
+            _j_add(JJ, mode, ie, ie, dfac * (qb - qa) + dgl * Ld)
+            _j_axpy(JJ, mode, ie, -(fac * (qb - qa) + gl * Ld) / L, GI, GC, GV, maxd, qL + i)
+            _j_axpy(JJ, mode, ie, gl, GI, GC, GV, maxd, qLD + i)
+            if sp_before < 0:
+                dqa = W[oV + a] * _df(ef, linear) * dwa if W[oV + a] >= 0.0 else 0.0
+                _j_axpy(JJ, mode, ie, -fac * dqa, GI, GC, GV, maxd, qR + a)
             _j_flux(JJ, mode, ie, fac, W[oV + bnode], W[oEM + i], er, i,
                     sp_after if sp_after >= 0 else i, linear, I, P, GI, GC, GV, maxd,
                     qV + bnode, qT, oSP)
@@ -612,6 +738,7 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         for i in range(nS):
             aux[m] = W[oT + i]
             aux[m + 1] = y[I[oSI + i * NSI + SI_E]]
+            aux[m + 2] = W[oL + i]
             m += AUX_SPAN
         for k in range(nN):
             b = oNP + k * NP
@@ -662,6 +789,23 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
                 aux[m + 1] = W[oU + c]
             aux[m + 2] = y[ix] if ix >= 0 else 0.0
             m += AUX_CTRL
+        for mv in range(nM):
+            aux[m] = y[I[oMI + mv * NMI + MI_Q]]
+            aux[m + 1] = y[I[oMI + mv * NMI + MI_QD]]
+            aux[m + 2] = W[oMW + mv]
+            aux[m + 3] = W[oMF + mv]
+            aux[m + 4] = P[oMP + mv * NMP + MP_MODE]
+            m += AUX_MOVER
+        for js in range(I[H_NJ]):
+            bj = I[H_OFF_JP] + js * NJP
+            if P[bj + JP_ACTIVE] != 0.0:
+                k0 = int(P[bj + JP_NODE])
+                aux[m] = y[I[oNI + k0 * NI + NI_U]] - P[bj + JP_U0]
+                aux[m + 1] = P[bj + JP_SPAN]
+            else:
+                aux[m] = math.nan
+                aux[m + 1] = -1.0
+            m += AUX_JOINT
         aux[m] = V
         aux[m + 1] = A
         m += 2
@@ -729,44 +873,88 @@ def _j_flux(JJ, mode, row, a, v, e_fwd, e_rev, sp_fwd, sp_rev, linear, I, P, GI,
 
 # --------------------------------------------------------------------------- events
 @njit(cache=True)
-def event_values(y, g, I, P):
+def event_values(t, y, g, I, P, W, GI, GC, GV, yd, JJ):
     """Event functions at one state; an event's condition holds where its value is < 0.
 
     slack: geometric strain; break: T_break - T; capstan: e^(mu beta)·T_lo - T_hi;
-    roll empty: R - R_core.
+    roll empty: R - R_core; end stop: q - q_min (q_max - q), and while latched the force
+    pressing the mover into the stop (released when it reverses); splice joint: unstretched
+    length to the next node minus the joint's lead, joint break: T_break,s - T; splice
+    trigger: R - R_trigger; refill: storage short of its set-point.
     """
+    evaluate(t, y, yd, JJ, MODE_RHS, I, P, W, GI, GC, GV, yd[:0])
+    (oT, oEM, oL, oLD, oLP, oLPP, oEAE, oV, oR, oOM, oJ, oTRIM, oTCMD, oTM, oRAW, oYS, oU, oE,
+     oMF, oMW) = _offsets(I)
     oNI = I[H_OFF_NI]
     oSI = I[H_OFF_SI]
     oNP = I[H_OFF_NP]
     oSP = I[H_OFF_SP]
     oEV = I[H_OFF_EV]
+    oMI = I[H_OFF_MI]
+    oMP = I[H_OFF_MP]
+    oCP = I[H_OFF_CP]
+    nS = I[H_NS]
     for m in range(I[H_NEV]):
         kind = I[oEV + m * NEVI]
         idx = I[oEV + m * NEVI + 1]
         if kind == EV_SLACK:
             g[m] = y[I[oSI + idx * NSI + SI_E]]
         elif kind == EV_BREAK:
-            e = y[I[oSI + idx * NSI + SI_E]]
-            g[m] = P[oSP + idx * NSP + SP_TBRK] - P[oSP + idx * NSP + SP_EA] * max(e, 0.0)
+            g[m] = P[oSP + idx * NSP + SP_TBRK] - W[oT + idx]
         elif kind == EV_CAPSTAN:
-            up = I[oNI + idx * NI + NI_SPAN_UP]
-            dn = I[oNI + idx * NI + NI_SPAN_DN]
-            t1 = P[oSP + up * NSP + SP_EA] * max(y[I[oSI + up * NSI + SI_E]], 0.0)
-            t2 = P[oSP + dn * NSP + SP_EA] * max(y[I[oSI + dn * NSI + SI_E]], 0.0)
+            t1 = W[oT + I[oNI + idx * NI + NI_SPAN_UP]]
+            t2 = W[oT + I[oNI + idx * NI + NI_SPAN_DN]]
             g[m] = P[oNP + idx * NP + NP_EMB] * min(t1, t2) - max(t1, t2)
         elif kind == EV_EMPTY:
             b = oNP + idx * NP
             R2 = P[b + NP_R0] ** 2 - P[b + NP_CW] / PI * y[I[oNI + idx * NI + NI_S]]
             g[m] = R2 - P[b + NP_RC] ** 2
+        elif kind == EV_STOP_LO or kind == EV_STOP_HI:
+            bm = oMP + idx * NMP
+            md = P[bm + MP_MODE]
+            q = y[I[oMI + idx * NMI + MI_Q]]
+            lo = kind == EV_STOP_LO
+            if md == 0.0:
+                g[m] = q - P[bm + MP_QMIN] if lo else P[bm + MP_QMAX] - q
+            elif md == -1.0 and lo:
+                g[m] = W[oMF + idx]
+            elif md == 1.0 and not lo:
+                g[m] = -W[oMF + idx]
+            else:
+                g[m] = 1.0
+        elif kind == EV_JOINT_PASS or kind == EV_JOINT_BREAK:
+            bj = I[H_OFF_JP] + idx * NJP
+            if P[bj + JP_ACTIVE] == 0.0:
+                g[m] = 1.0
+                continue
+            sp = int(P[bj + JP_SPAN])
+            if kind == EV_JOINT_BREAK:
+                g[m] = P[bj + JP_TBRK] - W[oT + min(max(sp, 0), nS - 1)]
+                continue
+            k0 = int(P[bj + JP_NODE])
+            lead = y[I[oNI + k0 * NI + NI_U]] - P[bj + JP_U0]
+            c0 = 0.0
+            for i in range(min(sp + 1, nS)):
+                c0 += W[oL + i] / max(1.0 + y[I[oSI + i * NSI + SI_E]], 1e-6)
+            g[m] = c0 - lead
+        elif kind == EV_SPLICE_RADIUS:
+            rt = P[oNP + idx * NP + NP_RTRIG]
+            g[m] = W[oR + idx] - rt if rt > 0.0 else 1.0
+        elif kind == EV_REFILL:
+            b = oCP + idx * NCP
+            if P[b + CP_GATE] == -1.0:
+                g[m] = P[b + CP_SIGN] * W[oE + idx]
+            else:
+                g[m] = 1.0
         else:
             g[m] = 1.0
 
 
 @njit(cache=True)
-def event_values_rows(Y, G, I, P):
+def event_values_rows(T, Y, G, I, P, W, GI, GC, GV, yd, JJ):
     """:func:`event_values` for every row of a state matrix."""
     for r in range(Y.shape[0]):
-        event_values(Y[r], G[r], I, P)
+        event_values(T[r], Y[r], G[r], I, P, W, GI, GC, GV, yd, JJ)
 
 
 @njit(cache=True)

@@ -22,47 +22,72 @@ H_NQ, H_MAXD = 22, 23    # gradient scratch: number of quantities, slots per qua
 H_NAUX = 25              # length of one row of algebraic outputs
 H_NEV = 26               # number of event functions
 H_OFF_EV = 27            # I block: event records
-HEADER = 32
+H_NM, H_OFF_MI, H_OFF_MP = 28, 29, 30   # movers (dancers, festoon carriages)
+H_NJ, H_OFF_JP = 31, 32  # splice-joint slots (P block)
+H_EA = 33                # index in P of the web's EA
+HEADER = 40
 
 # ---- node records ----
 NK_UNWIND, NK_REWIND, NK_ROLLER = 0, 1, 2
 DRV_NONE, DRV_TORQUE, DRV_IDEAL = 0, 1, 2
 NI_KIND, NI_DRIVE, NI_W, NI_S, NI_U, NI_TAU = 0, 1, 2, 3, 4, 5
-NI_SPAN_UP, NI_SPAN_DN, NI_SPEEDC, NI_TENSC = 6, 7, 8, 9
-NI = 10
+NI_SPAN_UP, NI_SPAN_DN, NI_SPEEDC, NI_TENSC, NI_MOVER = 6, 7, 8, 9, 10
+NI = 11
 (NP_R, NP_J, NP_B, NP_TC, NP_WEPS, NP_R0, NP_RC, NP_JC, NP_CW, NP_RHOW, NP_EPSW,
- NP_TLAG, NP_TMAX, NP_DRAW, NP_EMB, NP_RIPA, NP_RIPW) = range(17)
-NP = 17
+ NP_TLAG, NP_TMAX, NP_DRAW, NP_EMB, NP_RIPA, NP_RIPW, NP_EPSW1, NP_EPSW2,
+ NP_VGAIN, NP_VOFF, NP_VSLOPE, NP_VT0, NP_RTRIG) = range(24)
+NP = 24
+# reference surface speed of a speed-controlled node (splice phases override it):
+#   v_ref = V·(1 + draw)·VGAIN + VOFF + VSLOPE·(t - VT0) + trim
 
 # ---- span records ----
-SI_E, SI_UP, SI_DN = 0, 1, 2
-NSI = 3
+SI_E, SI_UP, SI_DN, SI_MOVER = 0, 1, 2, 3
+NSI = 4
 SP_L, SP_EA, SP_TBRK = 0, 1, 2
 NSP = 3
 
 # ---- sensor records ----
-SE_LOADCELL, SE_ENCODER, SE_DIAMETER = 1, 2, 3
+SE_LOADCELL, SE_ENCODER, SE_DIAMETER, SE_DANCER = 1, 2, 3, 4
 SEI_TYPE, SEI_NODE, SEI_F = 0, 1, 2
 NSEI = 3
 SEP_WIN, SEP_WOUT, SEP_GAIN, SEP_OFF, SEP_TAU, SEP_CIN, SEP_COUT = range(7)
 NSEP = 7
 
 # ---- controller records ----
-C_SPEED, C_TENSION_TORQUE, C_TENSION_TRIM = 1, 2, 3
-CI_TYPE, CI_NODE, CI_X, CI_SENSOR, CI_RSENSOR, CI_CH = 0, 1, 2, 3, 4, 5
-NCI = 6
-CP_KP, CP_KI, CP_KAW, CP_LIM, CP_DRAW, CP_FF, CP_SIGN = range(7)
-NCP = 7
+C_SPEED, C_TENSION_TORQUE, C_TENSION_TRIM, C_DANCER = 1, 2, 3, 4
+CI_TYPE, CI_NODE, CI_X, CI_SENSOR, CI_RSENSOR, CI_CH, CI_MOVER = 0, 1, 2, 3, 4, 5, 6
+NCI = 7
+CP_KP, CP_KI, CP_KAW, CP_LIM, CP_DRAW, CP_FF, CP_SIGN, CP_SETP, CP_GATE = range(9)
+NCP = 9
+
+# ---- mover records (dancer carriage/arm, festoon carriage): generalised coordinate q ----
+MV_LINEAR, MV_PIVOT, MV_FESTOON = 1, 2, 3
+MI_KIND, MI_Q, MI_QD, MI_SPAN_U, MI_SPAN_D, MI_NODE = range(6)
+NMI = 6
+(MP_MASS, MP_QMIN, MP_QMAX, MP_C, MP_FC, MP_EPS, MP_F0, MP_K, MP_Q0, MP_G1, MP_G2, MP_MODE,
+ MP_CX, MP_CY, MP_NX, MP_NY, MP_AX, MP_AY, MP_BX, MP_BY, MP_DU, MP_DD, MP_TUX, MP_TUY,
+ MP_TDX, MP_TDY, MP_LU0, MP_LD0, MP_NSTR, MP_CYLF, MP_CYLX, MP_CYLY, MP_CYLA,
+ MP_SEIZED_Q) = range(34)
+NMP = 34
+# MP_MODE: 0 free, -1 latched at the lower stop, +1 at the upper stop, 2 seized
+
+# ---- splice-joint slots (P only) ----
+(JP_ACTIVE, JP_U0, JP_LEN, JP_RATIO, JP_TBRK, JP_SPAN, JP_NODE) = range(7)
+NJP = 7
 
 # ---- event records (I block, 3 ints each: kind, index, sign convention) ----
 EV_SLACK, EV_BREAK, EV_CAPSTAN, EV_EMPTY = 1, 2, 3, 4
+EV_STOP_LO, EV_STOP_HI, EV_JOINT_PASS, EV_JOINT_BREAK, EV_SPLICE_RADIUS, EV_REFILL = (
+    5, 6, 7, 8, 9, 10)
 NEVI = 2
 
 # ---- algebraic outputs, per record ----
-AUX_SPAN = 2      # tension, geometric strain
+AUX_SPAN = 3      # tension, geometric strain, length
 AUX_NODE = 8      # v, omega, R, J, m, tau_applied, tau_cmd, capstan margin ratio
 AUX_SENS = 3      # physical value, controller-visible value, bearing force (load cell)
 AUX_CTRL = 3      # error, output, integrator
+AUX_MOVER = 5     # position, velocity, web force, net force, mode
+AUX_JOINT = 2     # leading-edge position (unstretched, from the unwind), span index
 # set-points after the records: line speed, line acceleration, one per channel >= 1
 
 # ---- evaluation modes ----

@@ -21,6 +21,15 @@ _NODE_DESC = {
 }
 
 
+_MOVER_DESC = {
+    "position": "dancer travel / arm angle / festoon carriage position",
+    "velocity": "rate of the position",
+    "web_force": "generalised force of the web on the dancer or carriage",
+    "static_force": "web plus load force at rest (pushes into a stop when latched)",
+    "stop_state": "0 free, -1 at the lower stop, +1 at the upper stop, 2 seized",
+}
+
+
 def true_state_columns(cl: CompiledLine) -> list[dict]:
     """Describe each algebraic output written to the samples table.
 
@@ -31,10 +40,21 @@ def true_state_columns(cl: CompiledLine) -> list[dict]:
     for j, name in enumerate(cl.aux_names):
         comp, _, q = name.partition(".")
         unit = cl.aux_units[j]
-        if comp in cl.span_ids:
+        mq = q.split("_")[0] if not q.startswith(("web_", "static_", "stop_")) else \
+            "_".join(q.split("_")[:2])
+        if comp in cl.mover_ids and mq in _MOVER_DESC:
+            kind, desc = "state", _MOVER_DESC[mq]
+        elif comp.startswith("splice_joint"):
+            kind = "state"
+            desc = {"lead_m": "unstretched web length from the unwind to the joint's leading "
+                              "edge (NaN: no joint on the line)",
+                    "span_index": "index of the span holding the joint's leading edge (-1: "
+                                  "none)"}[q]
+        elif comp in cl.span_ids:
             kind = "state"
             desc = {"tension_N": "span tension (true)",
-                    "geometric_strain": "geometric strain L/l - 1 (< 0: slack)"}[q]
+                    "geometric_strain": "geometric strain L/l - 1 (< 0: slack)",
+                    "length_m": "span path length (changes with a dancer or festoon)"}[q]
         elif comp in cl.node_ids:
             if q == "tension_ratio" and comp in (cl.node_ids[0], cl.node_ids[-1]):
                 continue  # an end roll has one span: no capstan ratio

@@ -15,15 +15,20 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from .materials import MATERIALS
 from .quantities import (
+    Acceleration,
     Angle,
     AngularSpeed,
+    Damping,
     Density,
     Dimensionless,
     Force,
     Frequency,
     Inertia,
     Length,
+    Mass,
     Pressure,
+    Speed,
+    Stiffness,
     Time,
     Torque,
     ViscousTorque,
@@ -32,6 +37,9 @@ from .quantities import (
 Id = Annotated[str, Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$", max_length=64)]
 PosLength = Annotated[Length, Field(gt=0)]
 NonNegTime = Annotated[Time, Field(ge=0)]
+Vec2 = tuple[Length, Length]
+Wrap = Literal["cw", "ccw"]
+GRAVITY = (0.0, -9.81)
 
 
 class Strict(BaseModel):
@@ -128,9 +136,19 @@ class Roll(Strict):
     build_per_wrap: PosLength | None = Field(
         None, description="radial build per wrap c_w [m]; default: the web thickness"
     )
-    wound_in_strain: Dimensionless = Field(
-        0.0, description="strain frozen into the roll when it was wound (unwind inflow strain)"
+    wound_in_strain: Dimensionless | Annotated[list[Dimensionless], Field(
+        min_length=1, max_length=3)] = Field(
+        0.0, description="strain frozen into the roll when it was wound (the unwind's inflow "
+        "strain): a number, or polynomial coefficients [e0, e1, e2] of e0 + e1·R + e2·R^2 over "
+        "the roll radius R in m, so tension drifts over a roll (thesis eq. 2.22)"
     )
+
+    def wound_in_coefficients(self) -> tuple[float, float, float]:
+        """(e0, e1, e2) of the wound-in strain e0 + e1·R + e2·R²."""
+        c = self.wound_in_strain if isinstance(self.wound_in_strain, list) else [
+            self.wound_in_strain]
+        c = [*c, 0.0, 0.0, 0.0]
+        return float(c[0]), float(c[1]), float(c[2])
 
 
 class _Element(Strict):
@@ -144,14 +162,70 @@ class _Element(Strict):
         None, description="web-roller friction coefficient mu; with wrap_angle enables the "
         "capstan (slip-risk) monitor"
     )
+    position: Vec2 | None = Field(
+        None, description="roller centre [x, y] in m (y up); needed next to a dancer, whose "
+        "span lengths come from the geometry"
+    )
+    wrap: Wrap | None = Field(
+        None, description="direction the web travels around this roller seen with x right and "
+        "y up: cw or ccw; needed with position"
+    )
+
+
+class SpliceJoint(Strict):
+    """The taped overlap a splice leaves in the web (physics.md eq. 1.19)."""
+
+    length: PosLength = Field(0.05, description="overlap length l_s [m]")
+    stiffness_ratio: Annotated[Dimensionless, Field(ge=1)] = Field(
+        2.0, description="(EA)_s / EA of the overlap (two webs plus tape: about 2)"
+    )
+    break_tension: Annotated[Force, Field(gt=0)] | None = Field(
+        None, description="break limit of the joint [N]; default the web's"
+    )
+
+
+class Splicer(Strict):
+    """Roll change on an unwind (physics.md §1.7). ``zero_speed``: fill the dancer/festoon,
+    brake the expiring roll to rest, splice during ``dwell``, accelerate the new roll, refill.
+    The unwind needs a speed_pi. ``flying``: the new roll is pre-accelerated to line speed
+    with a relative speed-match error and swapped in at once."""
+
+    type: Literal["zero_speed", "flying"]
+    trigger_radius: PosLength | None = Field(
+        None, description="splice when the running roll's radius falls to this [m]; "
+        "otherwise only at the scenario's splice events"
+    )
+    joint: SpliceJoint = Field(default_factory=SpliceJoint)
+    fill_time: NonNegTime = Field(5.0, description="zero_speed: fill phase duration [s]")
+    fill_overspeed: Annotated[Dimensionless, Field(ge=0, le=0.5)] = Field(
+        0.08, description="zero_speed: relative overspeed of the unwind while filling/refilling"
+    )
+    brake_decel: Annotated[Acceleration, Field(gt=0)] = Field(
+        2.0, description="zero_speed: surface deceleration of the expiring roll [m/s^2]"
+    )
+    dwell: NonNegTime = Field(3.0, description="zero_speed: time at rest for the splice [s]")
+    accel: Annotated[Acceleration, Field(gt=0)] = Field(
+        2.0, description="zero_speed: surface acceleration of the new roll [m/s^2]"
+    )
+    refill_timeout: Annotated[Time, Field(gt=0)] = Field(
+        60.0, description="zero_speed: the refill ends when the dancer/festoon is back at its "
+        "set-point, or after this time [s]"
+    )
+    speed_match_error: Annotated[Dimensionless, Field(gt=-0.5, lt=0.5)] = Field(
+        0.0, description="flying: relative surface-speed error of the new roll (diameter "
+        "error), delta in omega_new = v(1 + delta)/R_new"
+    )
 
 
 class Unwind(_Element):
-    """Unwind stand: a roll paying out web; torque drive (default) or ideal speed."""
+    """Unwind stand: a roll paying out web; torque drive (default) or ideal speed. With a
+    ``splicer`` the expiring roll is replaced by a fresh ``spare_roll`` at every splice."""
 
     type: Literal["unwind"]
     roll: Roll
     drive: Drive = Field(default_factory=Drive)
+    spare_roll: Roll | None = Field(None, description="the roll loaded at each splice")
+    splicer: Splicer | None = None
 
 
 class Rewind(_Element):
@@ -198,15 +272,111 @@ class Nip(_Element):
     pressure_roller: PressureRoller
 
 
-Element = Annotated[Unwind | Rewind | Idler | Driven | Nip, Field(discriminator="type")]
+class Dancer(_Element):
+    """Translating dancer: a roller on a carriage that moves along ``direction``
+    (physics.md eq. 1.15). The roller spins like an idler; the lengths of the spans on both
+    sides follow from the geometry (the neighbours need ``position`` and ``wrap``)."""
+
+    type: Literal["dancer"]
+    radius: PosLength
+    inertia: Annotated[Inertia, Field(gt=0)] = Field(description="roller spin inertia")
+    position: Vec2 = Field(description="roller centre at travel 0 [m]")
+    wrap: Wrap
+    direction: tuple[float, float] = Field(
+        (0.0, -1.0), description="unit vector along which the travel x grows (normalised)"
+    )
+    travel_range: tuple[Length, Length] = Field(description="end stops [x_min, x_max] [m]")
+    initial_travel: Length = Field(0.0, description="travel x at t = 0 [m]")
+    mass: Annotated[Mass, Field(gt=0)] = Field(description="moving mass incl. roller [kg]")
+    load_force: Force = Field(
+        0.0, description="actuator force along direction (air cylinder at regulated pressure)"
+    )
+    spring_stiffness: Annotated[Stiffness, Field(ge=0)] = 0.0
+    spring_free_travel: Length = 0.0
+    damping: Annotated[Damping, Field(ge=0)] = 0.0
+    coulomb: Annotated[Force, Field(ge=0)] = Field(0.0, description="carriage Coulomb friction")
+    smoothing_speed: Annotated[Speed, Field(gt=0)] = Field(
+        1e-3, description="tanh smoothing of the Coulomb friction [m/s]"
+    )
+    gravity: tuple[Acceleration, Acceleration] = GRAVITY
+
+
+class Cylinder(Strict):
+    """Air cylinder between a fixed point and a point on the arm; regulated pressure gives a
+    constant force (physics.md §1.5). Positive force pushes the two points apart."""
+
+    force: Force
+    fixed_point: Vec2
+    arm_point: PosLength = Field(description="distance of the rod end from the pivot [m]")
+
+
+class TorsionSpring(Strict):
+    """Torsion spring at the pivot: M = -stiffness·(angle - free_angle)."""
+
+    stiffness: Annotated[Torque, Field(ge=0)] = Field(description="[N m/rad]")
+    free_angle: Angle = 0.0
+
+
+class PivotDancer(_Element):
+    """Pivoted (pendulum) dancer: roller at the end of an arm (physics.md eq. 1.17), loaded by
+    an air cylinder, a torsion spring, a torque motor and/or gravity."""
+
+    type: Literal["pivot_dancer"]
+    radius: PosLength
+    inertia: Annotated[Inertia, Field(gt=0)] = Field(description="roller spin inertia")
+    wrap: Wrap
+    pivot: Vec2
+    arm_length: PosLength
+    arm_angle: Angle = Field(description="arm angle from +x at t = 0 [rad]")
+    angle_range: tuple[Angle, Angle] = Field(description="end stops [min, max] [rad]")
+    arm_inertia: Annotated[Inertia, Field(ge=0)] = Field(
+        description="arm inertia about the pivot, without the roller [kg m^2]"
+    )
+    roller_mass: Annotated[Mass, Field(ge=0)] = 0.0
+    arm_mass: Annotated[Mass, Field(ge=0)] = 0.0
+    arm_com: Length | None = Field(None, description="pivot to arm centre of mass; default "
+                                   "half the arm length")
+    cylinder: Cylinder | None = None
+    torsion_spring: TorsionSpring | None = None
+    torque: Torque = Field(0.0, description="torque motor at the pivot (active dancer)")
+    damping: Annotated[ViscousTorque, Field(ge=0)] = 0.0
+    coulomb: Annotated[Torque, Field(ge=0)] = 0.0
+    smoothing_speed: Annotated[AngularSpeed, Field(gt=0)] = 1e-3
+    gravity: tuple[Acceleration, Acceleration] = GRAVITY
+
+
+Element = Annotated[Unwind | Rewind | Idler | Driven | Nip | Dancer | PivotDancer,
+                    Field(discriminator="type")]
+DANCERS = ("dancer", "pivot_dancer")
 ROTATING_WITH_DRIVE = ("unwind", "rewind", "driven", "nip")
+
+
+class Festoon(Strict):
+    """Festoon accumulator lumped into its span (physics.md eq. 1.18): ``moving_rollers`` on a
+    carriage give 2n strands; the span length is ``length + 2n·x``."""
+
+    moving_rollers: Annotated[int, Field(ge=1)]
+    carriage_mass: Annotated[Mass, Field(gt=0)]
+    stroke: tuple[Length, Length] = Field(description="carriage end stops [x_min, x_max] [m]")
+    initial_position: Length = Field(description="carriage position x at t = 0 [m]")
+    force: Force = Field(description="carriage actuator force along +x (storage grows) [N]")
+    gravity: Acceleration = Field(
+        0.0, description="gravity component along +x [m/s^2] (-9.81: storage grows upward)"
+    )
+    damping: Annotated[Damping, Field(ge=0)] = 0.0
+    coulomb: Annotated[Force, Field(ge=0)] = 0.0
+    smoothing_speed: Annotated[Speed, Field(gt=0)] = 1e-3
 
 
 class Span(Strict):
     """Free span between consecutive elements."""
 
     id: Id | None = Field(None, description="default: span1, span2, ... in web order")
-    length: PosLength
+    length: PosLength | None = Field(
+        None, description="free length [m]; omitted next to a dancer (from the geometry); "
+        "with a festoon, the length at carriage position 0"
+    )
+    festoon: Festoon | None = None
 
 
 class _Sensor(Strict):
@@ -251,7 +421,17 @@ class RollDiameter(_Sensor):
     offset: Length = 0.0
 
 
-Sensor = Annotated[LoadCell | Encoder | RollDiameter, Field(discriminator="type")]
+class DancerPosition(_Sensor):
+    """Position of a dancer (travel in m, or arm angle in rad) or festoon carriage (m);
+    ``element`` is the dancer's id or the festoon span's id."""
+
+    type: Literal["dancer_position"]
+    noise: Annotated[float, Field(ge=0)] = 0.0
+    offset: float = 0.0
+
+
+Sensor = Annotated[LoadCell | Encoder | RollDiameter | DancerPosition,
+                   Field(discriminator="type")]
 
 
 class _Controller(Strict):
@@ -292,7 +472,22 @@ class TensionPI(_Controller):
     )
 
 
-Controller = Annotated[SpeedPI | TensionPI, Field(discriminator="type")]
+class DancerPI(_Controller):
+    """Dancer (or festoon) position loop: trims the surface speed of ``element`` (a
+    speed-controlled element upstream or downstream of the dancer) by
+    kp·e + ki·∫e, e = setpoint - position, limited to ±output_limit (physics.md §1.10).
+    kp [(m/s)/m] or [(m/s)/rad]. The sign is chosen from the geometry so that a dancer
+    short of web speeds an upstream element up (or slows a downstream one)."""
+
+    type: Literal["dancer_pi"]
+    dancer: Id = Field(description="dancer element id or festoon span id")
+    sensor: Id | None = Field(None, description="dancer_position sensor; default true position")
+    setpoint: float | None = Field(None, description="position set-point; default the "
+                                   "initial position")
+    output_limit: Annotated[float, Field(gt=0)] | None = Field(None, description="[m/s]")
+
+
+Controller = Annotated[SpeedPI | TensionPI | DancerPI, Field(discriminator="type")]
 
 
 class Line(Strict):
@@ -359,9 +554,18 @@ def check_line(line: Line) -> list[tuple[str, str]]:
                 out.append((f"elements[{i}].roll.core_radius",
                             f"core radius {r.core_radius:g} m must be smaller than the roll's "
                             f"outer radius {r.outer_radius:g} m"))
+    out += _check_geometry(line)
     by_id = {e.id: (i, e) for i, e in enumerate(els)}
+    festoons = {sp.id or f"span{i + 1}": sp for i, sp in enumerate(line.spans)
+                if sp.festoon is not None}
+    movers = {e.id for e in els if e.type in DANCERS} | set(festoons)
     sensors = {s.id: s for s in line.sensors}
     for j, s in enumerate(line.sensors):
+        if s.type == "dancer_position":
+            if s.element not in movers:
+                out.append((f"sensors[{j}].element",
+                            _missing("dancer or festoon span", s.element, movers)))
+            continue
         if s.element not in by_id:
             out.append((f"sensors[{j}].element", _missing("element", s.element, by_id)))
             continue
@@ -371,9 +575,54 @@ def check_line(line: Line) -> list[tuple[str, str]]:
                         f"a roll_diameter sensor needs an unwind or rewind, '{e.id}' is {e.type}"))
         if s.type in ("encoder", "load_cell") and not hasattr(e, "friction"):
             out.append((f"sensors[{j}].element", f"'{e.id}' cannot carry a {s.type}"))
-    speed_ctrl: dict[str, int] = {}
+    speed_ctrl = {c.element: j for j, c in enumerate(line.controllers)
+                  if c.type == "speed_pi"}
+    for j, c in enumerate(line.controllers):
+        if c.type != "dancer_pi":
+            continue
+        p = f"controllers[{j}]"
+        if c.dancer not in movers:
+            out.append((f"{p}.dancer", _missing("dancer or festoon span", c.dancer, movers)))
+        if c.sensor is not None:
+            s = sensors.get(c.sensor)
+            if s is None or s.type != "dancer_position":
+                out.append((f"{p}.sensor", _missing("dancer_position sensor", c.sensor,
+                                                    {k: v for k, v in sensors.items()
+                                                     if v.type == "dancer_position"})))
+            elif s.element != c.dancer:
+                out.append((f"{p}.sensor", f"sensor '{s.id}' is on '{s.element}', not on "
+                                           f"'{c.dancer}'"))
+        if c.element not in by_id:
+            out.append((f"{p}.element", _missing("element", c.element, by_id)))
+            continue
+        drive = getattr(by_id[c.element][1], "drive", None)
+        if drive is None or (drive.type == "torque" and c.element not in speed_ctrl):
+            out.append((f"{p}.element", f"a dancer_pi trims a speed: '{c.element}' needs an "
+                                        f"ideal_speed drive or a speed_pi"))
+    for i, e in enumerate(els):
+        sp = getattr(e, "splicer", None)
+        if sp is None:
+            continue
+        p = f"elements[{i}]"
+        if e.spare_roll is None:
+            out.append((f"{p}.spare_roll", "a splicer needs the spare roll it loads"))
+        elif sp.trigger_radius is not None and not (
+                e.roll.core_radius < sp.trigger_radius < e.spare_roll.outer_radius):
+            out.append((f"{p}.splicer.trigger_radius",
+                        f"{sp.trigger_radius:g} m must lie between the core radius "
+                        f"{e.roll.core_radius:g} m and the spare roll's radius "
+                        f"{e.spare_roll.outer_radius:g} m"))
+        if sp.type == "zero_speed":
+            if e.id not in speed_ctrl and e.drive.type != "ideal_speed":
+                out.append((f"{p}.splicer.type", "a zero_speed splice stops the unwind under "
+                                                 "speed control: add a speed_pi on it"))
+            if not movers:
+                out.append((f"{p}.splicer.type", "a zero_speed splice needs a dancer or a "
+                                                 "festoon to supply web while the roll stops"))
     for j, c in enumerate(line.controllers):
         p = f"controllers[{j}]"
+        if c.type == "dancer_pi":
+            continue
         if c.element not in by_id:
             out.append((f"{p}.element", _missing("element", c.element, by_id)))
             continue
@@ -383,13 +632,12 @@ def check_line(line: Line) -> list[tuple[str, str]]:
             out.append((f"{p}.element", f"'{e.id}' is an {e.type} and has no drive to control"))
             continue
         if c.type == "speed_pi":
+            if speed_ctrl.get(c.element, j) != j:
+                out.append((f"{p}.element", f"'{e.id}' already has a speed controller "
+                                            f"(controllers[{speed_ctrl[c.element]}])"))
             if drive.type != "torque":
                 out.append((f"{p}.element", f"speed_pi needs a torque drive; '{e.id}' has an "
                                             f"ideal_speed drive (its speed is already imposed)"))
-            if c.element in speed_ctrl:
-                out.append((f"{p}.element", f"'{e.id}' already has a speed controller "
-                                            f"(controllers[{speed_ctrl[c.element]}])"))
-            speed_ctrl[c.element] = j
             if c.encoder is not None:
                 s = sensors.get(c.encoder)
                 if s is None or s.type != "encoder":
@@ -439,6 +687,67 @@ def check_line(line: Line) -> list[tuple[str, str]]:
                                         f"tension_pi; use one of them"))
         if c.radius_sensor is not None and not roll:
             out.append((f"{p}.radius_sensor", "a radius sensor applies only to unwind/rewind"))
+    return out
+
+
+def _check_geometry(line: Line) -> list[tuple[str, str]]:
+    """Span lengths, festoons and the dancer geometry."""
+    out: list[tuple[str, str]] = []
+    els = line.elements
+    for i, sp in enumerate(line.spans):
+        if i + 1 >= len(els):
+            break
+        a, b = els[i], els[i + 1]
+        near_dancer = a.type in DANCERS or b.type in DANCERS
+        if a.type in DANCERS and b.type in DANCERS:
+            out.append((f"spans[{i}]", f"two dancers next to each other ('{a.id}', '{b.id}') "
+                                       f"are not supported; put a roller between them"))
+        elif near_dancer and sp.length is not None:
+            out.append((f"spans[{i}].length", "the length of a span next to a dancer comes from "
+                                              "the geometry (positions); leave it out"))
+        elif not near_dancer and sp.length is None:
+            out.append((f"spans[{i}].length", "missing: give the span's free length"))
+        if sp.festoon is not None:
+            f = sp.festoon
+            if near_dancer:
+                out.append((f"spans[{i}].festoon", "a festoon span cannot end on a dancer"))
+            if not f.stroke[0] < f.stroke[1]:
+                out.append((f"spans[{i}].festoon.stroke", "must be [x_min, x_max] with "
+                                                          "x_min < x_max"))
+            elif not f.stroke[0] <= f.initial_position <= f.stroke[1]:
+                out.append((f"spans[{i}].festoon.initial_position",
+                            f"{f.initial_position:g} m is outside the stroke {list(f.stroke)}"))
+            elif sp.length is not None and sp.length + 2 * f.moving_rollers * f.stroke[0] <= 0:
+                out.append((f"spans[{i}].festoon.stroke", "the span length "
+                                                          "length + 2n·x_min must stay positive"))
+    for i, e in enumerate(els):
+        if e.type not in DANCERS:
+            continue
+        p = f"elements[{i}]"
+        if e.type == "dancer":
+            lo, hi = e.travel_range
+            if math.hypot(*e.direction) < 1e-9:
+                out.append((f"{p}.direction", "must be a non-zero vector"))
+            if not lo < hi:
+                out.append((f"{p}.travel_range", "must be [x_min, x_max] with x_min < x_max"))
+            elif not lo <= e.initial_travel <= hi:
+                out.append((f"{p}.initial_travel",
+                            f"{e.initial_travel:g} m is outside the travel range {[lo, hi]}"))
+        else:
+            lo, hi = e.angle_range
+            if e.position is not None:
+                out.append((f"{p}.position", "a pivot dancer's roller position follows from "
+                                             "pivot, arm_length and arm_angle; leave it out"))
+            if not lo < hi:
+                out.append((f"{p}.angle_range", "must be [min, max] with min < max"))
+            elif not lo <= e.arm_angle <= hi:
+                out.append((f"{p}.arm_angle", f"{e.arm_angle:g} rad is outside the angle range "
+                                              f"{[lo, hi]}"))
+        for j in (i - 1, i + 1):
+            n = els[j]
+            if n.position is None or n.wrap is None:
+                out.append((f"elements[{j}].position",
+                            f"'{n.id}' is next to dancer '{e.id}': give its position and wrap"))
     return out
 
 

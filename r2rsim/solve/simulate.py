@@ -117,7 +117,7 @@ class _CVODEBackend:
         self.solver = CVODE(rhs, **common)
 
         def eventsfn(t, y, g):
-            g[:] = cl.events(y)[0]
+            g[:] = cl.events(t, y)[0]
 
         if len(cl.event_kinds):
             eventsfn.terminal = [True] * len(cl.event_kinds)
@@ -217,7 +217,7 @@ class _RadauBackend:
         evs = []
         for i in range(m):
             def ev(t, y, i=i):
-                return cl.events(y)[0][i]
+                return cl.events(t, y)[0][i]
             ev.terminal = True
             ev.direction = 0
             evs.append(ev)
@@ -310,7 +310,7 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
             on_chunk(t, Y, A)
 
     events: list[Event] = []
-    flags = cl.events(y0)[0] < 0 if len(cl.event_kinds) else np.zeros(0, bool)
+    flags = cl.events(0.0, y0)[0] < 0 if len(cl.event_kinds) else np.zeros(0, bool)
     t = 0.0
     y = y0
     k_next = 0  # next sample index to emit
@@ -345,7 +345,7 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
             # event detection at the solver's steps (as CVODE's own root finding does)
             hit_row = None
             if len(cl.event_kinds):
-                cond = cl.events(ys) < 0
+                cond = cl.events(ts, ys) < 0
                 # the first row is the chunk's start, whose conditions are known (after an
                 # event it sits on a root, where the sign of g is not meaningful)
                 cond[0] = flags
