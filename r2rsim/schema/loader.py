@@ -175,6 +175,26 @@ def check_scenario_against_line(scenario: Scenario, line: Line, file: str) -> No
         if step.rate is not None and step.line_speed is None:
             raise InputError("rate applies to a line_speed change", file=file,
                              path=f"programme[{i}].rate")
+    splicers = [e.id for e in line.elements if getattr(e, "splicer", None) is not None]
+    movers = {e.id for e in line.elements if e.type in ("dancer", "pivot_dancer")} | {
+        s.id for s in line.spans if s.festoon is not None}
+    for i, ev in enumerate(scenario.events):
+        if ev.type == "splice":
+            if ev.element is None and len(splicers) != 1:
+                raise InputError(f"name the unwind to splice (unwinds with a splicer: "
+                                 f"{', '.join(splicers) or 'none'})", file=file,
+                                 path=f"events[{i}].element")
+            if ev.element is not None and ev.element not in splicers:
+                raise InputError(f"no unwind with a splicer named '{ev.element}' (known: "
+                                 f"{', '.join(splicers) or 'none'})", file=file,
+                                 path=f"events[{i}].element")
+        if ev.type == "dancer_seize" and ev.element not in movers:
+            raise InputError(f"no dancer or festoon named '{ev.element}' (known: "
+                             f"{', '.join(sorted(movers)) or 'none'})", file=file,
+                             path=f"events[{i}].element")
+        if ev.at > scenario.duration:
+            raise InputError(f"at {ev.at:g} s is after the end of the run ({scenario.duration:g}"
+                             f" s)", file=file, path=f"events[{i}].at")
     span_ids = {s.id for s in line.spans}
     for sid in scenario.initial.span_tension:
         if sid not in span_ids:

@@ -40,6 +40,30 @@ class ProgrammeStep(Strict):
         return self
 
 
+class ScenarioEvent(Strict):
+    """A scheduled discrete event.
+
+    ``splice``: start a roll change on ``element`` (an unwind with a splicer; default the
+    only one). ``e_stop``: ramp the line speed down to 0 at ``deceleration``.
+    ``dancer_seize``: the dancer (or festoon carriage) ``element`` seizes where it is.
+    """
+
+    at: Annotated[Time, Field(ge=0)]
+    type: Literal["splice", "e_stop", "dancer_seize"]
+    element: Id | None = None
+    deceleration: Annotated[Acceleration, Field(gt=0)] | None = Field(
+        None, description="e_stop: line deceleration limit [m/s^2]"
+    )
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.type == "e_stop" and self.deceleration is None:
+            raise ValueError("an e_stop needs its deceleration limit")
+        if self.type == "dancer_seize" and self.element is None:
+            raise ValueError("a dancer_seize names the dancer (element)")
+        return self
+
+
 class Initial(Strict):
     """Initial state. ``steady``: solve for the steady state at the t = 0 set-points (default).
     ``nominal``: all nodes at line speed, every span at ``tension`` (overridable per span)."""
@@ -83,6 +107,7 @@ class Scenario(Strict):
     )
     initial: Initial = Field(default_factory=Initial)
     programme: list[ProgrammeStep] = Field(default_factory=list)
+    events: list[ScenarioEvent] = Field(default_factory=list)
     solver: SolverOptions = Field(default_factory=SolverOptions)
     warmup: Annotated[Time, Field(ge=0)] = Field(
         0.0, description="initial period labelled 'warmup' in the dataset [s]"

@@ -22,8 +22,10 @@ import numpy as np
 from ..compile.compiler import EVENT_NAMES, CompiledLine
 from ..compile.layout import EV_BREAK, EV_CAPSTAN, EV_EMPTY, EV_SLACK
 from ..schema.scenario import SolverOptions
+from .discrete import MODE_EVENTS, DiscreteLogic
 
 TERMINAL = {EV_BREAK, EV_EMPTY}
+PHYSICAL = {EV_SLACK, EV_BREAK, EV_CAPSTAN, EV_EMPTY}
 
 
 SolverSettings = SolverOptions
@@ -252,7 +254,8 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
              y0: np.ndarray | None = None, settings: SolverSettings | None = None,
              on_chunk: ChunkCallback | None = None,
              progress: Callable[[float], None] | None = None,
-             initial_state_mode: str = "given", outputs: bool = True) -> SimulationResult:
+             initial_state_mode: str = "given", outputs: bool = True,
+             events=()) -> SimulationResult:
     """Integrate a compiled line over ``[0, duration]`` and sample it at ``record_rate``.
 
     Parameters
@@ -273,6 +276,9 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
     outputs : bool
         Compute the algebraic outputs (tensions, speeds, torques, ...) of every sample. With
         False, ``on_chunk`` receives ``None`` for them and the result holds states only.
+    events : list of ScenarioEvent
+        Scheduled discrete events (splice, e-stop, dancer seize); see
+        :class:`r2rsim.solve.discrete.DiscreteLogic`.
 
     Returns
     -------
@@ -290,8 +296,22 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
     dt = 1.0 / record_rate
     n_samples = int(math.floor(duration * record_rate + 1e-9)) + 1
     sample_t = np.arange(n_samples) * dt
-    breakpoints = [b for b in cl.programme.breakpoints if 0.0 < b < duration]
-    seg_ends = [*breakpoints, duration]
+    # the discrete logic changes modes and parameters in place; the compiled line is put
+    # back as it was when the run ends, so it can be run again
+    saved = (cl.I.copy(), cl.P.copy(), [list(v) for v in cl.programme.times],
+             [list(v) for v in cl.programme.values])
+    try:
+        return _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mode,
+                    outputs, events, backend, sample_t, wall0)
+    finally:
+        cl.I[:], cl.P[:] = saved[0], saved[1]
+        cl.programme.times, cl.programme.values = saved[2], saved[3]
+
+
+def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mode, outputs,
+         events, backend, sample_t, wall0):
+    logic = DiscreteLogic(cl, events)
+    prog_breaks = sorted(b for b in cl.programme.breakpoints if 0.0 < b < duration)
     rows_per_chunk = max(16, int(s.chunk_memory_mb * 1e6 / 8 / max(cl.n_states + len(
         cl.aux_names), 1)))
 
@@ -309,22 +329,42 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
         else:
             on_chunk(t, Y, A)
 
-    events: list[Event] = []
-    flags = cl.events(0.0, y0)[0] < 0 if len(cl.event_kinds) else np.zeros(0, bool)
+    log: list[Event] = []
+    mode_idx = np.array([m for m, k in enumerate(cl.event_kinds) if k in MODE_EVENTS], int)
+
+    def record(entries):
+        log.extend(Event(e.t, e.kind, e.component, e.state, e.message, e.values)
+                   for e in entries)
+
+    def refresh_mode_flags(t, y, flags):
+        # after a discrete change the mode events' functions mean something new: re-read
+        # them (a value exactly at 0 keeps the flag it had)
+        if len(mode_idx):
+            g = cl.events(t, y)[0]
+            for m in mode_idx:
+                if g[m] != 0.0:
+                    flags[m] = g[m] < 0
+        return flags
+
+    cl.set_segment_start(0.0)
+    y0_applied, entries = logic.apply_due(0.0, y0.copy())
+    record(entries)
+    y = y0_applied
+    flags = cl.events(0.0, y)[0] < 0 if len(cl.event_kinds) else np.zeros(0, bool)
     t = 0.0
-    y = y0
     k_next = 0  # next sample index to emit
     terminated, reason, t_term = False, None, None
     restarts = 0
-    seg = 0
-    cl.set_segment_start(0.0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         while t < duration - 1e-12 and not terminated:
-            while seg < len(seg_ends) - 1 and seg_ends[seg] <= t + 1e-12:
-                seg += 1
-            t_seg_end = seg_ends[seg]
-            cl.set_segment_start(seg_ends[seg - 1] if seg > 0 else 0.0)
+            if logic.next_time() <= t + 1e-12:
+                y, entries = logic.apply_due(t, y)
+                record(entries)
+                flags = refresh_mode_flags(t, y, flags)
+            bps = [b for b in (*prog_breaks, *logic.extra_breakpoints()) if b > t + 1e-12]
+            t_seg_end = min([*bps, logic.next_time(), duration])
+            cl.set_segment_start(t)
             # samples in [t, t_seg_end]
             k_end = int(np.searchsorted(sample_t, t_seg_end + 1e-9, side="right"))
             k_hi = min(k_end, k_next + rows_per_chunk)
@@ -374,21 +414,29 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
             new_flags = flags.copy()
             new_flags[which] = ~flags[which]
             aux_ev = cl.outputs(np.array([t_ev]), y_ev[None, :])[0]
+            y_ev = y_ev.copy()
             for m in which:
                 kind = cl.event_kinds[m]
                 comp = cl.event_components[m]
-                state, msg, vals = _message(cl, kind, comp, bool(new_flags[m]), aux_ev)
-                events.append(Event(t_ev, EVENT_NAMES[kind], comp, state, msg, vals))
-                if kind in TERMINAL and new_flags[m]:
-                    terminated = True
-                    reason = EVENT_NAMES[kind]
-                    t_term = t_ev
-            flags = new_flags
+                if kind in PHYSICAL:
+                    state, msg, vals = _message(cl, kind, comp, bool(new_flags[m]), aux_ev)
+                    log.append(Event(t_ev, EVENT_NAMES[kind], comp, state, msg, vals))
+                    if kind in TERMINAL and new_flags[m]:
+                        terminated = True
+                        reason = EVENT_NAMES[kind]
+                        t_term = t_ev
+                    continue
+                y_ev, entries, _ = logic.on_event(int(m), bool(new_flags[m]), t_ev, y_ev)
+                record(entries)
+                if logic.terminate_reason is not None:
+                    terminated, reason, t_term = True, logic.terminate_reason, t_ev
+            flags = refresh_mode_flags(t_ev, y_ev, new_flags)
             if terminated:
                 break
             t, y = t_ev, y_ev
             if progress:
                 progress(t)
+    events = log
 
     if keep and kept_t:
         T_all = np.concatenate(kept_t)

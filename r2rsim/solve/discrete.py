@@ -1,0 +1,472 @@
+"""Discrete behaviour of a line: what happens at an event or a scheduled time.
+
+The ODE right-hand side is smooth between discrete changes; every change of equations or
+parameters (dancer latched at an end stop, roll swap, splice phase, e-stop ramp, dancer
+seized) is made here, between two solver segments, and the integrator restarts from the new
+state (physics.md §1.11). Mode flags live in the compiled parameter vector, so the kernel
+sees them without any Python in the right-hand side.
+
+A zero-speed splice (physics.md §1.7) runs as scheduled phases:
+``fill`` (unwind at overspeed, dancer loop on hold) → ``brake`` (unwind speed reference
+ramps to 0) → ``dwell`` (roll at rest) → ``swap`` (new roll, joint injected) +
+``accelerate`` → ``refill`` (overspeed until the dancer/festoon is back at its set-point) →
+``complete`` (dancer loop resumes, integrator restored: bumpless). A flying splice swaps at
+once, with the new roll turning at v·(1 + δ)/R_new.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..compile.compiler import EVENT_NAMES, CompiledLine
+from ..compile.layout import (
+    C_DANCER,
+    C_TENSION_TORQUE,
+    C_TENSION_TRIM,
+    CI_NODE,
+    CI_TYPE,
+    CI_X,
+    CP_GATE,
+    EV_JOINT_BREAK,
+    EV_JOINT_PASS,
+    EV_REFILL,
+    EV_SPLICE_RADIUS,
+    EV_STOP_HI,
+    EV_STOP_LO,
+    H_MAXPTS,
+    H_OFF_CI,
+    H_OFF_CP,
+    H_OFF_EV,
+    H_OFF_JP,
+    H_OFF_MI,
+    H_OFF_MP,
+    H_OFF_NI,
+    H_OFF_NP,
+    H_OFF_SCHN,
+    H_OFF_SCHT,
+    H_OFF_SCHV,
+    H_OFF_SEI,
+    JP_ACTIVE,
+    JP_LEN,
+    JP_NODE,
+    JP_RATIO,
+    JP_SPAN,
+    JP_TBRK,
+    JP_U0,
+    MI_Q,
+    MI_QD,
+    MP_MODE,
+    MP_QMAX,
+    MP_QMIN,
+    NCI,
+    NCP,
+    NEVI,
+    NI,
+    NI_S,
+    NI_U,
+    NI_W,
+    NJP,
+    NMI,
+    NMP,
+    NP,
+    NP_CW,
+    NP_EPSW,
+    NP_EPSW1,
+    NP_EPSW2,
+    NP_JC,
+    NP_R,
+    NP_R0,
+    NP_RC,
+    NP_RHOW,
+    NP_VGAIN,
+    NP_VOFF,
+    NP_VSLOPE,
+    NP_VT0,
+    NSEI,
+    SE_DIAMETER,
+    SEI_F,
+    SEI_NODE,
+    SEI_TYPE,
+)
+
+#: events whose handling changes the model (their flags are recomputed after a change)
+MODE_EVENTS = {EV_STOP_LO, EV_STOP_HI, EV_JOINT_PASS, EV_SPLICE_RADIUS, EV_REFILL}
+
+
+@dataclass(order=True)
+class _Action:
+    t: float
+    seq: int
+    kind: str = field(compare=False)
+    target: int = field(compare=False, default=-1)
+    data: dict = field(compare=False, default_factory=dict)
+
+
+@dataclass
+class LogEntry:
+    """An event-log entry produced by the discrete logic."""
+
+    t: float
+    kind: str
+    component: str
+    state: str
+    message: str
+    values: dict = field(default_factory=dict)
+
+
+class DiscreteLogic:
+    """Scheduled actions and event handlers of one run.
+
+    Parameters
+    ----------
+    cl : CompiledLine
+    events : list of ScenarioEvent
+        The scenario's scheduled events (``splice``, ``e_stop``, ``dancer_seize``).
+    """
+
+    def __init__(self, cl: CompiledLine, events=()):
+        self.cl = cl
+        self.line = cl.line
+        self._queue: list[_Action] = []
+        self._seq = 0
+        self.splicing: dict[int, str] = {}   # unwind node -> phase
+        self._saved_integral: dict[int, float] = {}
+        self.terminate_reason: str | None = None
+        self._breakpoints: list[float] = []
+        node_idx = {nid: k for k, nid in enumerate(cl.node_ids)}
+        mover_idx = {mid: m for m, mid in enumerate(cl.mover_ids)}
+        for ev in events:
+            if ev.type == "splice":
+                k = node_idx[ev.element] if ev.element else cl.splice_nodes[0]
+                self._push(ev.at, "splice", k)
+            elif ev.type == "e_stop":
+                self._push(ev.at, "e_stop", -1, {"decel": ev.deceleration})
+            elif ev.type == "dancer_seize":
+                self._push(ev.at, "seize", mover_idx[ev.element])
+
+    # ---- queue ----------------------------------------------------------------------------
+    def _push(self, t, kind, target=-1, data=None):
+        self._seq += 1
+        heapq.heappush(self._queue, _Action(float(t), self._seq, kind, target, data or {}))
+
+    def next_time(self) -> float:
+        """Time of the next scheduled action (inf when none)."""
+        return self._queue[0].t if self._queue else math.inf
+
+    def extra_breakpoints(self) -> list[float]:
+        """Set-point breakpoints added at run time (e-stop ramp end)."""
+        return list(self._breakpoints)
+
+    # ---- parameter access -------------------------------------------------------------------
+    def _np(self, k, f):
+        return self.cl.I[H_OFF_NP] + k * NP + f
+
+    def _ni(self, k, f):
+        return int(self.cl.I[self.cl.I[H_OFF_NI] + k * NI + f])
+
+    def _ctrls_on(self, k, types):
+        I = self.cl.I
+        for c in range(len(self.cl.controllers)):
+            b = I[H_OFF_CI] + c * NCI
+            if I[b + CI_NODE] == k and I[b + CI_TYPE] in types:
+                yield c
+
+    # ---- scheduled actions ------------------------------------------------------------------
+    def apply_due(self, t: float, y: np.ndarray) -> tuple[np.ndarray, list[LogEntry]]:
+        """Apply every action scheduled at or before t."""
+        log: list[LogEntry] = []
+        while self._queue and self._queue[0].t <= t + 1e-12:
+            a = heapq.heappop(self._queue)
+            y = getattr(self, f"_do_{a.kind}")(t, y, a, log)
+        return y, log
+
+    def _do_splice(self, t, y, a, log):
+        k = a.target
+        if k in self.splicing:
+            log.append(LogEntry(t, "splice", self.cl.node_ids[k], "ignored",
+                                "splice requested while one is in progress"))
+            return y
+        sp = self.line.elements[k].splicer
+        if sp.type == "flying":
+            self.splicing[k] = "swap"
+            y = self._swap(t, y, k, log, flying=True)
+            del self.splicing[k]
+            return y
+        self.splicing[k] = "fill"
+        P = self.cl.P
+        P[self._np(k, NP_VGAIN)] = 1.0 + sp.fill_overspeed
+        for c in self._dancer_loops(k):
+            ix = int(self.cl.I[self.cl.I[H_OFF_CI] + c * NCI + CI_X])
+            self._saved_integral[c] = float(y[ix]) if ix >= 0 else 0.0
+            P[self.cl.I[H_OFF_CP] + c * NCP + CP_GATE] = 0.0
+        log.append(self._phase(t, k, "fill", f"fill: unwind at +{sp.fill_overspeed:.0%} speed"))
+        self._push(t + sp.fill_time, "brake", k)
+        return y
+
+    def _do_brake(self, t, y, a, log):
+        k = a.target
+        if self.splicing.get(k) != "fill":
+            return y
+        sp = self.line.elements[k].splicer
+        v0 = self._reference_speed(t, k)
+        self._set_ref(k, gain=0.0, off=v0, slope=-sp.brake_decel, t0=t)
+        self.splicing[k] = "brake"
+        log.append(self._phase(t, k, "brake", f"brake: unwind from {v0:.3g} m/s to rest"))
+        self._push(t + max(v0, 0.0) / sp.brake_decel, "dwell", k)
+        return y
+
+    def _do_dwell(self, t, y, a, log):
+        k = a.target
+        if self.splicing.get(k) != "brake":
+            return y
+        self._set_ref(k, gain=0.0, off=0.0, slope=0.0, t0=t)
+        self.splicing[k] = "dwell"
+        log.append(self._phase(t, k, "dwell", "dwell: roll at rest, splicing"))
+        self._push(t + self.line.elements[k].splicer.dwell, "accelerate", k)
+        return y
+
+    def _do_accelerate(self, t, y, a, log):
+        k = a.target
+        if self.splicing.get(k) != "dwell":
+            return y
+        sp = self.line.elements[k].splicer
+        y = self._swap(t, y, k, log, flying=False)
+        target = self._line_speed(t, k) * (1.0 + sp.fill_overspeed)
+        self._set_ref(k, gain=0.0, off=0.0, slope=sp.accel, t0=t)
+        self.splicing[k] = "accelerate"
+        log.append(self._phase(t, k, "accelerate", f"accelerate the new roll to {target:.3g} m/s"))
+        self._push(t + target / sp.accel, "refill", k)
+        return y
+
+    def _do_refill(self, t, y, a, log):
+        k = a.target
+        if self.splicing.get(k) != "accelerate":
+            return y
+        sp = self.line.elements[k].splicer
+        self._set_ref(k, gain=1.0 + sp.fill_overspeed, off=0.0, slope=0.0, t0=t)
+        for c in self._dancer_loops(k):
+            self.cl.P[self.cl.I[H_OFF_CP] + c * NCP + CP_GATE] = -1.0  # armed: refill event
+        self.splicing[k] = "refill"
+        log.append(self._phase(t, k, "refill", "refill the dancer/festoon"))
+        self._push(t + sp.refill_timeout, "complete", k, {"timeout": True})
+        return y
+
+    def _do_complete(self, t, y, a, log):
+        k = a.target
+        if self.splicing.get(k) != "refill":
+            return y
+        return self._complete(t, y, k, log, timeout=a.data.get("timeout", False))
+
+    def _complete(self, t, y, k, log, timeout=False):
+        self._set_ref(k, gain=1.0, off=0.0, slope=0.0, t0=t)
+        I, P = self.cl.I, self.cl.P
+        for c in self._dancer_loops(k):
+            P[I[H_OFF_CP] + c * NCP + CP_GATE] = 1.0
+            ix = int(I[I[H_OFF_CI] + c * NCI + CI_X])
+            if ix >= 0:
+                y[ix] = self._saved_integral.get(c, 0.0)
+        del self.splicing[k]
+        log.append(self._phase(t, k, "complete", "splice complete" + (
+            " (refill timed out)" if timeout else "")))
+        return y
+
+    def _do_e_stop(self, t, y, a, log):
+        decel = a.data["decel"]
+        v = self._line_speed(t, -1)
+        I, P = self.cl.I, self.cl.P
+        mx = int(I[H_MAXPTS])
+        n = int(I[I[H_OFF_SCHN]])
+        bt, bv = int(I[H_OFF_SCHT]), int(I[H_OFF_SCHV])
+        keep = [m for m in range(n) if P[bt + m] <= t]
+        times = [float(P[bt + m]) for m in keep] + [t, t + v / decel]
+        vals = [float(P[bv + m]) for m in keep] + [v, 0.0]
+        if len(times) > mx:
+            times, vals = times[-mx:], vals[-mx:]
+        P[bt:bt + mx] = math.inf
+        P[bt:bt + len(times)] = times
+        P[bv:bv + len(vals)] = vals
+        I[I[H_OFF_SCHN]] = len(times)
+        self.cl.programme.times[0], self.cl.programme.values[0] = times, vals
+        self._breakpoints = [*self._breakpoints, t, t + v / decel]
+        for k in list(self.splicing):  # an e-stop aborts a splice sequence
+            self._set_ref(k, gain=1.0, off=0.0, slope=0.0, t0=t)
+            for c in self._dancer_loops(k):
+                P[I[H_OFF_CP] + c * NCP + CP_GATE] = 1.0
+            del self.splicing[k]
+        log.append(LogEntry(t, "e_stop", "line", "start",
+                            f"e-stop: line speed {v:.3g} m/s -> 0 at {decel:g} m/s^2",
+                            {"deceleration_m_s2": decel}))
+        self._push(t + v / decel, "stopped")
+        return y
+
+    def _do_stopped(self, t, y, a, log):
+        log.append(LogEntry(t, "e_stop", "line", "end", "line at rest after e-stop"))
+        return y
+
+    def _do_seize(self, t, y, a, log):
+        m = a.target
+        I, P = self.cl.I, self.cl.P
+        P[I[H_OFF_MP] + m * NMP + MP_MODE] = 2.0
+        y[I[I[H_OFF_MI] + m * NMI + MI_QD]] = 0.0
+        q = float(y[I[I[H_OFF_MI] + m * NMI + MI_Q]])
+        log.append(LogEntry(t, "dancer_seized", self.cl.mover_ids[m], "start",
+                            f"{self.cl.mover_ids[m]} seizes at position {q:.4g}",
+                            {"position": q}))
+        return y
+
+    # ---- event handlers ---------------------------------------------------------------------
+    def on_event(self, m: int, on: bool, t: float, y: np.ndarray):
+        """Handle a change of event m's condition. Returns (y, log entries, handled)."""
+        kind = self.cl.event_kinds[m]
+        I, P = self.cl.I, self.cl.P
+        comp = self.cl.event_components[m]
+        log: list[LogEntry] = []
+        if kind in (EV_STOP_LO, EV_STOP_HI):
+            mv = self._event_index(m)
+            bm = I[H_OFF_MP] + mv * NMP
+            iq = I[I[H_OFF_MI] + mv * NMI + MI_Q]
+            iqd = I[I[H_OFF_MI] + mv * NMI + MI_QD]
+            lo = kind == EV_STOP_LO
+            if on and P[bm + MP_MODE] == 0.0:
+                v = float(y[iqd])
+                P[bm + MP_MODE] = -1.0 if lo else 1.0
+                y[iq] = P[bm + (MP_QMIN if lo else MP_QMAX)]
+                y[iqd] = 0.0
+                log.append(LogEntry(t, EVENT_NAMES[kind], comp, "start",
+                                    f"{comp} hits its {'lower' if lo else 'upper'} stop at "
+                                    f"{v:.3g}/s", {"velocity": v}))
+            elif not on and P[bm + MP_MODE] in (-1.0, 1.0):
+                P[bm + MP_MODE] = 0.0
+                log.append(LogEntry(t, EVENT_NAMES[kind], comp, "end",
+                                    f"{comp} leaves its {'lower' if lo else 'upper'} stop"))
+            return y, log, True
+        if kind == EV_JOINT_PASS and on:
+            js = self._event_index(m)
+            bj = I[H_OFF_JP] + js * NJP
+            P[bj + JP_SPAN] += 1.0
+            sp = int(P[bj + JP_SPAN])
+            if sp >= len(self.cl.span_ids):
+                P[bj + JP_ACTIVE] = 0.0
+                log.append(LogEntry(t, "splice_joint", comp, "end",
+                                    f"{comp} is wound into {self.cl.node_ids[-1]}"))
+            else:
+                log.append(LogEntry(t, "splice_joint", comp, self.cl.span_ids[sp],
+                                    f"{comp} passes {self.cl.node_ids[sp]} into "
+                                    f"{self.cl.span_ids[sp]}"))
+            return y, log, True
+        if kind == EV_JOINT_BREAK and on:
+            js = self._event_index(m)
+            sp = int(P[I[H_OFF_JP] + js * NJP + JP_SPAN])
+            T = float(self.cl.outputs(t, y[None, :])[0][self.cl.aux_index(
+                f"{self.cl.span_ids[sp]}.tension_N")])
+            log.append(LogEntry(t, "web_break", self.cl.span_ids[sp], "start",
+                                f"web break at the splice joint in {self.cl.span_ids[sp]} at "
+                                f"{T:.1f} N", {"tension_N": T, "at_splice_joint": True}))
+            self.terminate_reason = "web_break"
+            return y, log, True
+        if kind == EV_SPLICE_RADIUS and on:
+            k = self._event_index(m)
+            if k not in self.splicing:
+                self._push(t, "splice", k)
+                y, log = self.apply_due(t, y)
+            return y, log, True
+        if kind == EV_REFILL and on:
+            c = self._event_index(m)
+            k = int(I[I[H_OFF_CI] + c * NCI + CI_NODE])
+            if self.splicing.get(k) == "refill":
+                y = self._complete(t, y, k, log)
+            return y, log, True
+        return y, log, kind in MODE_EVENTS or kind == EV_JOINT_BREAK
+
+    # ---- helpers ----------------------------------------------------------------------------
+    def _event_index(self, m):
+        return int(self.cl.I[self.cl.I[H_OFF_EV] + m * NEVI + 1])
+
+    def _dancer_loops(self, k):
+        return list(self._ctrls_on(k, (C_DANCER,)))
+
+    def _phase(self, t, k, state, msg):
+        return LogEntry(t, "splice", self.cl.node_ids[k], state, msg)
+
+    def _set_ref(self, k, gain, off, slope, t0):
+        P = self.cl.P
+        P[self._np(k, NP_VGAIN)] = gain
+        P[self._np(k, NP_VOFF)] = off
+        P[self._np(k, NP_VSLOPE)] = slope
+        P[self._np(k, NP_VT0)] = t0
+
+    def _line_speed(self, t, k):
+        from ..compile.kernels import setpoint
+        self.cl.set_segment_start(t)
+        return float(setpoint(self.cl.I, self.cl.P, 0, t)[0])
+
+    def _reference_speed(self, t, k):
+        """The unwind's current speed reference without the (held) dancer trim."""
+        P = self.cl.P
+        draw = 0.0
+        for c in self.line.controllers:
+            if c.type == "speed_pi" and c.element == self.cl.node_ids[k]:
+                draw = c.draw
+        return (self._line_speed(t, k) * (1.0 + draw) * P[self._np(k, NP_VGAIN)]
+                + P[self._np(k, NP_VOFF)]
+                + P[self._np(k, NP_VSLOPE)] * (t - P[self._np(k, NP_VT0)]))
+
+    def _swap(self, t, y, k, log, flying):
+        """Replace the expiring roll by a fresh spare roll; inject the splice joint."""
+        e = self.line.elements[k]
+        sp, new = e.splicer, e.spare_roll
+        I, P = self.cl.I, self.cl.P
+        web = self.line.web
+        R_old = float(self.cl.outputs(t, y[None, :])[0][self.cl.aux_index(f"{e.id}.radius_m")])
+        cw = new.build_per_wrap if new.build_per_wrap is not None else web.thickness
+        P[self._np(k, NP_R0)] = new.outer_radius
+        P[self._np(k, NP_R)] = new.outer_radius
+        P[self._np(k, NP_RC)] = new.core_radius
+        P[self._np(k, NP_JC)] = new.core_inertia
+        P[self._np(k, NP_CW)] = cw
+        P[self._np(k, NP_RHOW)] = web.density * web.thickness / cw * web.width
+        (P[self._np(k, NP_EPSW)], P[self._np(k, NP_EPSW1)],
+         P[self._np(k, NP_EPSW2)]) = new.wound_in_coefficients()
+        y[self._ni(k, NI_S)] = 0.0
+        iw = self._ni(k, NI_W)
+        if iw >= 0:
+            y[iw] = (self._line_speed(t, k) * (1.0 + sp.speed_match_error) / new.outer_radius
+                     if flying else 0.0)
+        # bumpless transfer: the tension trims of the old roll restart from zero; the radius
+        # estimate (diameter-sensor filter) takes the new roll's measured diameter
+        for c in self._ctrls_on(k, (C_TENSION_TORQUE, C_TENSION_TRIM)):
+            ix = int(I[I[H_OFF_CI] + c * NCI + CI_X])
+            if ix >= 0:
+                y[ix] = 0.0
+        for j, s in enumerate(self.cl.sensors):
+            b = I[H_OFF_SEI] + j * NSEI
+            if I[b + SEI_TYPE] == SE_DIAMETER and I[b + SEI_NODE] == k and I[b + SEI_F] >= 0:
+                y[I[b + SEI_F]] = s.gain * 2.0 * new.outer_radius + s.offset
+        # the joint
+        slot = None
+        for js in range(self.cl.n_joint_slots):
+            if P[I[H_OFF_JP] + js * NJP + JP_ACTIVE] == 0.0:
+                slot = js
+                break
+        if slot is not None:
+            bj = I[H_OFF_JP] + slot * NJP
+            P[bj + JP_ACTIVE] = 1.0
+            P[bj + JP_U0] = y[self._ni(k, NI_U)]
+            P[bj + JP_LEN] = sp.joint.length
+            P[bj + JP_RATIO] = sp.joint.stiffness_ratio
+            P[bj + JP_TBRK] = (sp.joint.break_tension if sp.joint.break_tension is not None
+                               else web.break_tension)
+            P[bj + JP_SPAN] = float(k)
+            P[bj + JP_NODE] = float(k)
+        log.append(LogEntry(t, "splice", e.id, "swap",
+                            f"roll change: radius {R_old:.4g} m -> {new.outer_radius:.4g} m"
+                            + (f", speed-match error {sp.speed_match_error:+.2%}" if flying
+                               else ""),
+                            {"radius_old_m": R_old, "radius_new_m": new.outer_radius,
+                             "joint_slot": slot}))
+        return y
+
