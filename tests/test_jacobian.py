@@ -139,3 +139,107 @@ def test_chain_band_does_not_grow_with_length(tmp_path):
         return cl.lband, cl.uband
 
     assert chain(5) == chain(50)
+
+
+MOVERS = """\
+span_model: {model}
+web: {{material: PET, thickness: 50 um, width: 1 m}}
+elements:
+  - id: unwind
+    type: unwind
+    roll: {{core_radius: 0.076, outer_radius: 0.4, core_inertia: 0.5,
+           wound_in_strain: [1e-4, 2e-3, -1e-3]}}
+    drive: {{torque_lag: 1 ms}}
+  - {{id: i1, type: idler, radius: 0.05, inertia: 0.011, position: [0, 0], wrap: cw}}
+  - id: d1
+    type: dancer
+    radius: 0.06
+    inertia: 0.02
+    position: [0.2, -0.8]
+    wrap: ccw
+    direction: [0.3, -1]
+    travel_range: [-0.2, 0.2]
+    mass: 10
+    load_force: 400
+    spring_stiffness: 200
+    damping: 30
+    coulomb: 5
+  - {{id: i2, type: idler, radius: 0.05, inertia: 0.011, position: [0.5, 0.1], wrap: cw}}
+  - id: d2
+    type: pivot_dancer
+    radius: 0.04
+    inertia: 0.002
+    wrap: ccw
+    pivot: [1.0, 0.4]
+    arm_length: 0.3
+    arm_angle: -100 deg
+    angle_range: [-150 deg, -30 deg]
+    arm_inertia: 0.4
+    roller_mass: 2
+    arm_mass: 3
+    cylinder: {{force: 900, fixed_point: [1.4, 0.5], arm_point: 0.2}}
+    torsion_spring: {{stiffness: 20, free_angle: -90 deg}}
+    damping: 0.5
+    coulomb: 0.3
+  - {{id: pull, type: driven, radius: 0.1, inertia: 0.2, position: [1.3, 0.0], wrap: cw}}
+  - {{id: exit, type: driven, radius: 0.1, inertia: 0.2}}
+  - id: rewind
+    type: rewind
+    roll: {{core_radius: 0.076, outer_radius: 0.1, core_inertia: 0.5}}
+spans:
+  - {{length: 1.5}}
+  - {{}}
+  - {{}}
+  - {{}}
+  - {{}}
+  - id: fest
+    length: 2.0
+    festoon: {{moving_rollers: 3, carriage_mass: 40, stroke: [0, 3], initial_position: 1.2,
+              force: 1600, gravity: -9.81, damping: 50, coulomb: 10}}
+  - {{length: 1.0}}
+sensors:
+  - {{id: lc1, type: load_cell, element: i1, filter: 2 ms}}
+  - {{id: pos1, type: dancer_position, element: d1, filter: 5 ms, gain: 1.02, offset: 0.001}}
+  - {{id: posf, type: dancer_position, element: fest}}
+controllers:
+  - {{id: c_pull, type: speed_pi, element: pull, master: true, kp: 25, ki: 790}}
+  - {{id: c_exit, type: speed_pi, element: exit, kp: 25, ki: 790}}
+  - {{id: c_unw, type: speed_pi, element: unwind, kp: 25, ki: 790}}
+  - {{id: c_rew, type: tension_pi, element: rewind, sensor: lc1, setpoint: 240, kp: 0.1,
+     ki: 0.5}}
+  - {{id: loop1, type: dancer_pi, dancer: d1, element: unwind, sensor: pos1, kp: 4, ki: 1,
+     output_limit: {limit}}}
+  - {{id: loop2, type: dancer_pi, dancer: d2, element: pull, kp: 2, ki: 0.5}}
+  - {{id: loop3, type: dancer_pi, dancer: fest, element: exit, kp: 1, ki: 0, setpoint: 1.0}}
+"""
+
+
+@pytest.mark.parametrize("model", ["exact", "linear"])
+@pytest.mark.parametrize("case", ["moving", "latched", "saturated"])
+def test_dancer_festoon_and_loop_jacobian_against_finite_differences(tmp_path, model, case):
+    limit = 1e-4 if case == "saturated" else 0.5
+    line = r2rsim.load_line(write(tmp_path / "movers.yaml", MOVERS.format(model=model,
+                                                                          limit=limit)))
+    prog = r2rsim.Programme.from_steps(line, [ProgrammeStep(at=0, line_speed=3.0)])
+    cl = r2rsim.compile_line(line, prog)
+    y = r2rsim.nominal_state(cl, 250.0)
+    rng = np.random.default_rng(5)
+    for i, (name, kind) in enumerate(zip(cl.state_names, cl.state_kinds, strict=True)):
+        if kind in ("strain", "speed", "torque", "controller", "sensor_filter"):
+            y[i] *= 1 + 0.05 * rng.standard_normal()
+        if kind == "mover":
+            y[i] += 0.02 * rng.standard_normal()
+    if case == "latched":
+        from r2rsim.compile.layout import H_OFF_MP, MP_MODE, NMP
+        cl.P[cl.I[H_OFF_MP] + 0 * NMP + MP_MODE] = -1.0
+        cl.P[cl.I[H_OFF_MP] + 2 * NMP + MP_MODE] = 2.0
+    J = cl.jacobian(0.3, y)
+    Jfd = _fd(cl, 0.3, y)
+    scale = np.abs(Jfd).max(axis=1, keepdims=True) + 1e-300
+    err = np.abs(J - Jfd) / (np.abs(Jfd) + 1e-6 * scale + 1e-12)
+    bad = np.argwhere(err > 1e-4)
+    detail = [(cl.state_names[i], cl.state_names[j], J[i, j], Jfd[i, j]) for i, j in bad[:5]]
+    assert not len(bad), detail
+    mask = np.zeros_like(J, dtype=bool)
+    mask[cl.pattern] = True
+    assert np.all(Jfd[~mask] == 0.0), "finite differences found entries outside the pattern"

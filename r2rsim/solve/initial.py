@@ -78,6 +78,9 @@ def nominal_state(cl: CompiledLine, tension: float | None = None,
             sgn = -1.0 if line.element(eid).type == "unwind" else 1.0
             u = (needed_torque.get(eid, 0.0) - tau_ff) / (sgn * R)
             y[ix] = u / ki
+    # dancers and festoon carriages at their initial positions, at rest
+    for mid, q0 in zip(cl.mover_ids, cl.mover_q0, strict=True):
+        y[cl.index(f"{mid}.position")] = q0
     # sensor filters start at their input
     for _ in range(2):
         aux = cl.outputs(0.0, y[None, :])[0]
@@ -85,7 +88,9 @@ def nominal_state(cl: CompiledLine, tension: float | None = None,
             name = f"{s.id}.filtered"
             if name in cl.state_names:
                 q = {"load_cell": "tension_N", "encoder": "speed_rad_s",
-                     "roll_diameter": "diameter_m"}[s.type]
+                     "roll_diameter": "diameter_m"}.get(s.type)
+                q = q or next(n.split(".", 1)[1] for n in cl.aux_names
+                              if n.startswith(f"{s.id}.position_"))
                 y[cl.index(name)] = s.gain * aux[cl.aux_index(f"{s.id}.{q}")] + s.offset
     return y
 
