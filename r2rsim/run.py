@@ -167,7 +167,7 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
         res = simulate(cl, scenario.duration, scenario.record_rate, y0,
                        scenario.solver, on_chunk=on_chunk,
                        progress=(lambda t: progress(t, scenario.duration)) if progress else None,
-                       initial_state_mode=init_mode)
+                       initial_state_mode=init_mode, events=scenario.events)
         wall = time.perf_counter() - wall0
         sim_end = res.termination_time if res.terminated else scenario.duration
 
@@ -180,10 +180,11 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
             s = mc["sensor"]
             unit = mc["name"].rsplit("_", 1)[-1].replace("rad_s", "rad/s")
             rate = mc["rate"]
-            ch_rows.append((mc["name"], "measured", unit, s.element,
-                            f"{s.type} '{s.id}' on {s.element}: measured (noise, sampling)",
+            where = getattr(s, "element", None) or s.span
+            ch_rows.append((mc["name"], "measured", unit, where,
+                            f"{s.type} '{s.id}' on {where}: measured (noise, sampling)",
                             rate))
-            ch_rows.append((mc["true"], "true", unit, s.element,
+            ch_rows.append((mc["true"], "true", unit, where,
                             f"noise-free shadow of {mc['name']} (never give to algorithms)",
                             rate))
         for c in cols:

@@ -299,6 +299,7 @@ def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine
     mover_q0 = [0.0] * nM
     splice_nodes = [k for k, e in enumerate(els) if getattr(e, "splicer", None) is not None]
     nJ = N_JOINT_SLOTS if splice_nodes else 0
+    pitch_filters: list = []
 
     def add_mover(mid, kind, k_node, span_u, span_d, mp, q0, unit):
         m = mover_idx[mid]
@@ -419,13 +420,15 @@ def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine
                 cp[CP_LIM] = c.output_limit if c.output_limit is not None else math.inf
                 cp[CP_FF] = 1.0 if c.feedforward else 0.0
                 # a trim raises the tension of a span upstream of the node, lowers one downstream
-                meas = node_idx[sensors[sens_idx[c.sensor]].element]
+                sm = sensors[sens_idx[c.sensor]]
+                meas = (span_ids.index(sm.span) + 1 if sm.type == "pitch_length"
+                        else node_idx[sm.element])
                 cp[CP_SIGN] = 1.0 if meas <= k else -1.0
                 out_tol = 1e-4 if ci[CI_TYPE] == C_TENSION_TORQUE else 1e-8
             if c.ki > 0:
                 ci[CI_X] = add(f"{c.id}.integral", "", "controller", out_tol / c.ki)
         for j, s in enumerate(sensors):
-            if s.element != e.id or s.type == "dancer_position":
+            if getattr(s, "element", None) != e.id or s.type == "dancer_position":
                 continue
             si, sp = sens_I[j], sens_P[j]
             si[SEI_NODE] = k
@@ -464,10 +467,21 @@ def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine
                 add_mover(line.spans[k].id, MV_FESTOON, -1, k, -1, mp, fe.initial_position, "m")
                 si_[SI_MOVER] = mover_idx[line.spans[k].id]
             span_P[k, SP_L] = line.spans[k].length or 0.0
+            for j, sn in enumerate(sensors):
+                if sn.type == "pitch_length" and sn.span == line.spans[k].id:
+                    sens_I[j, SEI_TYPE], sens_I[j, SEI_NODE] = SE_PITCH, k
+                    sens_P[j, SEP_GAIN], sens_P[j, SEP_OFF], sens_P[j, SEP_TAU] = (
+                        sn.gain, sn.offset, sn.filter)
+                    sens_P[j, SEP_CIN], sens_P[j, SEP_COUT] = sn.relaxed_pitch, EA
+                    pitch_filters.append((j, sn))
             span_P[k, SP_EA] = EA
             span_P[k, SP_TBRK] = web.break_tension
             # strain tolerance ~1e-4 N of tension (physics.md 1.2, solver.md 6)
             si_[SI_E] = add(f"{line.spans[k].id}.strain", "", "strain", 1e-4 / EA)
+            for j, sn in pitch_filters:
+                if sn.filter > 0:
+                    sens_I[j, SEI_F] = add(f"{sn.id}.filtered", "m", "sensor_filter", 1e-9)
+            pitch_filters.clear()
 
     # events: slack and break per span, capstan per monitored interior roller, empty unwind
     ev_kinds: list[int] = []
@@ -522,10 +536,10 @@ def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine
         aux_units += ["m/s", "rad/s", "m", "kg*m^2", "kg", "N*m", "N*m", "1"]
     mover_unit = {mid: units[mov_I[m, MI_Q]] for m, mid in enumerate(mover_ids)}
     for s in sensors:
-        u = {"load_cell": "N", "encoder": "rad_s", "roll_diameter": "m",
-             "dancer_position": mover_unit.get(s.element, "m")}[s.type]
+        u = {"load_cell": "N", "encoder": "rad_s", "roll_diameter": "m", "pitch_length": "m",
+             "dancer_position": mover_unit.get(getattr(s, "element", ""), "m")}[s.type]
         q = {"load_cell": "tension", "encoder": "speed", "roll_diameter": "diameter",
-             "dancer_position": "position"}[s.type]
+             "dancer_position": "position", "pitch_length": "pitch"}[s.type]
         aux_names += [f"{s.id}.{q}_{u}", f"{s.id}.{q}_seen_{u}", f"{s.id}.force_N"]
         aux_units += [u.replace("_", "/"), u.replace("_", "/"), "N"]
     for c in ctrls:

@@ -413,6 +413,11 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             W[oRAW + j] = g * y[iq] + P[b + SEP_OFF]
             if jac:
                 _g_add(GI, GC, GV, maxd, qRAW + j, iq, g)
+        elif typ == SE_PITCH:  # node holds the span index; pitch = (T/ES + 1)·L0
+            L0 = P[b + SEP_CIN]
+            W[oRAW + j] = g * (W[oT + node] / EAweb + 1.0) * L0 + P[b + SEP_OFF]
+            if jac:
+                _g_axpy(GI, GC, GV, maxd, qRAW + j, g * L0 / EAweb, qT + node)
         else:
                 _sensor_raw(j, typ, node, g, P[b + SEP_OFF], P[b + SEP_WIN], P[b + SEP_WOUT], I,
                         oNI, W, oT, oR, oOM, oRAW, jac, GI, GC, GV, maxd, qT, qR, qOM, qRAW)
@@ -443,7 +448,14 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             e = P[b + CP_SETP] - (W[oYS + sens] if sens >= 0 else y[imq])
         else:
             Tref, _ = setpoint(I, P, I[oCI + c * NCI + CI_CH], t)
-            e = Tref - W[oYS + sens]
+            # a pitch-length sensor is read as tension through the calibrated Hooke's law
+            if I[oSEI + sens * NSEI + SEI_TYPE] == SE_PITCH:
+                bs = oSEP + sens * NSEP
+                wy = P[bs + SEP_COUT] / P[bs + SEP_CIN]
+                e = Tref - (W[oYS + sens] / P[bs + SEP_CIN] - 1.0) * P[bs + SEP_COUT]
+            else:
+                wy = 1.0
+                e = Tref - W[oYS + sens]
         # a gated loop (dancer loop during a splice) holds its integrator and outputs 0
         gate = 1.0 if P[b + CP_GATE] > 0.0 else 0.0
         x = y[ix] if ix >= 0 else 0.0
@@ -452,9 +464,11 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         act = 1.0 if u == upi else 0.0
         W[oU + c] = gate * u
         W[oE + c] = e
+        if typ == C_DANCER:
+            wy = 1.0
         if jac:
             if sens >= 0:
-                _g_axpy(GI, GC, GV, maxd, qU + c, -gate * kp * act, qY + sens)
+                _g_axpy(GI, GC, GV, maxd, qU + c, -gate * kp * act * wy, qY + sens)
             else:
                 _g_add(GI, GC, GV, maxd, qU + c, imq, -gate * kp * act)
             if ix >= 0:
@@ -466,7 +480,7 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
                 # d(u - upi) = (act - 1) * d(upi)
                 wm = gate * (-1.0 + kaw * (act - 1.0) * (-kp))
                 if sens >= 0:
-                    _j_axpy(JJ, mode, ix, wm, GI, GC, GV, maxd, qY + sens)
+                    _j_axpy(JJ, mode, ix, wm * wy, GI, GC, GV, maxd, qY + sens)
                 else:
                     _j_add(JJ, mode, ix, imq, wm)
                 _j_add(JJ, mode, ix, ix, gate * kaw * (act - 1.0) * ki)

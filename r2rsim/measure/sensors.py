@@ -17,7 +17,8 @@ import numpy as np
 from ..compile.compiler import CompiledLine
 
 _QUANTITY = {"load_cell": ("tension", "N"), "encoder": ("speed", "rad_s"),
-             "roll_diameter": ("diameter", "m")}
+             "roll_diameter": ("diameter", "m"), "pitch_length": ("pitch", "m"),
+             "dancer_position": ("position", None)}
 
 
 class MeasurementModel:
@@ -39,6 +40,9 @@ class MeasurementModel:
         self.channels = []
         for s, child in zip(cl.sensors, children, strict=True):
             q, u = _QUANTITY[s.type]
+            if u is None:  # dancer position: m (travel) or rad (arm angle)
+                u = next(n for n in cl.aux_names
+                         if n.startswith(f"{s.id}.{q}_") and "_seen_" not in n).rsplit("_", 1)[1]
             rate = min(s.rate or record_rate, record_rate)
             self.channels.append({
                 "sensor": s, "name": f"meas.{s.id}.{q}_{u}", "true": f"true.{s.id}.{q}_{u}",

@@ -430,7 +430,23 @@ class DancerPosition(_Sensor):
     offset: float = 0.0
 
 
-Sensor = Annotated[LoadCell | Encoder | RollDiameter | DancerPosition,
+class PitchLength(Strict):
+    """2-D vision pitch-length measurement on a span (thesis eq. 2.11, Hooke's law):
+    pitch = (T/(E·S) + 1)·L0. A tension_pi reading it converts the pitch back to tension with
+    the web's nominal E·S."""
+
+    id: Id
+    type: Literal["pitch_length"]
+    span: Id
+    relaxed_pitch: PosLength = Field(description="pitch length L0 of the relaxed web [m]")
+    rate: Annotated[Frequency, Field(gt=0)] | None = None
+    filter: NonNegTime = 0.0
+    gain: float = 1.0
+    noise: Annotated[Length, Field(ge=0)] = 0.0
+    offset: Length = 0.0
+
+
+Sensor = Annotated[LoadCell | Encoder | RollDiameter | DancerPosition | PitchLength,
                    Field(discriminator="type")]
 
 
@@ -560,7 +576,12 @@ def check_line(line: Line) -> list[tuple[str, str]]:
                 if sp.festoon is not None}
     movers = {e.id for e in els if e.type in DANCERS} | set(festoons)
     sensors = {s.id: s for s in line.sensors}
+    span_names = {sp.id or f"span{i + 1}" for i, sp in enumerate(line.spans)}
     for j, s in enumerate(line.sensors):
+        if s.type == "pitch_length":
+            if s.span not in span_names:
+                out.append((f"sensors[{j}].span", _missing("span", s.span, span_names)))
+            continue
         if s.type == "dancer_position":
             if s.element not in movers:
                 out.append((f"sensors[{j}].element",
@@ -650,10 +671,11 @@ def check_line(line: Line) -> list[tuple[str, str]]:
                             "the master speed node defines line speed: draw must be 0"))
         else:
             s = sensors.get(c.sensor)
-            if s is None or s.type != "load_cell":
-                out.append((f"{p}.sensor", _missing("load_cell sensor", c.sensor,
-                                                    {k: v for k, v in sensors.items()
-                                                     if v.type == "load_cell"})))
+            if s is None or s.type not in ("load_cell", "pitch_length"):
+                out.append((f"{p}.sensor", _missing(
+                    "load_cell or pitch_length sensor", c.sensor,
+                    {k: v for k, v in sensors.items() if v.type in ("load_cell",
+                                                                    "pitch_length")})))
             if c.radius_sensor is not None:
                 s = sensors.get(c.radius_sensor)
                 if s is None or s.type != "roll_diameter":

@@ -88,7 +88,7 @@ def nominal_state(cl: CompiledLine, tension: float | None = None,
             name = f"{s.id}.filtered"
             if name in cl.state_names:
                 q = {"load_cell": "tension_N", "encoder": "speed_rad_s",
-                     "roll_diameter": "diameter_m"}.get(s.type)
+                     "roll_diameter": "diameter_m", "pitch_length": "pitch_m"}.get(s.type)
                 q = q or next(n.split(".", 1)[1] for n in cl.aux_names
                               if n.startswith(f"{s.id}.position_"))
                 y[cl.index(name)] = s.gain * aux[cl.aux_index(f"{s.id}.{q}")] + s.offset
