@@ -436,6 +436,8 @@ class DiscreteLogic:
         if iw >= 0:
             y[iw] = (self._line_speed(t, k) * (1.0 + sp.speed_match_error) / new.outer_radius
                      if flying else 0.0)
+        elif flying:  # an imposed-speed unwind keeps the new roll's speed error
+            P[self._np(k, NP_VGAIN)] = 1.0 + sp.speed_match_error
         # bumpless transfer: the tension trims of the old roll restart from zero; the radius
         # estimate (diameter-sensor filter) takes the new roll's measured diameter
         for c in self._ctrls_on(k, (C_TENSION_TORQUE, C_TENSION_TRIM)):
