@@ -22,16 +22,28 @@ ELEMENTS = {
     "idler": "undriven roller: radius, inertia, friction, wrap_angle, friction_coefficient",
     "driven": "motor-driven roller: radius, inertia, friction, drive",
     "nip": "nip pair as one degree of freedom: radius, inertia, drive, pressure_roller",
+    "dancer": "translating dancer: roller on a carriage (mass, load_force, spring, damping, "
+              "coulomb, travel_range end stops); span lengths from the geometry",
+    "pivot_dancer": "pivoted dancer: roller on an arm (pivot, arm_length, arm_inertia, "
+                    "cylinder, torsion_spring, torque, gravity, angle_range end stops)",
+    "festoon (span)": "spans[i].festoon: carriage with n moving rollers, 2n lumped strands",
+    "splicer (unwind)": "unwind.splicer + spare_roll: zero_speed (fill, brake, dwell, swap, "
+                        "accelerate, refill) or flying (speed_match_error); splice joint",
 }
 SENSORS = {
     "load_cell": "bearing force of a roller -> indicated tension (wrap_angle, axis_angle)",
     "encoder": "angular speed (counts_per_rev for quantisation)",
     "roll_diameter": "ultrasonic/laser diameter of an unwind/rewind roll",
+    "dancer_position": "dancer travel [m] / arm angle [rad] or festoon carriage position [m]",
+    "pitch_length": "2-D vision pitch length on a span, (T/ES + 1)·L0 (thesis eq. 2.11)",
 }
 CONTROLLERS = {
     "speed_pi": "speed PI on a torque drive, torque feed-forward, draw; one master node",
     "tension_pi": "tension PI on a load cell: torque mode on unwind/rewind (T_ref·R feed-"
-                  "forward + trim), speed trim on speed-controlled elements",
+                  "forward + trim), speed trim on speed-controlled elements; reads a "
+                  "load_cell or a pitch_length sensor",
+    "dancer_pi": "dancer/festoon position loop trimming the speed of an upstream or "
+                 "downstream element, with limits",
 }
 
 
@@ -100,7 +112,7 @@ def _cmd_schema(args) -> int:
 def _cmd_list(args) -> int:
     tables = {"elements": ELEMENTS, "sensors": SENSORS, "controllers": CONTROLLERS}
     for name, desc in tables[args.what].items():
-        print(f"{name:<14} {desc}")
+        print(f"{name:<17} {desc}")
     return 0
 
 
