@@ -25,6 +25,7 @@ import numpy as np
 from ..compile.compiler import EVENT_NAMES, CompiledLine
 from ..compile.layout import (
     C_DANCER,
+    C_SPEED,
     C_TENSION_TORQUE,
     C_TENSION_TRIM,
     CI_NODE,
@@ -433,9 +434,9 @@ class DiscreteLogic:
          P[self._np(k, NP_EPSW2)]) = new.wound_in_coefficients()
         y[self._ni(k, NI_S)] = 0.0
         iw = self._ni(k, NI_W)
-        if iw >= 0:
-            y[iw] = (self._line_speed(t, k) * (1.0 + sp.speed_match_error) / new.outer_radius
-                     if flying else 0.0)
+        if iw >= 0:  # the new roll is brought up to the running web's surface speed
+            v_web = R_old * float(y[iw])
+            y[iw] = v_web * (1.0 + sp.speed_match_error) / new.outer_radius if flying else 0.0
         elif flying:  # an imposed-speed unwind keeps the new roll's speed error
             P[self._np(k, NP_VGAIN)] = 1.0 + sp.speed_match_error
         # bumpless transfer: the tension trims of the old roll restart from zero; the radius
@@ -444,6 +445,12 @@ class DiscreteLogic:
             ix = int(I[I[H_OFF_CI] + c * NCI + CI_X])
             if ix >= 0:
                 y[ix] = 0.0
+        # the speed loop's integrator holds the tension torque -T·R: scale it to the new
+        # radius so the drive takes the web's pull from the first instant
+        for c in self._ctrls_on(k, (C_SPEED,)):
+            ix = int(I[I[H_OFF_CI] + c * NCI + CI_X])
+            if ix >= 0:
+                y[ix] *= new.outer_radius / R_old
         for j, s in enumerate(self.cl.sensors):
             b = I[H_OFF_SEI] + j * NSEI
             if I[b + SEI_TYPE] == SE_DIAMETER and I[b + SEI_NODE] == k and I[b + SEI_F] >= 0:
