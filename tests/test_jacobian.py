@@ -92,6 +92,21 @@ def _fd(cl, t, y):
     return J
 
 
+def _assert_jacobian_matches_fd(cl, t, y, floor):
+    """Analytic Jacobian = central differences (relative 1e-4, entries below ``floor`` of
+    the row's largest ignored), and no finite-difference entry outside the pattern."""
+    J = cl.jacobian(t, y)
+    Jfd = _fd(cl, t, y)
+    scale = np.abs(Jfd).max(axis=1, keepdims=True) + 1e-300
+    err = np.abs(J - Jfd) / (np.abs(Jfd) + floor * scale + 1e-12)
+    bad = np.argwhere(err > 1e-4)
+    detail = [(cl.state_names[i], cl.state_names[j], J[i, j], Jfd[i, j]) for i, j in bad[:5]]
+    assert not len(bad), detail
+    mask = np.zeros_like(J, dtype=bool)
+    mask[cl.pattern] = True
+    assert np.all(Jfd[~mask] == 0.0), "finite differences found entries outside the pattern"
+
+
 @pytest.mark.parametrize("model", ["exact", "linear"])
 @pytest.mark.parametrize("case", ["taut", "slack", "reverse", "saturated"])
 def test_every_element_jacobian_against_finite_differences(tmp_path, model, case):
@@ -105,16 +120,7 @@ def test_every_element_jacobian_against_finite_differences(tmp_path, model, case
     rng = np.random.default_rng(3)
     y = _state(cl, rng, slack=("span2", "span4") if case == "slack" else (),
                reverse=case == "reverse")
-    J = cl.jacobian(1.7, y)
-    Jfd = _fd(cl, 1.7, y)
-    scale = np.abs(Jfd).max(axis=1, keepdims=True) + 1e-300
-    err = np.abs(J - Jfd) / (np.abs(Jfd) + 1e-7 * scale + 1e-12)
-    bad = np.argwhere(err > 1e-4)
-    detail = [(cl.state_names[i], cl.state_names[j], J[i, j], Jfd[i, j]) for i, j in bad[:5]]
-    assert not len(bad), detail
-    mask = np.zeros_like(J, dtype=bool)
-    mask[cl.pattern] = True
-    assert np.all(Jfd[~mask] == 0.0), "finite differences found entries outside the pattern"
+    _assert_jacobian_matches_fd(cl, 1.7, y, floor=1e-7)
 
 
 def test_band_of_line_a(repo):
@@ -233,13 +239,4 @@ def test_dancer_festoon_and_loop_jacobian_against_finite_differences(tmp_path, m
         from r2rsim.compile.layout import H_OFF_MP, MP_MODE, NMP
         cl.P[cl.I[H_OFF_MP] + 0 * NMP + MP_MODE] = -1.0
         cl.P[cl.I[H_OFF_MP] + 2 * NMP + MP_MODE] = 2.0
-    J = cl.jacobian(0.3, y)
-    Jfd = _fd(cl, 0.3, y)
-    scale = np.abs(Jfd).max(axis=1, keepdims=True) + 1e-300
-    err = np.abs(J - Jfd) / (np.abs(Jfd) + 1e-6 * scale + 1e-12)
-    bad = np.argwhere(err > 1e-4)
-    detail = [(cl.state_names[i], cl.state_names[j], J[i, j], Jfd[i, j]) for i, j in bad[:5]]
-    assert not len(bad), detail
-    mask = np.zeros_like(J, dtype=bool)
-    mask[cl.pattern] = True
-    assert np.all(Jfd[~mask] == 0.0), "finite differences found entries outside the pattern"
+    _assert_jacobian_matches_fd(cl, 0.3, y, floor=1e-6)

@@ -101,6 +101,17 @@ CASES = [
     ("scenario unknown controller", None,
      _scen(_set(["programme"], [{"at": 1, "tension": {"nope": 100}}])), "scen.yaml",
      "programme[0].tension.nope", "no tension controller 'nope'"),
+    ("splicer without a spare roll", _line(_set(["elements", 0, "splicer"], {"type": "flying"})),
+     None, "line.yaml", "elements[0].spare_roll", "needs the spare roll"),
+    ("dancer loop on an unknown dancer", _line(lambda d: d["controllers"].append(
+        {"id": "dl", "type": "dancer_pi", "dancer": "nope", "element": "unwind", "kp": 1})),
+     None, "line.yaml", "controllers[2].dancer", "no dancer or festoon span with id 'nope'"),
+    ("scenario splice without a splicer", None,
+     _scen(_set(["events"], [{"at": 1, "type": "splice"}])), "scen.yaml", "events[0].element",
+     "unwinds with a splicer: none"),
+    ("scenario e_stop without deceleration", None,
+     _scen(_set(["events"], [{"at": 1, "type": "e_stop"}])), "scen.yaml", "events[0]",
+     "needs its deceleration limit"),
     ("scenario missing line file", None, _scen(_set(["line"], "missing.yaml")), "scen.yaml",
      "line", "not found"),
 ]

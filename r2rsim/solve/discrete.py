@@ -108,8 +108,8 @@ class _Action:
 
 
 @dataclass
-class LogEntry:
-    """An event-log entry produced by the discrete logic."""
+class Event:
+    """One entry of the event log (physical events and discrete changes alike)."""
 
     t: float
     kind: str
@@ -177,9 +177,9 @@ class DiscreteLogic:
                 yield c
 
     # ---- scheduled actions ------------------------------------------------------------------
-    def apply_due(self, t: float, y: np.ndarray) -> tuple[np.ndarray, list[LogEntry]]:
+    def apply_due(self, t: float, y: np.ndarray) -> tuple[np.ndarray, list[Event]]:
         """Apply every action scheduled at or before t."""
-        log: list[LogEntry] = []
+        log: list[Event] = []
         while self._queue and self._queue[0].t <= t + 1e-12:
             a = heapq.heappop(self._queue)
             y = getattr(self, f"_do_{a.kind}")(t, y, a, log)
@@ -188,7 +188,7 @@ class DiscreteLogic:
     def _do_splice(self, t, y, a, log):
         k = a.target
         if k in self.splicing:
-            log.append(LogEntry(t, "splice", self.cl.node_ids[k], "ignored",
+            log.append(Event(t, "splice", self.cl.node_ids[k], "ignored",
                                 "splice requested while one is in progress"))
             return y
         sp = self.line.elements[k].splicer
@@ -298,14 +298,14 @@ class DiscreteLogic:
             for c in self._dancer_loops(k):
                 P[I[H_OFF_CP] + c * NCP + CP_GATE] = 1.0
             del self.splicing[k]
-        log.append(LogEntry(t, "e_stop", "line", "start",
+        log.append(Event(t, "e_stop", "line", "start",
                             f"e-stop: line speed {v:.3g} m/s -> 0 at {decel:g} m/s^2",
                             {"deceleration_m_s2": decel}))
         self._push(t + v / decel, "stopped")
         return y
 
     def _do_stopped(self, t, y, a, log):
-        log.append(LogEntry(t, "e_stop", "line", "end", "line at rest after e-stop"))
+        log.append(Event(t, "e_stop", "line", "end", "line at rest after e-stop"))
         return y
 
     def _do_seize(self, t, y, a, log):
@@ -314,7 +314,7 @@ class DiscreteLogic:
         P[I[H_OFF_MP] + m * NMP + MP_MODE] = 2.0
         y[I[I[H_OFF_MI] + m * NMI + MI_QD]] = 0.0
         q = float(y[I[I[H_OFF_MI] + m * NMI + MI_Q]])
-        log.append(LogEntry(t, "dancer_seized", self.cl.mover_ids[m], "start",
+        log.append(Event(t, "dancer_seized", self.cl.mover_ids[m], "start",
                             f"{self.cl.mover_ids[m]} seizes at position {q:.4g}",
                             {"position": q}))
         return y
@@ -325,7 +325,7 @@ class DiscreteLogic:
         kind = self.cl.event_kinds[m]
         I, P = self.cl.I, self.cl.P
         comp = self.cl.event_components[m]
-        log: list[LogEntry] = []
+        log: list[Event] = []
         if kind in (EV_STOP_LO, EV_STOP_HI):
             mv = self._event_index(m)
             bm = I[H_OFF_MP] + mv * NMP
@@ -337,12 +337,12 @@ class DiscreteLogic:
                 P[bm + MP_MODE] = -1.0 if lo else 1.0
                 y[iq] = P[bm + (MP_QMIN if lo else MP_QMAX)]
                 y[iqd] = 0.0
-                log.append(LogEntry(t, EVENT_NAMES[kind], comp, "start",
+                log.append(Event(t, EVENT_NAMES[kind], comp, "start",
                                     f"{comp} hits its {'lower' if lo else 'upper'} stop at "
                                     f"{v:.3g}/s", {"velocity": v}))
             elif not on and P[bm + MP_MODE] in (-1.0, 1.0):
                 P[bm + MP_MODE] = 0.0
-                log.append(LogEntry(t, EVENT_NAMES[kind], comp, "end",
+                log.append(Event(t, EVENT_NAMES[kind], comp, "end",
                                     f"{comp} leaves its {'lower' if lo else 'upper'} stop"))
             return y, log, True
         if kind == EV_JOINT_PASS and on:
@@ -352,10 +352,10 @@ class DiscreteLogic:
             sp = int(P[bj + JP_SPAN])
             if sp >= len(self.cl.span_ids):
                 P[bj + JP_ACTIVE] = 0.0
-                log.append(LogEntry(t, "splice_joint", comp, "end",
+                log.append(Event(t, "splice_joint", comp, "end",
                                     f"{comp} is wound into {self.cl.node_ids[-1]}"))
             else:
-                log.append(LogEntry(t, "splice_joint", comp, self.cl.span_ids[sp],
+                log.append(Event(t, "splice_joint", comp, self.cl.span_ids[sp],
                                     f"{comp} passes {self.cl.node_ids[sp]} into "
                                     f"{self.cl.span_ids[sp]}"))
             return y, log, True
@@ -364,7 +364,7 @@ class DiscreteLogic:
             sp = int(P[I[H_OFF_JP] + js * NJP + JP_SPAN])
             T = float(self.cl.outputs(t, y[None, :])[0][self.cl.aux_index(
                 f"{self.cl.span_ids[sp]}.tension_N")])
-            log.append(LogEntry(t, "web_break", self.cl.span_ids[sp], "start",
+            log.append(Event(t, "web_break", self.cl.span_ids[sp], "start",
                                 f"web break at the splice joint in {self.cl.span_ids[sp]} at "
                                 f"{T:.1f} N", {"tension_N": T, "at_splice_joint": True}))
             self.terminate_reason = "web_break"
@@ -391,7 +391,7 @@ class DiscreteLogic:
         return list(self._ctrls_on(k, (C_DANCER,)))
 
     def _phase(self, t, k, state, msg):
-        return LogEntry(t, "splice", self.cl.node_ids[k], state, msg)
+        return Event(t, "splice", self.cl.node_ids[k], state, msg)
 
     def _set_ref(self, k, gain, off, slope, t0):
         P = self.cl.P
@@ -471,7 +471,7 @@ class DiscreteLogic:
                                else web.break_tension)
             P[bj + JP_SPAN] = float(k)
             P[bj + JP_NODE] = float(k)
-        log.append(LogEntry(t, "splice", e.id, "swap",
+        log.append(Event(t, "splice", e.id, "swap",
                             f"roll change: radius {R_old:.4g} m -> {new.outer_radius:.4g} m"
                             + (f", speed-match error {sp.speed_match_error:+.2%}" if flying
                                else ""),

@@ -15,14 +15,14 @@ import math
 import time as _time
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..compile.compiler import EVENT_NAMES, CompiledLine
 from ..compile.layout import EV_BREAK, EV_CAPSTAN, EV_EMPTY, EV_SLACK
 from ..schema.scenario import SolverOptions
-from .discrete import MODE_EVENTS, DiscreteLogic
+from .discrete import MODE_EVENTS, DiscreteLogic, Event
 
 TERMINAL = {EV_BREAK, EV_EMPTY}
 PHYSICAL = {EV_SLACK, EV_BREAK, EV_CAPSTAN, EV_EMPTY}
@@ -37,18 +37,6 @@ def describe_settings(s: SolverOptions) -> str:
     if s.backend == "cvode":
         return f"CVODE BDF max_order={s.max_order} band analytic-jac rtol={s.rtol:g}"
     return f"scipy Radau sparse analytic-jac rtol={s.rtol:g}"
-
-
-@dataclass
-class Event:
-    """One entry of the event log."""
-
-    t: float
-    kind: str
-    component: str
-    state: str
-    message: str
-    values: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -332,9 +320,7 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
     log: list[Event] = []
     mode_idx = np.array([m for m, k in enumerate(cl.event_kinds) if k in MODE_EVENTS], int)
 
-    def record(entries):
-        log.extend(Event(e.t, e.kind, e.component, e.state, e.message, e.values)
-                   for e in entries)
+    record = log.extend
 
     def refresh_mode_flags(t, y, flags):
         # after a discrete change the mode events' functions mean something new: re-read
