@@ -52,8 +52,9 @@ def test_v13_material_balance_across_dancer_festoon_slack_and_splice(tmp_path):
     assert np.max(np.abs(inv - inv[0])) < 1e-9 * inv[0]
 
 
-def flying_line(tmp_path, *, dancer: bool, delta: float):
-    """Kinematic line whose unwind makes a flying splice with speed-match error delta."""
+def flying_line(tmp_path, *, dancer: bool, delta: float, stiffness_ratio: float = 1.0):
+    """Kinematic line whose unwind makes a flying splice with speed-match error delta (the
+    splice joint as stiff as the web unless ``stiffness_ratio`` says otherwise)."""
     if dancer:  # as Line A: unwind -> free idler -> dancer
         path = dancer_line(tmp_path, EA=2.25e5, mass=10.0, force_total=520.0, outer=1.5)
         d = yaml.safe_load(path.read_text())
@@ -67,7 +68,8 @@ def flying_line(tmp_path, *, dancer: bool, delta: float):
         d["spans"] = [{"length": 1.5}, {"length": 1.0}]
     src = d["elements"][0]
     src["spare_roll"] = dict(src["roll"])
-    src["splicer"] = {"type": "flying", "speed_match_error": delta}
+    src["splicer"] = {"type": "flying", "speed_match_error": delta,
+                      "joint": {"stiffness_ratio": stiffness_ratio}}
     return write(tmp_path / f"flying_{dancer}.yaml", yaml.safe_dump(d))
 
 
@@ -96,6 +98,33 @@ def test_v23_flying_splice_speed_mismatch(tmp_path):
     t_slack = 1.0 + L / v * np.log((T - t_inf) / (-t_inf))
     slack = [e for e in _events(res, "slack") if e.component == "span1"]
     assert slack and slack[0].t == pytest.approx(t_slack, abs=1e-3)
+
+
+def test_splice_joint_carries_its_own_strain_through_the_nodes(tmp_path):
+    # A joint twice as stiff as the web crosses a kinematic line (all nodes at v, wound-in
+    # strain = running strain). It carries the running tension at strain T/EA_s, so by mass
+    # conservation no span's tension changes while it enters, crosses and leaves: tension
+    # stays T (without the joint's own strain in the flux it jumped by up to 1/(1 - f/2)).
+    v, T, ls = 5.0, 260.0, 0.05
+    line = r2rsim.load_line(flying_line(tmp_path, dancer=False, delta=0.0,
+                                        stiffness_ratio=2.0))
+    cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(
+        line, [ProgrammeStep(at=0, line_speed=v)]))
+    res = r2rsim.simulate(cl, 1.8, 2000.0, r2rsim.nominal_state(cl, T),
+                          r2rsim.SolverSettings(rtol=1e-10, atol_scale=1e-4),
+                          events=[ScenarioEvent(at=1.0, type="splice", element="src")])
+    passes = [e for e in res.events if e.kind == "splice_joint"]
+    # the lead enters span 2 once span 1's unstretched length L/(1+eps) has been paid out
+    # at v/(1+eps), i.e. after L/v ...
+    assert passes[0].state == "span2"
+    assert passes[0].t == pytest.approx(1.0 + 1.5 / v, abs=1e-6)
+    # ... and the trail leaves the line l_s later than the lead reaches the rewind
+    assert passes[-1].state == "end"
+    assert passes[-1].t == pytest.approx(1.0 + (2.5 + ls) / v, abs=1e-5)
+    joint_in = np.isfinite(res["splice_joint1.lead_m"])
+    assert joint_in.sum() > 500
+    for s in ("span1", "span2"):
+        assert np.max(np.abs(res[f"{s}.tension_N"] - T)) < 1e-6 * T
 
 
 def test_e_stop_ramps_the_line_down_at_its_deceleration_limit(repo):

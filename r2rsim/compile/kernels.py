@@ -115,8 +115,9 @@ def _offsets(I):
     oE = oU + nC
     oMF = oE + nC
     oMW = oMF + nM
+    oXF = oMW + nM
     return (oT, oEM, oL, oLD, oLP, oLPP, oEAE, oV, oR, oOM, oJ, oTRIM, oTCMD, oTM, oRAW, oYS,
-            oU, oE, oMF, oMW)
+            oU, oE, oMF, oMW, oXF)
 
 
 # --------------------------------------------------------------------------- mover geometry
@@ -231,7 +232,7 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
     EAweb = P[I[H_EA]]
 
     (oT, oEM, oL, oLD, oLP, oLPP, oEAE, oV, oR, oOM, oJ, oTRIM, oTCMD, oTM, oRAW, oYS, oU, oE,
-     oMF, oMW) = _offsets(I)
+     oMF, oMW, oXF) = _offsets(I)
     # gradient quantity ids
     qT = 0
     qL = qT + nS
@@ -302,8 +303,12 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
 
     # splice joints: a span holding joint length l_s has compliance (l - l_s)/EA + l_s/EA_s
     # (physics.md eq. 1.19). The joint's place is fixed by the unstretched length paid out
-    # since the splice; the Jacobian treats the overlap as constant (it changes only while
-    # the joint crosses a node).
+    # since the splice. Mass conservation: while the joint crosses a node the web crossing
+    # it is the joint, at strain T/EA_s (factor XF = EA/EA_s on the carried strain); without
+    # this the span's tension would jump with its compliance as the joint enters. The
+    # Jacobian treats the overlap as constant (it changes only while the joint crosses a node).
+    for k in range(nN):
+        W[oXF + k] = 1.0
     oJP = I[H_OFF_JP]
     for js in range(I[H_NJ]):
         bj = oJP + js * NJP
@@ -312,14 +317,19 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         k0 = int(P[bj + JP_NODE])
         lead = y[I[oNI + k0 * NI + NI_U]] - P[bj + JP_U0]
         trail = lead - P[bj + JP_LEN]
+        xf = 1.0 / P[bj + JP_RATIO]
+        if trail < 0.0 < lead:
+            W[oXF + k0] = xf
         c0 = 0.0
         for i in range(nS):
             ell = W[oL + i] / max(1.0 + y[I[oSI + i * NSI + SI_E]], 1e-6)
             ov = min(c0 + ell, lead) - max(c0, trail)
             if ov > 0.0:
                 frac = min(ov / ell, 1.0)
-                W[oEAE + i] = W[oEAE + i] / (1.0 - frac * (1.0 - 1.0 / P[bj + JP_RATIO]))
+                W[oEAE + i] = W[oEAE + i] / (1.0 - frac * (1.0 - xf))
             c0 += ell
+            if trail < c0 < lead:
+                W[oXF + I[oSI + i * NSI + SI_DN]] = xf
             if c0 >= lead:
                 break
 
@@ -672,24 +682,25 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         iU = I[oNI + k * NI + NI_U]
         v = W[oV + k]
         yd[iS] = v
+        xk = W[oXF + k]
         if kind == NK_UNWIND:
             sp = I[oNI + k * NI + NI_SPAN_DN]
             esrc_fwd, desrc = roll_wound_in_strain(P, oNP + k * NP, W[oR + k])
-            q = _flux(v, esrc_fwd, W[oEM + sp], linear)
+            q = _flux(v, xk * esrc_fwd, xk * W[oEM + sp], linear)
         else:
             sp = I[oNI + k * NI + NI_SPAN_UP]
-            q = _flux(v, W[oEM + sp], W[oEM + sp], linear)
+            q = _flux(v, xk * W[oEM + sp], xk * W[oEM + sp], linear)
         yd[iU] = q
         if jac:
             _j_axpy(JJ, mode, iS, 1.0, GI, GC, GV, maxd, qV + k)
             if kind == NK_UNWIND:
-                _j_flux(JJ, mode, iU, 1.0, v, esrc_fwd, W[oEM + sp], -1, sp, linear, I, P,
-                        GI, GC, GV, maxd, qV + k, qT, oSP)
-                dq = v * _df(esrc_fwd, linear) * desrc if v >= 0.0 else 0.0
+                _j_flux(JJ, mode, iU, 1.0, v, esrc_fwd, W[oEM + sp], -1, sp, xk, linear, I,
+                        P, GI, GC, GV, maxd, qV + k, qT, oSP)
+                dq = v * _df(xk * esrc_fwd, linear) * xk * desrc if v >= 0.0 else 0.0
                 _j_axpy(JJ, mode, iU, dq, GI, GC, GV, maxd, qR + k)
             else:
-                _j_flux(JJ, mode, iU, 1.0, v, W[oEM + sp], W[oEM + sp], sp, sp, linear, I,
-                        P, GI, GC, GV, maxd, qV + k, qT, oSP)
+                _j_flux(JJ, mode, iU, 1.0, v, W[oEM + sp], W[oEM + sp], sp, sp, xk, linear,
+                        I, P, GI, GC, GV, maxd, qV + k, qT, oSP)
 
     # 11. spans: mass conservation with the geometric strain as the state
     for i in range(nS):
@@ -706,10 +717,12 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             ef = W[oEM + sp_before]
         else:
             ef, dwa = roll_wound_in_strain(P, oNP + a * NP, W[oR + a])
-        qa = _flux(W[oV + a], ef, W[oEM + i], linear)
+        xa = W[oXF + a]
+        xb = W[oXF + bnode]
+        qa = _flux(W[oV + a], xa * ef, xa * W[oEM + i], linear)
         sp_after = I[oNI + bnode * NI + NI_SPAN_DN]
         er = W[oEM + sp_after] if sp_after >= 0 else W[oEM + i]
-        qb = _flux(W[oV + bnode], W[oEM + i], er, linear)
+        qb = _flux(W[oV + bnode], xb * W[oEM + i], xb * er, linear)
         # moving length (dancer, festoon): + (1 + eg)/L·dL/dt (linear model: dL/dt / L)
         if linear:
             fac = 1.0 / L
@@ -727,13 +740,13 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             _j_axpy(JJ, mode, ie, -(fac * (qb - qa) + gl * Ld) / L, GI, GC, GV, maxd, qL + i)
             _j_axpy(JJ, mode, ie, gl, GI, GC, GV, maxd, qLD + i)
             if sp_before < 0:
-                dqa = W[oV + a] * _df(ef, linear) * dwa if W[oV + a] >= 0.0 else 0.0
+                dqa = W[oV + a] * _df(xa * ef, linear) * xa * dwa if W[oV + a] >= 0.0 else 0.0
                 _j_axpy(JJ, mode, ie, -fac * dqa, GI, GC, GV, maxd, qR + a)
             _j_flux(JJ, mode, ie, fac, W[oV + bnode], W[oEM + i], er, i,
-                    sp_after if sp_after >= 0 else i, linear, I, P, GI, GC, GV, maxd,
+                    sp_after if sp_after >= 0 else i, xb, linear, I, P, GI, GC, GV, maxd,
                     qV + bnode, qT, oSP)
-            _j_flux(JJ, mode, ie, -fac, W[oV + a], ef, W[oEM + i], sp_before, i, linear, I, P,
-                    GI, GC, GV, maxd, qV + a, qT, oSP)
+            _j_flux(JJ, mode, ie, -fac, W[oV + a], ef, W[oEM + i], sp_before, i, xa, linear,
+                    I, P, GI, GC, GV, maxd, qV + a, qT, oSP)
 
     # 12. first-order sensor filters
     for j in range(nSe):
@@ -871,17 +884,18 @@ def _flux(v, e_fwd, e_rev, linear):
 
 
 @njit(cache=True)
-def _j_flux(JJ, mode, row, a, v, e_fwd, e_rev, sp_fwd, sp_rev, linear, I, P, GI, GC, GV, maxd,
-            qv, qT, oSP):
-    """Add a·d(flux)/dy to a Jacobian row. Both upwind sources are recorded (one with 0)."""
+def _j_flux(JJ, mode, row, a, v, e_fwd, e_rev, sp_fwd, sp_rev, xf, linear, I, P, GI, GC, GV,
+            maxd, qv, qT, oSP):
+    """Add a·d(flux)/dy to a Jacobian row for the flux v·f(xf·e) (xf: splice-joint factor
+    of the node). Both upwind sources are recorded (one with 0)."""
     fwd = v >= 0.0
-    e = e_fwd if fwd else e_rev
+    e = xf * (e_fwd if fwd else e_rev)
     _j_axpy(JJ, mode, row, a * _f(e, linear), GI, GC, GV, maxd, qv)
     if sp_fwd >= 0:
-        w = a * v * _df(e_fwd, linear) / P[oSP + sp_fwd * NSP + SP_EA] if fwd else 0.0
+        w = a * v * _df(e, linear) * xf / P[oSP + sp_fwd * NSP + SP_EA] if fwd else 0.0
         _j_axpy(JJ, mode, row, w, GI, GC, GV, maxd, qT + sp_fwd)
     if sp_rev >= 0:
-        w = 0.0 if fwd else a * v * _df(e_rev, linear) / P[oSP + sp_rev * NSP + SP_EA]
+        w = 0.0 if fwd else a * v * _df(e, linear) * xf / P[oSP + sp_rev * NSP + SP_EA]
         _j_axpy(JJ, mode, row, w, GI, GC, GV, maxd, qT + sp_rev)
 
 
@@ -898,7 +912,7 @@ def event_values(t, y, g, I, P, W, GI, GC, GV, yd, JJ):
     """
     evaluate(t, y, yd, JJ, MODE_RHS, I, P, W, GI, GC, GV, yd[:0])
     (oT, oEM, oL, oLD, oLP, oLPP, oEAE, oV, oR, oOM, oJ, oTRIM, oTCMD, oTM, oRAW, oYS, oU, oE,
-     oMF, oMW) = _offsets(I)
+     oMF, oMW, oXF) = _offsets(I)
     oNI = I[H_OFF_NI]
     oSI = I[H_OFF_SI]
     oNP = I[H_OFF_NP]
@@ -945,12 +959,18 @@ def event_values(t, y, g, I, P, W, GI, GC, GV, yd, JJ):
             if kind == EV_JOINT_BREAK:
                 g[m] = P[bj + JP_TBRK] - W[oT + min(max(sp, 0), nS - 1)]
                 continue
+            # the next node crossing of the lead or of the trail, whichever comes first
             k0 = int(P[bj + JP_NODE])
             lead = y[I[oNI + k0 * NI + NI_U]] - P[bj + JP_U0]
+            st = int(P[bj + JP_TSPAN])
             c0 = 0.0
+            c_trail = 0.0
             for i in range(min(sp + 1, nS)):
                 c0 += W[oL + i] / max(1.0 + y[I[oSI + i * NSI + SI_E]], 1e-6)
-            g[m] = c0 - lead
+                if i == st:
+                    c_trail = c0
+            g_lead = c0 - lead if sp < nS else 1.0
+            g[m] = min(g_lead, c_trail - (lead - P[bj + JP_LEN]))
         elif kind == EV_SPLICE_RADIUS:
             rt = P[oNP + idx * NP + NP_RTRIG]
             g[m] = W[oR + idx] - rt if rt > 0.0 else 1.0

@@ -73,8 +73,10 @@ NMP = 34
 # MP_MODE: 0 free, -1 latched at the lower stop, +1 at the upper stop, 2 seized
 
 # ---- splice-joint slots (P only) ----
-(JP_ACTIVE, JP_U0, JP_LEN, JP_RATIO, JP_TBRK, JP_SPAN, JP_NODE) = range(7)
-NJP = 7
+# JP_SPAN: span holding the joint's lead (front); JP_TSPAN: span holding its trail (-1 while
+# the trail is still on the roll)
+(JP_ACTIVE, JP_U0, JP_LEN, JP_RATIO, JP_TBRK, JP_SPAN, JP_NODE, JP_TSPAN) = range(8)
+NJP = 8
 
 # ---- event records (I block, 3 ints each: kind, index, sign convention) ----
 EV_SLACK, EV_BREAK, EV_CAPSTAN, EV_EMPTY = 1, 2, 3, 4

@@ -57,6 +57,7 @@ from ..compile.layout import (
     JP_RATIO,
     JP_SPAN,
     JP_TBRK,
+    JP_TSPAN,
     JP_U0,
     MI_Q,
     MI_QD,
@@ -348,16 +349,20 @@ class DiscreteLogic:
         if kind == EV_JOINT_PASS and on:
             js = self._event_index(m)
             bj = I[H_OFF_JP] + js * NJP
-            P[bj + JP_SPAN] += 1.0
-            sp = int(P[bj + JP_SPAN])
-            if sp >= len(self.cl.span_ids):
-                P[bj + JP_ACTIVE] = 0.0
-                log.append(Event(t, "splice_joint", comp, "end",
-                                    f"{comp} is wound into {self.cl.node_ids[-1]}"))
-            else:
-                log.append(Event(t, "splice_joint", comp, self.cl.span_ids[sp],
-                                    f"{comp} passes {self.cl.node_ids[sp]} into "
-                                    f"{self.cl.span_ids[sp]}"))
+            nS = len(self.cl.span_ids)
+            if self._joint_lead_crossed(bj, t, y):
+                P[bj + JP_SPAN] += 1.0
+                sp = int(P[bj + JP_SPAN])
+                if sp < nS:
+                    log.append(Event(t, "splice_joint", comp, self.cl.span_ids[sp],
+                                     f"{comp} passes {self.cl.node_ids[sp]} into "
+                                     f"{self.cl.span_ids[sp]}"))
+            else:  # the trail crossed a node: the joint has left a span
+                P[bj + JP_TSPAN] += 1.0
+                if int(P[bj + JP_TSPAN]) >= nS:
+                    P[bj + JP_ACTIVE] = 0.0
+                    log.append(Event(t, "splice_joint", comp, "end",
+                                     f"{comp} is wound into {self.cl.node_ids[-1]}"))
             return y, log, True
         if kind == EV_JOINT_BREAK and on:
             js = self._event_index(m)
@@ -416,6 +421,21 @@ class DiscreteLogic:
                 + P[self._np(k, NP_VOFF)]
                 + P[self._np(k, NP_VSLOPE)] * (t - P[self._np(k, NP_VT0)]))
 
+    def _joint_lead_crossed(self, bj: int, t: float, y: np.ndarray) -> bool:
+        """At a joint-pass event: True if the joint's lead reached a node, False if its
+        trail did (whichever of the two is closer to its node)."""
+        cl, P = self.cl, self.cl.P
+        aux = cl.outputs(np.array([t]), y[None, :])[0]
+        ell = np.array([aux[cl.aux_index(f"{s}.length_m")]
+                        / (1.0 + aux[cl.aux_index(f"{s}.geometric_strain")])
+                        for s in cl.span_ids])
+        c = np.concatenate([[0.0], np.cumsum(ell)])  # node positions from the splice node
+        lead = y[self._ni(int(P[bj + JP_NODE]), NI_U)] - P[bj + JP_U0]
+        trail = lead - P[bj + JP_LEN]
+        sp, st = int(P[bj + JP_SPAN]), int(P[bj + JP_TSPAN])
+        g_lead = abs(c[sp + 1] - lead) if sp < len(ell) else np.inf
+        return g_lead <= abs(c[st + 1] - trail)
+
     def _swap(self, t, y, k, log, flying):
         """Replace the expiring roll by a fresh spare roll; inject the splice joint."""
         e = self.line.elements[k]
@@ -470,6 +490,7 @@ class DiscreteLogic:
             P[bj + JP_TBRK] = (sp.joint.break_tension if sp.joint.break_tension is not None
                                else web.break_tension)
             P[bj + JP_SPAN] = float(k)
+            P[bj + JP_TSPAN] = float(k) - 1.0
             P[bj + JP_NODE] = float(k)
         log.append(Event(t, "splice", e.id, "swap",
                             f"roll change: radius {R_old:.4g} m -> {new.outer_radius:.4g} m"
