@@ -4,7 +4,7 @@
 
 Runs scenarios/thesis_normal_cycles.yaml and scenarios/thesis_dancer_failure.yaml into a
 temporary directory and draws the tension of stages 2-5 over time with the splice phases
-shaded (thesis Fig. 2-13 and Fig. 2-15b).
+shaded (thesis Fig. 2-13, Fig. 2-15a and b).
 """
 
 from __future__ import annotations
@@ -65,10 +65,12 @@ def plot(name: str, title: str, out: Path) -> None:
 
 
 def main() -> int:
-    plot("thesis_normal_cycles", "Thesis testbed, normal cycles (cf. Shui 2018 Fig. 2-13): "
-         "splices with the dancer supplying stages 3-5", ROOT / "docs" / "thesis_normal_cycles.png")
+    plot("thesis_normal_cycles", "Thesis testbed, normal cycles (cf. Shui 2018 Fig. 2-13, "
+         "2-15a):\nthe dancer stores web (tension climbs), then supplies stages 3-5 in the splice",
+         ROOT / "docs" / "thesis_normal_cycles.png")
     plot("thesis_dancer_failure", "Thesis testbed, dancer seized before a changeover "
-         "(cf. Fig. 2-15b): web break", ROOT / "docs" / "thesis_dancer_failure.png")
+         "(cf. Fig. 2-15b):\nno storage, no climb; web break in the splice",
+         ROOT / "docs" / "thesis_dancer_failure.png")
     return 0
 
 
