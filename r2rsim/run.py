@@ -22,10 +22,13 @@ import yaml
 
 from ._version import __version__
 from .compile import Programme, compile_line
+from .compile.faults import realise_faults
 from .dataset import DatasetWriter, true_state_columns
+from .dataset.labels import derive_labels
 from .dataset.writer import EVENTS_SCHEMA, FAULTS_SCHEMA
 from .errors import InputError
 from .measure import MeasurementModel
+from .measure.sensors import channel_names
 from .schema import load_scenario
 from .solve import nominal_state, simulate, steady_state
 
@@ -136,15 +139,30 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
     run_id = f"{name}__s{scenario.seed}"
     meta = {"r2rsim.schema_version": "0.1", "r2rsim.version": __version__,
             "r2rsim.scenario_sha256": scenario_sha, "r2rsim.root_seed": str(scenario.seed)}
+    sensor_chan = {s.id: channel_names(cl, s)[0][len("meas."):] for s in cl.sensors}
+    faults = realise_faults(scenario, line, ss_faults, str(scenario_path),
+                            channel_of=lambda sid: f"meas.{sensor_chan[sid]}")
+    rate = scenario.record_rate
+    fault_rows = [f.record(run_id, int(math.ceil(f.onset * rate - 1e-9))) for f in faults]
+    modes = [(st.at, st.mode) for st in scenario.programme if st.mode is not None]
     writer = DatasetWriter(out, run_id, meta)
     try:
-        meas = MeasurementModel(cl, scenario.record_rate, ss_meas)
+        meas = MeasurementModel(cl, rate, ss_meas, faults)
         cols = true_state_columns(cl)
         aux_idx = np.array([c["aux"] for c in cols], dtype=np.int64)
         span_cols = [cl.aux_index(f"{s}.tension_N") for s in cl.span_ids]
         stats = {"min": np.full(len(span_cols), np.inf), "max": np.full(len(span_cols), -np.inf),
                  "sum": np.zeros(len(span_cols)), "n": 0}
         k0 = [0]
+        held: list[dict] = []  # one chunk of look-behind: the last one learns how the run ended
+
+        def flush(terminated: bool):
+            data = held.pop()
+            k_last = int(data["k"][-1]) if terminated and len(data["k"]) else None
+            data.update(derive_labels(fault_rows, data["k"], data["t_s"],
+                                      warmup=scenario.warmup, modes=modes,
+                                      terminated_k=k_last, sensor_channels=sensor_chan))
+            writer.write_chunk(data)
 
         def on_chunk(t, Y, A):
             n = len(t)
@@ -152,10 +170,9 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
             data.update(meas.measure(t, A))
             for c, j in zip(cols, aux_idx, strict=True):
                 data[c["column"]] = A[:, j]
-            data["label.is_faulty"] = np.zeros(n, bool)
-            data["label.phase"] = np.where(t < scenario.warmup, "warmup", "normal")
-            data["label.score_mask"] = t >= scenario.warmup
-            writer.write_chunk(data)
+            if held:
+                flush(False)
+            held.append(data)
             T = A[:, span_cols]
             stats["min"] = np.minimum(stats["min"], T.min(axis=0))
             stats["max"] = np.maximum(stats["max"], T.max(axis=0))
@@ -164,10 +181,12 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
             k0[0] += n
 
         wall0 = time.perf_counter()
-        res = simulate(cl, scenario.duration, scenario.record_rate, y0,
+        res = simulate(cl, scenario.duration, rate, y0,
                        scenario.solver, on_chunk=on_chunk,
                        progress=(lambda t: progress(t, scenario.duration)) if progress else None,
-                       initial_state_mode=init_mode, events=scenario.events)
+                       initial_state_mode=init_mode, events=scenario.events, faults=faults)
+        if held:
+            flush(res.terminated)
         wall = time.perf_counter() - wall0
         sim_end = res.termination_time if res.terminated else scenario.duration
 
@@ -190,9 +209,24 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
         for c in cols:
             ch_rows.append((c["column"], c["kind"], c["unit"], c["component"], c["description"],
                             scenario.record_rate))
-        ch_rows += [("label.is_faulty", "label", "", "", "any fault active", None),
-                    ("label.phase", "label", "", "", "warmup / normal", None),
-                    ("label.score_mask", "label", "", "", "false during warm-up", None)]
+        for mc in meas.channels:
+            s = mc["sensor"]
+            if s.range is not None:
+                ch_rows.append((f"flag.{s.id}.clipped", "flag", "", s.id,
+                                f"{mc['name']} was clipped to its range {list(s.range)} "
+                                "(censored)", mc["rate"]))
+        ch_rows += [
+            ("label.is_faulty", "label", "", "", "any fault present", None),
+            ("label.n_active", "label", "", "", "number of faults present", None),
+            ("label.fault_ids", "label", "", "", "ids of the faults present", None),
+            ("label.primary_type", "label", "", "", "type of the present fault with the "
+             "largest magnitude_rel, else 'normal'", None),
+            ("label.severity", "label", "", "", "profile p(t) of the primary fault, 0-1", None),
+            ("label.phase", "label", "", "", "warmup / normal / faulty / terminated", None),
+            ("label.mode", "label", "", "", "operating mode named by the programme", None),
+            ("label.score_mask", "label", "", "", "false during warm-up", None)]
+        ch_rows += [(f"label.ch.{c}", "label", "", sid, f"a sensor fault acts on meas.{c}",
+                     None) for sid, c in sensor_chan.items()]
         ch_table = pa.table({
             "channel": [r[0] for r in ch_rows], "kind": [r[1] for r in ch_rows],
             "unit": [r[2] for r in ch_rows], "component": [r[3] for r in ch_rows],
@@ -201,7 +235,8 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
                                  for r in ch_rows], pa.float64()),
         })
         writer.write_table("channels", ch_table)
-        writer.write_table("faults", FAULTS_SCHEMA.empty_table())
+        writer.write_table("faults", pa.Table.from_pylist(fault_rows, schema=FAULTS_SCHEMA)
+                           if fault_rows else FAULTS_SCHEMA.empty_table())
         writer.write_table("events", pa.table({
             "run_id": [run_id] * len(res.events), "t_s": [e.t for e in res.events],
             "kind": [e.kind for e in res.events], "component": [e.component for e in res.events],
@@ -216,13 +251,15 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
             "seed_streams": pa.array([seeds], pa.struct([("process", pa.uint64()),
                                                          ("measurement", pa.uint64()),
                                                          ("fault_sampling", pa.uint64())])),
-            "split": pa.array([None], pa.string()),
+            "split": pa.array([scenario.split_of(scenario.seed)], pa.string()),
             "line_config": [line.name or line_path.stem],
-            "operating_mode": pa.array([None], pa.string()),
+            "operating_mode": pa.array(["+".join(dict.fromkeys(m for _, m in modes)) or None],
+                                       pa.string()),
+            "modes_json": [json.dumps(modes)],
             "sample_period_s": [1.0 / scenario.record_rate],
             "duration_s": [scenario.duration], "n_samples": pa.array([writer.n_rows], pa.int64()),
-            "warmup_s": [scenario.warmup], "has_fault": [False],
-            "n_faults": pa.array([0], pa.int16()), "terminated": [res.terminated],
+            "warmup_s": [scenario.warmup], "has_fault": [bool(faults)],
+            "n_faults": pa.array([len(faults)], pa.int16()), "terminated": [res.terminated],
             "termination_reason": pa.array([res.termination_reason], pa.string()),
             "termination_t_s": pa.array([res.termination_time], pa.float64()),
             "simulated_s": [float(sim_end)],

@@ -48,6 +48,25 @@ def _g_axpy(GI, GC, GV, maxd, qdst, a, qsrc):
 
 
 @njit(cache=True)
+def _sensor_fault(t, P, b, W, iraw, jac, GC, GV, maxd, q):
+    """Apply a sensor's in-loop fault (offset, gain, drift, stuck) to its raw reading."""
+    if P[b + SEP_FON] == 0.0:
+        return
+    if P[b + SEP_STUCK] != 0.0:
+        W[iraw] = P[b + SEP_SV]
+        if jac:
+            GC[q] = 0
+        return
+    dt = t - P[b + SEP_FT0]
+    g = 1.0 + P[b + SEP_GA] + P[b + SEP_GB] * dt + P[b + SEP_GC] * math.exp(-dt / P[b + SEP_GTAU])
+    bias = P[b + SEP_BA] + P[b + SEP_BB] * dt + P[b + SEP_BC] * math.exp(-dt / P[b + SEP_BTAU])
+    W[iraw] = g * W[iraw] + bias
+    if jac:
+        for e in range(GC[q]):
+            GV[q * maxd + e] *= g
+
+
+@njit(cache=True)
 def _j_add(JJ, mode, row, col, val):
     if mode == MODE_TOUCH:
         JJ[row, col] = 1.0
@@ -429,8 +448,9 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             if jac:
                 _g_axpy(GI, GC, GV, maxd, qRAW + j, g * L0 / EAweb, qT + node)
         else:
-                _sensor_raw(j, typ, node, g, P[b + SEP_OFF], P[b + SEP_WIN], P[b + SEP_WOUT], I,
+            _sensor_raw(j, typ, node, g, P[b + SEP_OFF], P[b + SEP_WIN], P[b + SEP_WOUT], I,
                         oNI, W, oT, oR, oOM, oRAW, jac, GI, GC, GV, maxd, qT, qR, qOM, qRAW)
+        _sensor_fault(t, P, b, W, oRAW + j, jac, GC, GV, maxd, qRAW + j)
         if iF >= 0:
             W[oYS + j] = y[iF]
             if jac:
@@ -637,6 +657,7 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         b = oSEP + j * NSEP
         _sensor_raw(j, typ, node, P[b + SEP_GAIN], P[b + SEP_OFF], 0.0, 0.0, I, oNI, W, oT,
                     oR, oOM, oRAW, jac, GI, GC, GV, maxd, qT, qR, qOM, qRAW)
+        _sensor_fault(t, P, b, W, oRAW + j, jac, GC, GV, maxd, qRAW + j)
         iF = I[oSEI + j * NSEI + SEI_F]
         W[oYS + j] = y[iF] if iF >= 0 else W[oRAW + j]
 

@@ -51,8 +51,12 @@ SE_LOADCELL, SE_ENCODER, SE_DIAMETER, SE_DANCER, SE_PITCH = 1, 2, 3, 4, 5
 # SE_PITCH: SEI_NODE is the span; SEP_CIN holds L0, SEP_COUT the calibration E·S
 SEI_TYPE, SEI_NODE, SEI_F = 0, 1, 2
 NSEI = 3
-SEP_WIN, SEP_WOUT, SEP_GAIN, SEP_OFF, SEP_TAU, SEP_CIN, SEP_COUT = range(7)
-NSEP = 7
+# sensor faults acting in the loop (set by the solver's fault actions): with dt = t - FT0,
+#   reading = (1 + GA + GB·dt + GC·exp(-dt/GTAU))·raw + BA + BB·dt + BC·exp(-dt/BTAU),
+# or the held value SV while STUCK; FON = 0 skips all of it
+(SEP_WIN, SEP_WOUT, SEP_GAIN, SEP_OFF, SEP_TAU, SEP_CIN, SEP_COUT, SEP_FON, SEP_FT0, SEP_BA,
+ SEP_BB, SEP_BC, SEP_BTAU, SEP_GA, SEP_GB, SEP_GC, SEP_GTAU, SEP_STUCK, SEP_SV) = range(19)
+NSEP = 19
 
 # ---- controller records ----
 C_SPEED, C_TENSION_TORQUE, C_TENSION_TRIM, C_DANCER = 1, 2, 3, 4

@@ -92,6 +92,10 @@ class DatasetWriter:
                     fields.append(pa.field(name, pa.int64()))
                 elif name == "t_s":
                     fields.append(pa.field(name, pa.float64()))
+                elif isinstance(arr, list):
+                    fields.append(pa.field(name, pa.list_(pa.string())))
+                elif arr.dtype.kind in "iu":
+                    fields.append(pa.field(name, pa.from_numpy_dtype(arr.dtype)))
                 elif arr.dtype == bool:
                     fields.append(pa.field(name, pa.bool_()))
                 elif arr.dtype.kind in "OU":
@@ -112,6 +116,8 @@ class DatasetWriter:
             arr = columns[f.name]
             if pa.types.is_dictionary(f.type):
                 arrays.append(pa.array(arr.astype(str)).dictionary_encode().cast(f.type))
+            elif pa.types.is_list(f.type):
+                arrays.append(pa.array(arr, type=f.type))
             else:
                 arrays.append(pa.array(arr, type=f.type, from_pandas=False))
         self._writer.write_table(pa.Table.from_arrays(arrays, schema=self._schema))

@@ -387,6 +387,18 @@ class _Sensor(Strict):
     )
     filter: NonNegTime = Field(0.0, description="first-order filter time constant [s]")
     gain: float = Field(1.0, description="calibration gain g in y = g·x + b")
+    range: tuple[float, float] | None = Field(
+        None, description="measuring range [low, high] in the reading's SI unit; recorded "
+        "samples outside are clipped and flagged (censored data)")
+    quantization: Annotated[float, Field(ge=0)] = Field(
+        0.0, description="resolution of the recorded reading (SI unit of the reading)")
+    delay: NonNegTime = Field(0.0, description="transport/processing delay of the record [s]")
+
+    @model_validator(mode="after")
+    def _check_range(self):
+        if self.range is not None and not self.range[0] < self.range[1]:
+            raise ValueError("range must be [low, high] with low < high")
+        return self
 
 
 class LoadCell(_Sensor):
@@ -444,6 +456,9 @@ class PitchLength(Strict):
     gain: float = 1.0
     noise: Annotated[Length, Field(ge=0)] = 0.0
     offset: Length = 0.0
+    range: tuple[float, float] | None = Field(None, description="[low, high] in m")
+    quantization: Annotated[float, Field(ge=0)] = Field(0.0, description="resolution [m]")
+    delay: NonNegTime = Field(0.0, description="processing delay of the record [s]")
 
 
 Sensor = Annotated[LoadCell | Encoder | RollDiameter | DancerPosition | PitchLength,

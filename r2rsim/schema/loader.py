@@ -11,6 +11,7 @@ import yaml
 from pydantic import ValidationError
 
 from ..errors import InputError
+from .faults import check_faults
 from .line import Line
 from .scenario import Scenario
 
@@ -195,6 +196,7 @@ def check_scenario_against_line(scenario: Scenario, line: Line, file: str) -> No
         if ev.at > scenario.duration:
             raise InputError(f"at {ev.at:g} s is after the end of the run ({scenario.duration:g}"
                              f" s)", file=file, path=f"events[{i}].at")
+    check_faults(scenario, line, file)
     span_ids = {s.id for s in line.spans}
     for sid in scenario.initial.span_tension:
         if sid not in span_ids:

@@ -1,7 +1,8 @@
 """Pydantic models of a scenario file (DESIGN.md §4.2; the minimal form of issue 2).
 
 A scenario names a line, a duration, a record rate, a seed, an output location, the initial
-state and an operating programme of set-point changes. Faults and events come later.
+state, an operating programme of set-point changes (with operating-mode names), scheduled
+events, faults (:mod:`r2rsim.schema.faults`) and the run's data split.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
+from .faults import Fault
 from .line import Id, Strict
 from .quantities import Acceleration, Force, Frequency, Speed, Time
 
@@ -30,11 +32,13 @@ class ProgrammeStep(Strict):
     rate: Annotated[Acceleration, Field(gt=0)] | None = Field(
         None, description="line-speed ramp rate [m/s^2] (instead of ramp)"
     )
+    mode: Id | None = Field(
+        None, description="operating-mode name from this step on (label.mode), e.g. OC1")
 
     @model_validator(mode="after")
     def _check(self):
-        if self.line_speed is None and not self.tension:
-            raise ValueError("a programme step must change line_speed or tension")
+        if self.line_speed is None and not self.tension and self.mode is None:
+            raise ValueError("a programme step must change line_speed, tension or mode")
         if self.ramp is not None and self.rate is not None:
             raise ValueError("give either ramp (a duration) or rate, not both")
         return self
@@ -92,6 +96,28 @@ class SolverOptions(Strict):
     )
 
 
+class SplitBySeed(Strict):
+    """Assign the run to a split from its seed: fractions of train/val/test, deterministic
+    in the seed (the same seed always lands in the same split)."""
+
+    by: Literal["seed"]
+    train: Annotated[float, Field(ge=0, le=1)] = 0.6
+    val: Annotated[float, Field(ge=0, le=1)] = 0.2
+    test: Annotated[float, Field(ge=0, le=1)] = 0.2
+
+    @model_validator(mode="after")
+    def _check(self):
+        if abs(self.train + self.val + self.test - 1.0) > 1e-9:
+            raise ValueError("train + val + test must be 1")
+        return self
+
+    def assign(self, seed: int) -> str:
+        import numpy as np
+
+        u = np.random.default_rng(np.random.SeedSequence([seed, 0x5B117])).random()
+        return "train" if u < self.train else "val" if u < self.train + self.val else "test"
+
+
 class Scenario(Strict):
     """An operating scenario for a line."""
 
@@ -112,6 +138,9 @@ class Scenario(Strict):
     warmup: Annotated[Time, Field(ge=0)] = Field(
         0.0, description="initial period labelled 'warmup' in the dataset [s]"
     )
+    faults: list[Fault] = Field(default_factory=list)
+    split: Literal["train", "val", "test"] | SplitBySeed | None = Field(
+        None, description="data split of the run: fixed, or {by: seed, train:, val:, test:}")
 
     @model_validator(mode="after")
     def _check(self):
@@ -121,4 +150,14 @@ class Scenario(Strict):
                 raise ValueError(f"@programme[{i}].at@ steps must be in time order "
                                  f"({step.at:g} s comes after {last:g} s)")
             last = step.at
+        ids = [f.id for f in self.faults]
+        for i, f in enumerate(self.faults):
+            if ids.index(f.id) != i:
+                raise ValueError(f"@faults[{i}].id@ fault id '{f.id}' is used twice")
         return self
+
+    def split_of(self, seed: int) -> str | None:
+        """The run's split (None when the scenario does not say)."""
+        if isinstance(self.split, SplitBySeed):
+            return self.split.assign(seed)
+        return self.split

@@ -51,6 +51,7 @@ from ..compile.layout import (
     H_OFF_SCHT,
     H_OFF_SCHV,
     H_OFF_SEI,
+    H_OFF_SEP,
     JP_ACTIVE,
     JP_LEN,
     JP_NODE,
@@ -89,10 +90,23 @@ from ..compile.layout import (
     NP_VSLOPE,
     NP_VT0,
     NSEI,
+    NSEP,
     SE_DIAMETER,
     SEI_F,
     SEI_NODE,
     SEI_TYPE,
+    SEP_BA,
+    SEP_BB,
+    SEP_BC,
+    SEP_BTAU,
+    SEP_FON,
+    SEP_FT0,
+    SEP_GA,
+    SEP_GB,
+    SEP_GC,
+    SEP_GTAU,
+    SEP_STUCK,
+    SEP_SV,
 )
 
 #: events whose handling changes the model (their flags are recomputed after a change)
@@ -130,7 +144,7 @@ class DiscreteLogic:
         The scenario's scheduled events (``splice``, ``e_stop``, ``dancer_seize``).
     """
 
-    def __init__(self, cl: CompiledLine, events=()):
+    def __init__(self, cl: CompiledLine, events=(), faults=()):
         self.cl = cl
         self.line = cl.line
         self._queue: list[_Action] = []
@@ -149,6 +163,17 @@ class DiscreteLogic:
                 self._push(ev.at, "e_stop", -1, {"decel": ev.deceleration})
             elif ev.type == "dancer_seize":
                 self._push(ev.at, "seize", mover_idx[ev.element])
+        # faults acting inside the loop: an action at each breakpoint of their profiles
+        # resets the target sensor's fault coefficients (the solver restarts there)
+        sensor_idx = {s.id: j for j, s in enumerate(cl.sensors)}
+        self._sensor_faults: dict[int, list] = {}
+        for f in faults:
+            if f.kind.acts != "loop" or f.kind.target != "sensor":
+                continue
+            j = sensor_idx[f.target]
+            self._sensor_faults.setdefault(j, []).append(f)
+            for tb in f.breakpoints(math.inf):
+                self._push(tb, "sensor_fault", j, {"fault": f})
 
     # ---- queue ----------------------------------------------------------------------------
     def _push(self, t, kind, target=-1, data=None):
@@ -319,6 +344,49 @@ class DiscreteLogic:
                             f"{self.cl.mover_ids[m]} seizes at position {q:.4g}",
                             {"position": q}))
         return y
+
+    def _do_sensor_fault(self, t, y, a, log):
+        """Re-express every in-loop fault on sensor j as coefficients from time t on."""
+        j = a.target
+        I, P = self.cl.I, self.cl.P
+        b = I[H_OFF_SEP] + j * NSEP
+        f = a.data["fault"]
+        if abs(t - f.onset) < 1e-12:
+            log.append(Event(t, "fault", f.target, "start", f"{f.id}: {f.type} on {f.target} "
+                             f"starts", {"fault_id": f.id}))
+        if f.end is not None and abs(t - f.end) < 1e-12:
+            log.append(Event(t, "fault", f.target, "end", f"{f.id}: {f.type} on {f.target} "
+                             f"ends", {"fault_id": f.id}))
+        bias = [0.0, 0.0, 0.0, 1.0]
+        gain = [0.0, 0.0, 0.0, 1.0]
+        stuck = False
+        for g in self._sensor_faults[j]:
+            ca, cb, cc, tau = g.segment(t)
+            if g.type in ("sensor.stuck", "sensor.dropout"):
+                stuck = stuck or ca > 0.0
+                continue
+            acc = gain if g.type == "sensor.gain" else bias
+            acc[0] += ca
+            acc[1] += cb
+            if cc != 0.0:
+                acc[2] += cc
+                acc[3] = tau
+        was_stuck = P[b + SEP_STUCK] != 0.0
+        if stuck and not was_stuck:  # hold the reading the controllers see now
+            P[b + SEP_SV] = self._seen(t, y, j)
+        P[b + SEP_STUCK] = 1.0 if stuck else 0.0
+        P[b + SEP_FT0] = t
+        P[b + SEP_BA], P[b + SEP_BB], P[b + SEP_BC], P[b + SEP_BTAU] = bias
+        P[b + SEP_GA], P[b + SEP_GB], P[b + SEP_GC], P[b + SEP_GTAU] = gain
+        P[b + SEP_FON] = 1.0 if (stuck or any(bias[:3]) or any(gain[:3])) else 0.0
+        return y
+
+    def _seen(self, t, y, j) -> float:
+        """The reading sensor j delivers to the controllers at (t, y)."""
+        cl = self.cl
+        s = cl.sensors[j]
+        name = next(n for n in cl.aux_names if n.startswith(f"{s.id}.") and "_seen_" in n)
+        return float(cl.outputs(np.array([t]), y[None, :])[0][cl.aux_index(name)])
 
     # ---- event handlers ---------------------------------------------------------------------
     def on_event(self, m: int, on: bool, t: float, y: np.ndarray):

@@ -261,7 +261,7 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
              on_chunk: ChunkCallback | None = None,
              progress: Callable[[float], None] | None = None,
              initial_state_mode: str = "given", outputs: bool = True,
-             events=()) -> SimulationResult:
+             events=(), faults=()) -> SimulationResult:
     """Integrate a compiled line over ``[0, duration]`` and sample it at ``record_rate``.
 
     Parameters
@@ -285,6 +285,9 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
     events : list of ScenarioEvent
         Scheduled discrete events (splice, e-stop, dancer seize); see
         :class:`r2rsim.solve.discrete.DiscreteLogic`.
+    faults : list of FaultInstance
+        The run's faults (:func:`r2rsim.compile.faults.realise_faults`); those acting inside
+        the loop change the sensor readings the controllers see.
 
     Returns
     -------
@@ -308,15 +311,15 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
              [list(v) for v in cl.programme.values])
     try:
         return _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mode,
-                    outputs, events, backend, sample_t, wall0)
+                    outputs, events, faults, backend, sample_t, wall0)
     finally:
         cl.I[:], cl.P[:] = saved[0], saved[1]
         cl.programme.times, cl.programme.values = saved[2], saved[3]
 
 
 def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mode, outputs,
-         events, backend, sample_t, wall0):
-    logic = DiscreteLogic(cl, events)
+         events, faults, backend, sample_t, wall0):
+    logic = DiscreteLogic(cl, events, faults)
     prog_breaks = sorted(b for b in cl.programme.breakpoints if 0.0 < b < duration)
     rows_per_chunk = max(16, int(s.chunk_memory_mb * 1e6 / 8 / max(cl.n_states + len(
         cl.aux_names), 1)))
