@@ -88,7 +88,7 @@ def test_same_seed_same_data_and_noise_seed_leaves_truth(tmp_path, repo):
                               c["meas.lc_unwind.tension_N"].to_numpy())
     for col in a.column_names:
         if not col.startswith("meas."):
-            np.testing.assert_array_equal(a[col].to_numpy(), c[col].to_numpy(), err_msg=col)
+            assert a[col].equals(c[col]), col
 
 
 def test_rerun_replaces_dataset(tmp_path, repo):

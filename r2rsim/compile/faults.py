@@ -129,6 +129,18 @@ class FaultInstance:
         }
 
 
+def loop_sensor_ids(line) -> set[str]:
+    """Sensors some controller reads: their faults act inside the simulation. Faults on
+    the other (monitoring) sensors act on the record only, and the process is untouched."""
+    out = set()
+    for c in line.controllers:
+        for attr in ("sensor", "radius_sensor", "encoder"):
+            v = getattr(c, attr, None)
+            if v:
+                out.add(v)
+    return out
+
+
 def from_record(row: dict) -> FaultInstance:
     """Rebuild a fault instance from its faults.parquet row (labels and the validator)."""
     params = json.loads(row.get("params_json") or "{}")

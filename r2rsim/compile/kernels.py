@@ -48,8 +48,10 @@ def _g_axpy(GI, GC, GV, maxd, qdst, a, qsrc):
 
 
 @njit(cache=True)
-def _sensor_fault(t, P, b, W, iraw, jac, GC, GV, maxd, q):
-    """Apply a sensor's in-loop fault (offset, gain, drift, stuck) to its raw reading."""
+def _sensor_fault(t, P, b, W, iraw, irw0, jac, GC, GV, maxd, q):
+    """Apply a sensor's in-loop fault (offset, gain, drift, stuck) to its raw reading; the
+    fault-free reading is kept at W[irw0] for the true (shadow) channel."""
+    W[irw0] = W[iraw]
     if P[b + SEP_FON] == 0.0:
         return
     if P[b + SEP_STUCK] != 0.0:
@@ -135,8 +137,9 @@ def _offsets(I):
     oMF = oE + nC
     oMW = oMF + nM
     oXF = oMW + nM
+    oRW0 = oXF + nN
     return (oT, oEM, oL, oLD, oLP, oLPP, oEAE, oV, oR, oOM, oJ, oTRIM, oTCMD, oTM, oRAW, oYS,
-            oU, oE, oMF, oMW, oXF)
+            oU, oE, oMF, oMW, oXF, oRW0)
 
 
 # --------------------------------------------------------------------------- mover geometry
@@ -251,7 +254,7 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
     EAweb = P[I[H_EA]]
 
     (oT, oEM, oL, oLD, oLP, oLPP, oEAE, oV, oR, oOM, oJ, oTRIM, oTCMD, oTM, oRAW, oYS, oU, oE,
-     oMF, oMW, oXF) = _offsets(I)
+     oMF, oMW, oXF, oRW0) = _offsets(I)
     # gradient quantity ids
     qT = 0
     qL = qT + nS
@@ -450,7 +453,7 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         else:
             _sensor_raw(j, typ, node, g, P[b + SEP_OFF], P[b + SEP_WIN], P[b + SEP_WOUT], I,
                         oNI, W, oT, oR, oOM, oRAW, jac, GI, GC, GV, maxd, qT, qR, qOM, qRAW)
-        _sensor_fault(t, P, b, W, oRAW + j, jac, GC, GV, maxd, qRAW + j)
+        _sensor_fault(t, P, b, W, oRAW + j, oRW0 + j, jac, GC, GV, maxd, qRAW + j)
         if iF >= 0:
             W[oYS + j] = y[iF]
             if jac:
@@ -657,7 +660,7 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         b = oSEP + j * NSEP
         _sensor_raw(j, typ, node, P[b + SEP_GAIN], P[b + SEP_OFF], 0.0, 0.0, I, oNI, W, oT,
                     oR, oOM, oRAW, jac, GI, GC, GV, maxd, qT, qR, qOM, qRAW)
-        _sensor_fault(t, P, b, W, oRAW + j, jac, GC, GV, maxd, qRAW + j)
+        _sensor_fault(t, P, b, W, oRAW + j, oRW0 + j, jac, GC, GV, maxd, qRAW + j)
         iF = I[oSEI + j * NSEI + SEI_F]
         W[oYS + j] = y[iF] if iF >= 0 else W[oRAW + j]
 
@@ -813,7 +816,7 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         for j in range(nSe):
             b = oSEP + j * NSEP
             g = P[b + SEP_GAIN]
-            aux[m] = (W[oRAW + j] - P[b + SEP_OFF]) / g if g != 0.0 else math.nan
+            aux[m] = (W[oRW0 + j] - P[b + SEP_OFF]) / g if g != 0.0 else math.nan
             aux[m + 1] = W[oYS + j]
             if I[oSEI + j * NSEI + SEI_TYPE] == SE_LOADCELL:
                 node = I[oSEI + j * NSEI + SEI_NODE]
@@ -933,7 +936,7 @@ def event_values(t, y, g, I, P, W, GI, GC, GV, yd, JJ):
     """
     evaluate(t, y, yd, JJ, MODE_RHS, I, P, W, GI, GC, GV, yd[:0])
     (oT, oEM, oL, oLD, oLP, oLPP, oEAE, oV, oR, oOM, oJ, oTRIM, oTCMD, oTM, oRAW, oYS, oU, oE,
-     oMF, oMW, oXF) = _offsets(I)
+     oMF, oMW, oXF, oRW0) = _offsets(I)
     oNI = I[H_OFF_NI]
     oSI = I[H_OFF_SI]
     oNP = I[H_OFF_NP]

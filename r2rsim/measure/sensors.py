@@ -2,10 +2,12 @@
 
 Controllers act on the reading each sensor delivers inside the simulation: calibration
 gain/offset, first-order filter and the in-loop sensor faults (offset, gain, drift, stuck,
-dropout-hold). The recorded measured channel takes that reading on the sensor's own sample
-clock and adds, in this order: delay (nominal + ``sensor.delay`` faults), Gaussian noise
-(nominal + ``sensor.noise`` faults), ``sensor.spike`` faults, quantisation (nominal, encoder
-counts, ``sensor.quantization`` faults), clipping to the sensor's range, and NaN where a
+dropout-hold) of the sensors they read. A sensor no controller reads gets those faults here,
+on its record, so the process is bit-for-bit untouched by them. The recorded measured channel
+takes the reading on the sensor's own sample clock and adds, in this order: delay
+(nominal + ``sensor.delay`` faults), Gaussian noise (nominal + ``sensor.noise`` faults),
+``sensor.spike`` faults, quantisation (nominal, encoder counts, ``sensor.quantization``
+faults), clipping to the sensor's range, and NaN where a
 ``sensor.dropout`` fault acts. Every random draw comes from the run's measurement stream
 (one child per sensor, one per fault), only at the sensor's sample instants, so it depends
 neither on solver steps nor on how the run was chunked.
@@ -18,6 +20,7 @@ import math
 import numpy as np
 
 from ..compile.compiler import CompiledLine
+from ..compile.faults import loop_sensor_ids
 
 _QUANTITY = {"load_cell": ("tension", "N"), "encoder": ("speed", "rad_s"),
              "roll_diameter": ("diameter", "m"), "pitch_length": ("pitch", "m"),
@@ -53,6 +56,7 @@ class MeasurementModel:
     def __init__(self, cl: CompiledLine, record_rate: float, seed_sequence, faults=()):
         self.cl = cl
         self.record_rate = record_rate
+        in_loop = loop_sensor_ids(cl.line)
         children = seed_sequence.spawn(len(cl.sensors))
         fault_children = seed_sequence.spawn(len(faults))
         self.channels = []
@@ -71,6 +75,9 @@ class MeasurementModel:
                 "rng": np.random.default_rng(child), "faults": mine,
                 "sensor_faults": [f for f, _ in mine],
                 "hist_t": np.zeros(0), "hist_v": np.zeros(0),
+                "record_loop_faults": [f for f, _ in mine if f.kind.acts == "loop"
+                                       and s.id not in in_loop],
+                "stuck_at": {},
             })
 
     def measure(self, t: np.ndarray, aux: np.ndarray) -> dict[str, np.ndarray]:
@@ -86,6 +93,7 @@ class MeasurementModel:
             nf = int(fresh.sum())
             tt = t[fresh]
             vals = seen[fresh].copy()
+            vals = self._loop_faults_on_record(ch, tt, vals)
             vals = self._delay(ch, tt, vals)
             if s.noise > 0:
                 vals += s.noise * ch["rng"].standard_normal(nf)
@@ -129,6 +137,35 @@ class MeasurementModel:
             out[ch["true"]] = aux[:, ch["true_col"]]
             if s.range is not None:
                 out[f"flag.{s.id}.clipped"] = held_clip.astype(bool)
+        return out
+
+    @staticmethod
+    def _loop_faults_on_record(ch, tt, vals):
+        """Offset, gain, drift, stuck of a sensor no controller reads, as in the kernel."""
+        faults = ch["record_loop_faults"]
+        if not faults:
+            return vals
+        gain = np.ones(len(tt))
+        bias = np.zeros(len(tt))
+        for f in faults:
+            if f.type == "sensor.gain":
+                gain += f.effect(tt)
+            elif f.type in ("sensor.offset", "sensor.drift"):
+                bias += f.effect(tt)
+        out = gain * vals + bias
+        for f in faults:
+            if f.type not in ("sensor.stuck", "sensor.dropout"):
+                continue
+            on = f.p(tt) > 0
+            held = ch["stuck_at"].get(f.id)
+            for i in range(len(tt)):  # hold the reading of the first sample of each on-phase
+                if on[i]:
+                    if held is None:
+                        held = out[i]
+                    out[i] = held
+                else:
+                    held = None
+            ch["stuck_at"][f.id] = held
         return out
 
     def _delay(self, ch, tt, vals):

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..compile.compiler import EVENT_NAMES, CompiledLine
+from ..compile.faults import loop_sensor_ids
 from ..compile.layout import (
     C_DANCER,
     C_SPEED,
@@ -166,9 +167,10 @@ class DiscreteLogic:
         # faults acting inside the loop: an action at each breakpoint of their profiles
         # resets the target sensor's fault coefficients (the solver restarts there)
         sensor_idx = {s.id: j for j, s in enumerate(cl.sensors)}
+        in_loop = loop_sensor_ids(cl.line)
         self._sensor_faults: dict[int, list] = {}
         for f in faults:
-            if f.kind.acts != "loop" or f.kind.target != "sensor":
+            if f.kind.acts != "loop" or f.kind.target != "sensor" or f.target not in in_loop:
                 continue
             j = sensor_idx[f.target]
             self._sensor_faults.setdefault(j, []).append(f)

@@ -379,7 +379,10 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
             t_seg_end = min([*bps, logic.next_time(), duration])
             cl.set_segment_start(t)
             # samples in [t, t_seg_end]
-            k_end = int(np.searchsorted(sample_t, t_seg_end + 1e-9, side="right"))
+            # a sample on a segment's end belongs to the next segment: it sees the discrete
+            # change made there (a fault acts from its onset sample on)
+            k_end = int(np.searchsorted(sample_t, t_seg_end + (1e-9 if t_seg_end >= duration
+                                                               else -1e-9), side="right"))
             k_hi = min(k_end, k_next + rows_per_chunk)
             t_chunk_end = t_seg_end if k_hi == k_end else float(sample_t[k_hi - 1])
             ts = sample_t[k_next:k_hi]
@@ -392,7 +395,7 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
             tt, Y, err, ts, ys, root = backend.solve(tspan, y, find_events=hot)
             restarts += 1
             if err is not None:
-                k_next = _emit_samples(emit, sample_t, k_next, tt, Y)
+                k_next = _emit_samples(emit, sample_t, k_next, tt, Y, k_end)
                 terminated, reason, t_term = True, f"solver_failure: {err}", float(ts[-1])
                 break
             if root is not None:  # hot: CVODE stopped at a root
@@ -420,7 +423,7 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
                     if len(changed):
                         hit_row = int(changed[0])
                 if hit_row is None:
-                    k_next = _emit_samples(emit, sample_t, k_next, tt, Y)
+                    k_next = _emit_samples(emit, sample_t, k_next, tt, Y, k_end)
                     t, y = float(tt[-1]), Y[-1].copy()
                     hot = False
                     if progress:
@@ -483,13 +486,14 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
                             duration, initial_state_mode, y0)
 
 
-def _emit_samples(emit, sample_t, k_next, tt, Y) -> int:
-    """Emit the rows of (tt, Y) that fall on the sample grid from index k_next on."""
+def _emit_samples(emit, sample_t, k_next, tt, Y, k_stop=None) -> int:
+    """Emit the rows of (tt, Y) that fall on the sample grid from index k_next on (and
+    before index k_stop)."""
     if len(tt) == 0:
         return k_next
     idx = np.searchsorted(sample_t, tt - 1e-9)
-    ok = (idx < len(sample_t)) & (np.abs(sample_t[np.minimum(idx, len(sample_t) - 1)] - tt)
-                                  < 1e-9) & (idx >= k_next)
+    ok = (idx < (len(sample_t) if k_stop is None else k_stop)) & (np.abs(
+        sample_t[np.minimum(idx, len(sample_t) - 1)] - tt) < 1e-9) & (idx >= k_next)
     if np.any(ok):
         emit(tt[ok], Y[ok])
         return int(idx[ok][-1]) + 1
