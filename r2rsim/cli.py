@@ -78,8 +78,16 @@ def _cmd_validate(args) -> int:
     status = 0
     for f in args.files:
         path = Path(f)
-        if path.is_dir() and (path / "manifest.json").exists():
-            print(f"{f}: dataset (label validation arrives with the fault catalogue)")
+        if path.is_dir():
+            from .dataset.validate import validate_dataset
+
+            problems = validate_dataset(path)
+            for msg in problems:
+                print(f"{f}: {msg}", file=sys.stderr)
+            if problems:
+                status = EXIT_INPUT
+            else:
+                print(f"{f}: valid dataset")
             continue
         try:
             data = read_yaml(path)
@@ -110,9 +118,43 @@ def _cmd_schema(args) -> int:
 
 
 def _cmd_list(args) -> int:
+    if args.what == "faults":
+        from .schema.faults import CATALOGUE
+
+        acts = {"loop": "inside the loop if a controller reads the sensor, else on the record",
+                "record": "on the recorded measurement", "model": "on the line's equations"}
+        print(f"{'type':<22} {'target':<8} {'magnitude':<10} description")
+        for ft in CATALOGUE.values():
+            print(f"{ft.name:<22} {ft.target:<8} {ft.magnitude:<10} {ft.description} "
+                  f"(acts {acts[ft.acts]})")
+        return 0
+    if args.what == "channels":
+        if not args.line:
+            raise InputError("name the line file: r2rsim list channels LINE")
+        return _list_channels(args.line)
     tables = {"elements": ELEMENTS, "sensors": SENSORS, "controllers": CONTROLLERS}
     for name, desc in tables[args.what].items():
         print(f"{name:<17} {desc}")
+    return 0
+
+
+def _list_channels(line_path: str) -> int:
+    from .compile import Programme, compile_line
+    from .dataset import true_state_columns
+    from .measure.sensors import channel_names
+    from .schema import load_line
+
+    line = load_line(line_path)
+    cl = compile_line(line, Programme.from_steps(line, []))
+    print(f"{'channel':<44} {'unit':<8} description")
+    for s in cl.sensors:
+        meas, true, unit = channel_names(cl, s)
+        where = getattr(s, "element", None) or s.span
+        print(f"{meas:<44} {unit:<8} {s.type} '{s.id}' on {where}: measured (what "
+              f"algorithms see)")
+        print(f"{true:<44} {unit:<8} noise- and fault-free shadow (never for algorithms)")
+    for c in true_state_columns(cl):
+        print(f"{c['column']:<44} {c['unit']:<8} {c['description']}")
     return 0
 
 
@@ -139,8 +181,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("kind", choices=["line", "scenario"])
     s.set_defaults(func=_cmd_schema)
 
-    ls = sub.add_parser("list", help="list element, sensor or controller types")
-    ls.add_argument("what", choices=["elements", "sensors", "controllers"])
+    ls = sub.add_parser("list", help="list element, sensor, controller or fault types, or the "
+                        "channels of a line")
+    ls.add_argument("what", choices=["elements", "sensors", "controllers", "faults",
+                                     "channels"])
+    ls.add_argument("line", nargs="?", help="line file (for 'channels')")
     ls.set_defaults(func=_cmd_list)
     return p
 

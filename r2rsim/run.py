@@ -25,6 +25,7 @@ from .compile import Programme, compile_line
 from .compile.faults import realise_faults
 from .dataset import DatasetWriter, true_state_columns
 from .dataset.labels import derive_labels
+from .dataset.validate import validate_dataset
 from .dataset.writer import EVENTS_SCHEMA, FAULTS_SCHEMA
 from .errors import InputError
 from .measure import MeasurementModel
@@ -275,7 +276,7 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
                           yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=True))
         path = writer.commit({"run_ids": [run_id], "scenario_sha256": scenario_sha,
                               "root_seed": scenario.seed, "scenario": scenario_path.name,
-                              "line": line_path.name})
+                              "line": line_path.name}, check=validate_dataset)
     except BaseException:
         writer.abort()
         raise

@@ -219,3 +219,42 @@ def test_bad_faults_are_rejected(tmp_path, faults, message):
     path = scenario(tmp_path, faults)
     with pytest.raises(InputError, match=message.replace("(", r"\(").replace(")", r"\)")):
         r2rsim.load_scenario(path)
+
+
+def test_validator_rederives_every_label_from_faults_parquet(tmp_path, capsys):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from r2rsim.cli import main
+    from r2rsim.dataset.validate import validate_dataset
+
+    _, _, out = run(tmp_path, [{"id": "f1", "type": "sensor.offset", "target": "lc_mon",
+                                "onset": 3.0, "magnitude": 10.0}])
+    assert validate_dataset(out) == []
+    assert main(["validate", str(out)]) == 0
+    # a fault label one sample before the onset, as in the mislabelled TEP files
+    part = next((out / "samples").glob("*/part-0.parquet"))
+    table = pq.read_table(part)
+    flags = table.column("label.is_faulty").to_numpy(zero_copy_only=False).copy()
+    flags[299] = True
+    i = table.column_names.index("label.is_faulty")
+    pq.write_table(table.set_column(i, "label.is_faulty", pa.array(flags)), part)
+    problems = validate_dataset(out)
+    assert any("label.is_faulty at k = 299 is True; faults.parquet gives False" in p
+               for p in problems), problems
+    assert any("fault labels before the first onset" in p for p in problems)
+    assert any("checksum differs" in p for p in problems)
+    assert main(["validate", str(out)]) == 2
+
+
+def test_list_faults_and_channels(repo, capsys):
+    from r2rsim.cli import main
+    from r2rsim.schema.faults import CATALOGUE
+
+    assert main(["list", "faults"]) == 0
+    text = capsys.readouterr().out
+    assert all(name in text for name in CATALOGUE)
+    assert main(["list", "channels", str(repo / "lines" / "registration.yaml")]) == 0
+    text = capsys.readouterr().out
+    assert "meas.sensor_B.pitch_m" in text and "state.registration.tension_N" in text
+    assert main(["list", "channels"]) == 2

@@ -25,7 +25,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from .._version import __version__
-from ..errors import InputError
+from ..errors import InputError, R2RError
 
 SCHEMA_VERSION = "0.1"
 
@@ -132,8 +132,9 @@ class DatasetWriter:
     def write_text(self, relpath: str, text: str) -> None:
         (self.tmp / relpath).write_text(text, encoding="utf-8")
 
-    def commit(self, manifest_extra: dict) -> Path:
-        """Close the files, write the manifest with checksums and move the dataset in place."""
+    def commit(self, manifest_extra: dict, check=None) -> Path:
+        """Close the files, write the manifest with checksums, run ``check(directory)`` (a
+        list of problems; any problem aborts) and move the dataset in place."""
         if self._writer is not None:
             self._writer.close()
         files = sorted(p for p in self.tmp.rglob("*") if p.is_file())
@@ -149,6 +150,10 @@ class DatasetWriter:
                       for p in files},
         }
         (self.tmp / "manifest.json").write_text(json.dumps(manifest, indent=2, sort_keys=True))
+        problems = check(self.tmp) if check is not None else []
+        if problems:
+            raise R2RError("the dataset failed its own validation (a bug in r2rsim; please "
+                           "report it): " + "; ".join(problems[:5]))
         if self.output.exists():
             trash = self.output.parent / f".{self.output.name}.old-{os.getpid()}"
             os.replace(self.output, trash)
