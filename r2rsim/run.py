@@ -31,7 +31,7 @@ from .errors import InputError
 from .measure import MeasurementModel
 from .measure.sensors import channel_names
 from .schema import load_scenario
-from .solve import nominal_state, simulate, steady_state
+from .solve import Event, nominal_state, simulate, steady_state
 
 
 @dataclass
@@ -196,26 +196,23 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
                     None),
                    ("k", "index", "", "", "sample index from 0", None),
                    ("t_s", "index", "s", "", "simulation time", None)]
-        for mc in meas.channels:
+        for mc in meas.channels:  # in the order MeasurementModel.measure writes them
             s = mc["sensor"]
-            unit = mc["name"].rsplit("_", 1)[-1].replace("rad_s", "rad/s")
-            rate = mc["rate"]
+            unit = channel_names(cl, s)[2].replace("rad_s", "rad/s")
             where = getattr(s, "element", None) or s.span
             ch_rows.append((mc["name"], "measured", unit, where,
                             f"{s.type} '{s.id}' on {where}: measured (noise, sampling)",
-                            rate))
+                            mc["rate"]))
             ch_rows.append((mc["true"], "true", unit, where,
-                            f"noise-free shadow of {mc['name']} (never give to algorithms)",
-                            rate))
-        for c in cols:
-            ch_rows.append((c["column"], c["kind"], c["unit"], c["component"], c["description"],
-                            scenario.record_rate))
-        for mc in meas.channels:
-            s = mc["sensor"]
+                            f"noise- and fault-free shadow of {mc['name']} (never give to "
+                            "algorithms)", rate))
             if s.range is not None:
                 ch_rows.append((f"flag.{s.id}.clipped", "flag", "", s.id,
                                 f"{mc['name']} was clipped to its range {list(s.range)} "
                                 "(censored)", mc["rate"]))
+        for c in cols:
+            ch_rows.append((c["column"], c["kind"], c["unit"], c["component"], c["description"],
+                            rate))
         ch_rows += [
             ("label.is_faulty", "label", "", "", "any fault present", None),
             ("label.n_active", "label", "", "", "number of faults present", None),
@@ -238,11 +235,18 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
         writer.write_table("channels", ch_table)
         writer.write_table("faults", pa.Table.from_pylist(fault_rows, schema=FAULTS_SCHEMA)
                            if fault_rows else FAULTS_SCHEMA.empty_table())
+        # every fault's start and end joins the event log (within the simulated time)
+        events = list(res.events) + [
+            Event(tb, "fault", f.target, state, f"{f.id}: {f.type} on {f.target} {state}s",
+                  {"fault_id": f.id})
+            for f in faults for tb, state in ((f.onset, "start"), (f.end, "end"))
+            if tb is not None and tb <= sim_end]
+        events.sort(key=lambda e: e.t)
         writer.write_table("events", pa.table({
-            "run_id": [run_id] * len(res.events), "t_s": [e.t for e in res.events],
-            "kind": [e.kind for e in res.events], "component": [e.component for e in res.events],
-            "state": [e.state for e in res.events], "message": [e.message for e in res.events],
-            "values_json": [json.dumps(e.values) for e in res.events]}, schema=EVENTS_SCHEMA))
+            "run_id": [run_id] * len(events), "t_s": [e.t for e in events],
+            "kind": [e.kind for e in events], "component": [e.component for e in events],
+            "state": [e.state for e in events], "message": [e.message for e in events],
+            "values_json": [json.dumps(e.values) for e in events]}, schema=EVENTS_SCHEMA))
         seeds = {"process": int(ss_process.generate_state(1, np.uint64)[0]),
                  "measurement": int(ss_meas.generate_state(1, np.uint64)[0]),
                  "fault_sampling": int(ss_faults.generate_state(1, np.uint64)[0])}
@@ -283,6 +287,6 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
     n = max(stats["n"], 1)
     tstats = {sid: (float(stats["min"][i]), float(stats["sum"][i] / n), float(stats["max"][i]))
               for i, sid in enumerate(cl.span_ids)}
-    return RunSummary(path, run_id, float(sim_end), wall, writer.n_rows, tstats, res.events,
+    return RunSummary(path, run_id, float(sim_end), wall, writer.n_rows, tstats, events,
                       res.terminated, res.termination_reason, res.termination_time, init_mode,
                       res.stats)

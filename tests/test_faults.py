@@ -258,3 +258,37 @@ def test_list_faults_and_channels(repo, capsys):
     text = capsys.readouterr().out
     assert "meas.sensor_B.pitch_m" in text and "state.registration.tension_N" in text
     assert main(["list", "channels"]) == 2
+
+
+def test_range_clipping_is_flagged_and_channels_describe_every_column(tmp_path):
+    path = scenario(tmp_path, [{"id": "o", "type": "sensor.offset", "target": "lc_mon",
+                                "onset": 4.0, "magnitude": 10.0}])
+    d = yaml.safe_load(fault_line(tmp_path).read_text())
+    for s in d["sensors"]:
+        if s["id"] == "lc_mon":
+            s["range"] = [0.0, 265.0]
+    write(tmp_path / "line_r.yaml", yaml.safe_dump(d))
+    d = yaml.safe_load(path.read_text())
+    d["line"] = str(tmp_path / "line_r.yaml")
+    write(path, yaml.safe_dump(d))
+    out = tmp_path / "clip"
+    r2rsim.run_scenario(path, output=out)
+    s = pd.read_parquet(out / "samples")
+    m = s["meas.lc_mon.tension_N"].to_numpy()
+    flag = s["flag.lc_mon.clipped"].to_numpy()
+    # 260 N + 10 N offset reads 270 N: above the range, recorded as 265 N and flagged
+    assert (flag == (s["true.lc_mon.tension_N"].to_numpy() + np.where(s.t_s >= 4.0, 10.0, 0)
+                     > 265.0)).all()
+    assert flag.any() and np.all(m[flag] == 265.0)
+    ch = pd.read_parquet(out / "channels.parquet").set_index("channel")
+    assert list(ch.index) == ["run_id", *pq_columns(out)]
+    assert ch.loc["meas.enc_pull.speed_rad_s", "unit"] == "rad/s"
+    assert ch.loc["true.lc_mon.tension_N", "rate_hz"] == RATE
+    ev = pd.read_parquet(out / "events.parquet")
+    assert ((ev.kind == "fault") & (ev.state == "start") & (ev.t_s == 4.0)).sum() == 1
+
+
+def pq_columns(out):
+    import pyarrow.parquet as pq
+
+    return pq.read_schema(next((out / "samples").glob("*/part-0.parquet"))).names

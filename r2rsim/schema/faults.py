@@ -131,7 +131,7 @@ class Fault(Strict):
         None, description="sensor.spike: mean number of spikes per second")
     compose: Literal["superpose"] | None = Field(
         None, description="allow overlap with other faults on the same target that also "
-        "declare it: offsets and drifts add, gains multiply, noise variances add")
+        "declare it: offsets and drifts add, gain changes add, noise variances add")
 
     @model_validator(mode="after")
     def _check(self):

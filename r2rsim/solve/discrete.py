@@ -352,13 +352,6 @@ class DiscreteLogic:
         j = a.target
         I, P = self.cl.I, self.cl.P
         b = I[H_OFF_SEP] + j * NSEP
-        f = a.data["fault"]
-        if abs(t - f.onset) < 1e-12:
-            log.append(Event(t, "fault", f.target, "start", f"{f.id}: {f.type} on {f.target} "
-                             f"starts", {"fault_id": f.id}))
-        if f.end is not None and abs(t - f.end) < 1e-12:
-            log.append(Event(t, "fault", f.target, "end", f"{f.id}: {f.type} on {f.target} "
-                             f"ends", {"fault_id": f.id}))
         bias = [0.0, 0.0, 0.0, 1.0]
         gain = [0.0, 0.0, 0.0, 1.0]
         stuck = False
