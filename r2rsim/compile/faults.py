@@ -51,9 +51,6 @@ class FaultInstance:
     def kind(self):
         return CATALOGUE[self.type]
 
-    def stop(self, duration: float) -> float:
-        return self.end if self.end is not None else math.inf
-
     def present(self, t: np.ndarray) -> np.ndarray:
         """True where the fault exists (onset <= t < end), whatever its profile does."""
         t = np.asarray(t, float)
@@ -82,7 +79,7 @@ class FaultInstance:
 
     def breakpoints(self, duration: float) -> list[float]:
         """Times at which the effect is not smooth (onset, ramp end, switches, end)."""
-        stop = min(self.stop(duration), duration)
+        stop = min(self.end if self.end is not None else math.inf, duration)
         out = [self.onset]
         if self.shape == "ramp":
             out.append(self.onset + self.ramp)

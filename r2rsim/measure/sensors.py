@@ -73,7 +73,6 @@ class MeasurementModel:
                 "true_col": cl.aux_index(f"{s.id}.{q}_{u}"),
                 "rate": rate, "last_tick": None, "held": math.nan, "clip_held": False,
                 "rng": np.random.default_rng(child), "faults": mine,
-                "sensor_faults": [f for f, _ in mine],
                 "hist_t": np.zeros(0), "hist_v": np.zeros(0),
                 "record_loop_faults": [f for f, _ in mine if f.kind.acts == "loop"
                                        and s.id not in in_loop],

@@ -175,7 +175,7 @@ class DiscreteLogic:
             j = sensor_idx[f.target]
             self._sensor_faults.setdefault(j, []).append(f)
             for tb in f.breakpoints(math.inf):
-                self._push(tb, "sensor_fault", j, {"fault": f})
+                self._push(tb, "sensor_fault", j)
 
     # ---- queue ----------------------------------------------------------------------------
     def _push(self, t, kind, target=-1, data=None):
