@@ -119,7 +119,7 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
     out = Path(output) if output is not None else Path(scenario.output or f"runs/{name}")
 
     prog = Programme.from_steps(line, scenario.programme, file=str(scenario_path))
-    cl = compile_line(line, prog)
+    cl = compile_line(line, prog, scenario.faults)
     init = scenario.initial
     y_nom = nominal_state(cl, init.tension, init.span_tension)
     init_mode = "nominal"

@@ -137,7 +137,11 @@ def check_dancer_failure(r):
     runs, ev = r["runs"].iloc[0], r["events"]
     assert bool(runs["terminated"]) and runs["termination_reason"] == "web_break"
     assert 63.0 < runs["termination_t_s"] < 90.0
-    assert r["faults"].empty
+    f, s = r["faults"], r["samples"]
+    assert len(f) == 1 and (f.fault_type.iloc[0], f.target_id.iloc[0]) == (
+        "dancer.arm_stuck", "dancer")
+    assert (s["label.is_faulty"].to_numpy() == (s.t_s.to_numpy() >= 60.0)).all()
+    assert (s["label.primary_type"][s.t_s >= 60.0] == "dancer.arm_stuck").all()
     seize = ev[ev.kind == "dancer_seized"]
     assert len(seize) == 1 and seize.t_s.iloc[0] == pytest.approx(60.0)
     assert (ev.kind == "web_break").sum() == 1

@@ -237,7 +237,7 @@ class CompiledLine:
         return "\n".join(lines)
 
 
-def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine:
+def compile_line(line: Line, programme: Programme | None = None, faults=()) -> CompiledLine:
     """Compile a validated line.
 
     Parameters
@@ -246,6 +246,9 @@ def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine
     programme : Programme, optional
         Set-point tables; default: constant set-points (line speed 0, the controllers'
         tension set-points).
+    faults : sequence of r2rsim.schema.faults.Fault, optional
+        The scenario's faults: they reserve parameter slots, splice-joint slots (a modulus
+        change) and an angle state for each eccentric roller.
 
     Returns
     -------
@@ -298,12 +301,16 @@ def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine
     mov_P = np.zeros((nM, NMP))
     mover_q0 = [0.0] * nM
     splice_nodes = [k for k, e in enumerate(els) if getattr(e, "splicer", None) is not None]
-    nJ = N_JOINT_SLOTS if splice_nodes else 0
+    n_modulus = sum(f.type == "process.modulus_change" for f in faults)
+    nJ = (N_JOINT_SLOTS if splice_nodes else 0) + n_modulus
+    nFS = len(faults)
+    eccentric = {f.target for f in faults if f.type == "process.eccentricity"}
     pitch_filters: list = []
 
     def add_mover(mid, kind, k_node, span_u, span_d, mp, q0, unit):
         m = mover_idx[mid]
         mov_P[m] = mp
+        mov_P[m, MP_LOADF] = mov_P[m, MP_FRICF] = 1.0
         mover_q0[m] = q0
         mov_I[m, MI_NODE] = k_node
         mov_I[m, MI_SPAN_U], mov_I[m, MI_SPAN_D] = span_u, span_d
@@ -345,6 +352,8 @@ def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine
         f = e.friction
         ni, npr = node_I[k], node_P[k]
         npr[NP_VGAIN] = 1.0
+        npr[NP_TEFF] = npr[NP_FRICF] = 1.0
+        npr[NP_WRAP] = e.wrap_angle if e.wrap_angle is not None else math.pi
         ni[NI_KIND] = {"unwind": NK_UNWIND, "rewind": NK_REWIND}.get(e.type, NK_ROLLER)
         drive = getattr(e, "drive", None)
         ni[NI_DRIVE] = DRV_NONE if drive is None else (
@@ -389,6 +398,8 @@ def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine
             npr[NP_R], npr[NP_J] = e.radius, e.inertia
         if ni[NI_DRIVE] != DRV_IDEAL:
             ni[NI_W] = add(f"{e.id}.speed", "rad/s", "speed", 1e-6)
+        if e.id in eccentric:
+            ni[NI_TH] = add(f"{e.id}.angle", "rad", "angle", 1e-6)
         if ni[NI_DRIVE] == DRV_TORQUE and drive.torque_lag > 0:
             ni[NI_TAU] = add(f"{e.id}.drive_torque", "N*m", "torque", 1e-4)
         if e.type in DANCERS:
@@ -462,7 +473,8 @@ def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine
                 mp[MP_MASS] = fe.carriage_mass
                 mp[MP_QMIN], mp[MP_QMAX] = fe.stroke
                 mp[MP_C], mp[MP_FC], mp[MP_EPS] = fe.damping, fe.coulomb, fe.smoothing_speed
-                mp[MP_F0] = fe.force + fe.carriage_mass * fe.gravity
+                mp[MP_F0] = fe.carriage_mass * fe.gravity
+                mp[MP_FAIR] = fe.force
                 mp[MP_NSTR] = 2.0 * fe.moving_rollers
                 add_mover(line.spans[k].id, MV_FESTOON, -1, k, -1, mp, fe.initial_position, "m")
                 si_[SI_MOVER] = mover_idx[line.spans[k].id]
@@ -588,7 +600,8 @@ def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine
         offs_I.append(pos)
         pos += b.size
     blocks_P = [node_P.ravel(), span_P.ravel(), sens_P.ravel(), ctrl_P.ravel(), sch_t.ravel(),
-                sch_v.ravel(), np.zeros(4), mov_P.ravel(), np.zeros(nJ * NJP), np.array([EA])]
+                sch_v.ravel(), np.zeros(4), mov_P.ravel(), np.zeros(nJ * NJP), np.array([EA]),
+                np.zeros(nFS * NFS)]
     offs_P, ppos = [], 0
     for b in blocks_P:
         offs_P.append(ppos)
@@ -604,6 +617,7 @@ def compile_line(line: Line, programme: Programme | None = None) -> CompiledLine
     header[H_OFF_SCHT], header[H_OFF_SCHV], header[H_OFF_RT] = offs_P[4:7]
     header[H_NM], header[H_OFF_MI], header[H_OFF_MP] = nM, offs_I[6], offs_P[7]
     header[H_NJ], header[H_OFF_JP], header[H_EA] = nJ, offs_P[8], offs_P[9]
+    header[H_NFS], header[H_OFF_FS] = nFS, offs_P[10]
     header[H_MODEL] = 1 if line.span_model == "linear" else 0
     header[H_NCH], header[H_MAXPTS] = nch, maxpts
     header[H_NQ], header[H_MAXD] = nq, MAXD
@@ -671,7 +685,8 @@ def _dancer_record(line: Line, k: int):
         mp[MP_NX], mp[MP_NY] = nx, ny
         mp[MP_MASS] = e.mass
         mp[MP_QMIN], mp[MP_QMAX] = e.travel_range
-        mp[MP_F0] = e.load_force + e.mass * (gx * nx + gy * ny)
+        mp[MP_F0] = e.mass * (gx * nx + gy * ny)
+        mp[MP_FAIR] = e.load_force
         mp[MP_K], mp[MP_Q0] = e.spring_stiffness, e.spring_free_travel
         kind, q0, unit = MV_LINEAR, e.initial_travel, "m"
     else:

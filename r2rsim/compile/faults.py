@@ -208,9 +208,9 @@ def realise_faults(scenario, line, seed_sequence, file: str = "<scenario>",
     for i, (f, child) in enumerate(zip(scenario.faults, children, strict=True)):
         rng = np.random.default_rng(child)
         where = f"faults[{i}]"
-        s = sensors[f.target]
-        rdim = reading_dimension(line, s)
         ft = CATALOGUE[f.type]
+        s = sensors[f.target] if ft.target == "sensor" else None
+        rdim = reading_dimension(line, s)
         onset, onset_spec = _draw(f.onset, "time", rng, f"{where}.onset", file)
         unit = magnitude_unit(f.type, rdim)
         if ft.magnitude == "none":
@@ -222,7 +222,7 @@ def realise_faults(scenario, line, seed_sequence, file: str = "<scenario>",
             raise InputError(f"end {f.end:g} s comes before the drawn onset {onset:g} s",
                              file=file, path=f"{where}.end")
         spec = {k: v for k, v in (("onset", onset_spec), ("magnitude", mag_spec)) if v}
-        noise = getattr(s, "noise", 0.0) or 0.0
+        noise = (getattr(s, "noise", 0.0) or 0.0) if s is not None else 0.0
         rel = math.nan
         if ft.magnitude == "rel":
             rel = abs(mag)
@@ -234,7 +234,7 @@ def realise_faults(scenario, line, seed_sequence, file: str = "<scenario>",
             duty=f.profile.duty, magnitude=mag, unit=unit, rate=f.rate, compose=f.compose,
             sampled_from=json.dumps({k: json.loads(v) for k, v in spec.items()}) if spec
             else None,
-            expected_channels=[channel_of(f.target)] if channel_of else [],
+            expected_channels=[channel_of(f.target)] if channel_of and s is not None else [],
             magnitude_rel=rel)
         out.append(inst)
     for a in out:

@@ -185,11 +185,14 @@ def mover_lengths(P, bm, kind, q):
 
 @njit(cache=True)
 def _mover_load(P, bm, kind, q):
-    """Generalised actuator + spring + gravity force on a mover (without web and friction)."""
-    f = P[bm + MP_F0] - P[bm + MP_K] * (q - P[bm + MP_Q0])
+    """Generalised actuator + spring + gravity force on a mover (without web and friction).
+    The actuator (air cylinder, torque motor) is scaled by LOADF (loss of loading)."""
+    la = P[bm + MP_LOADF]
+    f = P[bm + MP_F0] + la * P[bm + MP_FAIR] - P[bm + MP_K] * (q - P[bm + MP_Q0])
     if kind == MV_PIVOT:
+        f += (la - 1.0) * P[bm + MP_F0]  # a pivot's F0 is its torque motor
         f += P[bm + MP_G1] * math.cos(q) + P[bm + MP_G2] * math.sin(q)
-        fc = P[bm + MP_CYLF]
+        fc = la * P[bm + MP_CYLF]
         if fc != 0.0:
             a = P[bm + MP_CYLA]
             rx = P[bm + MP_CX] + a * math.cos(q) - P[bm + MP_CYLX]
@@ -282,6 +285,15 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
 
     V, A = setpoint(I, P, 0, t)
 
+    # fault parameter slots: a ramp or exponential fault profile on a parameter
+    oFS = I[H_OFF_FS]
+    for fs in range(I[H_NFS]):
+        bs = oFS + fs * NFS
+        if P[bs + FS_ON] != 0.0:
+            dt = t - P[bs + FS_T0]
+            P[int(P[bs + FS_IDX])] = (P[bs + FS_BASE] + P[bs + FS_A] + P[bs + FS_B] * dt
+                                      + P[bs + FS_C] * math.exp(-dt / P[bs + FS_TAU]))
+
     # 0. span lengths: fixed, or set by a dancer's or festoon carriage's coordinate q
     for i in range(nS):
         W[oL + i] = P[oSP + i * NSP + SP_L]
@@ -322,6 +334,33 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
                 _g_add(GI, GC, GV, maxd, qL + sp, iq, W[oLP + sp])
                 _g_add(GI, GC, GV, maxd, qLD + sp, iq, W[oLPP + sp] * y[iqd])
                 _g_add(GI, GC, GV, maxd, qLD + sp, iqd, W[oLP + sp])
+    # eccentric rollers: the centre runs on a circle of radius ECC with the roller angle th,
+    # so L_up += ECC·cos(th) and L_dn -= ECC·cos(th - wrap) (physics.md §1.2, non-ideal
+    # rollers); the web still leaves the roller surface at omega·R
+    for k in range(nN):
+        ith = I[oNI + k * NI + NI_TH]
+        if ith < 0:
+            continue
+        b = oNP + k * NP
+        iw = I[oNI + k * NI + NI_W]
+        ecc = P[b + NP_ECC]
+        th = y[ith]
+        om = y[iw]
+        yd[ith] = om
+        if jac:
+            _j_add(JJ, mode, ith, iw, 1.0)
+        for side in range(2):
+            sp = I[oNI + k * NI + NI_SPAN_UP + side]
+            if sp < 0:
+                continue
+            ph = th - side * P[b + NP_WRAP]
+            sg = 1.0 - 2.0 * side
+            W[oL + sp] += sg * ecc * math.cos(ph)
+            W[oLD + sp] -= sg * ecc * om * math.sin(ph)
+            if jac:
+                _g_add(GI, GC, GV, maxd, qL + sp, ith, -sg * ecc * math.sin(ph))
+                _g_add(GI, GC, GV, maxd, qLD + sp, ith, -sg * ecc * om * math.cos(ph))
+                _g_add(GI, GC, GV, maxd, qLD + sp, iw, -sg * ecc * math.sin(ph))
 
     # splice joints: a span holding joint length l_s has compliance (l - l_s)/EA + l_s/EA_s
     # (physics.md eq. 1.19). The joint's place is fixed by the unstretched length paid out
@@ -414,8 +453,9 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         dload = (_mover_load(P, bm, kind, q + h) - _mover_load(P, bm, kind, q - h)) / (2.0 * h)
         eps = P[bm + MP_EPS]
         th = math.tanh(qd / eps)
-        fric = P[bm + MP_C] * qd + P[bm + MP_FC] * th
-        dfric = P[bm + MP_C] + P[bm + MP_FC] * (1.0 - th * th) / eps
+        ff = P[bm + MP_FRICF]
+        fric = ff * (P[bm + MP_C] * qd + P[bm + MP_FC] * th)
+        dfric = ff * (P[bm + MP_C] + P[bm + MP_FC] * (1.0 - th * th) / eps)
         W[oMW + m] = fweb
         W[oMF + m] = fweb + load
         free = 1.0 if P[bm + MP_MODE] == 0.0 else 0.0
@@ -608,19 +648,29 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         tc = W[oTCMD + k]
         ts = min(max(tc, -tmax), tmax)
         act = 1.0 if ts == tc else 0.0
+        # the torque the drive delivers: actuator faults act here, unseen by the controller
+        # (its anti-windup below knows only the limit)
+        teff = P[b + NP_TEFF]
+        if P[b + NP_TSTUCK] != 0.0:
+            tapp = P[b + NP_TSV]
+            dapp = 0.0
+        else:
+            tf_ = teff * tc + P[b + NP_TBIAS]
+            tapp = min(max(tf_, -tmax), tmax)
+            dapp = teff if tapp == tf_ else 0.0
         it = I[oNI + k * NI + NI_TAU]
         if it >= 0:
             lag = P[b + NP_TLAG]
             W[oTM + k] = y[it]
-            yd[it] = (ts - y[it]) / lag
+            yd[it] = (tapp - y[it]) / lag
             if jac:
                 _g_add(GI, GC, GV, maxd, qTM + k, it, 1.0)
-                _j_axpy(JJ, mode, it, act / lag, GI, GC, GV, maxd, qTCMD + k)
+                _j_axpy(JJ, mode, it, dapp / lag, GI, GC, GV, maxd, qTCMD + k)
                 _j_add(JJ, mode, it, it, -1.0 / lag)
         else:
-            W[oTM + k] = ts
+            W[oTM + k] = tapp
             if jac:
-                _g_axpy(GI, GC, GV, maxd, qTM + k, act, qTCMD + k)
+                _g_axpy(GI, GC, GV, maxd, qTM + k, dapp, qTCMD + k)
         # speed-PI anti-windup sees the drive saturation
         c = I[oNI + k * NI + NI_SPEEDC]
         if c >= 0 and I[oCI + c * NCI + CI_X] >= 0:
@@ -631,23 +681,24 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
                 _j_axpy(JJ, mode, ix, 1.0, GI, GC, GV, maxd, qE + c)
                 _j_axpy(JJ, mode, ix, kaw * (act - 1.0), GI, GC, GV, maxd, qTCMD + k)
 
-    # 7. surface speeds
+    # 7. surface speeds; a draw error (REFF) makes the effective radius R·(1 + REFF)
     for k in range(nN):
         iw = I[oNI + k * NI + NI_W]
         R = W[oR + k]
+        rf = 1.0 + P[oNP + k * NP + NP_REFF]
         if iw >= 0:
-            W[oV + k] = R * y[iw]
+            W[oV + k] = rf * R * y[iw]
             if jac:
-                _g_add(GI, GC, GV, maxd, qV + k, iw, R)
-                _g_axpy(GI, GC, GV, maxd, qV + k, y[iw], qR + k)
+                _g_add(GI, GC, GV, maxd, qV + k, iw, rf * R)
+                _g_axpy(GI, GC, GV, maxd, qV + k, rf * y[iw], qR + k)
         else:  # imposed speed
             bn = oNP + k * NP
             v = (V * (1.0 + P[bn + NP_DRAW]) * P[bn + NP_VGAIN] + P[bn + NP_VOFF]
                  + P[bn + NP_VSLOPE] * (t - P[bn + NP_VT0]) + W[oTRIM + k])
-            W[oV + k] = v
+            W[oV + k] = rf * v
             W[oOM + k] = v / R
             if jac:
-                _g_axpy(GI, GC, GV, maxd, qV + k, 1.0, qTRIM + k)
+                _g_axpy(GI, GC, GV, maxd, qV + k, rf, qTRIM + k)
                 _g_axpy(GI, GC, GV, maxd, qOM + k, 1.0 / R, qTRIM + k)
                 _g_axpy(GI, GC, GV, maxd, qOM + k, -v / (R * R), qR + k)
 
@@ -675,21 +726,35 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         Tup = W[oT + up] if up >= 0 else 0.0
         Tdn = W[oT + dn] if dn >= 0 else 0.0
         R = W[oR + k]
+        Re = R * (1.0 + P[b + NP_REFF])
         J = W[oJ + k]
         om = y[iw]
         weps = P[b + NP_WEPS]
         th = math.tanh(om / weps)
-        tf = P[b + NP_B] * om + P[b + NP_TC] * th
-        dtf = P[b + NP_B] + P[b + NP_TC] * (1.0 - th * th) / weps
-        num = R * (Tdn - Tup) + W[oTM + k] - tf
+        fr = P[b + NP_FRICF]
+        tf = fr * (P[b + NP_B] * om + P[b + NP_TC] * th)
+        dtf = fr * (P[b + NP_B] + P[b + NP_TC] * (1.0 - th * th) / weps)
+        num = Re * (Tdn - Tup) + W[oTM + k] - tf
         if P[b + NP_RIPA] != 0.0:
             num += P[b + NP_RIPA] * math.sin(P[b + NP_RIPW] * t)
+        # eccentric roller: the web's pull on the moving centre, -sum T·dL/dth
+        ith = I[oNI + k * NI + NI_TH]
+        fu = 0.0
+        fd = 0.0
+        if ith >= 0:
+            ecc = P[b + NP_ECC]
+            fu = ecc * math.sin(y[ith])
+            fd = -ecc * math.sin(y[ith] - P[b + NP_WRAP])
+            num += fu * Tup + fd * Tdn
         yd[iw] = num / J
         if jac:
             if dn >= 0:
-                _j_axpy(JJ, mode, iw, R / J, GI, GC, GV, maxd, qT + dn)
+                _j_axpy(JJ, mode, iw, (Re + fd) / J, GI, GC, GV, maxd, qT + dn)
             if up >= 0:
-                _j_axpy(JJ, mode, iw, -R / J, GI, GC, GV, maxd, qT + up)
+                _j_axpy(JJ, mode, iw, (fu - Re) / J, GI, GC, GV, maxd, qT + up)
+            if ith >= 0:
+                _j_add(JJ, mode, iw, ith, P[b + NP_ECC] * (
+                    math.cos(y[ith]) * Tup - math.cos(y[ith] - P[b + NP_WRAP]) * Tdn) / J)
             _j_axpy(JJ, mode, iw, 1.0 / J, GI, GC, GV, maxd, qTM + k)
             _j_add(JJ, mode, iw, iw, -dtf / J)
             if I[oNI + k * NI + NI_KIND] != NK_ROLLER:

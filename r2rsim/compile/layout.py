@@ -25,6 +25,7 @@ H_OFF_EV = 27            # I block: event records
 H_NM, H_OFF_MI, H_OFF_MP = 28, 29, 30   # movers (dancers, festoon carriages)
 H_NJ, H_OFF_JP = 31, 32  # splice-joint slots (P block)
 H_EA = 33                # index in P of the web's EA
+H_NFS, H_OFF_FS = 34, 35  # fault parameter slots (P block)
 HEADER = 40
 
 # ---- node records ----
@@ -32,11 +33,17 @@ NK_UNWIND, NK_REWIND, NK_ROLLER = 0, 1, 2
 DRV_NONE, DRV_TORQUE, DRV_IDEAL = 0, 1, 2
 NI_KIND, NI_DRIVE, NI_W, NI_S, NI_U, NI_TAU = 0, 1, 2, 3, 4, 5
 NI_SPAN_UP, NI_SPAN_DN, NI_SPEEDC, NI_TENSC, NI_MOVER = 6, 7, 8, 9, 10
-NI = 11
+NI_TH = 11  # roller angle state (only for an eccentric roller), else -1
+NI = 12
 (NP_R, NP_J, NP_B, NP_TC, NP_WEPS, NP_R0, NP_RC, NP_JC, NP_CW, NP_RHOW, NP_EPSW,
  NP_TLAG, NP_TMAX, NP_DRAW, NP_EMB, NP_RIPA, NP_RIPW, NP_EPSW1, NP_EPSW2,
- NP_VGAIN, NP_VOFF, NP_VSLOPE, NP_VT0, NP_RTRIG) = range(24)
-NP = 24
+ NP_VGAIN, NP_VOFF, NP_VSLOPE, NP_VT0, NP_RTRIG,
+ NP_TEFF, NP_TBIAS, NP_TSTUCK, NP_TSV, NP_FRICF, NP_REFF, NP_ECC, NP_WRAP) = range(32)
+NP = 32
+# faults on a node (defaults: TEFF 1, FRICF 1, the rest 0):
+#   applied torque = TSV while TSTUCK, else clip(TEFF·command + TBIAS, ±TMAX)
+#   bearing friction ×FRICF; surface speed and torque arm R·(1 + REFF) (draw error);
+#   eccentricity ECC [m] of a roller wrapped by WRAP [rad] (its angle is state NI_TH)
 # reference surface speed of a speed-controlled node (splice phases override it):
 #   v_ref = V·(1 + draw)·VGAIN + VOFF + VSLOPE·(t - VT0) + trim
 
@@ -72,8 +79,11 @@ NMI = 6
 (MP_MASS, MP_QMIN, MP_QMAX, MP_C, MP_FC, MP_EPS, MP_F0, MP_K, MP_Q0, MP_G1, MP_G2, MP_MODE,
  MP_CX, MP_CY, MP_NX, MP_NY, MP_AX, MP_AY, MP_BX, MP_BY, MP_DU, MP_DD, MP_TUX, MP_TUY,
  MP_TDX, MP_TDY, MP_LU0, MP_LD0, MP_NSTR, MP_CYLF, MP_CYLX, MP_CYLY, MP_CYLA,
- MP_SEIZED_Q) = range(34)
-NMP = 34
+ MP_SEIZED_Q, MP_FAIR, MP_LOADF, MP_FRICF) = range(37)
+NMP = 37
+# MP_FAIR: actuator force of a linear dancer or festoon (MP_F0 then holds gravity only);
+# MP_LOADF scales the actuator (air cylinder, torque motor): loss of loading;
+# MP_FRICF scales the carriage/arm friction
 # MP_MODE: 0 free, -1 latched at the lower stop, +1 at the upper stop, 2 seized
 
 # ---- splice-joint slots (P only) ----
@@ -81,6 +91,13 @@ NMP = 34
 # the trail is still on the roll)
 (JP_ACTIVE, JP_U0, JP_LEN, JP_RATIO, JP_TBRK, JP_SPAN, JP_NODE, JP_TSPAN) = range(8)
 NJP = 8
+
+# ---- fault parameter slots (P only): while FS_ON, the kernel sets, at every evaluation,
+#   P[FS_IDX] = FS_BASE + FS_A + FS_B·dt + FS_C·exp(-dt/FS_TAU),  dt = t - FS_T0
+# (a ramp or exponential fault profile on a parameter); the solver's fault actions set the
+# coefficients at each breakpoint and write constant values directly
+(FS_IDX, FS_BASE, FS_ON, FS_T0, FS_A, FS_B, FS_C, FS_TAU) = range(8)
+NFS = 8
 
 # ---- event records (I block, 3 ints each: kind, index, sign convention) ----
 EV_SLACK, EV_BREAK, EV_CAPSTAN, EV_EMPTY = 1, 2, 3, 4

@@ -24,11 +24,16 @@ from .quantities import Frequency, Time
 class FaultType:
     """One entry of the catalogue.
 
-    ``target``: what ``target`` names (``sensor``, ``drive``, ``dancer``, ``roller``,
-    ``speed_node``, ``unwind``). ``magnitude``: ``reading`` (the sensor's unit), ``reading/s``,
-    ``rel`` (relative change, 0.05 = +5 %), ``s``, ``N*m``, ``none``. ``acts``: ``loop`` (inside
-    the simulation: a controller reading the sensor sees it), ``record`` (on the recorded
-    measurement only), ``model`` (changes the line's equations or parameters).
+    ``target``: what ``target`` names (``sensor``; ``drive``: an element with a torque
+    drive; ``dancer``: a dancer or festoon carriage; ``roller``: an element that turns
+    freely or under a torque drive; ``eccentric``: such a roller between two spans;
+    ``speed_node``: a driven roller or nip; ``unwind``: an unwind; ``splicer``: an unwind with
+    a splicer). ``magnitude``: ``reading`` (the sensor's unit), ``reading/s``, ``rel``
+    (relative change, 0.05 = +5 %), ``s``, ``N*m``, ``N``, ``m``, ``none``. ``acts``: ``loop``
+    (inside the simulation: a controller reading the sensor sees it), ``record`` (on the
+    recorded measurement only), ``model`` (changes the line's equations or parameters; the
+    solver restarts at every breakpoint of the profile). ``profiles``: the profile shapes
+    that make sense for the type; ``end``: whether the fault can stop acting.
     """
 
     name: str
@@ -37,6 +42,8 @@ class FaultType:
     magnitude: str
     acts: str
     description: str
+    profiles: tuple[str, ...] = ("step", "ramp", "exp", "intermittent")
+    end: bool = True
 
 
 _C = [
@@ -58,11 +65,57 @@ _C = [
               "the reading is rounded to steps of magnitude"),
     FaultType("sensor.delay", "sensor", "sensor", "s", "record",
               "the reading lags by magnitude seconds"),
+    FaultType("actuator.bias", "actuator", "drive", "N*m", "model",
+              "the drive delivers its command + magnitude (then its torque limit)"),
+    FaultType("actuator.loss_of_effectiveness", "actuator", "drive", "rel", "model",
+              "the drive delivers (1 - magnitude) x its command, magnitude in (0, 1]"),
+    FaultType("actuator.stuck", "actuator", "drive", "none", "model",
+              "the drive torque freezes at its value at onset", ("step", "intermittent")),
+    FaultType("actuator.saturation", "actuator", "drive", "N*m", "model",
+              "the drive's torque limit falls to magnitude", ("step", "intermittent")),
+    FaultType("dancer.arm_stuck", "dancer", "dancer", "none", "model",
+              "the dancer arm or carriage seizes where it is: its spans become fixed "
+              "length", ("step", "intermittent")),
+    FaultType("dancer.loss_of_loading", "dancer", "dancer", "rel", "model",
+              "the loading actuator (air cylinder, torque motor) loses magnitude of its "
+              "force, magnitude in (0, 1]"),
+    FaultType("dancer.friction_increase", "dancer", "dancer", "rel", "model",
+              "the carriage/arm friction (viscous and Coulomb) grows by magnitude"),
+    FaultType("process.bearing_friction", "process", "roller", "rel", "model",
+              "the bearing friction (viscous and Coulomb) grows by magnitude"),
+    FaultType("process.eccentricity", "process", "eccentric", "m", "model",
+              "the roller turns about an axis magnitude off its centre: span lengths and "
+              "tension vary at the rotation frequency", ("step",)),
+    FaultType("process.modulus_change", "process", "unwind", "rel", "model",
+              "the web coming off the roll from onset has its modulus changed by magnitude "
+              "(new material) until the next splice", ("step",), end=False),
+    FaultType("process.draw_error", "process", "speed_node", "rel", "model",
+              "the effective radius is R x (1 + magnitude): the surface speed and torque "
+              "arm change, the drive's radius (and encoder) do not"),
+    FaultType("process.weak_splice", "process", "splicer", "N", "model",
+              "the first splice at or after onset makes a joint that breaks at magnitude N",
+              ("step",), end=False),
 ]
 CATALOGUE: dict[str, FaultType] = {f.name: f for f in _C}
 
 #: fault types that may overlap on one target when both declare ``compose: superpose``
-SUPERPOSABLE = {"sensor.offset", "sensor.gain", "sensor.drift", "sensor.noise", "sensor.spike"}
+#: (their effects add)
+SUPERPOSABLE = {"sensor.offset", "sensor.gain", "sensor.drift", "sensor.noise", "sensor.spike",
+                "actuator.bias", "process.draw_error", "process.bearing_friction",
+                "dancer.friction_increase"}
+#: faults that take over their target completely: nothing superposes on them
+_EXCLUSIVE = {"sensor.stuck", "sensor.dropout", "actuator.stuck", "dancer.arm_stuck"}
+
+
+def superposable(a: str, b: str) -> bool:
+    """Whether faults of types a and b may act on one target at once (when both declare
+    ``compose: superpose``): types whose effects add, or two different model faults that
+    change different parameters."""
+    if a in _EXCLUSIVE or b in _EXCLUSIVE:
+        return False
+    if a in SUPERPOSABLE and b in SUPERPOSABLE:
+        return True
+    return a != b and CATALOGUE[a].acts == "model" and CATALOGUE[b].acts == "model"
 
 
 class Uniform(Strict):
@@ -142,9 +195,11 @@ class Fault(Strict):
             raise ValueError(f"{self.type} needs a magnitude")
         if (self.type == "sensor.spike") != (self.rate is not None):
             raise ValueError("'rate' is required for sensor.spike and only for it")
-        if ft.magnitude == "none" and self.profile.shape not in ("step", "intermittent"):
-            raise ValueError(f"{self.type} acts fully or not at all: use a step "
-                             "or intermittent profile")
+        if self.profile.shape not in ft.profiles:
+            raise ValueError(f"{self.type} takes a {' or '.join(ft.profiles)} profile, not "
+                             f"{self.profile.shape}")
+        if not ft.end and self.end is not None:
+            raise ValueError(f"{self.type} lasts to the end of the run: leave out 'end'")
         if self.type == "sensor.drift" and self.profile.shape != "step":
             raise ValueError("a drift grows by itself: use a step profile")
         if self.end is not None and isinstance(self.onset, float) and self.end <= self.onset:
@@ -159,21 +214,110 @@ SI_UNIT = {"force": "N", "angular_speed": "rad/s", "length": "m", "angle": "rad"
 RATE_OF = {"force": "force_rate", "length": "speed", "angle": "angular_speed"}
 
 
-def magnitude_dimension(ftype: str, reading_dim: str) -> str | None:
+def magnitude_dimension(ftype: str, reading_dim: str | None) -> str | None:
     """The :data:`r2rsim.units.DIMENSIONS` key of a fault's magnitude, given the dimension of
-    the target's reading (None: a plain SI number)."""
+    the target's reading (sensor faults; None otherwise). None: a plain SI number."""
     return {"reading": reading_dim, "rel": "dimensionless", "s": "time", "none": None,
-            "reading/s": RATE_OF.get(reading_dim)}[CATALOGUE[ftype].magnitude]
+            "reading/s": RATE_OF.get(reading_dim), "N*m": "torque", "N": "force",
+            "m": "length"}[CATALOGUE[ftype].magnitude]
 
 
-def magnitude_unit(ftype: str, reading_dim: str) -> str:
+def magnitude_unit(ftype: str, reading_dim: str | None) -> str:
     """SI unit of a fault's magnitude as written to faults.parquet."""
-    return {"reading": SI_UNIT[reading_dim], "rel": "rel", "s": "s", "none": "",
-            "reading/s": SI_UNIT[reading_dim] + "/s"}[CATALOGUE[ftype].magnitude]
+    code = CATALOGUE[ftype].magnitude
+    if code == "reading":
+        return SI_UNIT[reading_dim]
+    if code == "reading/s":
+        return SI_UNIT[reading_dim] + "/s"
+    return {"rel": "rel", "none": ""}.get(code, code)
 
 
-def reading_dimension(line, sensor) -> str:
-    """Dimension of a sensor's reading."""
+def target_problem(ftype: str, target: str, line) -> str | None:
+    """Why ``target`` cannot carry a fault of type ``ftype`` (None if it can)."""
+    kind = CATALOGUE[ftype].target
+    sensors = {s.id for s in line.sensors}
+    els = {e.id: (k, e) for k, e in enumerate(line.elements)}
+    movers = [e.id for e in line.elements if e.type in ("dancer", "pivot_dancer")] + [
+        sp.id for sp in line.spans if sp.festoon is not None]
+    if kind == "sensor":
+        return None if target in sensors else (
+            f"{ftype} targets a sensor; no sensor '{target}' in the line (known: "
+            f"{', '.join(sorted(sensors)) or 'none'})")
+    if kind == "dancer":
+        if target not in movers:
+            return (f"{ftype} targets a dancer or festoon; none is called '{target}' (known: "
+                    f"{', '.join(movers) or 'none'})")
+        if ftype == "dancer.friction_increase":
+            el = els.get(target)
+            obj = el[1] if el else next(sp.festoon for sp in line.spans if sp.id == target)
+            if obj.damping == 0 and obj.coulomb == 0:
+                return f"'{target}' has no friction (damping, coulomb) to increase"
+        return None
+    if target not in els:
+        return (f"{ftype} targets an element; no element '{target}' in the line (known: "
+                f"{', '.join(els)})")
+    k, e = els[target]
+    drive = getattr(e, "drive", None)
+    if kind == "drive" and (drive is None or drive.type != "torque"):
+        return f"{ftype} needs an element with a torque drive; '{target}' has none"
+    ideal = drive is not None and drive.type == "ideal_speed"
+    if kind in ("roller", "eccentric") and ideal:
+        return (f"'{target}' turns at an imposed speed (ideal_speed drive): its {ftype} "
+                f"would have no effect")
+    if kind == "roller" and e.friction.viscous == 0 and e.friction.coulomb == 0:
+        return f"'{target}' has no bearing friction (friction: viscous, coulomb) to increase"
+    if kind == "eccentric":
+        if e.type in ("unwind", "rewind"):
+            return f"{ftype} applies to a roller, not to the roll '{target}'"
+        if not 0 < k < len(line.elements) - 1:
+            return f"{ftype} needs a roller with a span on each side"
+    if kind == "speed_node" and (e.type not in ("driven", "nip") or drive is None):
+        return f"{ftype} applies to a driven roller or nip; '{target}' is a {e.type}"
+    if kind == "unwind" and e.type != "unwind":
+        return f"{ftype} applies to an unwind; '{target}' is a {e.type}"
+    if kind == "splicer" and getattr(e, "splicer", None) is None:
+        return f"{ftype} needs an unwind with a splicer; '{target}' has none"
+    return None
+
+
+#: the allowed range of a magnitude: (low, high, low inclusive, why)
+_RANGES = {
+    "sensor.noise": (0.0, math.inf, True, "needs a magnitude >= 0"),
+    "sensor.spike": (0.0, math.inf, True, "needs a magnitude >= 0"),
+    "sensor.quantization": (0.0, math.inf, True, "needs a magnitude >= 0"),
+    "sensor.delay": (0.0, math.inf, True, "needs a magnitude >= 0"),
+    "sensor.gain": (-1.0, math.inf, False,
+                    "a gain change must be > -1 (the reading would vanish or flip sign)"),
+    "actuator.loss_of_effectiveness": (0.0, 1.0, False, "needs a magnitude in (0, 1]"),
+    "actuator.saturation": (0.0, math.inf, True, "needs a torque limit >= 0"),
+    "dancer.loss_of_loading": (0.0, 1.0, False, "needs a magnitude in (0, 1]"),
+    "dancer.friction_increase": (-1.0, math.inf, False, "needs a magnitude > -1"),
+    "process.bearing_friction": (-1.0, math.inf, False, "needs a magnitude > -1"),
+    "process.eccentricity": (0.0, math.inf, False, "needs an eccentricity > 0"),
+    "process.modulus_change": (-1.0, math.inf, False, "needs a modulus change > -1"),
+    "process.draw_error": (-0.5, 0.5, False, "needs a draw error in (-0.5, 0.5)"),
+    "process.weak_splice": (0.0, math.inf, False, "needs a joint break tension > 0"),
+}
+
+
+def magnitude_problem(ftype: str, lo: float, hi: float, line, target: str) -> str | None:
+    """Why a magnitude range [lo, hi] (SI) is not allowed for the type (None if it is)."""
+    rng = _RANGES.get(ftype)
+    if rng is not None:
+        a, b, incl, why = rng
+        if lo < a or (lo == a and not incl) or hi > b:
+            return f"{ftype} {why}"
+    if ftype == "process.eccentricity":
+        r = next(e for e in line.elements if e.id == target).radius
+        if hi >= r:
+            return f"an eccentricity of {hi:g} m is not less than the roller radius {r:g} m"
+    return None
+
+
+def reading_dimension(line, sensor) -> str | None:
+    """Dimension of a sensor's reading (None when ``sensor`` is None: not a sensor fault)."""
+    if sensor is None:
+        return None
     if sensor.type != "dancer_position":
         return READING[sensor.type]
     el = next((e for e in line.elements if e.id == sensor.element), None)
@@ -205,22 +349,18 @@ def check_faults(scenario, line, file: str) -> None:
     for i, f in enumerate(scenario.faults):
         where = f"faults[{i}]"
         ft = CATALOGUE[f.type]
-        if ft.target == "sensor" and f.target not in sensors:
-            raise InputError(f"{f.type} targets a sensor; no sensor '{f.target}' in the line "
-                             f"(known: {', '.join(sorted(sensors)) or 'none'})", file=file,
-                             path=f"{where}.target")
-        rdim = reading_dimension(line, sensors[f.target])
+        problem = target_problem(f.type, f.target, line)
+        if problem:
+            raise InputError(problem, file=file, path=f"{where}.target")
+        rdim = reading_dimension(line, sensors.get(f.target) if ft.target == "sensor"
+                                 else None)
         try:
             lo, hi = bounds(f.onset, "time")
             if ft.magnitude != "none":
                 mlo, mhi = bounds(f.magnitude, magnitude_dimension(f.type, rdim))
-                if f.type in ("sensor.noise", "sensor.quantization", "sensor.delay",
-                              "sensor.spike") and mlo < 0:
-                    raise InputError(f"{f.type} needs a magnitude >= 0", file=file,
-                                     path=f"{where}.magnitude")
-                if f.type == "sensor.gain" and mlo <= -1:
-                    raise InputError("a gain change must be > -1 (the reading would vanish "
-                                     "or flip sign)", file=file, path=f"{where}.magnitude")
+                problem = magnitude_problem(f.type, mlo, mhi, line, f.target)
+                if problem:
+                    raise InputError(problem, file=file, path=f"{where}.magnitude")
         except QuantityError as exc:
             raise InputError(str(exc), file=file, path=where) from None
         if hi > scenario.duration:
@@ -240,7 +380,7 @@ def check_faults(scenario, line, file: str) -> None:
                     f"faults '{b.id}' and '{a.id}' can overlap on '{a.target}' (from "
                     f"{max(alo, blo):g} s); declare compose: superpose on both, or separate "
                     f"them in time", file=file, path=f"faults[{i}]")
-            if not ({a.type, b.type} <= SUPERPOSABLE):
+            if not superposable(a.type, b.type):
                 raise InputError(
                     f"faults '{b.id}' ({b.type}) and '{a.id}' ({a.type}) overlap on "
                     f"'{a.target}' and cannot be superposed; separate them in time",

@@ -39,10 +39,20 @@ from ..compile.layout import (
     EV_SPLICE_RADIUS,
     EV_STOP_HI,
     EV_STOP_LO,
+    FS_A,
+    FS_B,
+    FS_BASE,
+    FS_C,
+    FS_IDX,
+    FS_ON,
+    FS_T0,
+    FS_TAU,
     H_MAXPTS,
+    H_NFS,
     H_OFF_CI,
     H_OFF_CP,
     H_OFF_EV,
+    H_OFF_FS,
     H_OFF_JP,
     H_OFF_MI,
     H_OFF_MP,
@@ -63,12 +73,15 @@ from ..compile.layout import (
     JP_U0,
     MI_Q,
     MI_QD,
+    MP_FRICF,
+    MP_LOADF,
     MP_MODE,
     MP_QMAX,
     MP_QMIN,
     NCI,
     NCP,
     NEVI,
+    NFS,
     NI,
     NI_S,
     NI_U,
@@ -78,14 +91,22 @@ from ..compile.layout import (
     NMP,
     NP,
     NP_CW,
+    NP_ECC,
     NP_EPSW,
     NP_EPSW1,
     NP_EPSW2,
+    NP_FRICF,
     NP_JC,
     NP_R,
     NP_R0,
     NP_RC,
+    NP_REFF,
     NP_RHOW,
+    NP_TBIAS,
+    NP_TEFF,
+    NP_TMAX,
+    NP_TSTUCK,
+    NP_TSV,
     NP_VGAIN,
     NP_VOFF,
     NP_VSLOPE,
@@ -109,6 +130,9 @@ from ..compile.layout import (
     SEP_STUCK,
     SEP_SV,
 )
+
+#: joint length of new material that runs until the next roll change
+OPEN_JOINT = 1e9  # m: longer than any roll
 
 #: events whose handling changes the model (their flags are recomputed after a change)
 MODE_EVENTS = {EV_STOP_LO, EV_STOP_HI, EV_JOINT_PASS, EV_SPLICE_RADIUS, EV_REFILL}
@@ -143,9 +167,14 @@ class DiscreteLogic:
     cl : CompiledLine
     events : list of ScenarioEvent
         The scenario's scheduled events (``splice``, ``e_stop``, ``dancer_seize``).
+    faults : list of FaultInstance
+        The run's faults; those acting inside the simulation get an action at every
+        breakpoint of their profile.
+    duration : float
+        Length of the run [s] (bounds the breakpoints of an intermittent fault).
     """
 
-    def __init__(self, cl: CompiledLine, events=(), faults=()):
+    def __init__(self, cl: CompiledLine, events=(), faults=(), duration: float = math.inf):
         self.cl = cl
         self.line = cl.line
         self._queue: list[_Action] = []
@@ -154,16 +183,6 @@ class DiscreteLogic:
         self._saved_integral: dict[int, float] = {}
         self.terminate_reason: str | None = None
         self._breakpoints: list[float] = []
-        node_idx = {nid: k for k, nid in enumerate(cl.node_ids)}
-        mover_idx = {mid: m for m, mid in enumerate(cl.mover_ids)}
-        for ev in events:
-            if ev.type == "splice":
-                k = node_idx[ev.element] if ev.element else cl.splice_nodes[0]
-                self._push(ev.at, "splice", k)
-            elif ev.type == "e_stop":
-                self._push(ev.at, "e_stop", -1, {"decel": ev.deceleration})
-            elif ev.type == "dancer_seize":
-                self._push(ev.at, "seize", mover_idx[ev.element])
         # faults acting inside the loop: an action at each breakpoint of their profiles
         # resets the target sensor's fault coefficients (the solver restarts there)
         sensor_idx = {s.id: j for j, s in enumerate(cl.sensors)}
@@ -174,8 +193,49 @@ class DiscreteLogic:
                 continue
             j = sensor_idx[f.target]
             self._sensor_faults.setdefault(j, []).append(f)
-            for tb in f.breakpoints(math.inf):
+            for tb in f.breakpoints(duration):
                 self._push(tb, "sensor_fault", j)
+        # faults that change the model: parameters through slots (one per parameter), or
+        # discrete changes (stuck drive or dancer, new material, weak splice)
+        self._param_faults: dict[int, list] = {}   # P index -> faults
+        self._slot: dict[int, int] = {}            # P index -> slot
+        self._base: dict[int, float] = {}
+        self._weak_splice: dict[int, float] = {}   # unwind node -> joint break tension
+        for f in faults:
+            if f.kind.acts != "model":
+                continue
+            spec = self._parameter_of(f)
+            if spec is None:
+                kind = f.type.split(".", 1)[1]
+                for tb in f.breakpoints(duration):
+                    self._push(tb, kind, -1, {"fault": f})
+                continue
+            idx, _ = spec
+            if f.type == "process.eccentricity" and \
+                    f"{f.target}.angle" not in cl.state_names:
+                raise ValueError(f"fault '{f.id}': compile the line with its faults "
+                                 "(compile_line(line, programme, faults)) for the angle state")
+            if idx not in self._slot:
+                if len(self._slot) >= cl.I[H_NFS]:
+                    raise ValueError(f"fault '{f.id}': no parameter slot left; compile the "
+                                     "line with its faults (compile_line(..., faults=...))")
+                self._slot[idx] = len(self._slot)
+                self._base[idx] = float(cl.P[idx])
+            self._param_faults.setdefault(idx, []).append(f)
+            for tb in f.breakpoints(duration):
+                self._push(tb, "param_fault", idx)
+        # scheduled events after the faults: a fault at the time of an event acts on it
+        # (a weak splice at the splice time makes that joint weak)
+        node_idx = {nid: k for k, nid in enumerate(cl.node_ids)}
+        mover_idx = {mid: m for m, mid in enumerate(cl.mover_ids)}
+        for ev in events:
+            if ev.type == "splice":
+                k = node_idx[ev.element] if ev.element else cl.splice_nodes[0]
+                self._push(ev.at, "splice", k)
+            elif ev.type == "e_stop":
+                self._push(ev.at, "e_stop", -1, {"decel": ev.deceleration})
+            elif ev.type == "dancer_seize":
+                self._push(ev.at, "seize", mover_idx[ev.element])
 
     # ---- queue ----------------------------------------------------------------------------
     def _push(self, t, kind, target=-1, data=None):
@@ -376,6 +436,137 @@ class DiscreteLogic:
         P[b + SEP_FON] = 1.0 if (stuck or any(bias[:3]) or any(gain[:3])) else 0.0
         return y
 
+    # ---- faults that change the model ----------------------------------------------------
+    def _parameter_of(self, f):
+        """(index in P, gain K) of a parameter fault: P = base + K·effect(t); None for the
+        faults handled by a discrete action."""
+        cl = self.cl
+        I = cl.I
+        if f.kind.target == "dancer":
+            m = cl.mover_ids.index(f.target)
+            field_, K = {"dancer.loss_of_loading": (MP_LOADF, -1.0),
+                         "dancer.friction_increase": (MP_FRICF, 1.0)}.get(f.type, (None, 0))
+            return None if field_ is None else (I[H_OFF_MP] + m * NMP + field_, K)
+        k = cl.node_ids.index(f.target)
+        field_, K = {"actuator.bias": (NP_TBIAS, 1.0),
+                     "actuator.loss_of_effectiveness": (NP_TEFF, -1.0),
+                     "actuator.saturation": (NP_TMAX, 1.0),
+                     "process.bearing_friction": (NP_FRICF, 1.0),
+                     "process.draw_error": (NP_REFF, 1.0),
+                     "process.eccentricity": (NP_ECC, 1.0)}.get(f.type, (None, 0))
+        return None if field_ is None else (self._np(k, field_), K)
+
+    def _do_param_fault(self, t, y, a, log):
+        """Re-express every fault on one parameter from time t on: P = base + A + B·dt +
+        C·exp(-dt/tau); a slot lets the kernel follow a ramp or exponential."""
+        idx = a.target
+        P, I = self.cl.P, self.cl.I
+        base = self._base[idx]
+        acc = [0.0, 0.0, 0.0, 1.0]
+        value = None
+        ecc_node = None
+        for f in self._param_faults[idx]:
+            ca, cb, cc, tau = f.segment(t)
+            if f.type == "actuator.saturation":  # step or intermittent: the new limit
+                if ca > 0.0 or (f.magnitude == 0.0 and f.p(np.array([t]))[0] > 0):
+                    value = f.magnitude
+                continue
+            if f.type == "process.eccentricity":
+                ecc_node = self.cl.node_ids.index(f.target)
+            K = self._parameter_of(f)[1]
+            acc[0] += K * ca
+            acc[1] += K * cb
+            if cc != 0.0:
+                acc[2] += K * cc
+                acc[3] = tau
+        lengths = self._span_lengths(t, y) if ecc_node is not None else None
+        P[idx] = value if value is not None else base + acc[0]
+        bs = I[H_OFF_FS] + self._slot[idx] * NFS
+        P[bs + FS_IDX], P[bs + FS_BASE], P[bs + FS_T0] = idx, base, t
+        P[bs + FS_A], P[bs + FS_B], P[bs + FS_C], P[bs + FS_TAU] = acc
+        P[bs + FS_ON] = 1.0 if (acc[1] != 0.0 or acc[2] != 0.0) and value is None else 0.0
+        if lengths is not None:
+            # the roller's centre jumps by the new eccentricity: each span keeps its
+            # unstretched length (mass), so its strain follows its new length
+            new = self._span_lengths(t, y)
+            for i, (l0, l1) in enumerate(zip(lengths, new, strict=True)):
+                ie = self.cl.index(f"{self.cl.span_ids[i]}.strain")
+                y[ie] = (1.0 + y[ie]) * l1 / l0 - 1.0
+        return y
+
+    def _span_lengths(self, t, y):
+        cl = self.cl
+        aux = cl.outputs(np.array([t]), y[None, :])[0]
+        return [float(aux[cl.aux_index(f"{s}.length_m")]) for s in cl.span_ids]
+
+    def _do_stuck(self, t, y, a, log):
+        """actuator.stuck: the drive torque freezes at its value now (or thaws)."""
+        f = a.data["fault"]
+        k = self.cl.node_ids.index(f.target)
+        on = f.p(np.array([t]))[0] > 0.0
+        P = self.cl.P
+        if on and P[self._np(k, NP_TSTUCK)] == 0.0:
+            aux = self.cl.outputs(np.array([t]), y[None, :])[0]
+            P[self._np(k, NP_TSV)] = aux[self.cl.aux_index(f"{f.target}.torque_N_m")]
+        P[self._np(k, NP_TSTUCK)] = 1.0 if on else 0.0
+        return y
+
+    def _do_arm_stuck(self, t, y, a, log):
+        """dancer.arm_stuck: the arm or carriage seizes where it is (or is freed)."""
+        f = a.data["fault"]
+        m = self.cl.mover_ids.index(f.target)
+        I, P = self.cl.I, self.cl.P
+        bm = I[H_OFF_MP] + m * NMP
+        mid = self.cl.mover_ids[m]
+        q = float(y[I[I[H_OFF_MI] + m * NMI + MI_Q]])
+        if f.p(np.array([t]))[0] > 0.0:
+            P[bm + MP_MODE] = 2.0
+            y[I[I[H_OFF_MI] + m * NMI + MI_QD]] = 0.0
+            log.append(Event(t, "dancer_seized", mid, "start",
+                             f"{mid} seizes at position {q:.4g} ({f.id})", {"position": q}))
+        elif P[bm + MP_MODE] == 2.0:
+            P[bm + MP_MODE] = 0.0  # free again; its end stops are re-detected as events
+            log.append(Event(t, "dancer_seized", mid, "end", f"{mid} is free again ({f.id})",
+                             {"position": q}))
+        return y
+
+    def _do_modulus_change(self, t, y, a, log):
+        """process.modulus_change: from now the unwind pays out web of modulus EA·(1 + m),
+        carried as an open-ended splice joint (closed by the next roll change)."""
+        f = a.data["fault"]
+        if f.p(np.array([t]))[0] <= 0.0:
+            return y
+        k = self.cl.node_ids.index(f.target)
+        slot = self._free_joint_slot()
+        if slot is None:
+            raise ValueError(f"fault '{f.id}': no splice-joint slot for the new material; "
+                             "compile the line with its faults (compile_line(..., faults=...))")
+        P = self.cl.P
+        bj = self.cl.I[H_OFF_JP] + slot * NJP
+        P[bj + JP_ACTIVE] = 1.0
+        P[bj + JP_U0] = y[self._ni(k, NI_U)]
+        P[bj + JP_LEN] = OPEN_JOINT
+        P[bj + JP_RATIO] = 1.0 + f.magnitude
+        P[bj + JP_TBRK] = 1e30  # no joint to break: the web's own break applies
+        P[bj + JP_SPAN] = float(k)
+        P[bj + JP_TSPAN] = float(k) - 1.0
+        P[bj + JP_NODE] = float(k)
+        return y
+
+    def _do_weak_splice(self, t, y, a, log):
+        """process.weak_splice: the next joint made on the unwind breaks at the magnitude."""
+        f = a.data["fault"]
+        if f.p(np.array([t]))[0] > 0.0:
+            self._weak_splice[self.cl.node_ids.index(f.target)] = f.magnitude
+        return y
+
+    def _free_joint_slot(self) -> int | None:
+        P, I = self.cl.P, self.cl.I
+        for js in range(self.cl.n_joint_slots):
+            if P[I[H_OFF_JP] + js * NJP + JP_ACTIVE] == 0.0:
+                return js
+        return None
+
     def _seen(self, t, y, j) -> float:
         """The reading sensor j delivers to the controllers at (t, y)."""
         cl = self.cl
@@ -538,20 +729,25 @@ class DiscreteLogic:
             b = I[H_OFF_SEI] + j * NSEI
             if I[b + SEI_TYPE] == SE_DIAMETER and I[b + SEI_NODE] == k and I[b + SEI_F] >= 0:
                 y[I[b + SEI_F]] = s.gain * 2.0 * new.outer_radius + s.offset
-        # the joint
-        slot = None
+        # new material paid out since a modulus change ends here: close its joint
+        u_now = y[self._ni(k, NI_U)]
         for js in range(self.cl.n_joint_slots):
-            if P[I[H_OFF_JP] + js * NJP + JP_ACTIVE] == 0.0:
-                slot = js
-                break
+            bj = I[H_OFF_JP] + js * NJP
+            if P[bj + JP_ACTIVE] != 0.0 and P[bj + JP_NODE] == k and \
+                    P[bj + JP_LEN] == OPEN_JOINT:
+                P[bj + JP_LEN] = u_now - P[bj + JP_U0]
+        # the joint
+        slot = self._free_joint_slot()
         if slot is not None:
             bj = I[H_OFF_JP] + slot * NJP
             P[bj + JP_ACTIVE] = 1.0
-            P[bj + JP_U0] = y[self._ni(k, NI_U)]
+            P[bj + JP_U0] = u_now
             P[bj + JP_LEN] = sp.joint.length
             P[bj + JP_RATIO] = sp.joint.stiffness_ratio
             P[bj + JP_TBRK] = (sp.joint.break_tension if sp.joint.break_tension is not None
                                else web.break_tension)
+            if k in self._weak_splice:
+                P[bj + JP_TBRK] = self._weak_splice.pop(k)
             P[bj + JP_SPAN] = float(k)
             P[bj + JP_TSPAN] = float(k) - 1.0
             P[bj + JP_NODE] = float(k)
@@ -561,5 +757,16 @@ class DiscreteLogic:
                                else ""),
                             {"radius_old_m": R_old, "radius_new_m": new.outer_radius,
                              "joint_slot": slot}))
+        if slot is not None:
+            # a joint weaker than the tension it is made under breaks at once (its break
+            # event can only see a crossing, not a joint born past its limit)
+            T = float(self.cl.outputs(t, y[None, :])[0][self.cl.aux_index(
+                f"{self.cl.span_ids[k]}.tension_N")])
+            if T >= P[bj + JP_TBRK]:
+                log.append(Event(t, "web_break", self.cl.span_ids[k], "start",
+                                 f"web break at the new splice joint in {self.cl.span_ids[k]}"
+                                 f" at {T:.1f} N (joint strength {P[bj + JP_TBRK]:.1f} N)",
+                                 {"tension_N": T, "at_splice_joint": True}))
+                self.terminate_reason = "web_break"
         return y
 

@@ -97,12 +97,13 @@ def nominal_state(cl: CompiledLine, tension: float | None = None,
 
 def steady_state(cl: CompiledLine, y_guess: np.ndarray, tol: float = 1e-10,
                  max_iter: int = 60) -> np.ndarray | None:
-    """Newton's method on dy/dt = 0 at t = 0 for every state except the roll lengths.
+    """Newton's method on dy/dt = 0 at t = 0 for every state except the roll lengths and
+    roller angles.
 
     Returns None when no steady state is found (for example a line at rest, where span
     strains are not determined by the speeds).
     """
-    free = np.array([k not in ("roll_length", "material") for k in cl.state_kinds])
+    free = np.array([k not in ("roll_length", "material", "angle") for k in cl.state_kinds])
     scale = np.abs(y_guess) + 1e3 * cl.atol
     y = y_guess.copy()
     cl.set_segment_start(0.0)

@@ -319,7 +319,7 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
 
 def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mode, outputs,
          events, faults, backend, sample_t, wall0):
-    logic = DiscreteLogic(cl, events, faults)
+    logic = DiscreteLogic(cl, events, faults, duration)
     prog_breaks = sorted(b for b in cl.programme.breakpoints if 0.0 < b < duration)
     rows_per_chunk = max(16, int(s.chunk_memory_mb * 1e6 / 8 / max(cl.n_states + len(
         cl.aux_names), 1)))
@@ -373,6 +373,9 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
             if logic.next_time() <= t + 1e-12:
                 y, entries = logic.apply_due(t, y)
                 record(entries)
+                if logic.terminate_reason is not None:
+                    terminated, reason, t_term = True, logic.terminate_reason, t
+                    break
                 flags = refresh_mode_flags(t, y, flags)
                 hot = True
             bps = [b for b in (*prog_breaks, *logic.extra_breakpoints()) if b > t + 1e-12]
