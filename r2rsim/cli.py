@@ -123,9 +123,9 @@ def _cmd_list(args) -> int:
 
         acts = {"loop": "inside the loop if a controller reads the sensor, else on the record",
                 "record": "on the recorded measurement", "model": "on the line's equations"}
-        print(f"{'type':<22} {'target':<8} {'magnitude':<10} description")
+        print(f"{'type':<31} {'target':<10} {'magnitude':<10} description")
         for ft in CATALOGUE.values():
-            print(f"{ft.name:<22} {ft.target:<8} {ft.magnitude:<10} {ft.description} "
+            print(f"{ft.name:<31} {ft.target:<10} {ft.magnitude:<10} {ft.description} "
                   f"(acts {acts[ft.acts]})")
         return 0
     if args.what == "channels":

@@ -22,6 +22,7 @@ import yaml
 
 from ._version import __version__
 from .compile import Programme, compile_line
+from .compile.disturbances import realise_disturbances
 from .compile.faults import realise_faults
 from .dataset import DatasetWriter, true_state_columns
 from .dataset.labels import derive_labels
@@ -119,9 +120,15 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
     out = Path(output) if output is not None else Path(scenario.output or f"runs/{name}")
 
     prog = Programme.from_steps(line, scenario.programme, file=str(scenario_path))
-    cl = compile_line(line, prog, scenario.faults)
+    root = np.random.SeedSequence(scenario.seed)
+    ss_process, ss_meas, ss_faults = root.spawn(3)
+    disturbances = realise_disturbances(scenario, line, ss_process)
+    cl = compile_line(line, prog, scenario.faults, disturbances)
     init = scenario.initial
     y_nom = nominal_state(cl, init.tension, init.span_tension)
+    for d in disturbances:  # an out-of-round roller starts at a random angle
+        if d.type == "out_of_round":
+            y_nom[cl.index(f"{d.element}.angle")] = d.phase
     init_mode = "nominal"
     if init.state == "steady":
         y_ss = steady_state(cl, y_nom)
@@ -135,8 +142,6 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
     scenario_text = scenario_path.read_text(encoding="utf-8")
     line_text = line_path.read_text(encoding="utf-8")
     scenario_sha = hashlib.sha256((scenario_text + "\0" + line_text).encode()).hexdigest()
-    root = np.random.SeedSequence(scenario.seed)
-    ss_process, ss_meas, ss_faults = root.spawn(3)
     run_id = f"{name}__s{scenario.seed}"
     meta = {"r2rsim.schema_version": "0.1", "r2rsim.version": __version__,
             "r2rsim.scenario_sha256": scenario_sha, "r2rsim.root_seed": str(scenario.seed)}
@@ -261,6 +266,7 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
             "operating_mode": pa.array(["+".join(dict.fromkeys(m for _, m in modes)) or None],
                                        pa.string()),
             "modes_json": [json.dumps(modes)],
+            "disturbances_json": [json.dumps([d.model_dump() for d in scenario.disturbances])],
             "sample_period_s": [1.0 / scenario.record_rate],
             "duration_s": [scenario.duration], "n_samples": pa.array([writer.n_rows], pa.int64()),
             "warmup_s": [scenario.warmup], "has_fault": [bool(faults)],

@@ -237,7 +237,8 @@ class CompiledLine:
         return "\n".join(lines)
 
 
-def compile_line(line: Line, programme: Programme | None = None, faults=()) -> CompiledLine:
+def compile_line(line: Line, programme: Programme | None = None, faults=(),
+                 disturbances=()) -> CompiledLine:
     """Compile a validated line.
 
     Parameters
@@ -249,6 +250,9 @@ def compile_line(line: Line, programme: Programme | None = None, faults=()) -> C
     faults : sequence of r2rsim.schema.faults.Fault, optional
         The scenario's faults: they reserve parameter slots, splice-joint slots (a modulus
         change) and an angle state for each eccentric roller.
+    disturbances : sequence of DisturbanceInstance, optional
+        The run's realised process disturbances
+        (:func:`r2rsim.compile.disturbances.realise_disturbances`).
 
     Returns
     -------
@@ -304,7 +308,8 @@ def compile_line(line: Line, programme: Programme | None = None, faults=()) -> C
     n_modulus = sum(f.type == "process.modulus_change" for f in faults)
     nJ = (N_JOINT_SLOTS if splice_nodes else 0) + n_modulus
     nFS = len(faults)
-    eccentric = {f.target for f in faults if f.type == "process.eccentricity"}
+    eccentric = {f.target for f in faults if f.type == "process.eccentricity"} | {
+        d.element for d in disturbances if d.type == "out_of_round"}
     pitch_filters: list = []
 
     def add_mover(mid, kind, k_node, span_u, span_d, mp, q0, unit):
@@ -354,6 +359,9 @@ def compile_line(line: Line, programme: Programme | None = None, faults=()) -> C
         npr[NP_VGAIN] = 1.0
         npr[NP_TEFF] = npr[NP_FRICF] = 1.0
         npr[NP_WRAP] = e.wrap_angle if e.wrap_angle is not None else math.pi
+        for d in disturbances:
+            if d.type == "out_of_round" and d.element == e.id:
+                npr[NP_ECC] = d.eccentricity
         ni[NI_KIND] = {"unwind": NK_UNWIND, "rewind": NK_REWIND}.get(e.type, NK_ROLLER)
         drive = getattr(e, "drive", None)
         ni[NI_DRIVE] = DRV_NONE if drive is None else (
@@ -593,15 +601,23 @@ def compile_line(line: Line, programme: Programme | None = None, faults=()) -> C
         sch_t[ch, sch_n[ch]:] = math.inf
 
     # ---- pack I and P
+    tables = [d for d in disturbances if d.values is not None]
+    tab_I = np.zeros((len(tables), NTI), np.int64)
+    tab_P = []
+    for m, d in enumerate(tables):
+        tab_I[m] = ({"bearing_drag": TB_DRAG, "wound_in_strain": TB_WOUND}[d.type],
+                    node_idx[d.element], len(d.values), 0)
+        tab_P.append(np.concatenate([[d.x0, d.dx], d.values]))
     blocks_I = [node_I.ravel(), span_I.ravel(), sens_I.ravel(), ctrl_I.ravel(), sch_n,
-                np.array(ev_I, np.int64).reshape(-1, NEVI).ravel(), mov_I.ravel()]
+                np.array(ev_I, np.int64).reshape(-1, NEVI).ravel(), mov_I.ravel(),
+                tab_I.ravel()]
     offs_I, pos = [], HEADER
     for b in blocks_I:
         offs_I.append(pos)
         pos += b.size
     blocks_P = [node_P.ravel(), span_P.ravel(), sens_P.ravel(), ctrl_P.ravel(), sch_t.ravel(),
                 sch_v.ravel(), np.zeros(4), mov_P.ravel(), np.zeros(nJ * NJP), np.array([EA]),
-                np.zeros(nFS * NFS)]
+                np.zeros(nFS * NFS), *tab_P]
     offs_P, ppos = [], 0
     for b in blocks_P:
         offs_P.append(ppos)
@@ -618,6 +634,10 @@ def compile_line(line: Line, programme: Programme | None = None, faults=()) -> C
     header[H_NM], header[H_OFF_MI], header[H_OFF_MP] = nM, offs_I[6], offs_P[7]
     header[H_NJ], header[H_OFF_JP], header[H_EA] = nJ, offs_P[8], offs_P[9]
     header[H_NFS], header[H_OFF_FS] = nFS, offs_P[10]
+    header[H_NTB], header[H_OFF_TB] = len(tables), offs_I[7]
+    for m in range(len(tables)):  # each table's values follow the fault slots in P
+        tab_I[m, TI_OFFP] = offs_P[11 + m]
+    blocks_I[7] = tab_I.ravel()
     header[H_MODEL] = 1 if line.span_model == "linear" else 0
     header[H_NCH], header[H_MAXPTS] = nch, maxpts
     header[H_NQ], header[H_MAXD] = nq, MAXD

@@ -204,6 +204,29 @@ def _mover_load(P, bm, kind, q):
 
 
 @njit(cache=True)
+def table_value(I, P, kind, node, x):
+    """Sum of the disturbance tables of ``kind`` on ``node`` at x (linear interpolation,
+    held constant outside the grid)."""
+    out = 0.0
+    for m in range(I[H_NTB]):
+        bt = I[H_OFF_TB] + m * NTI
+        if I[bt + TI_KIND] != kind or I[bt + TI_NODE] != node:
+            continue
+        o = I[bt + TI_OFFP]
+        n = I[bt + TI_N]
+        s = (x - P[o]) / P[o + 1]
+        if s <= 0.0:
+            out += P[o + 2]
+        elif s >= n - 1:
+            out += P[o + 2 + n - 1]
+        else:
+            i = int(s)
+            f = s - i
+            out += (1.0 - f) * P[o + 2 + i] + f * P[o + 3 + i]
+    return out
+
+
+@njit(cache=True)
 def roll_wound_in_strain(P, b, R):
     """Wound-in strain of a roll at radius R and its derivative (polynomial in R)."""
     e1 = P[b + NP_EPSW1]
@@ -255,6 +278,7 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
     jac = mode != MODE_RHS
     maxd = I[H_MAXD]
     EAweb = P[I[H_EA]]
+    ntb = I[H_NTB]
 
     (oT, oEM, oL, oLD, oLP, oLPP, oEAE, oV, oR, oOM, oJ, oTRIM, oTCMD, oTM, oRAW, oYS, oU, oE,
      oMF, oMW, oXF, oRW0) = _offsets(I)
@@ -737,6 +761,8 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         num = Re * (Tdn - Tup) + W[oTM + k] - tf
         if P[b + NP_RIPA] != 0.0:
             num += P[b + NP_RIPA] * math.sin(P[b + NP_RIPW] * t)
+        if ntb > 0:  # random bearing drag torque (a process disturbance)
+            num -= table_value(I, P, TB_DRAG, k, t)
         # eccentric roller: the web's pull on the moving centre, -sum T·dL/dth
         ith = I[oNI + k * NI + NI_TH]
         fu = 0.0
@@ -775,6 +801,8 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         if kind == NK_UNWIND:
             sp = I[oNI + k * NI + NI_SPAN_DN]
             esrc_fwd, desrc = roll_wound_in_strain(P, oNP + k * NP, W[oR + k])
+            if ntb > 0:
+                esrc_fwd += table_value(I, P, TB_WOUND, k, y[I[oNI + k * NI + NI_U]])
             q = _flux(v, xk * esrc_fwd, xk * W[oEM + sp], linear)
         else:
             sp = I[oNI + k * NI + NI_SPAN_UP]
@@ -806,6 +834,8 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             ef = W[oEM + sp_before]
         else:
             ef, dwa = roll_wound_in_strain(P, oNP + a * NP, W[oR + a])
+            if ntb > 0:
+                ef += table_value(I, P, TB_WOUND, a, y[I[oNI + a * NI + NI_U]])
         xa = W[oXF + a]
         xb = W[oXF + bnode]
         qa = _flux(W[oV + a], xa * ef, xa * W[oEM + i], linear)

@@ -26,6 +26,7 @@ H_NM, H_OFF_MI, H_OFF_MP = 28, 29, 30   # movers (dancers, festoon carriages)
 H_NJ, H_OFF_JP = 31, 32  # splice-joint slots (P block)
 H_EA = 33                # index in P of the web's EA
 H_NFS, H_OFF_FS = 34, 35  # fault parameter slots (P block)
+H_NTB, H_OFF_TB = 36, 37  # process-disturbance tables (I records; values in P)
 HEADER = 40
 
 # ---- node records ----
@@ -98,6 +99,12 @@ NJP = 8
 # coefficients at each breakpoint and write constant values directly
 (FS_IDX, FS_BASE, FS_ON, FS_T0, FS_A, FS_B, FS_C, FS_TAU) = range(8)
 NFS = 8
+
+# ---- process-disturbance tables: I record (kind, node, n, offset in P of [x0, dx, v0..]);
+# the kernel interpolates linearly (held constant outside the grid)
+TB_DRAG, TB_WOUND = 1, 2   # drag torque on node vs time; wound-in strain of an unwind vs u
+TI_KIND, TI_NODE, TI_N, TI_OFFP = range(4)
+NTI = 4
 
 # ---- event records (I block, 3 ints each: kind, index, sign convention) ----
 EV_SLACK, EV_BREAK, EV_CAPSTAN, EV_EMPTY = 1, 2, 3, 4

@@ -11,7 +11,8 @@ import yaml
 from pydantic import ValidationError
 
 from ..errors import InputError
-from .faults import check_faults
+from ..units import QuantityError
+from .faults import check_faults, target_problem
 from .line import Line
 from .scenario import Scenario
 
@@ -197,11 +198,51 @@ def check_scenario_against_line(scenario: Scenario, line: Line, file: str) -> No
             raise InputError(f"at {ev.at:g} s is after the end of the run ({scenario.duration:g}"
                              f" s)", file=file, path=f"events[{i}].at")
     check_faults(scenario, line, file)
+    check_disturbances(scenario, line, file)
     span_ids = {s.id for s in line.spans}
     for sid in scenario.initial.span_tension:
         if sid not in span_ids:
             raise InputError(f"no span '{sid}' in the line", file=file,
                              path=f"initial.span_tension.{sid}")
+
+
+def check_disturbances(scenario, line, file: str) -> None:
+    """Targets and values of the scenario's process disturbances."""
+    eccentric_faults = {f.target for f in scenario.faults if f.type == "process.eccentricity"}
+    ids = [e.id for e in line.elements]
+    for i, d in enumerate(scenario.disturbances):
+        where = f"disturbances[{i}]"
+        if d.element not in ids:
+            raise InputError(f"no element '{d.element}' in the line (known: {', '.join(ids)})",
+                             file=file, path=f"{where}.element")
+        e = line.element(d.element)
+        drive = getattr(e, "drive", None)
+        problem = None
+        if d.type == "out_of_round":  # the same rules as an eccentricity fault
+            problem = target_problem("process.eccentricity", d.element, line)
+            if problem is None and d.element in eccentric_faults:
+                problem = (f"'{d.element}' is out of round and also has a "
+                           "process.eccentricity fault; give it one or the other")
+        elif d.type == "wound_in_strain" and e.type != "unwind":
+            problem = f"wound_in_strain applies to an unwind; '{d.element}' is a {e.type}"
+        elif d.type == "bearing_drag" and drive is not None and drive.type == "ideal_speed":
+            problem = (f"'{d.element}' turns at an imposed speed (ideal_speed drive): a drag "
+                       "torque would have no effect")
+        if problem:
+            raise InputError(problem.replace("process.eccentricity", "out_of_round"),
+                             file=file, path=f"{where}.element")
+        if d.type == "out_of_round":
+            if d.eccentricity >= e.radius:
+                raise InputError(f"an eccentricity of {d.eccentricity:g} m is not less than "
+                                 f"the roller radius {e.radius:g} m", file=file,
+                                 path=f"{where}.eccentricity")
+            continue
+        try:
+            std = d.std_si()
+        except QuantityError as exc:
+            raise InputError(str(exc), file=file, path=f"{where}.std") from None
+        if not std >= 0:
+            raise InputError("std must be >= 0", file=file, path=f"{where}.std")
 
 
 def json_schema(kind: str) -> str:

@@ -11,9 +11,10 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
+from ..units import parse_quantity
 from .faults import Fault
 from .line import Id, Strict
-from .quantities import Acceleration, Force, Frequency, Speed, Time
+from .quantities import Acceleration, Force, Frequency, Length, Speed, Time
 
 
 class ProgrammeStep(Strict):
@@ -118,6 +119,46 @@ class SplitBySeed(Strict):
         return "train" if u < self.train else "val" if u < self.train + self.val else "test"
 
 
+class Disturbance(Strict):
+    """A process disturbance: always present, drawn from the run's process-noise stream on
+    a fixed grid (so it does not depend on the solver's steps) and independent of the
+    measurement noise. Not a fault: it carries no label.
+
+    ``bearing_drag``: a random drag torque on a roller, first-order filtered white noise of
+    standard deviation ``std`` [N m] and ``bandwidth`` [Hz], drawn on the sample grid.
+    ``wound_in_strain``: the strain wound into an unwind's roll varies along the web, with
+    standard deviation ``std`` and ``correlation_length`` [m] (tension and thickness history
+    of the roll); it enters the first span as the web leaves the roll.
+    ``out_of_round``: a roller turns about an axis ``eccentricity`` off its centre from
+    t = 0, at a random initial angle (see the process.eccentricity fault).
+    """
+
+    type: Literal["bearing_drag", "wound_in_strain", "out_of_round"]
+    element: Id
+    std: float | str | None = Field(
+        None, description="bearing_drag: torque [N m]; wound_in_strain: strain [1]")
+    bandwidth: Annotated[Frequency, Field(gt=0)] | None = None
+    correlation_length: Annotated[Length, Field(gt=0)] | None = None
+    eccentricity: Annotated[Length, Field(gt=0)] | None = None
+
+    @model_validator(mode="after")
+    def _check(self):
+        need = {"bearing_drag": ("std", "bandwidth"),
+                "wound_in_strain": ("std", "correlation_length"),
+                "out_of_round": ("eccentricity",)}[self.type]
+        for k in ("std", "bandwidth", "correlation_length", "eccentricity"):
+            if (getattr(self, k) is None) == (k in need):
+                raise ValueError(f"a {self.type} disturbance "
+                                 + (f"needs '{k}'" if k in need else f"takes no '{k}'"))
+        return self
+
+    def std_si(self) -> float:
+        """``std`` in SI (a torque for bearing drag, a plain number for a strain); raises
+        :class:`r2rsim.units.QuantityError` for a bad unit."""
+        return parse_quantity(self.std, "torque" if self.type == "bearing_drag"
+                              else "dimensionless")
+
+
 class Scenario(Strict):
     """An operating scenario for a line."""
 
@@ -139,6 +180,7 @@ class Scenario(Strict):
         0.0, description="initial period labelled 'warmup' in the dataset [s]"
     )
     faults: list[Fault] = Field(default_factory=list)
+    disturbances: list[Disturbance] = Field(default_factory=list)
     split: Literal["train", "val", "test"] | SplitBySeed | None = Field(
         None, description="data split of the run: fixed, or {by: seed, train:, val:, test:}")
 

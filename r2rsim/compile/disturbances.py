@@ -1,0 +1,72 @@
+"""Process disturbances of one run (the scenario's ``disturbances``), drawn from the run's
+process-noise stream on fixed grids, so that they depend neither on the solver's steps nor
+on the measurement noise. The compiler lowers them into tables the kernel interpolates."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class DisturbanceInstance:
+    """One realised disturbance: a table ``values`` on the grid ``x0 + k·dx`` (time for a
+    bearing drag [s], unwound web length for a wound-in strain [m]), or an out-of-round
+    roller (``eccentricity`` [m] and initial ``phase`` [rad])."""
+
+    type: str
+    element: str
+    x0: float = 0.0
+    dx: float = 1.0
+    values: np.ndarray | None = None
+    eccentricity: float = 0.0
+    phase: float = 0.0
+
+
+def _ar1(rng, n: int, a: float, std: float) -> np.ndarray:
+    """A stationary first-order autoregressive sequence (filtered white noise) of standard
+    deviation std and lag-one correlation a."""
+    e = rng.standard_normal(n)
+    x = np.empty(n)
+    x[0] = std * e[0]
+    s = std * math.sqrt(max(1.0 - a * a, 0.0))
+    for k in range(1, n):
+        x[k] = a * x[k - 1] + s * e[k]
+    return x
+
+
+def realise_disturbances(scenario, line, seed_sequence) -> list[DisturbanceInstance]:
+    """Draw the run's process disturbances.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    line : Line
+    seed_sequence : numpy.random.SeedSequence
+        The run's process-noise stream; each disturbance draws from its own child.
+    """
+    out = []
+    children = seed_sequence.spawn(len(scenario.disturbances))
+    rate = scenario.record_rate
+    speeds = [abs(s.line_speed) for s in scenario.programme if s.line_speed is not None]
+    v_max = max(speeds, default=0.0)
+    for d, child in zip(scenario.disturbances, children, strict=True):
+        rng = np.random.default_rng(child)
+        if d.type == "out_of_round":
+            out.append(DisturbanceInstance(d.type, d.element, eccentricity=d.eccentricity,
+                                           phase=float(rng.uniform(0.0, 2.0 * math.pi))))
+        elif d.type == "bearing_drag":
+            # on the sample grid; first-order filter of the given bandwidth
+            n = int(math.ceil(scenario.duration * rate)) + 2
+            a = math.exp(-2.0 * math.pi * d.bandwidth / rate)
+            out.append(DisturbanceInstance(d.type, d.element, 0.0, 1.0 / rate,
+                                           _ar1(rng, n, a, d.std_si())))
+        else:  # wound_in_strain along the web, ten points per correlation length
+            dx = d.correlation_length / 10.0
+            length = 1.5 * v_max * scenario.duration + 10.0 * d.correlation_length
+            n = int(math.ceil(length / dx)) + 2
+            out.append(DisturbanceInstance(d.type, d.element, 0.0, dx,
+                                           _ar1(rng, n, math.exp(-0.1), d.std_si())))
+    return out
