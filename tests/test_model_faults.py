@@ -335,13 +335,16 @@ def test_weak_splice_breaks_at_the_joint(tmp_path, strength, breaks):
      "leave out 'end'"),
     ({"type": "process.weak_splice", "target": "unwind", "magnitude": "100 N"},
      "splicer"),
+    ({"type": "process.weak_splice", "target": "unwind", "magnitude": "100 N", "splicer": 1},
+     "no splice on 'unwind' at or after the onset"),
     ({"type": "process.draw_error", "target": "idler1", "magnitude": 0.001},
      "driven roller or nip"),
     ({"type": "dancer.arm_stuck", "target": "pull"}, "dancer or festoon"),
     ({"type": "actuator.bias", "target": "pull", "magnitude": "1 N"}, "dimension"),
 ])
 def test_bad_model_faults_are_rejected(tmp_path, fault, message):
-    line = line_file(tmp_path)
+    fault = dict(fault)
+    line = line_file(tmp_path, edit=_splicing_line if fault.pop("splicer", 0) else None)
     sc = {"name": "bad", "line": str(line), "duration": 5.0,
           "programme": [{"at": 0, "line_speed": 5.0}],
           "faults": [{"id": "x", "onset": 1.0, **fault}]}

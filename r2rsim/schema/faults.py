@@ -363,6 +363,14 @@ def check_faults(scenario, line, file: str) -> None:
                     raise InputError(problem, file=file, path=f"{where}.magnitude")
         except QuantityError as exc:
             raise InputError(str(exc), file=file, path=where) from None
+        if f.type == "process.weak_splice":
+            splicer = next(e for e in line.elements if e.id == f.target).splicer
+            later = [ev for ev in scenario.events if ev.type == "splice" and ev.at >= lo
+                     and ev.element in (None, f.target)]
+            if not later and splicer.trigger_radius is None:
+                raise InputError(f"no splice on '{f.target}' at or after the onset: schedule "
+                                 "one (events: type splice) or give the splicer a "
+                                 "trigger_radius", file=file, path=f"{where}.onset")
         if hi > scenario.duration:
             raise InputError(f"onset can be {hi:g} s, after the end of the run "
                              f"({scenario.duration:g} s)", file=file, path=f"{where}.onset")
