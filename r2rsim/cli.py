@@ -118,6 +118,17 @@ def _cmd_schema(args) -> int:
 
 
 def _cmd_list(args) -> int:
+    if args.what == "plugins":
+        from .diagnostics.registry import GROUP
+        from .diagnostics.registry import plugins as found
+
+        print(f"{'name':<12} {'class':<55} first line of its docstring")
+        for name, cls in found().items():
+            doc = (cls.__doc__ or "").strip().splitlines()
+            print(f"{name:<12} {cls.__module__ + '.' + cls.__qualname__:<55} "
+                  f"{doc[0] if doc else ''}")
+        print(f"(entry-point group '{GROUP}')")
+        return 0
     if args.what == "faults":
         from .schema.faults import CATALOGUE
 
@@ -181,10 +192,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("kind", choices=["line", "scenario"])
     s.set_defaults(func=_cmd_schema)
 
-    ls = sub.add_parser("list", help="list element, sensor, controller or fault types, or the "
-                        "channels of a line")
+    ls = sub.add_parser("list", help="list element, sensor, controller or fault types, "
+                        "diagnostic plug-ins, or the channels of a line")
     ls.add_argument("what", choices=["elements", "sensors", "controllers", "faults",
-                                     "channels"])
+                                     "plugins", "channels"])
     ls.add_argument("line", nargs="?", help="line file (for 'channels')")
     ls.set_defaults(func=_cmd_list)
     return p

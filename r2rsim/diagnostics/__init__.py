@@ -1,1 +1,6 @@
-"""Later pipeline stage (diagnostics): arrives with its issue."""
+"""Stage 6 of the pipeline: diagnostic plug-ins (the contract in :mod:`.base`, baselines in
+:mod:`.baselines`, discovery in :mod:`.registry`)."""
+
+from .base import Diagnostic
+
+__all__ = ["Diagnostic"]

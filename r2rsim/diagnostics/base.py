@@ -1,0 +1,89 @@
+"""The plug-in contract for diagnostic algorithms (architecture.md B8, scikit-learn
+conventions).
+
+A plug-in is a :class:`Diagnostic` subclass:
+
+* ``__init__`` stores its parameters and nothing else (``get_params``/``clone`` work);
+* ``fit(runs)`` learns from healthy runs only, sets attributes ending in ``_`` and returns
+  ``self``; all randomness comes from a ``random_state`` parameter;
+* ``score(run)`` returns per-sample statistics aligned to the run's samples (same index),
+  with at least the column ``statistic`` (larger = more anomalous);
+* ``decide(scores)`` turns them into boolean alarms (default ``statistic > threshold_``);
+* optionally ``diagnose(scores)`` names the fault type per sample (``normal`` when none) and
+  ``rank_channels(scores)`` orders the channels most likely at fault.
+
+A plug-in sees only the visible columns of a run (:data:`r2rsim.dataset.read.VISIBLE`) and
+declares the ones it needs in ``requires`` (glob patterns), checked before ``fit`` and
+``score``. The harness, not the plug-in, computes metrics. Plug-ins are found through the
+``r2rsim.diagnostics`` entry-point group (:func:`r2rsim.diagnostics.registry.plugins`).
+"""
+
+from __future__ import annotations
+
+import fnmatch
+from typing import ClassVar
+
+import numpy as np
+import pandas as pd
+from sklearn.base import BaseEstimator
+
+from ..errors import InputError
+
+
+def _frame(run) -> pd.DataFrame:
+    """The visible columns of a run (a :class:`r2rsim.dataset.read.Run` or a frame)."""
+    return run.visible() if hasattr(run, "visible") else run
+
+
+class Diagnostic(BaseEstimator):
+    """Base class of r2rsim diagnostic plug-ins (see the module docstring)."""
+
+    #: registry name (the entry point's name)
+    name: ClassVar[str] = "abstract"
+    #: glob patterns of the columns the plug-in needs; each must match at least one column
+    requires: ClassVar[tuple[str, ...]] = ("meas.*",)
+
+    # ---- the contract ----------------------------------------------------------------------
+    def fit(self, runs) -> Diagnostic:
+        """Learn from healthy runs (a list of runs or frames); returns ``self``."""
+        raise NotImplementedError
+
+    def score(self, run) -> pd.DataFrame:
+        """Per-sample statistics of one run, indexed like its samples, with a ``statistic``
+        column."""
+        raise NotImplementedError
+
+    def decide(self, scores: pd.DataFrame) -> pd.Series:
+        """Boolean alarms per sample: ``statistic > threshold_``."""
+        return scores["statistic"] > self.threshold_
+
+    # ---- helpers for subclasses ------------------------------------------------------------
+    def _columns(self, frame: pd.DataFrame) -> list[str]:
+        """The columns matching ``requires``, in the frame's order; raises InputError naming
+        the patterns nothing matches."""
+        cols = [c for c in frame.columns if any(fnmatch.fnmatch(c, p) for p in self.requires)
+                and c != "t_s"]
+        missing = [p for p in self.requires if not any(fnmatch.fnmatch(c, p)
+                                                        for c in frame.columns)]
+        if missing:
+            raise InputError(f"{self.name}: the data has no column matching "
+                             f"{', '.join(missing)}")
+        return cols
+
+    def _check_fitted(self):
+        if not any(k.endswith("_") and not k.startswith("_") for k in vars(self)):
+            raise RuntimeError(f"{self.name} is not fitted: call fit first")
+
+    @staticmethod
+    def _matrix(frames, cols) -> np.ndarray:
+        """Rows of the given columns from several frames, with rows holding a NaN (a
+        dropped-out reading) removed."""
+        X = np.vstack([f[cols].to_numpy(dtype=float) for f in frames])
+        return X[np.all(np.isfinite(X), axis=1)]
+
+    def _frames(self, runs) -> list[pd.DataFrame]:
+        if not isinstance(runs, (list, tuple)):
+            runs = [runs]
+        if not runs:
+            raise InputError(f"{self.name}: fit needs at least one healthy run")
+        return [_frame(r) for r in runs]

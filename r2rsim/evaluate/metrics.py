@@ -1,0 +1,917 @@
+"""Fault-detection evaluation metrics (docs: fdd-benchmarks.md §5, M1–M7, M9, M15).
+
+Every metric works on a list of :class:`RunData`, one per simulated run, holding plain numpy
+arrays: the sample times, the ground truth ``y(k)``, the score mask, and the detector's alarm,
+score and (optionally) diagnosis. Notation follows §5.1: ``tau`` is a faulty run's first faulty
+sample, ``eps`` its last faulty sample, ``N`` its number of samples (indices are 0-based here).
+
+Conventions shared by all metrics
+---------------------------------
+* **Masking.** Samples with ``scored == False`` (warm-up) are excluded from every metric. The
+  alarm is ANDed with the mask before anything else (:attr:`RunData.effective_alarm`), so an
+  alarm raised in an unscored sample changes no metric: it neither counts as a false alarm nor
+  makes a later alarm event look like a continuation.
+* **Persistence.** With ``m > 1`` an alarm event counts for detection only if it lasts at least
+  ``m`` samples; its onset is still the first sample of the event (§5.1, M4).
+* **Pooling.** Sample-level rates (FAR, DR, IA, ROC-AUC, AP) pool samples over runs; run-level
+  metrics (P_D, DD) average over runs. Confidence intervals resample runs, never samples
+  (:func:`bootstrap_ci`, §5.5).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+import pandas as pd
+from numpy.typing import ArrayLike, NDArray
+from scipy.stats import rankdata
+
+__all__ = [
+    "ConfidenceInterval",
+    "DelayStats",
+    "Detectability",
+    "FalseAlarmEvents",
+    "FarResult",
+    "RunData",
+    "RunDetection",
+    "apply_threshold",
+    "average_precision",
+    "bootstrap_ci",
+    "calibrate_threshold",
+    "confirmed",
+    "detect_run",
+    "detectability",
+    "detection_delay",
+    "detection_probability",
+    "detection_rate",
+    "false_alarm_events",
+    "far",
+    "fault_free_scores",
+    "isolation_accuracy",
+    "pooled_scores",
+    "roc_auc",
+]
+
+# Relative tolerance (in sample periods) when comparing t[eps] + h with sample times, so that a
+# grace period that is a whole number of periods lands on the intended sample despite rounding.
+_TIME_RTOL = 1e-9
+
+
+# --------------------------------------------------------------------------- persistence
+
+
+def confirmed(alarm: ArrayLike, m: int = 1) -> NDArray[np.bool_]:
+    """Persistence rule: the alarm is *confirmed* at ``k`` iff ``alarm[k..k+m-1]`` are all true.
+
+    Parameters
+    ----------
+    alarm : array_like of bool, shape (N,)
+        Per-sample alarm.
+    m : int, default 1
+        Number of consecutive alarmed samples required (m >= 1).
+
+    Returns
+    -------
+    numpy.ndarray of bool, shape (N,)
+        Confirmed alarm. Near the end of the run, where fewer than ``m`` samples remain, the
+        window is incomplete and the alarm is not confirmed.
+    """
+    a = np.asarray(alarm, dtype=bool)
+    if a.ndim != 1:
+        raise ValueError("alarm must be one-dimensional")
+    if int(m) != m or m < 1:
+        raise ValueError(f"persistence m must be an integer >= 1, got {m!r}")
+    m = int(m)
+    n = a.size
+    out = np.zeros(n, dtype=bool)
+    if n < m:
+        return out
+    # c[j] = number of alarms in a[0:j]; the window a[k:k+m] is full when its count equals m
+    c = np.concatenate(([0], np.cumsum(a, dtype=np.int64)))
+    out[: n - m + 1] = (c[m:] - c[: n - m + 1]) == m
+    return out
+
+
+def _onsets(a: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """Samples where an alarm event (maximal run of consecutive alarms) starts."""
+    prev = np.concatenate(([False], a[:-1]))
+    return a & ~prev
+
+
+# --------------------------------------------------------------------------- run container
+
+
+@dataclass(frozen=True)
+class RunData:
+    """One run's ground truth and detector output, as aligned per-sample arrays.
+
+    Parameters
+    ----------
+    t : array_like of float, shape (N,)
+        Sample times in seconds, strictly increasing.
+    faulty : array_like of bool, shape (N,)
+        Ground truth y(k): at least one fault active at sample k.
+    scored : array_like of bool, shape (N,)
+        Score mask: False in warm-up (or any other excluded sample).
+    alarm : array_like of bool, shape (N,)
+        Detector alarm a(k).
+    score : array_like of float, shape (N,), optional
+        Anomaly score s(k), larger = more anomalous. Needed by M6/M7 only.
+    diagnosis : array_like of str, shape (N,), optional
+        Diagnosed class d(k) (a fault type, ``"normal"`` or ``"unknown"``). Needed by M9 only.
+    true_type : array_like of str, shape (N,), optional
+        True fault type per sample, ``"normal"`` where not faulty. Needed by M9 only.
+    magnitude : float, default nan
+        The run's fault magnitude (nan for fault-free runs). Used by M15.
+    """
+
+    t: NDArray[np.float64]
+    faulty: NDArray[np.bool_]
+    scored: NDArray[np.bool_]
+    alarm: NDArray[np.bool_]
+    score: NDArray[np.float64] | None = None
+    diagnosis: NDArray[np.str_] | None = None
+    true_type: NDArray[np.str_] | None = None
+    magnitude: float = math.nan
+
+    def __post_init__(self) -> None:
+        # frozen dataclass: normalise the arrays through object.__setattr__
+        t = np.asarray(self.t, dtype=float)
+        if t.ndim != 1 or t.size == 0:
+            raise ValueError("t must be a non-empty one-dimensional array")
+        if t.size > 1 and not np.all(np.diff(t) > 0):
+            raise ValueError("t must be strictly increasing")
+        object.__setattr__(self, "t", t)
+        for name in ("faulty", "scored", "alarm"):
+            object.__setattr__(self, name, self._aligned(name, bool))
+        if self.score is not None:
+            object.__setattr__(self, "score", self._aligned("score", float))
+        for name in ("diagnosis", "true_type"):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, self._aligned(name, str))
+        object.__setattr__(self, "magnitude", float(self.magnitude))
+
+    def _aligned(self, name: str, dtype: type) -> NDArray:
+        a = np.asarray(getattr(self, name), dtype=dtype)
+        if a.shape != self.t.shape:
+            raise ValueError(f"{name} has shape {a.shape}, expected {self.t.shape} (like t)")
+        return a
+
+    @property
+    def n(self) -> int:
+        """Number of samples N."""
+        return int(self.t.size)
+
+    @property
+    def is_faulty(self) -> bool:
+        """True if any sample is faulty."""
+        return bool(self.faulty.any())
+
+    @property
+    def onset(self) -> int | None:
+        """tau: index of the first faulty sample (None for a fault-free run)."""
+        idx = np.flatnonzero(self.faulty)
+        return int(idx[0]) if idx.size else None
+
+    @property
+    def end(self) -> int | None:
+        """eps: index of the last faulty sample (None for a fault-free run)."""
+        idx = np.flatnonzero(self.faulty)
+        return int(idx[-1]) if idx.size else None
+
+    @property
+    def period(self) -> float:
+        """Sample period in seconds: the median spacing of ``t`` (robust to one odd step)."""
+        if self.n < 2:
+            raise ValueError("the sample period needs at least two samples")
+        return float(np.median(np.diff(self.t)))
+
+    @property
+    def effective_alarm(self) -> NDArray[np.bool_]:
+        """The alarm restricted to scored samples; every metric uses this, not ``alarm``."""
+        return self.alarm & self.scored
+
+    def window_end(self, h: float = 0.0) -> int | None:
+        """Last index of the detection window: min(eps + h, last sample), h in seconds.
+
+        Parameters
+        ----------
+        h : float, default 0
+            Grace period after the fault end, in seconds (h >= 0).
+
+        Returns
+        -------
+        int or None
+            The largest index k with t[k] <= t[eps] + h (None for a fault-free run).
+        """
+        eps = self.end
+        if eps is None:
+            return None
+        if h < 0:
+            raise ValueError(f"grace period h must be >= 0, got {h!r}")
+        if h == 0:
+            return eps
+        tol = _TIME_RTOL * (self.period if self.n > 1 else 1.0)
+        return int(np.searchsorted(self.t, self.t[eps] + h + tol, side="right") - 1)
+
+
+def _faulty_runs(runs: Sequence[RunData]) -> list[RunData]:
+    return [r for r in runs if r.is_faulty]
+
+
+# --------------------------------------------------------------------------- M1, M2
+
+
+@dataclass(frozen=True)
+class FarResult:
+    """Sample false-alarm rates (M1), with the counts behind them.
+
+    Attributes
+    ----------
+    far_ff : float
+        Alarm fraction over scored samples of fully fault-free runs (nan if there are none).
+    far_pre : float
+        Alarm fraction over scored pre-onset samples (k < tau) of faulty runs (nan if none).
+    far : float
+        Alarm fraction over all scored fault-free samples of all runs (includes the samples after
+        an intermittent fault has ended, which belong to neither stratum).
+    alarms_ff, n_ff, alarms_pre, n_pre, alarms_all, n_all : int
+        Numerators and denominators of the three rates.
+    n_masked : int
+        Masked (unscored) samples over all runs, reported separately (§5.1).
+    """
+
+    far_ff: float
+    far_pre: float
+    far: float
+    alarms_ff: int
+    n_ff: int
+    alarms_pre: int
+    n_pre: int
+    alarms_all: int
+    n_all: int
+    n_masked: int
+
+
+def _ratio(num: float, den: float) -> float:
+    return num / den if den > 0 else math.nan
+
+
+def far(runs: Sequence[RunData]) -> FarResult:
+    """M1: sample false-alarm rate, in the strata FAR_ff and FAR_pre.
+
+    Parameters
+    ----------
+    runs : sequence of RunData
+        Runs to pool; fault-free runs feed FAR_ff, faulty runs' pre-onset samples FAR_pre.
+
+    Returns
+    -------
+    FarResult
+        The rates and their counts; a rate is nan when its stratum has no scored sample.
+    """
+    a_ff = n_ff = a_pre = n_pre = a_all = n_all = n_masked = 0
+    for r in runs:
+        a = r.effective_alarm
+        ok = r.scored & ~r.faulty
+        n_masked += int((~r.scored).sum())
+        a_all += int(a[ok].sum())
+        n_all += int(ok.sum())
+        tau = r.onset
+        if tau is None:
+            a_ff += int(a[ok].sum())
+            n_ff += int(ok.sum())
+        else:
+            pre = r.scored[:tau]  # all samples before tau are fault-free by definition of tau
+            a_pre += int(a[:tau].sum())
+            n_pre += int(pre.sum())
+    return FarResult(far_ff=_ratio(a_ff, n_ff), far_pre=_ratio(a_pre, n_pre),
+                     far=_ratio(a_all, n_all), alarms_ff=a_ff, n_ff=n_ff, alarms_pre=a_pre,
+                     n_pre=n_pre, alarms_all=a_all, n_all=n_all, n_masked=n_masked)
+
+
+@dataclass(frozen=True)
+class FalseAlarmEvents:
+    """False-alarm event rate (M2).
+
+    Attributes
+    ----------
+    per_hour : float
+        FA/h: false-alarm events per hour of scored fault-free time (nan if that time is 0).
+    mtbfa_h : float
+        Mean time between false alarms in hours, 1 / FA/h (inf when there is no event).
+    n_events : int
+        Alarm events starting at a scored fault-free sample.
+    hours : float
+        Scored fault-free duration in hours.
+    """
+
+    per_hour: float
+    mtbfa_h: float
+    n_events: int
+    hours: float
+
+
+def false_alarm_events(runs: Sequence[RunData]) -> FalseAlarmEvents:
+    """M2: false-alarm events per hour (FA/h) and mean time between false alarms (MTBFA).
+
+    An alarm event is a maximal run of consecutive (effective) alarms. It is a false-alarm
+    event if it *starts* at a scored fault-free sample; an alarm that starts during a fault and
+    lasts past its end is not one. The duration is the number of scored fault-free samples times
+    each run's sample period (:attr:`RunData.period`).
+
+    Parameters
+    ----------
+    runs : sequence of RunData
+        Runs to pool (fault-free and faulty; every fault-free sample counts).
+
+    Returns
+    -------
+    FalseAlarmEvents
+        FA/h, MTBFA (hours), the event count and the duration in hours.
+    """
+    n_events = 0
+    seconds = 0.0
+    for r in runs:
+        ok = r.scored & ~r.faulty
+        n_events += int((_onsets(r.effective_alarm) & ok).sum())
+        n_ok = int(ok.sum())
+        if n_ok:
+            seconds += n_ok * r.period
+    hours = seconds / 3600.0
+    rate = _ratio(n_events, hours)
+    if math.isnan(rate):
+        mtbfa = math.nan
+    else:
+        mtbfa = math.inf if n_events == 0 else 1.0 / rate
+    return FalseAlarmEvents(per_hour=rate, mtbfa_h=mtbfa, n_events=n_events, hours=hours)
+
+
+# --------------------------------------------------------------------------- M3
+
+
+def detection_rate(runs: Sequence[RunData]) -> float:
+    """M3: sample detection rate DR over the fault windows [tau, eps] of the faulty runs.
+
+    Parameters
+    ----------
+    runs : sequence of RunData
+        Runs to pool; fault-free runs are ignored.
+
+    Returns
+    -------
+    float
+        Alarmed scored samples in [tau, eps] / scored samples in [tau, eps], pooled over faulty
+        runs (nan if there is none). Samples inside the window where an intermittent fault is
+        momentarily inactive count, as in the §5.2 formula.
+    """
+    hits = total = 0
+    for r in _faulty_runs(runs):
+        sl = slice(r.onset, r.end + 1)
+        hits += int(r.effective_alarm[sl].sum())
+        total += int(r.scored[sl].sum())
+    return _ratio(hits, total)
+
+
+# --------------------------------------------------------------------------- M4, M5
+
+
+@dataclass(frozen=True)
+class RunDetection:
+    """Run-level detection outcome of one faulty run (M4/M5).
+
+    Attributes
+    ----------
+    eligible : bool
+        False when no sample of the detection window is scored (the run is then left out of
+        P_D and DD rather than counted as a miss).
+    detected : bool
+        A detection onset lies in the window [tau, min(eps + h, N-1)].
+    k_star : int or None
+        Index of the first detection onset (None if missed).
+    delay : float
+        DD = t[k*] - t[tau] in seconds (nan if missed).
+    horizon : float
+        t[min(eps + h, N-1)] - t[tau]: what a miss contributes to the censored mean.
+    magnitude : float
+        The run's fault magnitude (copied from :class:`RunData`, for M15).
+    """
+
+    eligible: bool
+    detected: bool
+    k_star: int | None
+    delay: float
+    horizon: float
+    magnitude: float
+
+
+def detect_run(run: RunData, m: int = 1, h: float = 0.0, *,
+               lenient: bool = False) -> RunDetection:
+    """Find the first detection onset of one faulty run (M4).
+
+    A *detection onset* is a sample k >= tau at which a confirmed alarm starts: the alarm is
+    confirmed at k (:func:`confirmed` with persistence ``m``) and the alarm at k-1 is off.
+
+    Parameters
+    ----------
+    run : RunData
+        A faulty run.
+    m : int, default 1
+        Persistence: minimum number of consecutive alarmed samples.
+    h : float, default 0
+        Grace period in seconds after the fault end; the window is [tau, min(eps + h, N-1)].
+    lenient : bool, default False
+        Strict (default): an alarm event that started before tau is a false alarm, even if it
+        is still on at tau, and only a new event starting inside the window detects.
+        Lenient: an alarm still on at tau, as part of an event of at least ``m`` samples,
+        is a detection at tau with delay 0.
+
+    Returns
+    -------
+    RunDetection
+        Whether and where the run was detected, the delay and the censoring horizon.
+    """
+    tau, end = run.onset, run.window_end(h)
+    if tau is None:
+        raise ValueError("detect_run needs a faulty run (no faulty sample found)")
+    a = run.effective_alarm
+    conf = confirmed(a, m)
+    onset = conf & ~np.concatenate(([False], a[:-1]))
+    horizon = float(run.t[end] - run.t[tau])
+    eligible = bool(run.scored[tau : end + 1].any())
+    k_star: int | None = None
+    if lenient and tau > 0 and a[tau] and a[tau - 1]:
+        # the alarm event running through tau started earlier: find its start, and accept it
+        # if that event is confirmed (long enough)
+        off = np.flatnonzero(~a[:tau])
+        start = int(off[-1]) + 1 if off.size else 0
+        if conf[start]:
+            k_star = tau
+    if k_star is None:
+        ks = np.flatnonzero(onset[tau : end + 1])
+        if ks.size:
+            k_star = tau + int(ks[0])
+    detected = eligible and k_star is not None
+    delay = float(run.t[k_star] - run.t[tau]) if detected else math.nan
+    return RunDetection(eligible=eligible, detected=detected, k_star=k_star if detected else None,
+                        delay=delay, horizon=horizon, magnitude=run.magnitude)
+
+
+def _detections(runs: Sequence[RunData], m: int, h: float, lenient: bool) -> list[RunDetection]:
+    dets = [detect_run(r, m, h, lenient=lenient) for r in _faulty_runs(runs)]
+    return [d for d in dets if d.eligible]
+
+
+def detection_probability(runs: Sequence[RunData], m: int = 1, h: float = 0.0, *,
+                          lenient: bool = False) -> float:
+    """M4: run-level detection probability P_D.
+
+    Parameters
+    ----------
+    runs : sequence of RunData
+        Runs; fault-free runs and runs whose window is entirely unscored are ignored.
+    m, h, lenient
+        As in :func:`detect_run` (persistence, grace period in seconds, variant).
+
+    Returns
+    -------
+    float
+        Detected faulty runs / faulty runs (nan if there is none).
+    """
+    dets = _detections(runs, m, h, lenient)
+    return _ratio(sum(d.detected for d in dets), len(dets))
+
+
+@dataclass(frozen=True)
+class DelayStats:
+    """Detection-delay summary (M5), in seconds.
+
+    Attributes
+    ----------
+    median, mean, p90 : float
+        Over detected runs only (nan if none); p90 uses linear interpolation between order
+        statistics (``numpy.percentile`` default).
+    censored_mean : float
+        Mean over all faulty runs, a miss contributing its horizon t[min(eps+h, N-1)] - t[tau].
+    n_detected, n_missed : int
+        Run counts.
+    """
+
+    median: float
+    mean: float
+    p90: float
+    censored_mean: float
+    n_detected: int
+    n_missed: int
+
+
+def detection_delay(runs: Sequence[RunData], m: int = 1, h: float = 0.0, *,
+                    lenient: bool = False) -> DelayStats:
+    """M5: detection delay DD = t[k*] - t[tau] over detected runs, with the miss count.
+
+    The delay is measured per run from the onset, never averaged over alarmed samples (the
+    pitfall of §2.1.4).
+
+    Parameters
+    ----------
+    runs : sequence of RunData
+        Runs; fault-free runs and runs whose window is entirely unscored are ignored.
+    m, h, lenient
+        As in :func:`detect_run`.
+
+    Returns
+    -------
+    DelayStats
+        Median, mean and 90th percentile over detected runs, censored mean over all faulty runs,
+        and the detected/missed counts.
+    """
+    dets = _detections(runs, m, h, lenient)
+    dd = np.array([d.delay for d in dets if d.detected], dtype=float)
+    censored = np.array([d.delay if d.detected else d.horizon for d in dets], dtype=float)
+    if dd.size:
+        med, mean, p90 = float(np.median(dd)), float(dd.mean()), float(np.percentile(dd, 90))
+    else:
+        med = mean = p90 = math.nan
+    return DelayStats(median=med, mean=mean, p90=p90,
+                      censored_mean=float(censored.mean()) if censored.size else math.nan,
+                      n_detected=int(dd.size), n_missed=len(dets) - int(dd.size))
+
+
+# --------------------------------------------------------------------------- M6
+
+
+def fault_free_scores(runs: Sequence[RunData]) -> NDArray[np.float64]:
+    """Pool the scores of the scored samples of the fully fault-free runs (M6 calibration set).
+
+    Parameters
+    ----------
+    runs : sequence of RunData
+        Typically the validation runs; faulty runs are skipped.
+
+    Returns
+    -------
+    numpy.ndarray of float
+        The concatenated scores.
+    """
+    parts = []
+    for r in runs:
+        if r.is_faulty:
+            continue
+        if r.score is None:
+            raise ValueError("a fault-free run has no score; calibration needs scores")
+        parts.append(r.score[r.scored])
+    return np.concatenate(parts) if parts else np.empty(0)
+
+
+def calibrate_threshold(scores: ArrayLike, alpha: float) -> float:
+    """M6: threshold theta with at most a fraction ``alpha`` of calibration scores above it.
+
+    The alarm rule is strict, ``score > theta``. theta is the (1 - alpha) empirical quantile in
+    its inverted-CDF form: with n scores sorted ascending, j = floor(alpha * n) exceedances are
+    allowed and theta is the (n - j)-th smallest score. Tie rule: scores equal to theta do not
+    alarm, so with ties at theta the calibration FAR is *below* alpha rather than above it; theta
+    is the smallest sample value that keeps the FAR <= alpha.
+
+    Parameters
+    ----------
+    scores : array_like of float
+        Scores of the scored samples of the validation fault-free runs
+        (:func:`fault_free_scores`).
+    alpha : float
+        Target false-alarm rate, 0 <= alpha < 1 (defaults in §5.2: 0.01 and 0.001).
+
+    Returns
+    -------
+    float
+        The threshold theta.
+    """
+    s = np.sort(np.asarray(scores, dtype=float).ravel())
+    if s.size == 0:
+        raise ValueError("no calibration scores")
+    if not np.all(np.isfinite(s)):
+        raise ValueError("calibration scores must be finite")
+    if not 0.0 <= alpha < 1.0:
+        raise ValueError(f"alpha must be in [0, 1), got {alpha!r}")
+    n = s.size
+    # the small epsilon keeps e.g. 0.29 * 100 = 28.999999999999996 from losing an exceedance
+    j = min(int(math.floor(alpha * n + 1e-9)), n - 1)
+    return float(s[n - 1 - j])
+
+
+def apply_threshold(runs: Sequence[RunData], theta: float) -> list[RunData]:
+    """Re-derive each run's alarm as ``score > theta`` (M6 operating point).
+
+    Parameters
+    ----------
+    runs : sequence of RunData
+        Runs with scores.
+    theta : float
+        Threshold from :func:`calibrate_threshold`.
+
+    Returns
+    -------
+    list of RunData
+        Copies of the runs with the new alarm; everything else unchanged.
+    """
+    out = []
+    for r in runs:
+        if r.score is None:
+            raise ValueError("apply_threshold needs runs with scores")
+        out.append(replace(r, alarm=r.score > theta))
+    return out
+
+
+# --------------------------------------------------------------------------- M7
+
+
+def pooled_scores(runs: Sequence[RunData]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Pool scores and ground truth over runs, scored samples only (input of M7).
+
+    Parameters
+    ----------
+    runs : sequence of RunData
+        Runs with scores.
+
+    Returns
+    -------
+    score : numpy.ndarray of float
+    y : numpy.ndarray of bool
+    """
+    if any(r.score is None for r in runs):
+        raise ValueError("pooled_scores needs runs with scores")
+    if not runs:
+        return np.empty(0), np.empty(0, dtype=bool)
+    return (np.concatenate([r.score[r.scored] for r in runs]),
+            np.concatenate([r.faulty[r.scored] for r in runs]))
+
+
+def _check_score_y(score: ArrayLike, y: ArrayLike) -> tuple[NDArray, NDArray]:
+    s = np.asarray(score, dtype=float).ravel()
+    yy = np.asarray(y, dtype=bool).ravel()
+    if s.shape != yy.shape:
+        raise ValueError(f"score and y differ in length ({s.size} vs {yy.size})")
+    if not np.all(np.isfinite(s)):
+        raise ValueError("scores must be finite")
+    return s, yy
+
+
+def roc_auc(score: ArrayLike, y: ArrayLike) -> float:
+    """M7: area under the ROC curve of ``score`` against the labels ``y``.
+
+    Computed as the Mann–Whitney statistic: the probability that a random positive sample
+    scores higher than a random negative one, ties counting 1/2 (average ranks). This equals the
+    trapezoidal ROC area of scikit-learn's ``roc_auc_score``.
+
+    Parameters
+    ----------
+    score : array_like of float
+        Scores, larger = more anomalous.
+    y : array_like of bool
+        Ground truth (True = faulty).
+
+    Returns
+    -------
+    float
+        ROC-AUC in [0, 1]; nan if either class is empty.
+    """
+    s, yy = _check_score_y(score, y)
+    n1 = int(yy.sum())
+    n0 = yy.size - n1
+    if n1 == 0 or n0 == 0:
+        return math.nan
+    ranks = rankdata(s)  # 'average' ranks: a tie contributes 1/2 to each pair
+    return float((ranks[yy].sum() - n1 * (n1 + 1) / 2.0) / (n1 * n0))
+
+
+def average_precision(score: ArrayLike, y: ArrayLike) -> float:
+    """M7: average precision (PR-AUC), as scikit-learn defines it.
+
+    AP = sum_n (R_n - R_{n-1}) P_n over the distinct score thresholds taken in decreasing order,
+    where P_n and R_n are the precision and recall of the rule ``score >= threshold_n`` and
+    R_0 = 0. Tied scores enter together at one threshold (no interpolation).
+
+    Parameters
+    ----------
+    score : array_like of float
+        Scores, larger = more anomalous.
+    y : array_like of bool
+        Ground truth (True = faulty).
+
+    Returns
+    -------
+    float
+        AP in [0, 1]; nan if there is no positive sample.
+    """
+    s, yy = _check_score_y(score, y)
+    n_pos = int(yy.sum())
+    if n_pos == 0:
+        return math.nan
+    order = np.argsort(-s, kind="mergesort")
+    s, yy = s[order], yy[order]
+    # last index of each block of equal scores = one distinct threshold
+    last = np.flatnonzero(np.r_[s[1:] != s[:-1], True])
+    tp = np.cumsum(yy)[last]
+    precision = tp / (last + 1)
+    recall = tp / n_pos
+    return float(np.sum(np.diff(np.r_[0.0, recall]) * precision))
+
+
+# --------------------------------------------------------------------------- M9
+
+
+def isolation_accuracy(runs: Sequence[RunData]) -> float:
+    """M9: sample-weighted isolation accuracy, conditional on detection.
+
+    Over the alarmed scored samples in [tau, eps] of the faulty runs, the fraction whose
+    diagnosis equals the true fault type. The truth at a sample is ``true_type``; inside an
+    intermittent fault's gaps (non-faulty samples within [tau, eps]) it is the type of the most
+    recent faulty sample, i.e. the run's fault f_r of §5.3.
+
+    Parameters
+    ----------
+    runs : sequence of RunData
+        Runs with ``diagnosis`` and ``true_type``; fault-free runs are ignored.
+
+    Returns
+    -------
+    float
+        IA in [0, 1]; nan when the detector gives no diagnosis or there is no alarmed sample
+        in any fault window.
+    """
+    faulty = _faulty_runs(runs)
+    has = [r.diagnosis is not None for r in faulty]
+    if not any(has):
+        return math.nan
+    if not all(has):
+        raise ValueError("some faulty runs have a diagnosis and some do not")
+    hits = total = 0
+    for r in faulty:
+        if r.true_type is None:
+            raise ValueError("isolation_accuracy needs true_type on every faulty run")
+        sl = slice(r.onset, r.end + 1)
+        # forward-fill the truth from the last faulty sample across intermittent gaps
+        idx = np.where(r.faulty[sl], np.arange(sl.start, sl.stop), -1)
+        truth = r.true_type[np.maximum.accumulate(idx)]
+        sel = r.effective_alarm[sl]
+        hits += int((r.diagnosis[sl][sel] == truth[sel]).sum())
+        total += int(sel.sum())
+    return _ratio(hits, total)
+
+
+# --------------------------------------------------------------------------- M15
+
+
+@dataclass(frozen=True)
+class Detectability:
+    """Detectability curve (M15).
+
+    Attributes
+    ----------
+    table : pandas.DataFrame
+        One row per magnitude value, sorted by absolute magnitude, with columns ``magnitude``,
+        ``n_runs``, ``n_detected`` and ``p_d``.
+    mdm : float
+        Minimum detectable magnitude: the smallest (in absolute value) magnitude whose
+        P_D >= level, with its sign; nan if none reaches the level.
+    level : float
+        The P_D level (0.9 for MDM90).
+    """
+
+    table: pd.DataFrame
+    mdm: float
+    level: float
+
+
+def detectability(magnitude: ArrayLike, detected: ArrayLike, level: float = 0.9) -> Detectability:
+    """M15: P_D per fault magnitude and the minimum detectable magnitude (MDM90 by default).
+
+    Runs are grouped by their exact magnitude value (a sweep uses a grid of magnitudes); runs
+    with a nan magnitude are dropped. MDM is min m with P_D(m) >= level, as in §5.4; it does not
+    require P_D to stay above the level at larger magnitudes.
+
+    Parameters
+    ----------
+    magnitude : array_like of float, shape (R,)
+        Per-run fault magnitude (e.g. ``[d.magnitude for d in detections]``).
+    detected : array_like of bool, shape (R,)
+        Per-run detection flag (:func:`detect_run`, at the calibrated threshold).
+    level : float, default 0.9
+        P_D level defining the minimum detectable magnitude.
+
+    Returns
+    -------
+    Detectability
+        The per-magnitude table and the MDM.
+    """
+    mag = np.asarray(magnitude, dtype=float).ravel()
+    det = np.asarray(detected, dtype=bool).ravel()
+    if mag.shape != det.shape:
+        raise ValueError("magnitude and detected differ in length")
+    keep = ~np.isnan(mag)
+    df = pd.DataFrame({"magnitude": mag[keep], "detected": det[keep]})
+    table = (df.groupby("magnitude", sort=False)["detected"]
+             .agg(n_runs="size", n_detected="sum").reset_index())
+    table["n_detected"] = table["n_detected"].astype(int)
+    table["p_d"] = table["n_detected"] / table["n_runs"]
+    # sort by |m|, then by m so that -x precedes +x deterministically
+    table = (table.assign(_abs=table["magnitude"].abs())
+             .sort_values(["_abs", "magnitude"], kind="mergesort")
+             .drop(columns="_abs").reset_index(drop=True))
+    hit = table.loc[table["p_d"] >= level, "magnitude"]
+    mdm = float(hit.iloc[0]) if len(hit) else math.nan
+    return Detectability(table=table, mdm=mdm, level=level)
+
+
+# --------------------------------------------------------------------------- statistics
+
+
+@dataclass(frozen=True)
+class ConfidenceInterval:
+    """Percentile bootstrap confidence interval.
+
+    Attributes
+    ----------
+    estimate : float
+        The statistic on the full set of runs.
+    low, high : float
+        Interval bounds (nan if no bootstrap replicate gave a finite value).
+    level : float
+        Confidence level, e.g. 0.95.
+    n_boot : int
+        Bootstrap replicates drawn.
+    n_valid : int
+        Replicates with a finite statistic (a resample may e.g. contain no faulty run).
+    """
+
+    estimate: float
+    low: float
+    high: float
+    level: float
+    n_boot: int
+    n_valid: int
+
+
+def bootstrap_ci(stat: ArrayLike | Callable[[list[RunData]], float],
+                 runs: Sequence[RunData] | None = None, *, n_boot: int = 1000, seed: int = 0,
+                 level: float = 0.95) -> ConfidenceInterval:
+    """Percentile bootstrap CI over runs (§5.5: resample runs, never samples).
+
+    Parameters
+    ----------
+    stat : array_like of float, or callable
+        Either per-run values (one finite number per run; the statistic is their mean), or a
+        function mapping a list of runs to a number, e.g.
+        ``lambda rs: detection_probability(rs, m=3)``.
+    runs : sequence of RunData, optional
+        The runs to resample; required when ``stat`` is callable.
+    n_boot : int, default 1000
+        Number of bootstrap replicates.
+    seed : int, default 0
+        Seed of the ``numpy.random.default_rng`` generator: same seed, same interval.
+    level : float, default 0.95
+        Confidence level.
+
+    Returns
+    -------
+    ConfidenceInterval
+        Point estimate, bounds at the (1 -+ level)/2 percentiles of the finite replicates.
+    """
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must be in (0, 1), got {level!r}")
+    if n_boot < 1:
+        raise ValueError("n_boot must be >= 1")
+    rng = np.random.default_rng(seed)
+    if callable(stat):
+        if runs is None:
+            raise ValueError("a callable statistic needs the runs to resample")
+        pool = list(runs)
+        n = len(pool)
+
+        def evaluate(idx: NDArray[np.intp]) -> float:
+            return float(stat([pool[i] for i in idx]))
+
+        estimate = float(stat(pool))
+    else:
+        values = np.asarray(stat, dtype=float).ravel()
+        if not np.all(np.isfinite(values)):
+            raise ValueError("per-run values must be finite; use a callable for nan-aware stats")
+        n = values.size
+
+        def evaluate(idx: NDArray[np.intp]) -> float:
+            return float(values[idx].mean())
+
+        estimate = float(values.mean()) if n else math.nan
+    if n == 0:
+        raise ValueError("nothing to resample")
+    idx = rng.integers(0, n, size=(n_boot, n))
+    boot = np.array([evaluate(row) for row in idx])
+    finite = boot[np.isfinite(boot)]
+    if finite.size:
+        low, high = np.percentile(finite, [50 * (1 - level), 50 * (1 + level)])
+    else:
+        low = high = math.nan
+    return ConfidenceInterval(estimate=estimate, low=float(low), high=float(high), level=level,
+                              n_boot=int(n_boot), n_valid=int(finite.size))

@@ -1,0 +1,91 @@
+"""Conformance of every registered diagnostic plug-in to the contract of
+r2rsim.diagnostics.base (scikit-learn conventions), on small registration-line datasets."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+from sklearn.base import clone
+
+import r2rsim
+from r2rsim.dataset.read import read_runs
+from r2rsim.diagnostics.registry import get, plugins
+from r2rsim.errors import InputError
+
+from conftest import REPO
+
+PLUGINS = sorted(plugins())
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    """Two healthy OC1 runs (seeds 1, 2) and one with sensor A offset +15 % at 20 s."""
+    d = tmp_path_factory.mktemp("plugin_data")
+    out = {}
+    for name, scen, seed in (("h1", "oc1_nominal", 1), ("h2", "oc1_nominal", 2),
+                             ("f", "sensor_a_offset_P15", 3)):
+        r2rsim.run_scenario(REPO / "scenarios" / "thesis" / f"{scen}.yaml", output=d / name,
+                            seed=seed, duration=30.0)
+        out[name] = read_runs(d / name)[0]
+    return out
+
+
+def test_baselines_are_registered():
+    assert {"residual", "pca", "dpca", "iforest"} <= set(PLUGINS)
+
+
+@pytest.mark.parametrize("name", PLUGINS)
+def test_plugin_conformance(name, data):
+    cls = get(name)
+    params = {"random_state": 0} if "random_state" in cls().get_params() else {}
+    est = cls(**params)
+    # __init__ stores parameters only: clone round-trips them, nothing is fitted yet
+    assert clone(est).get_params() == est.get_params()
+    assert not [k for k in vars(est) if k.endswith("_") and not k.startswith("_")]
+    with pytest.raises(RuntimeError, match="not fitted"):
+        est.score(data["f"])
+    assert est.fit([data["h1"], data["h2"]]) is est
+    scores = est.score(data["f"])
+    # aligned to the run's samples, a statistic column, boolean alarms
+    assert scores.index.equals(data["f"].samples.index)
+    assert "statistic" in scores.columns
+    alarms = est.decide(scores)
+    assert alarms.dtype == bool and alarms.index.equals(scores.index)
+    # deterministic with a fixed random_state (or without randomness)
+    again = cls(**params).fit([data["h1"], data["h2"]]).score(data["f"])
+    pd.testing.assert_frame_equal(scores, again)
+    # it uses only what an algorithm may see
+    assert not [c for c in getattr(est, "columns_", []) if c.startswith(("true.", "state.",
+                                                                          "label.", "act."))]
+
+
+@pytest.mark.parametrize("name", PLUGINS)
+def test_plugin_checks_its_required_channels(name, data):
+    cls = get(name)
+    frame = data["h1"].visible()[["t_s"]]
+    with pytest.raises(InputError, match="no column matching"):
+        cls().fit([frame])
+
+
+@pytest.mark.parametrize("name", ["residual", "pca"])
+def test_baseline_detects_the_sensor_a_offset(name, data):
+    # +15 % offset on sensor A (19.5 N on 130 N, noise 1 N): an easy fault for a monitor
+    # fitted on healthy OC1 runs; few alarms before the onset, nearly all after it
+    est = get(name)().fit([data["h1"], data["h2"]])
+    run = data["f"]
+    a = est.decide(est.score(run)).to_numpy()
+    t = run.samples.t_s.to_numpy()
+    pre, post = (t > 5.0) & (t < 20.0), t >= 21.0
+    assert a[pre].mean() < 0.05
+    assert a[post].mean() > 0.95
+    assert np.isfinite(est.threshold_)
+
+
+def test_list_plugins(capsys):
+    from r2rsim.cli import main
+
+    assert main(["list", "plugins"]) == 0
+    out = capsys.readouterr().out
+    for name in ("residual", "pca", "dpca", "iforest"):
+        assert f"\n{name} " in out
