@@ -377,3 +377,21 @@ def test_model_fault_overlaps(tmp_path):
     with pytest.raises(InputError, match="declare compose"):
         r2rsim.run_scenario(scenario([{**bias, "compose": None}, draw]),
                             output=tmp_path / "no")
+
+
+def test_shipped_fault_scenario(tmp_path):
+    """scenarios/line_a_faults.yaml (shortened): every fault row labels its window, and the
+    draw error shows in span 4 at the size mass balance gives."""
+    out = tmp_path / "out"
+    r2rsim.run_scenario(REPO / "scenarios" / "line_a_faults.yaml", output=out, duration=30.0)
+    s = pd.read_parquet(out / "samples")
+    f = pd.read_parquet(out / "faults.parquet")
+    assert set(f.fault_type) == {"process.draw_error", "process.bearing_friction",
+                                 "actuator.loss_of_effectiveness"}
+    assert_labels(s, f)
+    runs = pd.read_parquet(out / "runs.parquet")
+    assert len(yaml.safe_load(runs.disturbances_json.iloc[0])) == 3
+    # 0.1 % draw on the pull roll at full magnitude (15-25 s): span 4 about EA·0.001 higher
+    T4 = s["state.span4.tension_N"].to_numpy()
+    rise = T4[at(s, 24.0)] - T4[at(s, 9.0)]
+    assert rise == pytest.approx(EA * 0.001 * (1 + 260 / EA), rel=0.05)

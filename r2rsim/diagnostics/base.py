@@ -81,6 +81,14 @@ class Diagnostic(BaseEstimator):
         X = np.vstack([f[cols].to_numpy(dtype=float) for f in frames])
         return X[np.all(np.isfinite(X), axis=1)]
 
+    def _fit_scaling(self, X: np.ndarray) -> np.ndarray:
+        """Learn each column's mean and standard deviation (``mean_``, ``std_``; a constant
+        column keeps scale 1) and return X standardised."""
+        self.mean_ = X.mean(axis=0)
+        sd = X.std(axis=0)
+        self.std_ = np.where(sd > 0, sd, 1.0)
+        return (X - self.mean_) / self.std_
+
     def _frames(self, runs) -> list[pd.DataFrame]:
         if not isinstance(runs, (list, tuple)):
             runs = [runs]

@@ -28,10 +28,7 @@ class ResidualThreshold(Diagnostic):
     def fit(self, runs):
         frames = self._frames(runs)
         self.columns_ = self._columns(frames[0])
-        X = self._matrix(frames, self.columns_)
-        self.mean_ = X.mean(axis=0)
-        self.std_ = np.where(X.std(axis=0) > 0, X.std(axis=0), 1.0)
-        z = np.abs((X - self.mean_) / self.std_).max(axis=1)
+        z = np.abs(self._fit_scaling(self._matrix(frames, self.columns_))).max(axis=1)
         self.threshold_ = float(np.quantile(z, 1.0 - self.alpha))
         return self
 
@@ -88,10 +85,7 @@ class PCAMonitor(Diagnostic):
         frames = self._frames(runs)
         self.columns_ = self._columns(frames[0])
         X = np.vstack([self._design(f) for f in frames])
-        X = X[np.all(np.isfinite(X), axis=1)]
-        self.mean_ = X.mean(axis=0)
-        self.std_ = np.where(X.std(axis=0) > 0, X.std(axis=0), 1.0)
-        Z = (X - self.mean_) / self.std_
+        Z = self._fit_scaling(X[np.all(np.isfinite(X), axis=1)])
         n = len(Z)
         _, s, Vt = np.linalg.svd(Z, full_matrices=False)
         lam = s**2 / (n - 1)
@@ -172,10 +166,7 @@ class IsolationForestDetector(Diagnostic):
 
         frames = self._frames(runs)
         self.columns_ = self._columns(frames[0])
-        X = self._matrix(frames, self.columns_)
-        self.mean_ = X.mean(axis=0)
-        self.std_ = np.where(X.std(axis=0) > 0, X.std(axis=0), 1.0)
-        Z = (X - self.mean_) / self.std_
+        Z = self._fit_scaling(self._matrix(frames, self.columns_))
         self.forest_ = IsolationForest(n_estimators=self.n_estimators,
                                        max_samples=min(self.max_samples, len(Z)),
                                        random_state=self.random_state).fit(Z)

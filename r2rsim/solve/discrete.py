@@ -397,14 +397,17 @@ class DiscreteLogic:
         return y
 
     def _do_seize(self, t, y, a, log):
-        m = a.target
+        return self._seize(t, y, a.target, log, "")
+
+    def _seize(self, t, y, m, log, why):
+        """Mover m seizes where it is: q' = 0 and held (MP_MODE 2)."""
         I, P = self.cl.I, self.cl.P
         P[I[H_OFF_MP] + m * NMP + MP_MODE] = 2.0
         y[I[I[H_OFF_MI] + m * NMI + MI_QD]] = 0.0
         q = float(y[I[I[H_OFF_MI] + m * NMI + MI_Q]])
-        log.append(Event(t, "dancer_seized", self.cl.mover_ids[m], "start",
-                            f"{self.cl.mover_ids[m]} seizes at position {q:.4g}",
-                            {"position": q}))
+        mid = self.cl.mover_ids[m]
+        log.append(Event(t, "dancer_seized", mid, "start",
+                         f"{mid} seizes at position {q:.4g}{why}", {"position": q}))
         return y
 
     def _do_sensor_fault(self, t, y, a, log):
@@ -517,14 +520,11 @@ class DiscreteLogic:
         m = self.cl.mover_ids.index(f.target)
         I, P = self.cl.I, self.cl.P
         bm = I[H_OFF_MP] + m * NMP
-        mid = self.cl.mover_ids[m]
-        q = float(y[I[I[H_OFF_MI] + m * NMI + MI_Q]])
         if f.p(np.array([t]))[0] > 0.0:
-            P[bm + MP_MODE] = 2.0
-            y[I[I[H_OFF_MI] + m * NMI + MI_QD]] = 0.0
-            log.append(Event(t, "dancer_seized", mid, "start",
-                             f"{mid} seizes at position {q:.4g} ({f.id})", {"position": q}))
-        elif P[bm + MP_MODE] == 2.0:
+            return self._seize(t, y, m, log, f" ({f.id})")
+        if P[bm + MP_MODE] == 2.0:
+            mid = self.cl.mover_ids[m]
+            q = float(y[I[I[H_OFF_MI] + m * NMI + MI_Q]])
             P[bm + MP_MODE] = 0.0  # free again; its end stops are re-detected as events
             log.append(Event(t, "dancer_seized", mid, "end", f"{mid} is free again ({f.id})",
                              {"position": q}))
