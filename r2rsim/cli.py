@@ -72,6 +72,86 @@ def _cmd_run(args) -> int:
     return 0
 
 
+def _parse_params(items: list[str], cls) -> dict:
+    """``k=v`` pairs; values are YAML scalars or lists (``alpha=0.01``, ``lags=3``)."""
+    import yaml
+
+    known = cls().get_params()
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise InputError(f"--param expects key=value, got '{item}'")
+        if key not in known:
+            raise InputError(f"--param {key}: {cls.name} has no parameter '{key}' (its "
+                             f"parameters: {', '.join(known) or 'none'})")
+        try:
+            out[key] = yaml.safe_load(value)
+        except yaml.YAMLError:
+            raise InputError(f"--param {key}: cannot read the value '{value}'") from None
+    return out
+
+
+def _cmd_diagnose(args) -> int:
+    from .diagnostics.registry import get
+    from .evaluate.harness import evaluate, read_datasets, split_by_condition, split_by_seed
+
+    cls = get(args.method)
+    est = cls(**_parse_params(args.param, cls))
+    if args.data:
+        if args.train or args.test or args.val:
+            raise InputError("give either --data with --split, or --train/--val/--test")
+        runs = read_datasets(args.data)
+        if args.split == "seed":
+            split = split_by_seed(runs)
+        else:
+            split = split_by_condition(runs, train=args.train_mode, test=args.test_mode)
+    else:
+        if not args.train or not args.test:
+            raise InputError("name the training and test datasets (--train and --test), or "
+                             "pool them with --data and --split")
+        from .evaluate.harness import Split
+
+        split = Split(read_datasets(args.train), read_datasets(args.val or []),
+                      read_datasets(args.test))
+    print(split.describe())
+    if not split.val:
+        print("no validation runs: metrics at the plug-in's own threshold only (no *_cal)")
+    ev = evaluate(est, split.train, split.test, split.val, alpha=args.alpha,
+                  m=args.persistence, h=args.grace, n_boot=args.n_boot, seed=args.seed,
+                  split=split.name)
+    out = ev.write(args.output or Path("results") / args.method)
+    print(ev.format())
+    print(f"written: {out}/predictions.parquet, metrics.parquet, metrics.csv")
+    return 0
+
+
+def _cmd_bench(args) -> int:
+    from .bench import run_bench
+
+    res = run_bench(args.spec, workdir=args.workdir, update=args.update)
+    if args.output:
+        out = Path(args.output)
+        out.mkdir(parents=True, exist_ok=True)
+        res.results.to_parquet(out / "results.parquet", index=False)
+        res.results.to_csv(out / "results.csv", index=False)
+        print(f"results written: {out}/results.parquet, results.csv")
+    if res.baseline is None or args.update:
+        return 0
+    for line in res.improvements:
+        print(f"improved: {line}")
+    if res.improvements:
+        print("(better than the baseline beyond tolerance: update it with --update)")
+    if res.regressions:
+        for line in res.regressions:
+            print(f"REGRESSION: {line}", file=sys.stderr)
+        print(f"error: {len(res.regressions)} of {res.n_checked} metrics regressed beyond "
+              f"their tolerance against {res.baseline}", file=sys.stderr)
+        return EXIT_FAILURE
+    print(f"bench passed: {res.n_checked} metrics within tolerance of {res.baseline}")
+    return 0
+
+
 def _cmd_validate(args) -> int:
     from .schema import load_line, load_scenario, read_yaml
 
@@ -191,6 +271,38 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("schema", help="print the JSON Schema of a line or scenario file")
     s.add_argument("kind", choices=["line", "scenario"])
     s.set_defaults(func=_cmd_schema)
+
+    d = sub.add_parser("diagnose", help="fit a diagnostic plug-in on healthy runs, score "
+                       "test runs, write predictions and metrics")
+    d.add_argument("--method", required=True, help="registered plug-in (r2rsim list plugins)")
+    d.add_argument("--train", nargs="+", metavar="DATASET", help="fault-free datasets to fit on")
+    d.add_argument("--val", nargs="+", metavar="DATASET",
+                   help="fault-free datasets to calibrate the threshold on (M6)")
+    d.add_argument("--test", nargs="+", metavar="DATASET", help="datasets to score")
+    d.add_argument("--data", nargs="+", metavar="DATASET",
+                   help="a pool of datasets to split with --split")
+    d.add_argument("--split", choices=["seed", "condition"], default="seed",
+                   help="with --data: by seed (60/20/20) or by operating condition")
+    d.add_argument("--train-mode", default="OC1", help="--split condition: training mode")
+    d.add_argument("--test-mode", default="OC2", help="--split condition: test mode")
+    d.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                   help="plug-in parameter (repeatable)")
+    d.add_argument("--alpha", type=float, default=0.01, help="calibration false-alarm rate")
+    d.add_argument("-m", "--persistence", type=int, default=1,
+                   help="consecutive alarms that confirm a detection")
+    d.add_argument("--grace", type=float, default=0.0, help="grace period after a fault [s]")
+    d.add_argument("--n-boot", type=int, default=1000, help="bootstrap replicates over runs")
+    d.add_argument("--seed", type=int, default=0, help="seed of the bootstrap")
+    d.add_argument("-o", "--output", help="output directory (default: results/METHOD)")
+    d.set_defaults(func=_cmd_diagnose)
+
+    b = sub.add_parser("bench", help="run a diagnostic benchmark spec and compare with its "
+                       "baseline results (non-zero exit on a regression)")
+    b.add_argument("spec")
+    b.add_argument("--workdir", help="keep (and reuse) the simulated datasets here")
+    b.add_argument("--update", action="store_true", help="write the baseline file")
+    b.add_argument("-o", "--output", help="write results.parquet/.csv here")
+    b.set_defaults(func=_cmd_bench)
 
     ls = sub.add_parser("list", help="list element, sensor, controller or fault types, "
                         "diagnostic plug-ins, or the channels of a line")

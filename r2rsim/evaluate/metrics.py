@@ -51,8 +51,10 @@ __all__ = [
     "far",
     "fault_free_scores",
     "isolation_accuracy",
+    "isolation_counts",
     "pooled_scores",
     "roc_auc",
+    "window_counts",
 ]
 
 # Relative tolerance (in sample periods) when comparing t[eps] + h with sample times, so that a
@@ -370,10 +372,17 @@ def detection_rate(runs: Sequence[RunData]) -> float:
     """
     hits = total = 0
     for r in _faulty_runs(runs):
-        sl = slice(r.onset, r.end + 1)
-        hits += int(r.effective_alarm[sl].sum())
-        total += int(r.scored[sl].sum())
+        h, n = window_counts(r)
+        hits += h
+        total += n
     return _ratio(hits, total)
+
+
+def window_counts(run: RunData) -> tuple[int, int]:
+    """Alarmed scored samples and scored samples in a faulty run's window [tau, eps] (the
+    numerator and denominator of M3 for one run)."""
+    sl = slice(run.onset, run.end + 1)
+    return int(run.effective_alarm[sl].sum()), int(run.scored[sl].sum())
 
 
 # --------------------------------------------------------------------------- M4, M5
@@ -749,16 +758,23 @@ def isolation_accuracy(runs: Sequence[RunData]) -> float:
         raise ValueError("some faulty runs have a diagnosis and some do not")
     hits = total = 0
     for r in faulty:
-        if r.true_type is None:
-            raise ValueError("isolation_accuracy needs true_type on every faulty run")
-        sl = slice(r.onset, r.end + 1)
-        # forward-fill the truth from the last faulty sample across intermittent gaps
-        idx = np.where(r.faulty[sl], np.arange(sl.start, sl.stop), -1)
-        truth = r.true_type[np.maximum.accumulate(idx)]
-        sel = r.effective_alarm[sl]
-        hits += int((r.diagnosis[sl][sel] == truth[sel]).sum())
-        total += int(sel.sum())
+        h, n = isolation_counts(r)
+        hits += h
+        total += n
     return _ratio(hits, total)
+
+
+def isolation_counts(run: RunData) -> tuple[int, int]:
+    """Correctly diagnosed and all alarmed scored samples in a faulty run's window [tau, eps]
+    (the numerator and denominator of M9 for one run)."""
+    if run.diagnosis is None or run.true_type is None:
+        raise ValueError("isolation_accuracy needs diagnosis and true_type on every faulty run")
+    sl = slice(run.onset, run.end + 1)
+    # forward-fill the truth from the last faulty sample across intermittent gaps
+    idx = np.where(run.faulty[sl], np.arange(sl.start, sl.stop), -1)
+    truth = run.true_type[np.maximum.accumulate(idx)]
+    sel = run.effective_alarm[sl]
+    return int((run.diagnosis[sl][sel] == truth[sel]).sum()), int(sel.sum())
 
 
 # --------------------------------------------------------------------------- M15

@@ -1,0 +1,281 @@
+"""``r2rsim bench``: a diagnostic benchmark from a YAML spec (scenarios × seeds × plug-ins ×
+metrics), compared with a stored baseline results file.
+
+A spec names *studies* (each: the scenarios and seeds of its train, val and test runs), the
+*methods* (registered plug-ins with parameters), the evaluation settings, and which metrics
+to compare with the baseline file at which absolute tolerance. The runs are simulated (or
+reused from ``workdir``), every method is evaluated by :func:`r2rsim.evaluate.harness.evaluate`
+on every study, and a metric *regresses* when it is worse than the baseline by more than its
+tolerance, in the direction the metric is better (:data:`r2rsim.evaluate.harness.METRICS`).
+See docs/diagnostics.md for the file format.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any
+
+import pandas as pd
+from pydantic import Field, model_validator
+
+from .dataset.read import read_runs
+from .diagnostics.registry import get
+from .errors import InputError
+from .evaluate.harness import METRICS, Evaluation, evaluate
+from .schema.line import Id, Strict
+from .schema.loader import _validate, read_yaml
+from .schema.quantities import Time
+
+KEY = ["study", "label", "condition", "fault", "magnitude", "metric"]
+
+
+class RunSet(Strict):
+    """Runs of one scenario file, one per seed."""
+
+    scenario: str = Field(description="scenario file, relative to the spec")
+    seeds: Annotated[list[int], Field(min_length=1)] = Field(description="root seeds")
+
+
+class Study(Strict):
+    """Train (healthy), val (healthy, threshold calibration) and test runs."""
+
+    name: Id
+    train: Annotated[list[RunSet], Field(min_length=1)]
+    val: list[RunSet] = Field(default_factory=list)
+    test: Annotated[list[RunSet], Field(min_length=1)]
+
+
+class MethodSpec(Strict):
+    """A registered plug-in and its parameters; ``label`` tells apart two settings of one
+    method (default: the method name)."""
+
+    method: str
+    params: dict[str, Any] = Field(default_factory=dict)
+    label: str | None = None
+
+    @property
+    def key(self) -> str:
+        return self.label or self.method
+
+
+class EvaluationSettings(Strict):
+    alpha: Annotated[float, Field(gt=0, lt=1)] = 0.01
+    persistence: Annotated[int, Field(ge=1)] = 1
+    grace: Annotated[Time, Field(ge=0)] = 0.0
+    n_boot: Annotated[int, Field(ge=0)] = 200
+    seed: int = 0
+
+
+class Compare(Strict):
+    """The baseline results file and the metrics checked against it, each with an absolute
+    tolerance."""
+
+    baseline: str = Field(description="baseline results CSV, relative to the spec")
+    metrics: Annotated[dict[str, Annotated[float, Field(ge=0)]], Field(min_length=1)]
+
+    @model_validator(mode="after")
+    def _known(self):
+        unknown = sorted(set(self.metrics) - set(METRICS))
+        if unknown:
+            raise ValueError(f"unknown metric '{unknown[0]}' (known: {', '.join(METRICS)})")
+        return self
+
+
+class BenchSpec(Strict):
+    name: Id
+    description: str = ""
+    duration: Annotated[Time, Field(gt=0)] | None = Field(
+        None, description="overrides every scenario's duration")
+    studies: Annotated[list[Study], Field(min_length=1)]
+    methods: Annotated[list[MethodSpec], Field(min_length=1)]
+    evaluation: EvaluationSettings = Field(default_factory=EvaluationSettings)
+    compare: Compare | None = None
+
+
+def load_spec(path: str | Path) -> BenchSpec:
+    """Load and check a benchmark spec: scenario files exist, methods are registered and
+    their parameters are theirs.
+
+    Raises
+    ------
+    InputError
+        Naming the file, the YAML path and the problem.
+    """
+    path = Path(path)
+    spec = _validate(BenchSpec, read_yaml(path), str(path))
+    f = str(path)
+    names = [s.name for s in spec.studies]
+    if len(set(names)) != len(names):
+        raise InputError("study names must be unique", file=f, path="studies")
+    for i, st in enumerate(spec.studies):
+        for role in ("train", "val", "test"):
+            for j, rs in enumerate(getattr(st, role)):
+                if not (path.parent / rs.scenario).is_file():
+                    raise InputError(f"scenario file '{rs.scenario}' not found",
+                                     file=f, path=f"studies[{i}].{role}[{j}].scenario")
+    labels = [m.key for m in spec.methods]
+    if len(set(labels)) != len(labels):
+        raise InputError("two methods have the same label; give one a 'label'", file=f,
+                         path="methods")
+    for i, m in enumerate(spec.methods):
+        try:
+            cls = get(m.method)
+        except InputError as exc:
+            raise InputError(exc.message, file=f, path=f"methods[{i}].method") from None
+        known = cls().get_params()
+        for k in m.params:
+            if k not in known:
+                raise InputError(f"{m.method} has no parameter '{k}' (its parameters: "
+                                 f"{', '.join(known) or 'none'})", file=f,
+                                 path=f"methods[{i}].params.{k}")
+    return spec
+
+
+@dataclass
+class BenchResult:
+    """Outcome of :func:`run_bench`."""
+
+    results: pd.DataFrame
+    evaluations: dict[tuple[str, str], Evaluation]
+    regressions: list[str]
+    improvements: list[str]
+    n_checked: int
+    baseline: Path | None
+
+
+def _dataset(workdir: Path, scenario: Path, seed: int, duration: float | None) -> Path:
+    """Simulate one run into the work directory, or reuse it if it is already there (the
+    name holds the scenario's hash, the seed and the duration)."""
+    from .run import run_scenario
+
+    sha = hashlib.sha256(scenario.read_bytes()).hexdigest()[:12]
+    out = workdir / f"{scenario.stem}__{sha}__s{seed}__d{duration or 'scenario'}"
+    if not (out / "manifest.json").is_file():
+        run_scenario(scenario, output=out, seed=seed, duration=duration)
+    return out
+
+
+def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
+              update: bool = False, log=print) -> BenchResult:
+    """Run a benchmark spec and compare with its baseline file.
+
+    Parameters
+    ----------
+    spec_path : str or Path
+    workdir : str or Path, optional
+        Where the simulated datasets go (and are reused from); a temporary directory when
+        not given.
+    update : bool
+        Write the baseline file from this run's results instead of comparing.
+    log : callable
+        Receives progress and the printed tables.
+    """
+    spec_path = Path(spec_path)
+    spec = load_spec(spec_path)
+    tmp = None
+    if workdir is None:
+        tmp = tempfile.TemporaryDirectory(prefix="r2rsim-bench-")
+        workdir = tmp.name
+    workdir = Path(workdir)
+    workdir.mkdir(parents=True, exist_ok=True)
+    ev_set = spec.evaluation
+    try:
+        frames, evaluations = [], {}
+        for study in spec.studies:
+            roles = {}
+            for role in ("train", "val", "test"):
+                runs = []
+                for rs in getattr(study, role):
+                    for seed in rs.seeds:
+                        runs += read_runs(_dataset(workdir, spec_path.parent / rs.scenario,
+                                                   seed, spec.duration))
+                roles[role] = runs
+            log(f"study {study.name}: {len(roles['train'])} train, {len(roles['val'])} val, "
+                f"{len(roles['test'])} test runs")
+            for m in spec.methods:
+                est = get(m.method)(**m.params)
+                ev = evaluate(est, roles["train"], roles["test"], roles["val"],
+                              alpha=ev_set.alpha, m=ev_set.persistence, h=ev_set.grace,
+                              n_boot=ev_set.n_boot, seed=ev_set.seed, split=study.name)
+                evaluations[(study.name, m.key)] = ev
+                log(ev.format())
+                frames.append(ev.metrics.assign(study=study.name, label=m.key))
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
+    results = pd.concat(frames, ignore_index=True)
+    results = results[["study", "label", *[c for c in results.columns
+                                           if c not in ("study", "label")]]]
+    if spec.compare is None:
+        return BenchResult(results, evaluations, [], [], 0, None)
+    baseline = spec_path.parent / spec.compare.baseline
+    if update:
+        keep = results[results["metric"].isin(list(spec.compare.metrics))]
+        keep[KEY + ["value"]].to_csv(baseline, index=False, float_format="%.10g")
+        log(f"baseline written: {baseline} ({len(keep)} values)")
+        return BenchResult(results, evaluations, [], [], 0, baseline)
+    if not baseline.is_file():
+        raise InputError(f"baseline file '{spec.compare.baseline}' not found (create it with "
+                         f"`r2rsim bench {spec_path} --update`)", file=str(spec_path),
+                         path="compare.baseline")
+    regressions, improvements, n = compare(results, pd.read_csv(baseline),
+                                           spec.compare.metrics)
+    return BenchResult(results, evaluations, regressions, improvements, n, baseline)
+
+
+def _fmt(v: float) -> str:
+    return "nan" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.6g}"
+
+
+def compare(results: pd.DataFrame, baseline: pd.DataFrame, tolerances: dict[str, float]
+            ) -> tuple[list[str], list[str], int]:
+    """Compare results with baseline values, metric by metric.
+
+    Returns
+    -------
+    regressions : list of str
+        One line per metric worse than its baseline by more than its tolerance, or missing.
+    improvements : list of str
+        One line per metric better by more than its tolerance (the baseline is stale).
+    n_checked : int
+        Baseline values compared.
+    """
+    cur = {_key(r): r.value for r in results.itertuples(index=False)}
+    regressions, improvements, n = [], [], 0
+    for row in baseline.itertuples(index=False):
+        if row.metric not in tolerances:
+            continue
+        n += 1
+        where = (f"{row.study}/{row.label} {row.condition} {row.fault}"
+                 + ("" if pd.isna(row.magnitude) else f" magnitude {row.magnitude:g}")
+                 + f" {row.metric}")
+        tol = tolerances[row.metric]
+        value = cur.get(_key(row))
+        if value is None or math.isnan(value):
+            if not math.isnan(row.value):
+                regressions.append(f"{where}: baseline {_fmt(row.value)}, now no value")
+            continue
+        if math.isnan(row.value):
+            improvements.append(f"{where}: baseline no value, now {_fmt(value)}")
+            continue
+        worse = (row.value - value) if METRICS[row.metric].higher_is_better else \
+            (value - row.value)
+        line = (f"{where}: baseline {_fmt(row.value)}, now {_fmt(value)} "
+                f"({'worse' if worse > 0 else 'better'} by {_fmt(abs(worse))}, "
+                f"tolerance {_fmt(tol)})")
+        slack = tol + 1e-9 * max(1.0, abs(row.value))  # the CSV keeps 10 digits
+        if worse > slack:
+            regressions.append(line)
+        elif -worse > slack:
+            improvements.append(line)
+    return regressions, improvements, n
+
+
+def _key(row) -> tuple:
+    """A result's identity; the magnitude as text so that 'no magnitude' (nan) matches."""
+    mag = "" if pd.isna(row.magnitude) else f"{float(row.magnitude):.10g}"
+    return (row.study, row.label, row.condition, row.fault, mag, row.metric)

@@ -1,0 +1,557 @@
+"""The evaluation harness: fit a diagnostic plug-in on healthy runs, score test runs, and
+compute every metric of :mod:`r2rsim.evaluate.metrics` the same way for every plug-in.
+
+The protocol (fdd-benchmarks.md §5.5):
+
+* **train** runs are fault-free; the plug-in is fitted on them and on nothing else;
+* **val** runs are fault-free; the harness calibrates its own threshold theta on their scores
+  at the false-alarm rate ``alpha`` (M6) and reports the ``*_cal`` metrics at ``score > theta``
+  next to the metrics at the plug-in's own alarms (``decide``);
+* **test** runs (faulty and fault-free) are scored and the metrics computed on them, per
+  stratum: operating condition (``runs.operating_mode``) × fault (type and target, e.g.
+  ``sensor.offset:sensor_A``), and per magnitude where a fault was run at several magnitudes
+  (M15).
+
+:func:`split_by_seed` and :func:`split_by_condition` build the two standard splits from a pool
+of runs. Confidence intervals are percentile bootstraps over the runs of a stratum (never over
+samples), computed from per-run counts so that a thousand replicates cost milliseconds.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from sklearn.base import clone
+
+from ..dataset.read import Run, read_runs
+from ..errors import InputError
+from ..schema.scenario import SplitBySeed
+from .metrics import (
+    RunData,
+    average_precision,
+    calibrate_threshold,
+    detect_run,
+    detectability,
+    false_alarm_events,
+    far,
+    isolation_counts,
+    roc_auc,
+    window_counts,
+)
+
+__all__ = ["METRICS", "Evaluation", "Split", "evaluate", "read_datasets", "run_data",
+           "split_by_condition", "split_by_seed"]
+
+
+@dataclass(frozen=True)
+class Metric:
+    """What a metric name in the results table means."""
+
+    description: str
+    higher_is_better: bool
+    unit: str = ""
+
+
+#: every metric the harness reports, by the name used in the results table
+METRICS: dict[str, Metric] = {
+    "far_ff": Metric("M1 sample false-alarm rate over fault-free runs", False),
+    "far_pre": Metric("M1 sample false-alarm rate over pre-onset samples of faulty runs", False),
+    "fa_per_h": Metric("M2 false-alarm events per hour of fault-free time", False, "1/h"),
+    "dr": Metric("M3 sample detection rate over the fault windows", True),
+    "pd": Metric("M4 run-level detection probability (strict)", True),
+    "pd_lenient": Metric("M4 run-level detection probability (lenient)", True),
+    "dd_median_s": Metric("M5 median detection delay over detected runs", False, "s"),
+    "dd_p90_s": Metric("M5 90th percentile of the detection delay", False, "s"),
+    "dd_censored_mean_s": Metric("M5 mean delay, a miss counting its horizon", False, "s"),
+    "n_missed": Metric("M5 faulty runs not detected", False),
+    "roc_auc": Metric("M7 area under the ROC curve of the statistic", True),
+    "pr_auc": Metric("M7 average precision of the statistic", True),
+    "ia": Metric("M9 isolation accuracy over alarmed fault samples", True),
+    "mdm90": Metric("M15 smallest |magnitude| with P_D >= 0.9", False),
+    "theta": Metric("M6 threshold calibrated on the validation runs", False),
+    "far_ff_cal": Metric("M1 FAR over fault-free test runs at theta (M6)", False),
+    "far_pre_cal": Metric("M1 pre-onset FAR at theta (M6)", False),
+    "dr_cal": Metric("M3 detection rate at theta (M6)", True),
+    "pd_cal": Metric("M4 detection probability at theta (M6)", True),
+    "dd_median_cal_s": Metric("M5 median delay at theta (M6)", False, "s"),
+    "fit_s": Metric("wall time of fit", False, "s"),
+    "exec_s_per_sim_h": Metric("wall time of score per simulated hour", False, "s/h"),
+}
+
+#: stratum value meaning "pooled over every value"
+ALL = "all"
+#: fault stratum of fault-free runs
+NONE = "none"
+
+
+# --------------------------------------------------------------------------- splits
+
+
+@dataclass
+class Split:
+    """Runs by role: fit on ``train``, calibrate on ``val``, score ``test``."""
+
+    train: list[Run]
+    val: list[Run]
+    test: list[Run]
+    name: str = "explicit"
+
+    def describe(self) -> str:
+        """One line: how many runs each role has."""
+        nf = sum(_is_faulty(r) for r in self.test)
+        return (f"split '{self.name}': {len(self.train)} train, {len(self.val)} val, "
+                f"{len(self.test)} test ({nf} faulty)")
+
+
+def _is_faulty(run: Run) -> bool:
+    return len(run.faults) > 0 or bool(run.samples["label.is_faulty"].any())
+
+
+def split_by_seed(runs: Sequence[Run], train: float = 0.6, val: float = 0.2,
+                  test: float = 0.2) -> Split:
+    """Assign runs to roles from their seeds, deterministically.
+
+    A run whose scenario names its split (``runs.split``) keeps it; the others are assigned
+    from the seed exactly as a scenario's ``split: {by: seed}`` would. Plug-ins learn from
+    healthy runs only, so every faulty run is a test run whatever its seed.
+
+    Parameters
+    ----------
+    runs : sequence of Run
+    train, val, test : float
+        Fractions for the fault-free runs without a split of their own (summing to 1).
+    """
+    rule = SplitBySeed(by="seed", train=train, val=val, test=test)
+    roles: dict[str, list[Run]] = {"train": [], "val": [], "test": []}
+    for r in runs:
+        if _is_faulty(r):
+            roles["test"].append(r)
+            continue
+        s = r.info.get("split")
+        roles[s if s in roles else rule.assign(int(r.info["seed"]))].append(r)
+    return Split(roles["train"], roles["val"], roles["test"], name="seed")
+
+
+def split_by_condition(runs: Sequence[Run], train: str = "OC1", test: str = "OC2",
+                       val: float = 0.25) -> Split:
+    """Train and calibrate on one operating condition, test on another.
+
+    Fault-free runs of mode ``train`` are split by seed into train and val (a fraction ``val``
+    of them calibrates the threshold); every run of mode ``test`` is a test run. Runs of other
+    modes, and faulty runs of mode ``train``, are not used.
+
+    Parameters
+    ----------
+    runs : sequence of Run
+    train, test : str
+        Operating modes as named in the scenarios' programmes (``runs.operating_mode``).
+    val : float
+        Fraction of the healthy ``train``-mode runs held out for calibration.
+    """
+    modes = sorted({r.mode for r in runs})
+    for role, mode in (("train", train), ("test", test)):
+        if mode not in modes:
+            raise InputError(f"split by condition: no run has the {role} mode '{mode}' "
+                             f"(modes present: {', '.join(m or '(none)' for m in modes)})")
+    rule = SplitBySeed(by="seed", train=1.0 - val, val=val, test=0.0)
+    out = Split([], [], [], name=f"condition {train}->{test}")
+    for r in runs:
+        if r.mode == test:
+            out.test.append(r)
+        elif r.mode == train and not _is_faulty(r):
+            (out.val if rule.assign(int(r.info["seed"])) == "val" else out.train).append(r)
+    return out
+
+
+def read_datasets(paths: Sequence[str | Path]) -> list[Run]:
+    """Every run of the given dataset directories; a directory that is not a dataset but
+    holds datasets (one level down) contributes all of them."""
+    runs: list[Run] = []
+    for p in map(Path, paths):
+        if not p.is_dir():
+            raise InputError(f"{p}: no such dataset directory")
+        if (p / "runs.parquet").is_file():
+            runs += read_runs(p)
+            continue
+        subs = sorted(d for d in p.iterdir() if (d / "runs.parquet").is_file())
+        if not subs:
+            raise InputError(f"{p}: not an r2rsim dataset and holds none")
+        for d in subs:
+            runs += read_runs(d)
+    return runs
+
+
+# --------------------------------------------------------------------------- one run
+
+
+def fault_key(run: Run) -> str:
+    """The run's fault as ``type:target`` (several joined by ``+``; ``none`` when healthy):
+    the fault stratum of the results table."""
+    keys = sorted({f"{t}:{g}" for t, g in zip(run.faults["fault_type"], run.faults["target_id"],
+                                               strict=True)})
+    return "+".join(keys) if keys else NONE
+
+
+def _magnitude(run: Run) -> float:
+    return float(run.faults["magnitude"].iloc[0]) if len(run.faults) == 1 else math.nan
+
+
+def run_data(run: Run, statistic: np.ndarray, alarm: np.ndarray,
+             diagnosis: np.ndarray | None = None) -> RunData:
+    """The ground truth of a run (``label.*``) with a detector's output, as :class:`RunData`.
+
+    Faulty samples are ``label.is_faulty``, scored samples ``label.score_mask`` (false in the
+    warm-up), the true type per sample ``label.primary_type``; the magnitude is the run's
+    fault magnitude when it has exactly one fault.
+    """
+    s = run.samples
+    return RunData(t=s["t_s"].to_numpy(float), faulty=s["label.is_faulty"].to_numpy(bool),
+                   scored=s["label.score_mask"].to_numpy(bool), alarm=alarm, score=statistic,
+                   diagnosis=diagnosis,
+                   true_type=s["label.primary_type"].astype(str).to_numpy()
+                   if diagnosis is not None else None,
+                   magnitude=_magnitude(run))
+
+
+# --------------------------------------------------------------------------- per-run counts
+
+
+def _counts(r: RunData, m: int, h: float) -> dict[str, float]:
+    """Everything the metrics of one stratum need from one run, as numbers that add up over
+    runs (so a bootstrap replicate is a sum over resampled rows)."""
+    f = far([r])
+    ev = false_alarm_events([r])
+    out = {"ff_a": f.alarms_ff, "ff_n": f.n_ff, "pre_a": f.alarms_pre, "pre_n": f.n_pre,
+           "fa_ev": ev.n_events, "ok_h": ev.hours,
+           "dr_hit": 0, "dr_tot": 0, "elig": 0, "det": 0, "det_len": 0,
+           "delay": math.nan, "cens": math.nan, "ia_hit": 0, "ia_tot": 0}
+    if r.is_faulty:
+        out["dr_hit"], out["dr_tot"] = window_counts(r)
+        d = detect_run(r, m, h)
+        if d.eligible:
+            out.update(elig=1, det=int(d.detected), delay=d.delay,
+                       cens=d.delay if d.detected else d.horizon,
+                       det_len=int(detect_run(r, m, h, lenient=True).detected))
+        if r.diagnosis is not None:
+            out["ia_hit"], out["ia_tot"] = isolation_counts(r)
+    return out
+
+
+def _ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 0, num / np.where(den > 0, den, 1), np.nan)
+
+
+#: metric name -> function of a (replicates x runs) view of the per-run counts
+_FROM_COUNTS = {
+    "far_ff": lambda c: _ratio(c["ff_a"].sum(-1), c["ff_n"].sum(-1)),
+    "far_pre": lambda c: _ratio(c["pre_a"].sum(-1), c["pre_n"].sum(-1)),
+    "fa_per_h": lambda c: _ratio(c["fa_ev"].sum(-1), c["ok_h"].sum(-1)),
+    "dr": lambda c: _ratio(c["dr_hit"].sum(-1), c["dr_tot"].sum(-1)),
+    "pd": lambda c: _ratio(c["det"].sum(-1), c["elig"].sum(-1)),
+    "pd_lenient": lambda c: _ratio(c["det_len"].sum(-1), c["elig"].sum(-1)),
+    "dd_median_s": lambda c: _nanstat(np.nanmedian, c["delay"]),
+    "dd_p90_s": lambda c: _nanstat(lambda x, axis: np.nanpercentile(x, 90, axis=axis),
+                                   c["delay"]),
+    "dd_censored_mean_s": lambda c: _nanstat(np.nanmean, c["cens"]),
+    "ia": lambda c: _ratio(c["ia_hit"].sum(-1), c["ia_tot"].sum(-1)),
+}
+
+
+def _nanstat(fn, x: np.ndarray) -> np.ndarray:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-nan replicates give nan
+        return fn(x, axis=-1)
+
+
+def _bootstrap(counts: pd.DataFrame, n_boot: int, seed: int, level: float = 0.95
+               ) -> dict[str, tuple[float, float, float]]:
+    """Point estimate and percentile CI of every count-based metric, resampling runs."""
+    cols = {k: counts[k].to_numpy(float) for k in counts.columns}
+    idx = np.random.default_rng(seed).integers(0, len(counts), size=(n_boot, len(counts)))
+    out = {}
+    for name, fn in _FROM_COUNTS.items():
+        est = float(fn(cols))
+        boot = fn({k: v[idx] for k, v in cols.items()}) if n_boot else np.empty(0)
+        boot = boot[np.isfinite(boot)]
+        lo, hi = (np.percentile(boot, [50 * (1 - level), 50 * (1 + level)]) if boot.size
+                  else (math.nan, math.nan))
+        out[name] = (est, float(lo), float(hi))
+    return out
+
+
+# --------------------------------------------------------------------------- evaluation
+
+
+@dataclass
+class Evaluation:
+    """What :func:`evaluate` measured.
+
+    Attributes
+    ----------
+    method : str
+        The plug-in's registry name.
+    params : dict
+        Its parameters (``get_params``).
+    predictions : pandas.DataFrame
+        One row per test sample: ``run_id, k, t_s, statistic, alarm`` (the plug-in's),
+        ``alarm_cal`` (at theta, when calibrated) and ``diagnosis`` (when it diagnoses).
+    metrics : pandas.DataFrame
+        The long, typed results table: ``method, params_sha256, dataset_sha256, split,
+        condition, fault, magnitude, metric, value, ci_low, ci_high, n_runs``.
+    theta : float
+        The calibrated threshold (nan without validation runs).
+    """
+
+    method: str
+    params: dict
+    predictions: pd.DataFrame
+    metrics: pd.DataFrame
+    theta: float
+    settings: dict = field(default_factory=dict)
+
+    def table(self) -> pd.DataFrame:
+        """The results as a wide table: one row per stratum (magnitude rows left out), one
+        column per metric."""
+        m = self.metrics[self.metrics["magnitude"].isna()]
+        keys = ["condition", "fault"]
+        order = pd.MultiIndex.from_frame(m[keys].drop_duplicates())
+        wide = m.pivot_table(index=keys, columns="metric", values="value", aggfunc="first")
+        wide.insert(0, "n_runs", m.groupby(keys)["n_runs"].max())
+        wide.columns.name = None
+        cols = ["n_runs"] + [k for k in METRICS if k in wide.columns]
+        return wide.reindex(order)[cols]
+
+    def format(self) -> str:
+        """The readable table printed by ``r2rsim diagnose``."""
+        t = self.table()
+        show = [c for c in ("n_runs", "far_ff", "far_pre", "fa_per_h", "dr", "pd",
+                            "dd_median_s", "dd_p90_s", "n_missed", "roc_auc", "pr_auc", "ia",
+                            "mdm90", "far_ff_cal", "dr_cal", "pd_cal", "dd_median_cal_s")
+                if c in t.columns]
+        head = (f"{self.method} {json.dumps(self.params, sort_keys=True, default=str)}  "
+                f"[{self.settings.get('split', '')}; m={self.settings.get('m')}, "
+                f"h={self.settings.get('h')} s, alpha={self.settings.get('alpha')}, "
+                f"theta={self.theta:.4g}]")
+        short = {"fa_per_h": "FA/h", "dd_median_s": "DD med s", "dd_p90_s": "DD p90 s",
+                 "n_missed": "missed", "dd_median_cal_s": "DD_cal s"}
+        body = t[show].rename(columns=short).to_string(
+            float_format=lambda v: f"{v:.3g}", na_rep="-")
+        return head + "\n" + body
+
+    def write(self, outdir: str | Path) -> Path:
+        """Write ``predictions.parquet``, ``metrics.parquet`` and ``metrics.csv``."""
+        out = Path(outdir)
+        out.mkdir(parents=True, exist_ok=True)
+        self.predictions.to_parquet(out / "predictions.parquet", index=False)
+        self.metrics.to_parquet(out / "metrics.parquet", index=False)
+        self.metrics.to_csv(out / "metrics.csv", index=False)
+        return out
+
+
+def _sha(obj) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def _check_healthy(runs: Sequence[Run], role: str) -> None:
+    for r in runs:
+        if _is_faulty(r):
+            raise InputError(f"{r.path}: run {r.run_id} has faults; {role} runs must be "
+                             f"fault-free (plug-ins learn from healthy data only)")
+
+
+def _strata(test: list[Run]) -> list[tuple[str, str, list[int]]]:
+    """(condition, fault, indices of test runs): each condition and fault, with pooled
+    'all' levels where there is more than one value. A stratum holds the fault-free runs of
+    its condition(s) and the faulty runs of its fault(s)."""
+    cond = [r.mode or "-" for r in test]
+    ftype = [fault_key(r) for r in test]
+    conds = sorted(set(cond))
+    out = []
+    for c in conds + ([ALL] if len(conds) > 1 else []):
+        in_c = [i for i in range(len(test)) if c in (ALL, cond[i])]
+        healthy = [i for i in in_c if ftype[i] == NONE]
+        present = sorted({ftype[i] for i in in_c} - {NONE})
+        if not present:
+            out.append((c, NONE, healthy))
+            continue
+        for t in present + ([ALL] if len(present) > 1 else []):
+            out.append((c, t, healthy + [i for i in in_c if ftype[i] != NONE
+                                         and t in (ALL, ftype[i])]))
+    return out
+
+
+def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence[Run] = (),
+             *, alpha: float = 0.01, m: int = 1, h: float = 0.0, n_boot: int = 1000,
+             seed: int = 0, split: str = "explicit") -> Evaluation:
+    """Fit a plug-in on healthy runs, score the test runs and compute every metric.
+
+    Parameters
+    ----------
+    estimator : Diagnostic
+        An unfitted plug-in instance (it is cloned, never modified).
+    train : sequence of Run
+        Fault-free runs to fit on.
+    test : sequence of Run
+        Runs to score (faulty and fault-free).
+    val : sequence of Run, optional
+        Fault-free runs on which the harness calibrates theta at ``alpha`` (M6); without them
+        the ``*_cal`` metrics are not reported.
+    alpha : float
+        Target false-alarm rate of the calibration.
+    m : int
+        Persistence for detection (P_D, delays).
+    h : float
+        Grace period after a fault's end, in seconds.
+    n_boot : int
+        Bootstrap replicates over runs for the confidence intervals (0: none).
+    seed : int
+        Seed of the bootstrap.
+    split : str
+        Name of the split, recorded in the table.
+
+    Returns
+    -------
+    Evaluation
+    """
+    if not 0.0 < alpha < 1.0:
+        raise InputError(f"alpha must be in (0, 1), got {alpha!r}")
+    if int(m) != m or m < 1:
+        raise InputError(f"persistence m must be an integer >= 1, got {m!r}")
+    if not h >= 0:
+        raise InputError(f"grace period h must be >= 0 s, got {h!r}")
+    if n_boot < 0:
+        raise InputError(f"n_boot must be >= 0, got {n_boot!r}")
+    train, val, test = list(train), list(val), list(test)
+    if not train:
+        raise InputError("no training runs")
+    if not test:
+        raise InputError("no test runs")
+    _check_healthy(train, "training")
+    _check_healthy(val, "validation")
+    est = clone(estimator)
+    name = getattr(est, "name", type(est).__name__)
+    params = est.get_params()
+    t0 = time.perf_counter()
+    est.fit(train)
+    fit_s = time.perf_counter() - t0
+
+    def outputs(run: Run):
+        scores = est.score(run)
+        stat = scores["statistic"].to_numpy(float)
+        alarm = est.decide(scores).to_numpy(bool)
+        diag = (est.diagnose(scores).astype(str).to_numpy()
+                if hasattr(est, "diagnose") else None)
+        return stat, alarm, diag
+
+    theta = math.nan
+    if val:
+        cal = [outputs(r) for r in val]
+        pool = np.concatenate([s[r.samples["label.score_mask"].to_numpy(bool)]
+                               for r, (s, _, _) in zip(val, cal, strict=True)])
+        pool = pool[np.isfinite(pool)]
+        if pool.size == 0:
+            raise InputError(f"{name}: no finite statistic on the validation runs")
+        theta = calibrate_threshold(pool, alpha)
+
+    t0 = time.perf_counter()
+    scored = [outputs(r) for r in test]
+    exec_s = time.perf_counter() - t0
+    sim_h = sum(float(r.samples["t_s"].iloc[-1] - r.samples["t_s"].iloc[0]) for r in test) / 3600
+    # a statistic the plug-in could not compute (nan) never alarms and ranks lowest
+    finite = np.concatenate([s[np.isfinite(s)] for s, _, _ in scored])
+    floor = (finite.min() if finite.size else 0.0) - 1.0
+    rd = [run_data(r, np.where(np.isfinite(s), s, floor), a, d)
+          for r, (s, a, d) in zip(test, scored, strict=True)]
+    rd_cal = ([run_data(r, np.where(np.isfinite(s), s, floor), np.nan_to_num(s, nan=-np.inf)
+                        > theta, d) for r, (s, a, d) in zip(test, scored, strict=True)]
+              if val else None)
+
+    dataset_sha = _sha(sorted((r.info.get("scenario_sha256"), int(r.info["seed"]),
+                               role) for role, rs in (("train", train), ("val", val),
+                                                      ("test", test)) for r in rs))
+    base = {"method": name, "params_sha256": _sha(params), "dataset_sha256": dataset_sha,
+            "split": split}
+    rows = []
+
+    def add(cond, ftype, mag, metric, value, lo=math.nan, hi=math.nan, n=0):
+        if value is None or (isinstance(value, float) and math.isnan(value)):
+            return
+        rows.append({**base, "condition": cond, "fault": ftype, "magnitude": mag,
+                     "metric": metric, "value": float(value), "ci_low": lo, "ci_high": hi,
+                     "n_runs": n})
+
+    def stratum(cond, ftype, mag, idx):
+        runs = [rd[i] for i in idx]
+        n = len(idx)
+        counts = pd.DataFrame([_counts(r, m, h) for r in runs])
+        for metric, (est_, lo, hi) in _bootstrap(counts, n_boot, seed).items():
+            if metric == "ia" and runs[0].diagnosis is None:
+                continue
+            add(cond, ftype, mag, metric, est_, lo, hi, n)
+        n_faulty = int(counts["elig"].sum())
+        if n_faulty:
+            add(cond, ftype, mag, "n_missed", float(n_faulty - counts["det"].sum()), n=n)
+        y = np.concatenate([r.faulty[r.scored] for r in runs])
+        if y.any() and not y.all():
+            s = np.concatenate([r.score[r.scored] for r in runs])
+            add(cond, ftype, mag, "roc_auc", roc_auc(s, y), n=n)
+            add(cond, ftype, mag, "pr_auc", average_precision(s, y), n=n)
+        if rd_cal is not None:
+            rc = [rd_cal[i] for i in idx]
+            cc = pd.DataFrame([_counts(r, m, h) for r in rc])
+            for metric, (est_, lo, hi) in _bootstrap(cc, n_boot, seed).items():
+                key = {"far_ff": "far_ff_cal", "far_pre": "far_pre_cal", "dr": "dr_cal",
+                       "pd": "pd_cal", "dd_median_s": "dd_median_cal_s"}.get(metric)
+                if key:
+                    add(cond, ftype, mag, key, est_, lo, hi, n)
+        return counts
+
+    for cond, ftype, idx in _strata(test):
+        counts = stratum(cond, ftype, math.nan, idx)
+        faulty_idx = [i for i in idx if rd[i].is_faulty]
+        mags = np.array([rd[i].magnitude for i in faulty_idx])
+        if ftype not in (NONE, ALL) and np.unique(mags[np.isfinite(mags)]).size > 1:
+            for mag in np.unique(mags[np.isfinite(mags)]):
+                stratum(cond, ftype, float(mag), [i for i in faulty_idx
+                                                  if rd[i].magnitude == mag])
+            elig = counts["elig"].to_numpy(bool)
+            det = counts["det"].to_numpy(bool)
+            mag_all = np.array([rd[i].magnitude for i in idx])
+            curve = detectability(mag_all[elig], det[elig])
+            add(cond, ftype, math.nan, "mdm90", curve.mdm, n=int(elig.sum()))
+    add(ALL, ALL, math.nan, "fit_s", fit_s, n=len(train))
+    if sim_h > 0:
+        add(ALL, ALL, math.nan, "exec_s_per_sim_h", exec_s / sim_h, n=len(test))
+    if val:
+        add(ALL, ALL, math.nan, "theta", theta, n=len(val))
+
+    metrics = pd.DataFrame(rows, columns=[*base, "condition", "fault", "magnitude",
+                                          "metric", "value", "ci_low", "ci_high", "n_runs"])
+    metrics = metrics.astype({"magnitude": float, "value": float, "ci_low": float,
+                              "ci_high": float, "n_runs": "int64"})
+    preds = []
+    for r, (s, a, d), rc in zip(test, scored, rd_cal or [None] * len(test), strict=True):
+        p = pd.DataFrame({"run_id": r.run_id, "k": r.samples["k"].to_numpy(np.int64),
+                          "t_s": r.samples["t_s"].to_numpy(float), "statistic": s,
+                          "alarm": a})
+        if rc is not None:
+            p["alarm_cal"] = rc.alarm
+        if d is not None:
+            p["diagnosis"] = d
+        preds.append(p)
+    predictions = pd.concat(preds, ignore_index=True)
+    predictions["method"] = name
+    predictions["params_sha256"] = base["params_sha256"]
+    return Evaluation(name, params, predictions, metrics, theta,
+                      {"alpha": alpha, "m": m, "h": h, "n_boot": n_boot, "seed": seed,
+                       "split": split, "fit_s": fit_s})
