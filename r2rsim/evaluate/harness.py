@@ -87,6 +87,9 @@ METRICS: dict[str, Metric] = {
     "exec_s_per_sim_h": Metric("wall time of score per simulated hour", False, "s/h"),
 }
 
+#: metrics about the run of the method, not a stratum (left out of the wide table)
+_META = ("fit_s", "exec_s_per_sim_h", "theta")
+
 #: stratum value meaning "pooled over every value"
 ALL = "all"
 #: fault stratum of fault-free runs
@@ -322,7 +325,8 @@ class Evaluation:
     def table(self) -> pd.DataFrame:
         """The results as a wide table: one row per stratum (magnitude rows left out), one
         column per metric."""
-        m = self.metrics[self.metrics["magnitude"].isna()]
+        m = self.metrics[self.metrics["magnitude"].isna()
+                         & ~self.metrics["metric"].isin(_META)]
         keys = ["condition", "fault"]
         order = pd.MultiIndex.from_frame(m[keys].drop_duplicates())
         wide = m.pivot_table(index=keys, columns="metric", values="value", aggfunc="first")
@@ -341,7 +345,7 @@ class Evaluation:
         head = (f"{self.method} {json.dumps(self.params, sort_keys=True, default=str)}  "
                 f"[{self.settings.get('split', '')}; m={self.settings.get('m')}, "
                 f"h={self.settings.get('h')} s, alpha={self.settings.get('alpha')}, "
-                f"theta={self.theta:.4g}]")
+                f"theta={self.theta:.4g}, fit {self.settings.get('fit_s', math.nan):.2g} s]")
         short = {"fa_per_h": "FA/h", "dd_median_s": "DD med s", "dd_p90_s": "DD p90 s",
                  "n_missed": "missed", "dd_median_cal_s": "DD_cal s"}
         body = t[show].rename(columns=short).to_string(

@@ -1,0 +1,137 @@
+"""``r2rsim bench``: passes against its own baseline, fails with a clear message when a metric
+regresses beyond its tolerance, and refuses bad specs with file, YAML path and problem."""
+
+from __future__ import annotations
+
+import textwrap
+
+import pandas as pd
+import pytest
+
+from r2rsim.bench import load_spec
+from r2rsim.cli import main
+
+from conftest import REPO
+
+SPEC = """\
+name: tiny
+duration: 25 s
+studies:
+  - name: reg
+    train: [{{scenario: {thesis}/oc1_nominal.yaml, seeds: [1, 2]}}]
+    val: [{{scenario: {thesis}/oc1_nominal.yaml, seeds: [3]}}]
+    test:
+      - {{scenario: {thesis}/oc1_nominal.yaml, seeds: [4]}}
+      - {{scenario: {thesis}/sensor_a_offset_P15.yaml, seeds: [5]}}
+methods:
+  - {{method: residual{params}}}
+evaluation: {{n_boot: 20, persistence: 2}}
+compare:
+  baseline: base.csv
+  metrics: {{far_ff: 0.002, dr: 0.01, pd: 0.0, dd_median_s: 0.05}}
+"""
+
+
+def write_spec(d, params="", name="spec.yaml", **edits):
+    text = SPEC.format(thesis=REPO / "scenarios" / "thesis", params=params)
+    for old, new in edits.items():
+        text = text.replace(old, new)
+    (d / name).write_text(textwrap.dedent(text), encoding="utf-8")
+    return d / name
+
+
+@pytest.fixture(scope="module")
+def bench(tmp_path_factory):
+    """A spec, its baseline written by --update, and a work directory the runs are kept in."""
+    d = tmp_path_factory.mktemp("bench")
+    spec = write_spec(d)
+    assert main(["bench", str(spec), "--update", "--workdir", str(d / "work")]) == 0
+    return d, spec
+
+
+def run(spec, d, capsys):
+    code = main(["bench", str(spec), "--workdir", str(d / "work")])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_bench_passes_against_its_baseline(bench, capsys):
+    d, spec = bench
+    base = pd.read_csv(d / "base.csv")
+    assert set(base.metric) == {"far_ff", "dr", "pd", "dd_median_s"}
+    code, out, err = run(spec, d, capsys)
+    assert code == 0, err
+    assert f"bench passed: {len(base)} metrics within tolerance" in out
+
+
+def test_bench_fails_when_a_metric_regresses(bench, capsys):
+    d, _ = bench
+    # a residual threshold at alpha = 0.2 raises many more false alarms than the baseline's
+    spec = write_spec(d, params=", params: {alpha: 0.2}", name="worse.yaml")
+    code, out, err = run(spec, d, capsys)
+    assert code == 1
+    assert "REGRESSION: reg/residual OC1 sensor.offset:sensor_A far_ff: baseline" in err
+    assert "worse by" in err and "tolerance 0.002" in err
+    assert "metrics regressed beyond their tolerance" in err
+    # the detection metrics did not get worse, so they are not reported
+    assert " pd:" not in err and " dr:" not in err
+
+
+def test_bench_tolerance_decides(bench, capsys):
+    d, spec = bench
+    base = pd.read_csv(d / "base.csv")
+    row = (base.metric == "dd_median_s") & base.magnitude.isna()
+    delay = float(base.loc[row, "value"].iloc[0])
+    # a baseline delay 0.04 s shorter than measured: within the 0.05 s tolerance
+    base.loc[row, "value"] = delay - 0.04
+    base.to_csv(d / "base.csv", index=False)
+    assert run(spec, d, capsys)[0] == 0
+    # 0.06 s shorter: the measured delay regressed beyond its tolerance
+    base.loc[row, "value"] = delay - 0.06
+    base.to_csv(d / "base.csv", index=False)
+    code, _, err = run(spec, d, capsys)
+    assert code == 1 and "dd_median_s: baseline" in err and "worse by 0.06" in err
+    # 0.06 s longer: better than the baseline, reported, still a pass
+    base.loc[row, "value"] = delay + 0.06
+    base.to_csv(d / "base.csv", index=False)
+    code, out, _ = run(spec, d, capsys)
+    assert code == 0 and "improved:" in out and "--update" in out
+    base.loc[row, "value"] = delay
+    base.to_csv(d / "base.csv", index=False)
+
+
+def test_a_missing_result_is_a_regression(bench, capsys):
+    d, spec = bench
+    base = pd.read_csv(d / "base.csv")
+    extra = base.iloc[[0]].assign(fault="sensor.gain:nowhere")
+    pd.concat([base, extra]).to_csv(d / "base.csv", index=False)
+    code, _, err = run(spec, d, capsys)
+    base.to_csv(d / "base.csv", index=False)
+    assert code == 1 and "sensor.gain:nowhere" in err and "now no value" in err
+
+
+@pytest.mark.parametrize("old, new, path, message", [
+    ("method: residual", "method: nosuch", "methods[0].method", "no diagnostic plug-in 'nosuch'"),
+    ("{method: residual}", "{method: residual, params: {beta: 1}}", "methods[0].params.beta",
+     "residual has no parameter 'beta'"),
+    ("far_ff: 0.002", "farr: 0.002", "compare.metrics.farr", "unknown metric 'farr'"),
+    ("far_ff: 0.002", "far_ff: -1", "compare.metrics.far_ff", "must be >= 0"),
+    ("seeds: [4]", "seeds: []", "studies[0].test[0].seeds", "at least 1"),
+    ("oc1_nominal.yaml, seeds: [4]", "nosuch.yaml, seeds: [4]", "studies[0].test[0].scenario",
+     "not found"),
+    ("base.csv", "missing.csv", "compare.baseline", "--update"),
+])
+def test_bad_specs_are_refused(tmp_path, capsys, old, new, path, message):
+    spec = write_spec(tmp_path, **{old: new})
+    assert main(["bench", str(spec), "--workdir", str(tmp_path / "w")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"error: {spec}: {path}: ")
+    assert message in err
+
+
+def test_shipped_spec_and_baseline_agree():
+    spec = load_spec(REPO / "benchmarks" / "diagnostics.yaml")
+    base = pd.read_csv(REPO / "benchmarks" / spec.compare.baseline)
+    assert set(base.metric) == set(spec.compare.metrics)
+    assert set(base.label) == {m.key for m in spec.methods}
+    assert set(base.study) == {s.name for s in spec.studies}

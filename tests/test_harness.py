@@ -1,0 +1,242 @@
+"""The evaluation harness on small hand-made runs: every number it reports is checked against a
+hand count and against the metric functions of r2rsim.evaluate.metrics."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from r2rsim.dataset.read import Run
+from r2rsim.diagnostics import Diagnostic
+from r2rsim.errors import InputError
+from r2rsim.evaluate import metrics as M
+from r2rsim.evaluate.harness import (
+    _FROM_COUNTS,
+    _counts,
+    evaluate,
+    run_data,
+    split_by_condition,
+    split_by_seed,
+)
+
+
+class Passthrough(Diagnostic):
+    """statistic = meas.x; alarm when it exceeds ``level``."""
+
+    name = "passthrough"
+    requires = ("meas.x",)
+
+    def __init__(self, level: float = 5.0):
+        self.level = level
+
+    def fit(self, runs):
+        self.columns_ = self._columns(self._frames(runs)[0])
+        self.threshold_ = self.level
+        return self
+
+    def score(self, run):
+        self._check_fitted()
+        f = self._frames(run)[0]
+        return pd.DataFrame({"statistic": f["meas.x"].to_numpy(float)}, index=f.index)
+
+
+def make_run(x, *, onset=None, warmup=0, mode="OC1", seed=1, ftype="sensor.offset",
+             target="s1", magnitude=1.0, split=None, rid=None, dt=0.5) -> Run:
+    """A run of len(x) samples at dt; faulty from sample ``onset`` on (None: healthy)."""
+    n = len(x)
+    k = np.arange(n)
+    faulty = (k >= onset) if onset is not None else np.zeros(n, bool)
+    samples = pd.DataFrame({"k": k, "t_s": k * dt, "meas.x": np.asarray(x, float),
+                            "label.is_faulty": faulty, "label.score_mask": k >= warmup,
+                            "label.primary_type": np.where(faulty, ftype, "normal")}).set_index(
+        "k", drop=False)
+    faults = pd.DataFrame({"fault_type": [ftype], "target_id": [target],
+                           "magnitude": [magnitude]}) if onset is not None else \
+        pd.DataFrame({"fault_type": [], "target_id": [], "magnitude": []})
+    rid = rid or f"r{seed}"
+    return Run(rid, samples, faults, {"run_id": rid, "seed": seed, "operating_mode": mode,
+                                      "scenario_sha256": "x", "split": split}, Path("."))
+
+
+def healthy(seed, x=None, **kw):
+    return make_run(x if x is not None else [0.0] * 10, seed=seed, **kw)
+
+
+@pytest.fixture
+def train():
+    return [healthy(100), healthy(101)]
+
+
+def value(ev, metric, condition="OC1", fault="sensor.offset:s1", magnitude=None):
+    m = ev.metrics
+    sel = (m.metric == metric) & (m.condition == condition) & (m.fault == fault)
+    sel &= m.magnitude.isna() if magnitude is None else (m.magnitude == magnitude)
+    assert sel.sum() == 1, (metric, condition, fault, magnitude)
+    return float(m.loc[sel, "value"].iloc[0])
+
+
+def test_metrics_match_hand_counts(train):
+    # healthy: one alarm at k=3 in 8 scored samples (warm-up k<2 holds an alarm that must not count)
+    h = healthy(1, [9, 0, 0, 9, 0, 0, 0, 0, 0, 0], warmup=2)
+    # faulty, onset k=4: a false alarm at k=1, detected at k=6 (delay 1.0 s), 4 of 6 alarmed
+    f1 = make_run([0, 9, 0, 0, 0, 0, 9, 9, 9, 9], onset=4, seed=2)
+    # faulty, onset k=5: never alarms (a miss)
+    f2 = make_run([0] * 10, onset=5, seed=3)
+    ev = evaluate(Passthrough(), train, [h, f1, f2], n_boot=0)
+    assert value(ev, "far_ff") == pytest.approx(1 / 8)
+    assert value(ev, "far_pre") == pytest.approx(1 / 9)       # k<4 of f1, k<5 of f2
+    assert value(ev, "dr") == pytest.approx(4 / 11)           # 4 of 6 + 0 of 5
+    assert value(ev, "pd") == pytest.approx(1 / 2)
+    assert value(ev, "dd_median_s") == pytest.approx(1.0)
+    assert value(ev, "n_missed") == 1
+    # censored mean: the miss contributes its horizon t[9] - t[5] = 2 s
+    assert value(ev, "dd_censored_mean_s") == pytest.approx((1.0 + 2.0) / 2)
+    # and the same numbers from the metric functions on the same runs
+    rd = [run_data(r, r.samples["meas.x"].to_numpy(), r.samples["meas.x"].to_numpy() > 5)
+          for r in (h, f1, f2)]
+    fr = M.far(rd)
+    assert (fr.far_ff, fr.far_pre) == (value(ev, "far_ff"), value(ev, "far_pre"))
+    assert M.detection_rate(rd) == value(ev, "dr")
+    assert M.detection_probability(rd) == value(ev, "pd")
+    assert M.false_alarm_events(rd).per_hour == pytest.approx(value(ev, "fa_per_h"))
+    s, y = M.pooled_scores(rd)
+    assert M.roc_auc(s, y) == value(ev, "roc_auc")
+
+
+def test_count_decomposition_equals_the_metric_functions(train):
+    # the bootstrap resamples per-run counts: on the full set they must give the metric values
+    rng = np.random.default_rng(4)
+    runs = [make_run(rng.normal(size=40) * 3, onset=int(rng.integers(5, 35)), seed=i)
+            for i in range(6)] + [healthy(10 + i, rng.normal(size=40) * 3) for i in range(3)]
+    rd = [run_data(r, r.samples["meas.x"].to_numpy(), r.samples["meas.x"].to_numpy() > 4)
+          for r in runs]
+    counts = pd.DataFrame([_counts(r, 2, 0.5) for r in rd])
+    cols = {k: counts[k].to_numpy(float) for k in counts.columns}
+    fr = M.far(rd)
+    dd = M.detection_delay(rd, 2, 0.5)
+    expect = {"far_ff": fr.far_ff, "far_pre": fr.far_pre, "dr": M.detection_rate(rd),
+              "fa_per_h": M.false_alarm_events(rd).per_hour,
+              "pd": M.detection_probability(rd, 2, 0.5),
+              "pd_lenient": M.detection_probability(rd, 2, 0.5, lenient=True),
+              "dd_median_s": dd.median, "dd_p90_s": dd.p90,
+              "dd_censored_mean_s": dd.censored_mean}
+    for name, want in expect.items():
+        assert float(_FROM_COUNTS[name](cols)) == pytest.approx(want, nan_ok=True), name
+
+
+def test_calibrated_threshold_and_cal_metrics(train):
+    # validation statistic 0..99: at alpha = 0.01 one exceedance is allowed, theta = 98
+    val = [healthy(50, np.arange(100.0))]
+    test = [healthy(1, [0, 0, 97.5, 98.5, 0, 0, 0, 0]),
+            make_run([0, 0, 0, 0, 99, 99, 0, 0], onset=4, seed=2)]
+    ev = evaluate(Passthrough(level=1000.0), train, test, val, alpha=0.01, n_boot=0)
+    assert ev.theta == 98.0
+    assert value(ev, "theta", "all", "all") == 98.0
+    # the plug-in's own level (1000) never alarms; at theta one healthy sample in 8 does
+    assert value(ev, "far_ff") == 0 and value(ev, "pd") == 0
+    assert value(ev, "far_ff_cal") == pytest.approx(1 / 8)
+    assert value(ev, "dr_cal") == pytest.approx(2 / 4) and value(ev, "pd_cal") == 1.0
+    assert value(ev, "dd_median_cal_s") == 0.0
+    assert ev.predictions["alarm_cal"].sum() == 3 and not ev.predictions["alarm"].any()
+
+
+def test_strata_magnitudes_and_mdm90(train):
+    test = [healthy(1, mode="OC1"), healthy(2, mode="OC2"),
+            make_run([0] * 4 + [9] * 6, onset=4, seed=3, magnitude=2.0),
+            make_run([0] * 10, onset=4, seed=4, magnitude=1.0),
+            make_run([0] * 4 + [9] * 6, onset=4, seed=5, magnitude=2.0, mode="OC2"),
+            make_run([0] * 4 + [9] * 6, onset=4, seed=6, ftype="sensor.gain", target="s2",
+                     mode="OC2")]
+    ev = evaluate(Passthrough(), train, test, n_boot=0)
+    strata = set(map(tuple, ev.table().index))
+    assert strata == {("OC1", "sensor.offset:s1"), ("OC2", "sensor.offset:s1"),
+                      ("OC2", "sensor.gain:s2"), ("OC2", "all"), ("all", "sensor.gain:s2"),
+                      ("all", "sensor.offset:s1"), ("all", "all")}
+    # a stratum holds its condition's healthy runs and its fault's faulty runs
+    assert ev.table().loc[("OC2", "all"), "n_runs"] == 3
+    assert ev.table().loc[("all", "sensor.offset:s1"), "n_runs"] == 5
+    assert value(ev, "pd", "OC1", magnitude=1.0) == 0.0
+    assert value(ev, "pd", "OC1", magnitude=2.0) == 1.0
+    assert value(ev, "mdm90", "OC1") == 2.0
+    assert value(ev, "mdm90", "all") == 2.0
+    assert value(ev, "pd", "all") == pytest.approx(2 / 3)
+
+
+def test_bootstrap_intervals(train):
+    rng = np.random.default_rng(0)
+    test = [make_run(np.r_[np.zeros(5), rng.random(5) * 10], onset=5, seed=i) for i in range(8)]
+    test += [healthy(20 + i, rng.random(10) * 6) for i in range(4)]
+    a = evaluate(Passthrough(), train, test, n_boot=300, seed=3)
+    b = evaluate(Passthrough(), train, test, n_boot=300, seed=3)
+    pd.testing.assert_frame_equal(a.metrics.drop(columns="value").loc[
+        a.metrics.metric != "fit_s"], b.metrics.drop(columns="value").loc[
+        b.metrics.metric != "fit_s"])
+    m = a.metrics[a.metrics.metric.isin(["far_ff", "dr", "pd"])]
+    assert (m.ci_low <= m.value + 1e-12).all() and (m.value <= m.ci_high + 1e-12).all()
+    assert (m.ci_high > m.ci_low).any()
+    none = evaluate(Passthrough(), train, test, n_boot=0).metrics
+    assert none.ci_low.isna().all()
+
+
+def test_nan_statistic_never_alarms_and_ranks_lowest(train):
+    f = make_run([np.nan, 0, 0, 0, np.nan, 9, 9, 9], onset=4, seed=2)
+    ev = evaluate(Passthrough(), train, [f, healthy(1, [0.0] * 8)], n_boot=0)
+    assert value(ev, "dr") == pytest.approx(3 / 4)
+    assert value(ev, "roc_auc") == pytest.approx(M.roc_auc(
+        [-1, 0, 0, 0, -1, 9, 9, 9] + [0] * 8, [0] * 4 + [1] * 4 + [0] * 8))
+
+
+def test_bad_input_is_refused(train):
+    f = make_run([0] * 10, onset=4, seed=2)
+    with pytest.raises(InputError, match="must be fault-free"):
+        evaluate(Passthrough(), [f], [f])
+    with pytest.raises(InputError, match="validation runs must be fault-free"):
+        evaluate(Passthrough(), train, [f], [f])
+    with pytest.raises(InputError, match="alpha"):
+        evaluate(Passthrough(), train, [f], alpha=1.5)
+    with pytest.raises(InputError, match="persistence"):
+        evaluate(Passthrough(), train, [f], m=0)
+    with pytest.raises(InputError, match="no test runs"):
+        evaluate(Passthrough(), train, [])
+
+
+def test_split_by_seed_is_deterministic_and_keeps_faulty_runs_for_test():
+    runs = [healthy(s) for s in range(40)] + [make_run([0] * 10, onset=3, seed=s)
+                                             for s in range(5)]
+    runs.append(healthy(999, split="val"))
+    a, b = split_by_seed(runs), split_by_seed(list(reversed(runs)))
+    assert {r.info["seed"] for r in a.train} == {r.info["seed"] for r in b.train}
+    assert all(not r.faults.shape[0] for r in a.train + a.val)
+    assert sum(r.faults.shape[0] > 0 for r in a.test) == 5
+    assert any(r.info["seed"] == 999 for r in a.val)
+    assert 15 <= len(a.train) <= 33 and len(a.train) + len(a.val) + len(a.test) == len(runs)
+
+
+def test_split_by_condition():
+    runs = [healthy(s, mode="OC1") for s in range(12)] + [healthy(50, mode="OC2"),
+                                                        make_run([0] * 10, onset=3, seed=51,
+                                                                 mode="OC2"),
+                                                        make_run([0] * 10, onset=3, seed=52,
+                                                                 mode="OC1")]
+    sp = split_by_condition(runs, "OC1", "OC2", val=0.25)
+    assert {r.mode for r in sp.train + sp.val} == {"OC1"} and {r.mode for r in sp.test} == {"OC2"}
+    assert len(sp.train) + len(sp.val) == 12 and len(sp.val) >= 1 and len(sp.test) == 2
+    with pytest.raises(InputError, match="no run has the test mode 'OC3'"):
+        split_by_condition(runs, "OC1", "OC3")
+
+
+def test_results_are_written_typed(tmp_path, train):
+    ev = evaluate(Passthrough(), train, [make_run([0] * 4 + [9] * 6, onset=4, seed=2),
+                                         healthy(1)], [healthy(60)], n_boot=10)
+    out = ev.write(tmp_path / "res")
+    m = pd.read_parquet(out / "metrics.parquet")
+    assert m.dtypes["value"] == np.float64 and m.dtypes["n_runs"] == np.int64
+    assert set(m.metric) >= {"far_ff", "dr", "pd", "roc_auc", "theta", "far_ff_cal"}
+    p = pd.read_parquet(out / "predictions.parquet")
+    assert len(p) == 20 and p.dtypes["alarm"] == np.bool_
+    assert pd.read_csv(out / "metrics.csv").shape == m.shape
+    assert "far_ff" in ev.format() and not math.isnan(ev.theta)
