@@ -68,6 +68,7 @@ class EvaluationSettings(Strict):
     grace: Annotated[Time, Field(ge=0)] = 0.0
     n_boot: Annotated[int, Field(ge=0)] = 200
     seed: int = 0
+    drive_data: bool = Field(False, description="also show plug-ins cmd.*, act.*, ctrl.*")
 
 
 class Compare(Strict):
@@ -173,6 +174,12 @@ def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
     """
     spec_path = Path(spec_path)
     spec = load_spec(spec_path)
+    # a missing baseline is found before anything is simulated
+    baseline = spec_path.parent / spec.compare.baseline if spec.compare else None
+    if baseline is not None and not update and not baseline.is_file():
+        raise InputError(f"baseline file '{spec.compare.baseline}' not found (create it with "
+                         f"`r2rsim bench {spec_path} --update`)", file=str(spec_path),
+                         path="compare.baseline")
     tmp = None
     if workdir is None:
         tmp = tempfile.TemporaryDirectory(prefix="r2rsim-bench-")
@@ -197,7 +204,8 @@ def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
                 est = get(m.method)(**m.params)
                 ev = evaluate(est, roles["train"], roles["test"], roles["val"],
                               alpha=ev_set.alpha, m=ev_set.persistence, h=ev_set.grace,
-                              n_boot=ev_set.n_boot, seed=ev_set.seed, split=study.name)
+                              n_boot=ev_set.n_boot, seed=ev_set.seed, split=study.name,
+                              drive_data=ev_set.drive_data)
                 evaluations[(study.name, m.key)] = ev
                 log(ev.format())
                 frames.append(ev.metrics.assign(study=study.name, label=m.key))
@@ -209,16 +217,11 @@ def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
                                            if c not in ("study", "label")]]]
     if spec.compare is None:
         return BenchResult(results, evaluations, [], [], 0, None)
-    baseline = spec_path.parent / spec.compare.baseline
     if update:
         keep = results[results["metric"].isin(list(spec.compare.metrics))]
         keep[KEY + ["value"]].to_csv(baseline, index=False, float_format="%.10g")
         log(f"baseline written: {baseline} ({len(keep)} values)")
         return BenchResult(results, evaluations, [], [], 0, baseline)
-    if not baseline.is_file():
-        raise InputError(f"baseline file '{spec.compare.baseline}' not found (create it with "
-                         f"`r2rsim bench {spec_path} --update`)", file=str(spec_path),
-                         path="compare.baseline")
     regressions, improvements, n = compare(results, pd.read_csv(baseline),
                                            spec.compare.metrics)
     return BenchResult(results, evaluations, regressions, improvements, n, baseline)
@@ -259,8 +262,10 @@ def compare(results: pd.DataFrame, baseline: pd.DataFrame, tolerances: dict[str,
         if math.isnan(row.value):
             improvements.append(f"{where}: baseline no value, now {_fmt(value)}")
             continue
-        worse = (row.value - value) if METRICS[row.metric].higher_is_better else \
-            (value - row.value)
+        better = METRICS[row.metric].higher_is_better
+        # no better direction: a change either way beyond the tolerance counts as worse
+        worse = (row.value - value if better else value - row.value) if better is not None \
+            else abs(value - row.value)
         line = (f"{where}: baseline {_fmt(row.value)}, now {_fmt(value)} "
                 f"({'worse' if worse > 0 else 'better'} by {_fmt(abs(worse))}, "
                 f"tolerance {_fmt(tol)})")

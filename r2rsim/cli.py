@@ -105,7 +105,8 @@ def _cmd_diagnose(args) -> int:
         if args.split == "seed":
             split = split_by_seed(runs)
         else:
-            split = split_by_condition(runs, train=args.train_mode, test=args.test_mode)
+            split = split_by_condition(runs, train=args.train_mode, test=args.test_mode,
+                                       val=args.val_fraction)
     else:
         if not args.train or not args.test:
             raise InputError("name the training and test datasets (--train and --test), or "
@@ -119,7 +120,7 @@ def _cmd_diagnose(args) -> int:
         print("no validation runs: metrics at the plug-in's own threshold only (no *_cal)")
     ev = evaluate(est, split.train, split.test, split.val, alpha=args.alpha,
                   m=args.persistence, h=args.grace, n_boot=args.n_boot, seed=args.seed,
-                  split=split.name)
+                  split=split.name, drive_data=args.drive_data)
     out = ev.write(args.output or Path("results") / args.method)
     print(ev.format())
     print(f"written: {out}/predictions.parquet, metrics.parquet, metrics.csv")
@@ -285,6 +286,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with --data: by seed (60/20/20) or by operating condition")
     d.add_argument("--train-mode", default="OC1", help="--split condition: training mode")
     d.add_argument("--test-mode", default="OC2", help="--split condition: test mode")
+    d.add_argument("--val-fraction", type=float, default=0.25,
+                   help="--split condition: fraction of the healthy training-mode runs "
+                        "held out for calibration")
+    d.add_argument("--drive-data", action="store_true",
+                   help="also show the plug-in cmd.*, act.* and ctrl.* (drive data)")
     d.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="plug-in parameter (repeatable)")
     d.add_argument("--alpha", type=float, default=0.01, help="calibration false-alarm rate")

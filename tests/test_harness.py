@@ -34,7 +34,7 @@ class Passthrough(Diagnostic):
         self.level = level
 
     def fit(self, runs):
-        self.columns_ = self._columns(self._frames(runs)[0])
+        self.columns_ = self.required_columns(self._frames(runs)[0])
         self.threshold_ = self.level
         return self
 
@@ -240,3 +240,50 @@ def test_results_are_written_typed(tmp_path, train):
     assert len(p) == 20 and p.dtypes["alarm"] == np.bool_
     assert pd.read_csv(out / "metrics.csv").shape == m.shape
     assert "far_ff" in ev.format() and not math.isnan(ev.theta)
+
+
+class Spy(Passthrough):
+    """Records the columns it is shown."""
+
+    seen: list = []
+
+    def fit(self, runs):
+        Spy.seen = [list(f.columns) for f in runs]
+        return super().fit(runs)
+
+
+def test_plugins_see_only_the_visible_columns(train):
+    for r in train:
+        for c in ("label.x", "true.s1.x", "state.span1.tension_N", "cmd.pull.torque_N_m",
+                  "ctrl.s1.x_seen_N", "ctrl.pi.integral", "flag.s1.clipped"):
+            r.samples[c] = 0.0
+    f = make_run([0] * 10, onset=4, seed=2)
+    evaluate(Spy(), train, [f], n_boot=0)
+    assert Spy.seen[0] == ["t_s", "meas.x", "flag.s1.clipped"]
+    # a protocol with observable drive data adds cmd/act/ctrl, but never the *_seen_* copies
+    evaluate(Spy(), train, [f], n_boot=0, drive_data=True)
+    assert Spy.seen[0] == ["t_s", "meas.x", "cmd.pull.torque_N_m", "ctrl.pi.integral",
+                           "flag.s1.clipped"]
+
+
+def test_required_columns_are_checked_before_fit_and_score(train):
+    class Needy(Passthrough):
+        requires = ("meas.x", "meas.y*")
+
+    with pytest.raises(InputError, match=r"no column matching meas\.y\* \(run r100 in"):
+        evaluate(Needy(), train, [healthy(1)])
+
+
+def test_roles_must_not_share_runs(train):
+    with pytest.raises(InputError, match="both a train and a test run"):
+        evaluate(Passthrough(), train, [train[0]])
+
+
+def test_mdm90_is_a_magnitude_at_both_operating_points(train):
+    # offsets of -2 and +1: the +1 run is missed at the plug-in's level 5 but caught at theta
+    test = [make_run([0] * 4 + [9] * 6, onset=4, seed=3, magnitude=-2.0),
+            make_run([0] * 4 + [3] * 6, onset=4, seed=4, magnitude=1.0), healthy(1)]
+    ev = evaluate(Passthrough(), train, test, [healthy(60, [0.0] * 10 + [2.0])], alpha=0.1,
+                  n_boot=0)
+    assert ev.theta == 0.0
+    assert value(ev, "mdm90") == 2.0 and value(ev, "mdm90_cal") == 1.0

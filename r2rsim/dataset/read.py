@@ -11,10 +11,15 @@ import pandas as pd
 
 from ..errors import InputError
 
-#: column families an algorithm may see: what a plant's control system knows (measurements,
-#: set-points, commands and controller internals) and the time. Never ``true.``, ``state.``,
-#: ``act.``, ``flag.`` or ``label.``.
-VISIBLE = ("t_s", "meas.*", "sp.*", "cmd.*", "ctrl.*")
+#: column families a diagnosis algorithm sees by default (docs/dataset.md §2): the time, the
+#: recorded readings with their clipping flags, and the set-points. Never ``true.``,
+#: ``state.`` or ``label.``.
+VISIBLE = ("t_s", "meas.*", "flag.*", "sp.*")
+#: added under a protocol that treats drive data as observable: commanded and applied torques
+#: and controller internals. Not the ``ctrl.*_seen_*`` channels: they are noise-free copies of
+#: the readings including in-loop faults, so they would leak the faults.
+DRIVE_DATA = ("cmd.*", "act.*", "ctrl.*")
+_LEAKS = ("ctrl.*_seen_*",)
 
 
 @dataclass
@@ -40,9 +45,12 @@ class Run:
     info: dict
     path: Path
 
-    def visible(self) -> pd.DataFrame:
-        """The columns an algorithm may use (:data:`VISIBLE`)."""
-        cols = [c for c in self.samples.columns if any(fnmatch.fnmatch(c, p) for p in VISIBLE)]
+    def visible(self, drive_data: bool = False) -> pd.DataFrame:
+        """The columns an algorithm may use: :data:`VISIBLE`, and with ``drive_data`` also
+        :data:`DRIVE_DATA` (without the ``*_seen_*`` channels)."""
+        pats = VISIBLE + (DRIVE_DATA if drive_data else ())
+        cols = [c for c in self.samples.columns if any(fnmatch.fnmatch(c, p) for p in pats)
+                and not any(fnmatch.fnmatch(c, p) for p in _LEAKS)]
         return self.samples[cols]
 
     @property

@@ -12,9 +12,11 @@ A plug-in is a :class:`Diagnostic` subclass:
 * optionally ``diagnose(scores)`` names the fault type per sample (``normal`` when none) and
   ``rank_channels(scores)`` orders the channels most likely at fault.
 
-A plug-in sees only the visible columns of a run (:data:`r2rsim.dataset.read.VISIBLE`) and
-declares the ones it needs in ``requires`` (glob patterns), checked before ``fit`` and
-``score``. The harness, not the plug-in, computes metrics. Plug-ins are found through the
+The harness hands a plug-in only the visible columns of each run, as a DataFrame indexed
+like the run's samples (:data:`r2rsim.dataset.read.VISIBLE`; never labels, faults or true
+states). A plug-in declares the columns it needs in ``requires`` (glob patterns); the harness
+checks them with :meth:`Diagnostic.required_columns` before ``fit`` and ``score``. The
+harness, not the plug-in, computes metrics. Plug-ins are found through the
 ``r2rsim.diagnostics`` entry-point group (:func:`r2rsim.diagnostics.registry.plugins`).
 """
 
@@ -58,7 +60,7 @@ class Diagnostic(BaseEstimator):
         return scores["statistic"] > self.threshold_
 
     # ---- helpers for subclasses ------------------------------------------------------------
-    def _columns(self, frame: pd.DataFrame) -> list[str]:
+    def required_columns(self, frame: pd.DataFrame) -> list[str]:
         """The columns matching ``requires``, in the frame's order; raises InputError naming
         the patterns nothing matches."""
         cols = [c for c in frame.columns if any(fnmatch.fnmatch(c, p) for p in self.requires)

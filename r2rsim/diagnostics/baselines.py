@@ -27,7 +27,7 @@ class ResidualThreshold(Diagnostic):
 
     def fit(self, runs):
         frames = self._frames(runs)
-        self.columns_ = self._columns(frames[0])
+        self.columns_ = self.required_columns(frames[0])
         z = np.abs(self._fit_scaling(self._matrix(frames, self.columns_))).max(axis=1)
         self.threshold_ = float(np.quantile(z, 1.0 - self.alpha))
         return self
@@ -83,7 +83,7 @@ class PCAMonitor(Diagnostic):
         if self.limits not in ("analytic", "empirical"):
             raise ValueError("limits must be 'analytic' or 'empirical'")
         frames = self._frames(runs)
-        self.columns_ = self._columns(frames[0])
+        self.columns_ = self.required_columns(frames[0])
         X = np.vstack([self._design(f) for f in frames])
         Z = self._fit_scaling(X[np.all(np.isfinite(X), axis=1)])
         n = len(Z)
@@ -165,7 +165,7 @@ class IsolationForestDetector(Diagnostic):
         from sklearn.ensemble import IsolationForest
 
         frames = self._frames(runs)
-        self.columns_ = self._columns(frames[0])
+        self.columns_ = self.required_columns(frames[0])
         Z = self._fit_scaling(self._matrix(frames, self.columns_))
         self.forest_ = IsolationForest(n_estimators=self.n_estimators,
                                        max_samples=min(self.max_samples, len(Z)),

@@ -57,7 +57,8 @@ class Metric:
     """What a metric name in the results table means."""
 
     description: str
-    higher_is_better: bool
+    #: None: no better direction (a benchmark flags a change either way)
+    higher_is_better: bool | None
     unit: str = ""
 
 
@@ -70,14 +71,16 @@ METRICS: dict[str, Metric] = {
     "pd": Metric("M4 run-level detection probability (strict)", True),
     "pd_lenient": Metric("M4 run-level detection probability (lenient)", True),
     "dd_median_s": Metric("M5 median detection delay over detected runs", False, "s"),
+    "dd_mean_s": Metric("M5 mean detection delay over detected runs", False, "s"),
     "dd_p90_s": Metric("M5 90th percentile of the detection delay", False, "s"),
     "dd_censored_mean_s": Metric("M5 mean delay, a miss counting its horizon", False, "s"),
     "n_missed": Metric("M5 faulty runs not detected", False),
     "roc_auc": Metric("M7 area under the ROC curve of the statistic", True),
     "pr_auc": Metric("M7 average precision of the statistic", True),
     "ia": Metric("M9 isolation accuracy over alarmed fault samples", True),
-    "mdm90": Metric("M15 smallest |magnitude| with P_D >= 0.9", False),
-    "theta": Metric("M6 threshold calibrated on the validation runs", False),
+    "mdm90": Metric("M15 smallest |magnitude| with P_D >= 0.9 (plug-in alarms)", False),
+    "mdm90_cal": Metric("M15 smallest |magnitude| with P_D >= 0.9 at theta (M6)", False),
+    "theta": Metric("M6 threshold calibrated on the validation runs", None),
     "far_ff_cal": Metric("M1 FAR over fault-free test runs at theta (M6)", False),
     "far_pre_cal": Metric("M1 pre-onset FAR at theta (M6)", False),
     "dr_cal": Metric("M3 detection rate at theta (M6)", True),
@@ -263,6 +266,7 @@ _FROM_COUNTS = {
     "pd": lambda c: _ratio(c["det"].sum(-1), c["elig"].sum(-1)),
     "pd_lenient": lambda c: _ratio(c["det_len"].sum(-1), c["elig"].sum(-1)),
     "dd_median_s": lambda c: _nanstat(np.nanmedian, c["delay"]),
+    "dd_mean_s": lambda c: _nanstat(np.nanmean, c["delay"]),
     "dd_p90_s": lambda c: _nanstat(lambda x, axis: np.nanpercentile(x, 90, axis=axis),
                                    c["delay"]),
     "dd_censored_mean_s": lambda c: _nanstat(np.nanmean, c["cens"]),
@@ -340,7 +344,8 @@ class Evaluation:
         t = self.table()
         show = [c for c in ("n_runs", "far_ff", "far_pre", "fa_per_h", "dr", "pd",
                             "dd_median_s", "dd_p90_s", "n_missed", "roc_auc", "pr_auc", "ia",
-                            "mdm90", "far_ff_cal", "dr_cal", "pd_cal", "dd_median_cal_s")
+                            "mdm90", "far_ff_cal", "dr_cal", "pd_cal", "dd_median_cal_s",
+                            "mdm90_cal")
                 if c in t.columns]
         head = (f"{self.method} {json.dumps(self.params, sort_keys=True, default=str)}  "
                 f"[{self.settings.get('split', '')}; m={self.settings.get('m')}, "
@@ -373,6 +378,17 @@ def _check_healthy(runs: Sequence[Run], role: str) -> None:
                              f"fault-free (plug-ins learn from healthy data only)")
 
 
+def _check_disjoint(roles: dict[str, list[Run]]) -> None:
+    seen: dict[tuple, str] = {}
+    for role, runs in roles.items():
+        for r in runs:
+            key = (str(Path(r.path).resolve()), r.run_id)
+            if key in seen and seen[key] != role:
+                raise InputError(f"run {r.run_id} ({r.path}) is both a {seen[key]} and a "
+                                 f"{role} run; the roles must not share runs")
+            seen.setdefault(key, role)
+
+
 def _strata(test: list[Run]) -> list[tuple[str, str, list[int]]]:
     """(condition, fault, indices of test runs): each condition and fault, with pooled
     'all' levels where there is more than one value. A stratum holds the fault-free runs of
@@ -396,7 +412,7 @@ def _strata(test: list[Run]) -> list[tuple[str, str, list[int]]]:
 
 def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence[Run] = (),
              *, alpha: float = 0.01, m: int = 1, h: float = 0.0, n_boot: int = 1000,
-             seed: int = 0, split: str = "explicit") -> Evaluation:
+             seed: int = 0, split: str = "explicit", drive_data: bool = False) -> Evaluation:
     """Fit a plug-in on healthy runs, score the test runs and compute every metric.
 
     Parameters
@@ -422,6 +438,9 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
         Seed of the bootstrap.
     split : str
         Name of the split, recorded in the table.
+    drive_data : bool
+        Also show the plug-in the drive data (``cmd.*``, ``act.*``, ``ctrl.*``), for a
+        protocol that treats them as observable (:meth:`r2rsim.dataset.read.Run.visible`).
 
     Returns
     -------
@@ -442,15 +461,31 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
         raise InputError("no test runs")
     _check_healthy(train, "training")
     _check_healthy(val, "validation")
+    _check_disjoint({"train": train, "val": val, "test": test})
     est = clone(estimator)
     name = getattr(est, "name", type(est).__name__)
     params = est.get_params()
+
+    def frame(run: Run) -> pd.DataFrame:
+        # the plug-in gets the visible columns only: no labels, faults or true states
+        f = run.visible(drive_data)
+        try:
+            est.required_columns(f)
+        except InputError as exc:
+            raise InputError(f"{exc.message} (run {run.run_id} in {run.path})") from None
+        return f
+
+    train_frames = [frame(r) for r in train]
     t0 = time.perf_counter()
-    est.fit(train)
+    est.fit(train_frames)
     fit_s = time.perf_counter() - t0
 
     def outputs(run: Run):
-        scores = est.score(run)
+        f = frame(run)
+        scores = est.score(f)
+        if not scores.index.equals(f.index):
+            raise InputError(f"{name}: score() returned rows not aligned to the samples of "
+                             f"run {run.run_id}")
         stat = scores["statistic"].to_numpy(float)
         alarm = est.decide(scores).to_numpy(bool)
         diag = (est.diagnose(scores).astype(str).to_numpy()
@@ -518,21 +553,24 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
                        "pd": "pd_cal", "dd_median_s": "dd_median_cal_s"}.get(metric)
                 if key:
                     add(cond, ftype, mag, key, est_, lo, hi, n)
-        return counts
+            return counts, cc
+        return counts, None
 
     for cond, ftype, idx in _strata(test):
-        counts = stratum(cond, ftype, math.nan, idx)
+        counts, counts_cal = stratum(cond, ftype, math.nan, idx)
         faulty_idx = [i for i in idx if rd[i].is_faulty]
         mags = np.array([rd[i].magnitude for i in faulty_idx])
         if ftype not in (NONE, ALL) and np.unique(mags[np.isfinite(mags)]).size > 1:
             for mag in np.unique(mags[np.isfinite(mags)]):
                 stratum(cond, ftype, float(mag), [i for i in faulty_idx
                                                   if rd[i].magnitude == mag])
-            elig = counts["elig"].to_numpy(bool)
-            det = counts["det"].to_numpy(bool)
             mag_all = np.array([rd[i].magnitude for i in idx])
-            curve = detectability(mag_all[elig], det[elig])
-            add(cond, ftype, math.nan, "mdm90", curve.mdm, n=int(elig.sum()))
+            for key, c in (("mdm90", counts), ("mdm90_cal", counts_cal)):
+                if c is None:
+                    continue
+                elig = c["elig"].to_numpy(bool)
+                curve = detectability(mag_all[elig], c["det"].to_numpy(bool)[elig])
+                add(cond, ftype, math.nan, key, abs(curve.mdm), n=int(elig.sum()))
     add(ALL, ALL, math.nan, "fit_s", fit_s, n=len(train))
     if sim_h > 0:
         add(ALL, ALL, math.nan, "exec_s_per_sim_h", exec_s / sim_h, n=len(test))
@@ -558,4 +596,4 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
     predictions["params_sha256"] = base["params_sha256"]
     return Evaluation(name, params, predictions, metrics, theta,
                       {"alpha": alpha, "m": m, "h": h, "n_boot": n_boot, "seed": seed,
-                       "split": split, "fit_s": fit_s})
+                       "split": split, "fit_s": fit_s, "drive_data": drive_data})

@@ -38,7 +38,7 @@ class EwmaDetector(Diagnostic):
 
     def fit(self, runs):
         frames = self._frames(runs)
-        self.columns_ = self._columns(frames[0])
+        self.columns_ = self.required_columns(frames[0])
         self._fit_scaling(self._matrix(frames, self.columns_))
         stats = [self._statistic(f) for f in frames]
         pooled = np.concatenate([s[np.isfinite(s)] for s in stats])
