@@ -529,10 +529,14 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
                      "metric": metric, "value": float(value), "ci_low": lo, "ci_high": hi,
                      "n_runs": n})
 
+    # per-run counts, once per run; a stratum takes its runs' rows
+    per_run = pd.DataFrame([_counts(r, m, h) for r in rd])
+    per_run_cal = pd.DataFrame([_counts(r, m, h) for r in rd_cal]) if rd_cal else None
+
     def stratum(cond, ftype, mag, idx):
         runs = [rd[i] for i in idx]
         n = len(idx)
-        counts = pd.DataFrame([_counts(r, m, h) for r in runs])
+        counts = per_run.iloc[idx]
         for metric, (est_, lo, hi) in _bootstrap(counts, n_boot, seed).items():
             if metric == "ia" and runs[0].diagnosis is None:
                 continue
@@ -545,9 +549,8 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
             s = np.concatenate([r.score[r.scored] for r in runs])
             add(cond, ftype, mag, "roc_auc", roc_auc(s, y), n=n)
             add(cond, ftype, mag, "pr_auc", average_precision(s, y), n=n)
-        if rd_cal is not None:
-            rc = [rd_cal[i] for i in idx]
-            cc = pd.DataFrame([_counts(r, m, h) for r in rc])
+        if per_run_cal is not None:
+            cc = per_run_cal.iloc[idx]
             for metric, (est_, lo, hi) in _bootstrap(cc, n_boot, seed).items():
                 key = {"far_ff": "far_ff_cal", "far_pre": "far_pre_cal", "dr": "dr_cal",
                        "pd": "pd_cal", "dd_median_s": "dd_median_cal_s"}.get(metric)
