@@ -22,8 +22,9 @@ from typing import Annotated, Any
 import pandas as pd
 from pydantic import Field
 
+from ._version import __version__
 from .dataset.read import read_runs
-from .diagnostics.registry import get
+from .diagnostics.registry import get, unknown_parameter
 from .errors import InputError
 from .evaluate.harness import METRICS, Evaluation, evaluate
 from .schema.line import Id, Strict
@@ -124,12 +125,10 @@ def load_spec(path: str | Path) -> BenchSpec:
             cls = get(m.method)
         except InputError as exc:
             raise InputError(exc.message, file=f, path=f"methods[{i}].method") from None
-        known = cls().get_params()
         for k in m.params:
-            if k not in known:
-                raise InputError(f"{m.method} has no parameter '{k}' (its parameters: "
-                                 f"{', '.join(known) or 'none'})", file=f,
-                                 path=f"methods[{i}].params.{k}")
+            problem = unknown_parameter(cls, k)
+            if problem:
+                raise InputError(problem, file=f, path=f"methods[{i}].params.{k}")
     return spec
 
 
@@ -147,10 +146,14 @@ class BenchResult:
 
 def _dataset(workdir: Path, scenario: Path, seed: int, duration: float | None) -> Path:
     """Simulate one run into the work directory, or reuse it if it is already there (the
-    name holds the scenario's hash, the seed and the duration)."""
+    name holds a hash of the scenario file, its line file and the r2rsim version, the seed
+    and the duration, so an edit to either file or a new release simulates again)."""
     from .run import run_scenario
+    from .schema import load_scenario
 
-    sha = hashlib.sha256(scenario.read_bytes()).hexdigest()[:12]
+    line_path = load_scenario(scenario)[2]
+    h = hashlib.sha256(scenario.read_bytes() + line_path.read_bytes() + __version__.encode())
+    sha = h.hexdigest()[:12]
     out = workdir / f"{scenario.stem}__{sha}__s{seed}__d{duration or 'scenario'}"
     if not (out / "manifest.json").is_file():
         run_scenario(scenario, output=out, seed=seed, duration=duration)

@@ -76,15 +76,16 @@ def _parse_params(items: list[str], cls) -> dict:
     """``k=v`` pairs; values are YAML scalars or lists (``alpha=0.01``, ``lags=3``)."""
     import yaml
 
-    known = cls().get_params()
+    from .diagnostics.registry import unknown_parameter
+
     out = {}
     for item in items:
         key, sep, value = item.partition("=")
         if not sep or not key:
             raise InputError(f"--param expects key=value, got '{item}'")
-        if key not in known:
-            raise InputError(f"--param {key}: {cls.name} has no parameter '{key}' (its "
-                             f"parameters: {', '.join(known) or 'none'})")
+        problem = unknown_parameter(cls, key)
+        if problem:
+            raise InputError(f"--param {key}: {problem}")
         try:
             out[key] = yaml.safe_load(value)
         except yaml.YAMLError:

@@ -135,3 +135,10 @@ def test_shipped_spec_and_baseline_agree():
     assert set(base.metric) == set(spec.compare.metrics)
     assert set(base.label) == {m.key for m in spec.methods}
     assert set(base.study) == {s.name for s in spec.studies}
+
+
+def test_thesis_baselines_spec_is_valid():
+    # the reproduction study of docs/diagnostics.md and the issue-5 note (not run here: ~130 runs)
+    spec = load_spec(REPO / "benchmarks" / "thesis_baselines.yaml")
+    assert {s.name for s in spec.studies} == {"registration", "dancer"}
+    assert sum(len(rs.seeds) for rs in spec.studies[0].test) == 90

@@ -287,3 +287,19 @@ def test_mdm90_is_a_magnitude_at_both_operating_points(train):
                   n_boot=0)
     assert ev.theta == 0.0
     assert value(ev, "mdm90") == 2.0 and value(ev, "mdm90_cal") == 1.0
+
+
+def test_bad_split_fractions_are_refused():
+    with pytest.raises(InputError, match="split fractions must lie in"):
+        split_by_condition([healthy(1, mode="OC1"), healthy(2, mode="OC2")], val=1.5)
+    with pytest.raises(InputError, match="sum to 1"):
+        split_by_seed([healthy(1)], train=0.5, val=0.2, test=0.2)
+
+
+def test_nan_statistic_never_alarms_at_a_low_theta(train):
+    # theta far below every test statistic: every finite sample alarms, the nan ones do not
+    f = make_run([np.nan, 0, 0, 0, np.nan, 9, 9, 9], onset=4, seed=2)
+    ev = evaluate(Passthrough(), train, [f], [healthy(60, [-100.0] * 10)], n_boot=0)
+    assert ev.theta == -100.0
+    assert ev.predictions["alarm_cal"].tolist() == [False, True, True, True,
+                                                    False, True, True, True]

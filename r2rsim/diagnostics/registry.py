@@ -25,3 +25,11 @@ def get(name: str) -> type:
         raise InputError(f"no diagnostic plug-in '{name}' (registered: "
                          f"{', '.join(sorted(found)) or 'none'}; `r2rsim list plugins`)")
     return found[name].load()
+
+
+def unknown_parameter(cls: type, key: str) -> str | None:
+    """The problem with giving plug-in ``cls`` the parameter ``key`` (None if it has it)."""
+    known = cls().get_params()
+    if key in known:
+        return None
+    return f"{cls.name} has no parameter '{key}' (its parameters: {', '.join(known) or 'none'})"

@@ -25,7 +25,7 @@ import math
 import time
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -122,6 +122,16 @@ def _is_faulty(run: Run) -> bool:
     return len(run.faults) > 0 or bool(run.samples["label.is_faulty"].any())
 
 
+def _rule(train: float, val: float, test: float) -> SplitBySeed:
+    """The seed rule of a scenario's ``split: {by: seed}``, with the fractions checked."""
+    fr = {"train": train, "val": val, "test": test}
+    bad = [f"{k}={v:g}" for k, v in fr.items() if not 0.0 <= v <= 1.0]
+    if bad or abs(train + val + test - 1.0) > 1e-9:
+        raise InputError(f"split fractions must lie in [0, 1] and sum to 1, got "
+                         f"{', '.join(bad) or ', '.join(f'{k}={v:g}' for k, v in fr.items())}")
+    return SplitBySeed(by="seed", **fr)
+
+
 def split_by_seed(runs: Sequence[Run], train: float = 0.6, val: float = 0.2,
                   test: float = 0.2) -> Split:
     """Assign runs to roles from their seeds, deterministically.
@@ -136,7 +146,7 @@ def split_by_seed(runs: Sequence[Run], train: float = 0.6, val: float = 0.2,
     train, val, test : float
         Fractions for the fault-free runs without a split of their own (summing to 1).
     """
-    rule = SplitBySeed(by="seed", train=train, val=val, test=test)
+    rule = _rule(train, val, test)
     roles: dict[str, list[Run]] = {"train": [], "val": [], "test": []}
     for r in runs:
         if _is_faulty(r):
@@ -168,7 +178,7 @@ def split_by_condition(runs: Sequence[Run], train: str = "OC1", test: str = "OC2
         if mode not in modes:
             raise InputError(f"split by condition: no run has the {role} mode '{mode}' "
                              f"(modes present: {', '.join(m or '(none)' for m in modes)})")
-    rule = SplitBySeed(by="seed", train=1.0 - val, val=val, test=0.0)
+    rule = _rule(1.0 - val, val, 0.0)
     out = Split([], [], [], name=f"condition {train}->{test}")
     for r in runs:
         if r.mode == test:
@@ -285,10 +295,11 @@ def _bootstrap(counts: pd.DataFrame, n_boot: int, seed: int, level: float = 0.95
     """Point estimate and percentile CI of every count-based metric, resampling runs."""
     cols = {k: counts[k].to_numpy(float) for k in counts.columns}
     idx = np.random.default_rng(seed).integers(0, len(counts), size=(n_boot, len(counts)))
+    resampled = {k: v[idx] for k, v in cols.items()}
     out = {}
     for name, fn in _FROM_COUNTS.items():
         est = float(fn(cols))
-        boot = fn({k: v[idx] for k, v in cols.items()}) if n_boot else np.empty(0)
+        boot = fn(resampled) if n_boot else np.empty(0)
         boot = boot[np.isfinite(boot)]
         lo, hi = (np.percentile(boot, [50 * (1 - level), 50 * (1 + level)]) if boot.size
                   else (math.nan, math.nan))
@@ -511,8 +522,8 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
     floor = (finite.min() if finite.size else 0.0) - 1.0
     rd = [run_data(r, np.where(np.isfinite(s), s, floor), a, d)
           for r, (s, a, d) in zip(test, scored, strict=True)]
-    rd_cal = ([run_data(r, np.where(np.isfinite(s), s, floor), np.nan_to_num(s, nan=-np.inf)
-                        > theta, d) for r, (s, a, d) in zip(test, scored, strict=True)]
+    # the same runs at theta: only the alarm differs (a nan statistic never exceeds theta)
+    rd_cal = ([replace(x, alarm=s > theta) for x, (s, _, _) in zip(rd, scored, strict=True)]
               if val else None)
 
     dataset_sha = _sha(sorted((r.info.get("scenario_sha256"), int(r.info["seed"]),
