@@ -4,12 +4,17 @@ For each number of spans N the script builds the chain line (unwind roll -> N-1 
 rewind roll, PET web, random span lengths), runs the scenario (60 s of line time, 1 kHz
 output, line speed ramping 1 -> 5 m/s over 0...20 s) with
 
-* r2rsim: :func:`r2rsim.simulate` (CVODE BDF, ``max_order=2``, band, analytic Jacobian),
+* r2rsim with its default backend: :func:`r2rsim.simulate` (CVODE BDF, ``max_order=2``,
+  band, analytic Jacobian),
+* r2rsim with ``backend="radau5"``: its compiled Radau IIA (:mod:`r2rsim.solve.radau`, the
+  same method as scipy's, the whole integration in one numba kernel),
 * the peer: ``scipy.integrate.solve_ivp(method="Radau")`` fed the same compiled numba RHS
   and the analytic sparse Jacobian, integrated segment by segment like ``simulate`` does,
 
-and compares both against a tight reference (``simulate`` at rtol 1e-10, atol x 1e-4).
-It prints one table row per N with PASS/FAIL against the DESIGN.md §8 targets.
+and compares all three against a tight reference (CVODE at rtol 1e-10, atol x 1e-4). It
+prints three table rows per N with PASS/FAIL against the DESIGN.md §8 targets. "Equal
+accuracy": each r2rsim backend is run down a ladder of tolerances until its max tension error
+is at most scipy Radau's.
 
 Usage::
 
@@ -390,8 +395,10 @@ def run_radau(cl, y0: np.ndarray, rtol: float = RTOL, all_outputs: bool = False)
 
 def warm_up(cl, y0: np.ndarray, rtol: float, radau_rtol: float) -> None:
     """Short untimed runs of both solvers (numba compile / cache load, imports)."""
-    r2rsim.simulate(cl, WARMUP_S, RECORD_RATE, y0, r2rsim.SolverSettings(rtol=rtol),
-                    on_chunk=lambda t, Y, A: None)
+    for backend in ("cvode", "radau5"):
+        r2rsim.simulate(cl, WARMUP_S, RECORD_RATE, y0,
+                        r2rsim.SolverSettings(backend=backend, rtol=rtol),
+                        on_chunk=lambda t, Y, A: None)
     fun, jac = radau_callbacks(cl)
     cl.set_segment_start(0.0)
     solve_ivp(fun, (0.0, WARMUP_S), y0, method="Radau", jac=jac, rtol=radau_rtol,
@@ -435,6 +442,20 @@ def profile_r2rsim(cl, y0: np.ndarray, settings, log, top: int = 8) -> None:
 # =========================================================================================
 # one benchmark case
 # =========================================================================================
+def _ladder(cl, y0, ref, backend: str, target: float, log) -> dict | None:
+    """The loosest tolerance on a backend's ladder whose max tension error is at most
+    ``target`` (Radau's), timed like the main runs; None if no rung reaches it."""
+    for rt, sc in EQUAL_ACCURACY_LADDER[backend]:
+        run = run_r2rsim(cl, y0, r2rsim.SolverSettings(backend=backend, rtol=rt,
+                                                       atol_scale=sc))
+        err = tension_errors(run, ref)[0]
+        log(f"  ladder {backend}: rtol {rt:g}, atol x {sc:g}: {run.wall:.3f} s, "
+            f"max err {err:.2e} N")
+        if err <= target:
+            return {"rtol": rt, "atol_scale": sc, "wall": run.wall, "err": err}
+    return None
+
+
 def bench_case(n_spans: int, repeat: int, log, rtol: float = RTOL, radau_rtol: float = RTOL,
                profile: bool = False) -> dict:
     """Run the whole comparison for one N.
@@ -447,14 +468,16 @@ def bench_case(n_spans: int, repeat: int, log, rtol: float = RTOL, radau_rtol: f
     log : callable
         Receives progress lines.
     rtol, radau_rtol : float
-        Relative tolerances of r2rsim and of Radau.
+        Relative tolerances of r2rsim (both backends) and of scipy's Radau.
     profile : bool
         Also cProfile one extra r2rsim run and log the top entries.
 
     Returns
     -------
     dict
-        The table row.
+        The table row: ``r_*`` r2rsim's default backend (CVODE), ``c_*`` r2rsim's compiled
+        Radau IIA (``radau5``), ``p_*`` the peer (scipy Radau); ``eq``/``c_eq`` the rung of
+        each r2rsim backend's ladder that is at least as accurate as the peer.
     """
     t_build = time.perf_counter()
     cl, y0, init_mode = build_case(n_spans)
@@ -463,100 +486,108 @@ def bench_case(n_spans: int, repeat: int, log, rtol: float = RTOL, radau_rtol: f
         f"(built in {time.perf_counter() - t_build:.1f} s)")
     warm_up(cl, y0, rtol, radau_rtol)
 
-    settings = r2rsim.SolverSettings(rtol=rtol)
-    runs_r, runs_p = [], []
+    cvode = r2rsim.SolverSettings(rtol=rtol)
+    radau5 = r2rsim.SolverSettings(backend="radau5", rtol=rtol)
+    runs_r, runs_c, runs_p = [], [], []
     for i in range(repeat):
-        runs_r.append(run_r2rsim(cl, y0, settings))
+        runs_r.append(run_r2rsim(cl, y0, cvode))
+        runs_c.append(run_r2rsim(cl, y0, radau5))
         runs_p.append(run_radau(cl, y0, radau_rtol, all_outputs=i == repeat - 1))
-        log(f"  run {i + 1}/{repeat}: r2rsim {runs_r[-1].wall:.3f} s, "
-            f"Radau {runs_p[-1].wall:.3f} s")
+        log(f"  run {i + 1}/{repeat}: r2rsim cvode {runs_r[-1].wall:.3f} s, radau5 "
+            f"{runs_c[-1].wall:.3f} s, scipy Radau {runs_p[-1].wall:.3f} s")
     wall_r = float(np.median([r.wall for r in runs_r]))
+    wall_c = float(np.median([r.wall for r in runs_c]))
     wall_p = float(np.median([r.wall for r in runs_p]))
-    rr, rp = runs_r[-1], runs_p[-1]
-    if rr.extra["terminated"]:
-        log(f"  WARNING: r2rsim run terminated early: {rr.extra['reason']}")
+    rr, rc, rp = runs_r[-1], runs_c[-1], runs_p[-1]
+    for name, run in (("cvode", rr), ("radau5", rc)):
+        if run.extra["terminated"]:
+            log(f"  WARNING: r2rsim {name} run terminated early: {run.extra['reason']}")
 
     t_ref = time.perf_counter()
     ref = run_r2rsim(cl, y0, r2rsim.SolverSettings(rtol=REF_RTOL, atol_scale=REF_ATOL_SCALE))
-    log(f"  reference (rtol {REF_RTOL:g}, atol x {REF_ATOL_SCALE:g}): "
+    log(f"  reference (CVODE, rtol {REF_RTOL:g}, atol x {REF_ATOL_SCALE:g}): "
         f"{time.perf_counter() - t_ref:.1f} s, {ref.nfev} RHS evals")
     if ref.extra["terminated"]:
         log(f"  WARNING: reference run terminated early: {ref.extra['reason']}")
     err_r, end_r = tension_errors(rr, ref)
+    err_c, end_c = tension_errors(rc, ref)
     err_p, end_p = tension_errors(rp, ref)
     all_out = rp.extra["all_outputs_s"]
-    log(f"  r2rsim: {rr.nfev} RHS, {rr.njev} Jac, {rr.extra['restarts']} solver calls, "
-        f"{rr.extra['events']} events; Radau: {rp.nfev} RHS, {rp.njev} Jac, "
-        f"{rp.extra['nlu']} LU")
-    log(f"  not in the Radau wall: all {len(cl.aux_names)} outputs at every 1 kHz sample "
-        f"(which r2rsim computes) {all_out:.3f} s -> ratio incl. them "
-        f"{(wall_p + all_out) / wall_r:.2f}")
+    log(f"  r2rsim cvode: {rr.extra['steps']} steps, {rr.nfev} RHS, {rr.njev} Jac, "
+        f"{rr.extra['restarts']} solver calls; radau5: {rc.extra['steps']} steps, {rc.nfev} "
+        f"RHS, {rc.njev} Jac; scipy Radau: {rp.nfev} RHS, {rp.njev} Jac, {rp.extra['nlu']} LU")
+    log(f"  not in the scipy Radau wall: all {len(cl.aux_names)} outputs at every 1 kHz "
+        f"sample (which r2rsim computes) {all_out:.3f} s")
     # the same run computing every algebraic output at every sample, as `r2rsim run` does
-    with_out = run_r2rsim(cl, y0, settings, outputs=True)
-    log(f"  r2rsim with all {len(cl.aux_names)} algebraic outputs at 1 kHz: "
+    with_out = run_r2rsim(cl, y0, cvode, outputs=True)
+    log(f"  r2rsim cvode with all {len(cl.aux_names)} algebraic outputs at 1 kHz: "
         f"{with_out.wall:.3f} s (RTF {DURATION / with_out.wall:.1f})")
-    # equal accuracy: the loosest r2rsim tolerance on a ladder that is at least as accurate
-    # as Radau at its tolerance, timed the same way
-    eq = None
-    for rt, sc in EQUAL_ACCURACY_LADDER:
-        run = run_r2rsim(cl, y0, r2rsim.SolverSettings(rtol=rt, atol_scale=sc))
-        err = tension_errors(run, ref)[0]
-        log(f"  ladder: r2rsim rtol {rt:g}, atol x {sc:g}: {run.wall:.3f} s, "
-            f"max err {err:.2e} N")
-        if err <= err_p:
-            eq = {"rtol": rt, "atol_scale": sc, "wall": run.wall, "err": err}
-            break
+    eq = _ladder(cl, y0, ref, "cvode", err_p, log)
+    c_eq = _ladder(cl, y0, ref, "radau5", err_p, log)
     if profile:
-        profile_r2rsim(cl, y0, settings, log)
+        profile_r2rsim(cl, y0, cvode, log)
     return {
         "out_rtf": DURATION / with_out.wall,
-        "eq": eq,
+        "eq": eq, "c_eq": c_eq,
         "N": n_spans, "n": cl.n_states,
         "r_wall": wall_r, "r_rtf": DURATION / wall_r, "r_nfev": rr.nfev, "r_err": err_r,
         "r_end": end_r,
+        "c_wall": wall_c, "c_rtf": DURATION / wall_c, "c_nfev": rc.nfev, "c_err": err_c,
+        "c_end": end_c,
         "p_wall": wall_p, "p_rtf": DURATION / wall_p, "p_nfev": rp.nfev, "p_err": err_p,
         "p_end": end_p,
-        "ratio": wall_p / wall_r,
+        "ratio": wall_p / wall_r, "c_ratio": wall_p / wall_c,
     }
 
 
-EQUAL_ACCURACY_LADDER = [(1e-6, 1.0), (1e-7, 1.0), (1e-7, 0.1), (1e-8, 0.1), (1e-8, 0.01),
-                         (1e-9, 0.01), (1e-10, 0.001)]
+#: (rtol, atol scale) rungs tried, loosest first, until a backend is as accurate as scipy's
+#: Radau at its tolerance. radau5 is the same method, so its rungs are close together.
+EQUAL_ACCURACY_LADDER = {
+    "cvode": [(1e-6, 1.0), (1e-7, 1.0), (1e-7, 0.1), (1e-8, 0.1), (1e-8, 0.01),
+              (1e-9, 0.01), (1e-10, 0.001)],
+    "radau5": [(1e-6, 1.0), (7e-7, 1.0), (5e-7, 1.0), (3e-7, 1.0), (2e-7, 1.0), (1e-7, 1.0),
+               (1e-8, 0.1), (1e-9, 0.01)],
+}
 
 
-def verdicts(row: dict) -> tuple[str, str]:
-    """PASS/FAIL of the real-time-factor target and of the speed-ratio + accuracy target.
+def _ratio_verdict(eq: dict | None, p_wall: float) -> str:
+    if eq is None:
+        return "FAIL (scipy Radau's accuracy not reached on the ladder)"
+    ratio = p_wall / eq["wall"]
+    return (f"{'PASS' if ratio >= RATIO_TARGET else 'FAIL'} (x{ratio:.2f} at rtol "
+            f"{eq['rtol']:g}, atol x {eq['atol_scale']:g})")
 
-    The accuracy half passes if r2rsim's max tension error is at most Radau's
-    (``err<=Radau``), else if it is at most ``ABS_ERR_OK`` (``err<=0.05N``).
+
+def verdicts(row: dict) -> tuple[str, str, str]:
+    """PASS/FAIL of the real-time-factor target (default backend, CVODE) and of the
+    ">= 2x scipy Radau at equal or better accuracy" target for each r2rsim backend.
+
+    Equal accuracy: the loosest rung of the backend's ladder whose max tension error is at
+    most scipy Radau's; its wall time is compared with scipy Radau's.
     """
     target = RTF_TARGETS.get(row["N"])
     rtf = "n/a" if target is None else (
         f"{'PASS' if row['r_rtf'] >= target else 'FAIL'} (>={target:g})")
-    eq = row.get("eq")
-    if eq is None:
-        return rtf, "FAIL (Radau's accuracy not reached on the ladder)"
-    ratio = row["p_wall"] / eq["wall"]
-    ok = ratio >= RATIO_TARGET
-    return rtf, (f"{'PASS' if ok else 'FAIL'} (x{ratio:.2f} at equal accuracy: r2rsim rtol "
-                 f"{eq['rtol']:g}, atol x {eq['atol_scale']:g})")
+    return (rtf, _ratio_verdict(row.get("eq"), row["p_wall"]),
+            _ratio_verdict(row.get("c_eq"), row["p_wall"]))
 
 
 def format_table(rows: list[dict]) -> str:
     """The results table (one row per N)."""
-    head = (f"{'N':>4} {'states':>6} | {'r2r wall s':>10} {'RTF':>7} {'RHS':>7} "
-            f"{'maxTerr N':>9} {'endTerr':>8} | {'Radau wall':>10} {'RTF':>7} {'nfev':>7} "
-            f"{'maxTerr N':>9} {'endTerr':>8} | {'ratio':>6} | {'RTF+out':>7} | "
-            f"{'RTF target':<12} {'>=2x Radau at equal accuracy':<30}")
-    out = [head, "-" * len(head)]
+    head = (f"{'N':>4} {'states':>6} | {'backend':<13} {'wall s':>7} {'RTF':>7} {'RHS':>7} "
+            f"{'maxTerr N':>9} {'endTerr':>8} | {'ratio':>6} | verdicts")
+    out = [head, "-" * (len(head) + 50)]
     for r in rows:
-        v_rtf, v_ratio = verdicts(r)
-        out.append(
-            f"{r['N']:>4} {r['n']:>6} | {r['r_wall']:>10.3f} {r['r_rtf']:>7.1f} "
-            f"{r['r_nfev']:>7d} {r['r_err']:>9.2e} {r['r_end']:>8.1e} | "
-            f"{r['p_wall']:>10.3f} {r['p_rtf']:>7.1f} {r['p_nfev']:>7d} {r['p_err']:>9.2e} "
-            f"{r['p_end']:>8.1e} | {r['ratio']:>6.2f} | {r['out_rtf']:>7.1f} | {v_rtf:<12} "
-            f"{v_ratio:<30}")
+        v_rtf, v_cv, v_r5 = verdicts(r)
+        for key, name, verdict in (("r", "r2rsim cvode", f"RTF {v_rtf}; >=2x at equal "
+                                    f"accuracy: {v_cv}"),
+                                   ("c", "r2rsim radau5", f">=2x at equal accuracy: {v_r5}"),
+                                   ("p", "scipy Radau", "")):
+            ratio = f"{r['p_wall'] / r[key + '_wall']:>6.2f}"
+            out.append(
+                f"{r['N']:>4} {r['n']:>6} | {name:<13} {r[key + '_wall']:>7.3f} "
+                f"{r[key + '_rtf']:>7.1f} {r[key + '_nfev']:>7d} {r[key + '_err']:>9.2e} "
+                f"{r[key + '_end']:>8.1e} | {ratio} | {verdict}")
     return "\n".join(out)
 
 
@@ -602,10 +633,16 @@ def main(argv: list[str] | None = None) -> int:
     print()
     print(format_table(rows))
     print("RTF = simulated s / wall s. maxTerr: max |T - T_ref| over all spans and the "
-          f"{ERROR_RATE:g} Hz subsample; endTerr: at t = {DURATION:g} s. ratio = Radau wall / "
-          "r2rsim wall at the same rtol (states at every sample for both). RTF+out: r2rsim "
-          "also computing every algebraic output at every sample (what `r2rsim run` writes).")
-    all_ok = all(not v.startswith("FAIL") for r in rows for v in verdicts(r))
+          f"{ERROR_RATE:g} Hz subsample; endTerr: at t = {DURATION:g} s. ratio = scipy Radau "
+          "wall / this wall, all at the same rtol (states at every sample). Equal accuracy: "
+          "the loosest rung of the backend's tolerance ladder at least as accurate as scipy "
+          "Radau. r2rsim cvode with every algebraic output at every sample (what `r2rsim run` "
+          "writes): RTF " + ", ".join(f"{r['out_rtf']:.1f} (N={r['N']})" for r in rows) + ".")
+    # --strict: the RTF target (default backend) and >= 2x scipy Radau at equal accuracy
+    # with at least one r2rsim backend
+    all_ok = all(not v[0].startswith("FAIL") and not (v[1].startswith("FAIL")
+                                                      and v[2].startswith("FAIL"))
+                 for v in map(verdicts, rows))
     return 0 if all_ok or not args.strict else 1
 
 

@@ -51,7 +51,7 @@ def kinematic_line(tmp_path: Path, *, model: str, EA: float, spans: list[float],
 
 def run_line(path: Path, *, duration: float, rate: float = 1000.0, steps=(), tension=None,
              span_tension=None, rtol: float = 1e-9, atol_scale: float = 1e-3,
-             initial: str = "nominal", extra_yaml: str = ""):
+             initial: str = "nominal", extra_yaml: str = "", backend: str = "cvode"):
     """Load, compile and simulate a line file through the public API."""
     line = r2rsim.load_line(path)
     prog = r2rsim.Programme.from_steps(line, [ProgrammeStep(**s) for s in steps])
@@ -61,7 +61,8 @@ def run_line(path: Path, *, duration: float, rate: float = 1000.0, steps=(), ten
         y0 = r2rsim.steady_state(cl, y0)
         assert y0 is not None
     res = r2rsim.simulate(cl, duration, rate, y0,
-                          r2rsim.SolverSettings(rtol=rtol, atol_scale=atol_scale))
+                          r2rsim.SolverSettings(backend=backend, rtol=rtol,
+                                                atol_scale=atol_scale))
     return cl, res
 
 

@@ -19,6 +19,13 @@ from conftest import kinematic_line, run_line, write
 MODELS = ["linear", "exact"]
 
 
+@pytest.fixture(params=["cvode", "radau5"])
+def backend(request):
+    """Every simulated verification runs on both r2rsim integrators (CVODE BDF2, the
+    default, and the compiled Radau IIA)."""
+    return request.param
+
+
 def at(res, name, t):
     """Value of an output at a sample time (must be on the grid)."""
     k = int(np.argmin(np.abs(res.t - t)))
@@ -28,13 +35,14 @@ def at(res, name, t):
 
 # ---------------------------------------------------------------- V1 single-span step response
 @pytest.mark.parametrize("model", MODELS)
-def test_v1_single_span_step(tmp_path, model):
+def test_v1_single_span_step(tmp_path, model, backend):
     path = kinematic_line(tmp_path, model=model, EA=1.0e5, spans=[2.0], draws=[0.0, 0.001])
     tau = 2.0 / 1.001
     # record rate chosen so that t = tau, 1 s and 10 s fall on the sample grid
-    cl, res = run_line(path, duration=10.0, rate=1000.0, steps=[{"at": 0, "line_speed": 1.0}],
+    cl, res = run_line(path, backend=backend,
+                       duration=10.0, rate=1000.0, steps=[{"at": 0, "line_speed": 1.0}],
                        tension=0.0)
-    _, res_tau = run_line(path, duration=tau, rate=1000.0 / tau,
+    _, res_tau = run_line(path, backend=backend, duration=tau, rate=1000.0 / tau,
                           steps=[{"at": 0, "line_speed": 1.0}], tension=0.0)
     T_tau = res_tau["span1.tension_N"][-1]
     assert res_tau.t[-1] == pytest.approx(tau, rel=1e-12)
@@ -59,11 +67,12 @@ def test_v1_single_span_step(tmp_path, model):
     ("linear", [299.7003, 499.0020, 399.4009]),
     ("exact", [300.1000, 500.2000, 400.1500]),
 ])
-def test_v3_draw_chain(tmp_path, model, expected):
+def test_v3_draw_chain(tmp_path, model, expected, backend):
     EA = 2.0e5
     path = kinematic_line(tmp_path, model=model, EA=EA, spans=[1.0, 1.0, 1.0],
                           draws=[0.0, 0.001, 0.002, 0.0015], wound_strain=100.0 / EA)
-    _, res = run_line(path, duration=8.0, rate=100.0, steps=[{"at": 0, "line_speed": 5.0}],
+    _, res = run_line(path, backend=backend,
+                      duration=8.0, rate=100.0, steps=[{"at": 0, "line_speed": 5.0}],
                       tension=100.0)
     got = [res[f"span{i}.tension_N"][-1] for i in (1, 2, 3)]
     np.testing.assert_allclose(got, expected, atol=1e-3)
@@ -80,19 +89,22 @@ def _idler_line(tmp_path, model, *, J=0.01, coulomb=0.0, viscous=0.0, EA=1.0e5):
 
 
 @pytest.mark.parametrize("model", MODELS)
-def test_v5_idler_transfer(tmp_path, model):
+def test_v5_idler_transfer(tmp_path, model, backend):
     EA = 1.0e5
     path = _idler_line(tmp_path, model)
-    _, res = run_line(path, duration=5.0, rate=100.0, steps=[{"at": 0, "line_speed": 5.0}],
+    _, res = run_line(path, backend=backend,
+                      duration=5.0, rate=100.0, steps=[{"at": 0, "line_speed": 5.0}],
                       tension=100.0)
     assert abs(res["span2.tension_N"][-1] - res["span1.tension_N"][-1]) < 1e-9 * EA
     path = _idler_line(tmp_path, model, coulomb=0.02)
-    _, res = run_line(path, duration=5.0, rate=100.0, steps=[{"at": 0, "line_speed": 5.0}],
+    _, res = run_line(path, backend=backend,
+                      duration=5.0, rate=100.0, steps=[{"at": 0, "line_speed": 5.0}],
                       tension=100.0)
     dT = res["span2.tension_N"][-1] - res["span1.tension_N"][-1]
     assert dT == pytest.approx(0.400, abs=1e-6)  # tau_c / R, downstream higher
     path = _idler_line(tmp_path, model, coulomb=0.02, viscous=1e-4)
-    _, res = run_line(path, duration=5.0, rate=100.0, steps=[{"at": 0, "line_speed": 5.0}],
+    _, res = run_line(path, backend=backend,
+                      duration=5.0, rate=100.0, steps=[{"at": 0, "line_speed": 5.0}],
                       tension=100.0)
     dT = res["span2.tension_N"][-1] - res["span1.tension_N"][-1]
     om = res["n1.speed_rad_s"][-1]  # v/R to O(strain): the idler runs at the web speed
@@ -102,9 +114,9 @@ def test_v5_idler_transfer(tmp_path, model):
 
 # ---------------------------------------------------------------- V6 idler inertia
 @pytest.mark.parametrize("model", MODELS)
-def test_v6_idler_inertia_under_acceleration(tmp_path, model):
+def test_v6_idler_inertia_under_acceleration(tmp_path, model, backend):
     path = _idler_line(tmp_path, model, J=0.0109)
-    _, res = run_line(path, duration=8.0, rate=100.0,
+    _, res = run_line(path, backend=backend, duration=8.0, rate=100.0,
                       steps=[{"at": 0, "line_speed": 1.0},
                              {"at": 1.0, "line_speed": 6.0, "rate": 0.5}], tension=100.0)
     dT = at(res, "span2.tension_N", 8.0) - at(res, "span1.tension_N", 8.0)
@@ -141,11 +153,12 @@ def test_v7_idler_span_mode(tmp_path, v, expected):
 
 # ---------------------------------------------------------------- V9 radius law
 @pytest.mark.parametrize("model", MODELS)
-def test_v9_radius_law_and_roll_empty(tmp_path, model):
+def test_v9_radius_law_and_roll_empty(tmp_path, model, backend):
     path = kinematic_line(tmp_path, model=model, EA=1e5, spans=[1.0], draws=[0.0, 0.0])
     text = path.read_text().replace("thickness: 0.0001", "thickness: 5.0e-05")
     write(path, text)  # c_w = thickness = 50 um
-    _, res = run_line(path, duration=3200.0, rate=1.0, steps=[{"at": 0, "line_speed": 5.0}],
+    _, res = run_line(path, backend=backend,
+                      duration=3200.0, rate=1.0, steps=[{"at": 0, "line_speed": 5.0}],
                       tension=0.0, rtol=1e-10)
     assert at(res, "src.radius_m", 600.0) == pytest.approx(0.449726, abs=1e-6)
     assert at(res, "src.radius_m", 600.0) == pytest.approx(
@@ -161,7 +174,7 @@ def test_v9_radius_law_and_roll_empty(tmp_path, model):
 
 # ---------------------------------------------------------------- V10 inertia and mass
 @pytest.mark.parametrize("R,J,m", [(0.5, 136.454, 1082.86), (0.25, 8.5200, 264.08)])
-def test_v10_roll_inertia_and_mass(tmp_path, R, J, m):
+def test_v10_roll_inertia_and_mass(tmp_path, R, J, m, backend):
     text = f"""\
         span_model: exact
         web: {{material: PET, thickness: 50 um, width: 1 m}}
@@ -177,7 +190,7 @@ def test_v10_roll_inertia_and_mass(tmp_path, R, J, m):
         spans: [{{length: 1 m}}]
         """
     path = write(tmp_path / "roll.yaml", text)
-    _, res = run_line(path, duration=0.01, rate=100.0)
+    _, res = run_line(path, backend=backend, duration=0.01, rate=100.0)
     rho, w, Rc = 1390.0, 1.0, 0.045
     assert res["unwind.inertia_kg_m2"][0] == pytest.approx(
         0.5 * math.pi * rho * w * (R**4 - Rc**4), rel=1e-12)
@@ -190,11 +203,12 @@ def test_v10_roll_inertia_and_mass(tmp_path, R, J, m):
 
 # ---------------------------------------------------------------- V18 break event time
 @pytest.mark.parametrize("model", MODELS)
-def test_v18_break_time(tmp_path, model):
+def test_v18_break_time(tmp_path, model, backend):
     # EA = 1e5 N with A = 1e-4 m^2; break stress 5 MPa -> T_break = 500 N
     path = kinematic_line(tmp_path, model=model, EA=1e5, spans=[2.0], draws=[0.0, 0.01],
                           break_stress="5 MPa")
-    _, res = run_line(path, duration=3.0, rate=1000.0, steps=[{"at": 0, "line_speed": 1.0}],
+    _, res = run_line(path, backend=backend,
+                      duration=3.0, rate=1000.0, steps=[{"at": 0, "line_speed": 1.0}],
                       tension=0.0)
     if model == "linear":
         t_b = 1.392470  # physics.md V18
@@ -212,13 +226,14 @@ def test_v18_break_time(tmp_path, model):
 # ---------------------------------------------------------------- V19 capstan threshold
 @pytest.mark.parametrize("mu,beta,ratio", [(0.3, "3.141592653589793", 2.5663),
                                            (0.2, "90 deg", 1.3691)])
-def test_v19_capstan_threshold(tmp_path, mu, beta, ratio):
+def test_v19_capstan_threshold(tmp_path, mu, beta, ratio, backend):
     EA = 1e5
     node = (f"type: driven, radius: 0.1, inertia: 0.1, wrap_angle: {beta}, "
             f"friction_coefficient: {mu}, drive: {{type: ideal_speed}}")
     path = kinematic_line(tmp_path, model="linear", EA=EA, spans=[1.0, 1.0],
                           draws=[0.0, 0.0, 0.003], wound_strain=100.0 / EA, middle=[node])
-    _, res = run_line(path, duration=3.0, rate=1000.0, steps=[{"at": 0, "line_speed": 1.0}],
+    _, res = run_line(path, backend=backend,
+                      duration=3.0, rate=1000.0, steps=[{"at": 0, "line_speed": 1.0}],
                       tension=100.0)
     risk = [e for e in res.events if e.kind == "slip_risk"]
     assert len(risk) == 1 and risk[0].state == "start" and risk[0].component == "n1"
@@ -233,7 +248,7 @@ def test_v19_capstan_threshold(tmp_path, mu, beta, ratio):
 
 
 # ---------------------------------------------------------------- V24 speed-trim PI
-def test_v24_speed_trim_first_order(tmp_path):
+def test_v24_speed_trim_first_order(tmp_path, backend):
     EA, L, v = 2.25e5, 1.5, 5.0
     wc = 4 * math.pi
     kp = wc * L / EA
@@ -256,10 +271,11 @@ def test_v24_speed_trim_first_order(tmp_path):
         """
     path = write(tmp_path / "v24.yaml", text)
     assert kp == pytest.approx(8.3776e-5, rel=1e-4) and ki == pytest.approx(2.7925e-4, rel=1e-4)
-    _, res = run_line(path, duration=3.0 / wc, rate=1000.0 * wc,
+    _, res = run_line(path, backend=backend, duration=3.0 / wc, rate=1000.0 * wc,
                       steps=[{"at": 0, "line_speed": v}], tension=0.0)
     assert at(res, "span1.tension_N", 1 / wc) == pytest.approx(164.31, rel=1e-3)
     assert res["span1.tension_N"][-1] == pytest.approx(247.01, rel=1e-3)
-    _, res = run_line(path, duration=1.0, rate=1000.0, steps=[{"at": 0, "line_speed": v}],
+    _, res = run_line(path, backend=backend,
+                      duration=1.0, rate=1000.0, steps=[{"at": 0, "line_speed": v}],
                       tension=0.0)
     assert at(res, "span1.tension_N", 1.0) == pytest.approx(260.00, rel=1e-3)

@@ -84,7 +84,9 @@ class Initial(Strict):
 class SolverOptions(Strict):
     """Integrator settings (solver.md §6)."""
 
-    backend: Literal["cvode", "radau"] = "cvode"
+    backend: Literal["cvode", "radau5", "radau"] = Field(
+        "cvode", description="cvode: CVODE BDF (scikit-sundae); radau5: r2rsim's compiled "
+        "Radau IIA, order 5; radau: scipy's Radau (cross-check)")
     rtol: Annotated[float, Field(gt=0, lt=1)] = 1e-6
     atol_scale: Annotated[float, Field(gt=0)] = Field(
         1.0, description="multiplies the per-state absolute tolerances"

@@ -36,6 +36,8 @@ def describe_settings(s: SolverOptions) -> str:
     """One line naming the integrator and its settings (for logs and runs.parquet)."""
     if s.backend == "cvode":
         return f"CVODE BDF max_order={s.max_order} band analytic-jac rtol={s.rtol:g}"
+    if s.backend == "radau5":
+        return f"r2rsim Radau IIA order 5 (compiled) band analytic-jac rtol={s.rtol:g}"
     return f"scipy Radau sparse analytic-jac rtol={s.rtol:g}"
 
 
@@ -95,6 +97,11 @@ ChunkCallback = Callable[[np.ndarray, np.ndarray, np.ndarray], None]
 
 
 class _CVODEBackend:
+    @staticmethod
+    def locates_events(hot: bool) -> bool:
+        """Whether solve() itself stops at events: with root finding on (hot chunks)."""
+        return hot
+
     def __init__(self, cl: CompiledLine, s: SolverSettings):
         from sksundae.cvode import CVODE
 
@@ -173,6 +180,11 @@ class _CVODEBackend:
 
 
 class _RadauBackend:
+    @staticmethod
+    def locates_events(hot: bool) -> bool:
+        """Never: the caller checks the samples (scipy does not expose its steps)."""
+        return False
+
     def __init__(self, cl: CompiledLine, s: SolverSettings):
         import scipy.sparse as sps
 
@@ -208,7 +220,7 @@ class _RadauBackend:
 
         return solve_ivp(self.fun, (tspan[0], tspan[-1]), y0, method="Radau", t_eval=tspan,
                          jac=self.jac, rtol=self.s.rtol, atol=self.cl.atol * self.s.atol_scale,
-                         events=events)
+                         events=events, dense_output=events is not None)
 
     def solve(self, tspan, y0, find_events=False):
         res = self._ivp(tspan, y0)
@@ -234,7 +246,91 @@ class _RadauBackend:
         if res.status == 1:
             for i, te in enumerate(res.t_events):
                 if len(te):
-                    return float(te[0]), np.asarray(res.y_events[i][0]), np.array([i])
+                    t, y = self._past_root(res.sol, i, t0, y0, float(te[0]), t1)
+                    return t, y, np.array([i])
+        return None
+
+    def _past_root(self, sol, i, t0, y0, te, t1):
+        """The first time at or after scipy's root where event i has changed sign (as CVODE
+        and radau5 return it): scipy's root may lie up to 4 eps |t| on the near side, and a
+        mode change applied there would act on a state that has not crossed."""
+        g0 = self.cl.events(t0, y0)[0][i]
+        step = 4.0 * np.finfo(float).eps * max(1.0, abs(te))
+        t = te
+        for _ in range(60):
+            y = sol(t)
+            g = self.cl.events(t, y)[0][i]
+            if g == 0.0 or (g < 0.0) != (g0 < 0.0) or t >= t1:
+                return t, y
+            t = min(t1, t + step)
+            step *= 2.0
+        return t, sol(t)
+
+
+class _Radau5Backend:
+    """r2rsim's compiled Radau IIA (:mod:`r2rsim.solve.radau`): the integration, the dense
+    output at the samples and the location of events all run in one numba kernel."""
+
+    @staticmethod
+    def locates_events(hot: bool) -> bool:
+        """Always: at every step, in the kernel."""
+        return True
+
+    def __init__(self, cl: CompiledLine, s: SolverSettings):
+        from . import radau
+
+        self.cl = cl
+        self.radau = radau
+        n = cl.n_states
+        self.rtol = s.rtol
+        self.atol = np.ascontiguousarray(cl.atol * s.atol_scale, float)
+        rows, cols = cl.pattern
+        self.rows = np.ascontiguousarray(rows, np.int64)
+        self.cols = np.ascontiguousarray(cols, np.int64)
+        # the Jacobian kernel writes the pattern entries of a dense (n, n) array
+        self.line = (cl.I, cl.P, cl._W, cl._GI, cl._GC, cl._GV, cl._aux0, np.zeros((n, n)),
+                     np.zeros(n), cl._J1)
+        m = len(cl.event_kinds)
+        self.g = np.zeros(m)
+        self.y_root = np.zeros(n)
+        self.dirs = np.zeros(m, np.int64)
+        self.nfev = 0
+        self.njev = 0
+        self.nlu = 0
+        self.steps = 0
+
+    def _integrate(self, tspan, y0, with_events=True):
+        r = self.radau
+        cl = self.cl
+        tq = np.ascontiguousarray(tspan, float)
+        out = np.empty((len(tq), cl.n_states))
+        g = self.g if with_events else self.g[:0]
+        status, t_reached, n_out, nfev, njev, nlu, nsteps = r.integrate(
+            float(tq[0]), float(tq[-1]), np.ascontiguousarray(y0, float), tq, out, self.rtol,
+            self.atol, 200000, self.line, self.rows, self.cols, max(cl.lband, 0),
+            max(cl.uband, 0), r.CONSTS, g, self.y_root, self.dirs)
+        self.nfev += nfev
+        self.njev += njev
+        self.nlu += nlu
+        self.steps += nsteps
+        return status, t_reached, tq[:n_out], out[:n_out]
+
+    def solve(self, tspan, y0, find_events=False):
+        """Samples at ``tspan``. Events are always located (at every step, in the kernel):
+        the last return value is ``(t, y, directions)`` of the first one, else None."""
+        status, t_reached, tt, Y = self._integrate(tspan, y0)
+        if status == self.radau.ROOT:
+            root = (t_reached, self.y_root.copy(), self.dirs.copy())
+            return tt, Y, None, tt, Y, root
+        if status != self.radau.DONE:
+            return tt, Y, self.radau.MESSAGES[status], tt, Y, None
+        return tt, Y, None, tt, Y, None
+
+    def locate(self, t0, y0, t1):
+        """Integrate [t0, t1] locating events; return (t, y, event indices) or None."""
+        status, t_reached, _, _ = self._integrate(np.array([t0, t1]), y0)
+        if status == self.radau.ROOT:
+            return t_reached, self.y_root.copy(), np.nonzero(self.dirs)[0]
         return None
 
 
@@ -301,7 +397,8 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
         y0 = nominal_state(cl)
         initial_state_mode = "nominal"
     y0 = np.array(y0, dtype=float)
-    backend = _CVODEBackend(cl, s) if s.backend == "cvode" else _RadauBackend(cl, s)
+    backend = {"cvode": _CVODEBackend, "radau": _RadauBackend,
+               "radau5": _Radau5Backend}[s.backend](cl, s)
     dt = 1.0 / record_rate
     n_samples = int(math.floor(duration * record_rate + 1e-9)) + 1
     sample_t = np.arange(n_samples) * dt
@@ -399,7 +496,8 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
             restarts += 1
             if err is not None:
                 k_next = _emit_samples(emit, sample_t, k_next, tt, Y, k_end)
-                terminated, reason, t_term = True, f"solver_failure: {err}", float(ts[-1])
+                terminated, reason = True, f"solver_failure: {err}"
+                t_term = float(ts[-1]) if len(ts) else t
                 break
             if root is not None:  # hot: CVODE stopped at a root
                 t_ev, y_ev, dirs = root
@@ -416,7 +514,7 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
             else:
                 # event detection at the solver's steps (as CVODE's own root finding does)
                 hit_row = None
-                if len(cl.event_kinds) and not hot:
+                if len(cl.event_kinds) and not backend.locates_events(hot):
                     cond = cl.events(ts, ys) < 0
                     # the first row is the chunk's start, whose conditions are known (after
                     # an event it sits on a root, where the sign of g is not meaningful)
@@ -483,7 +581,7 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
         A_all = np.zeros((0, len(cl.aux_names)))
     wall = _time.perf_counter() - wall0
     stats = {"nfev": backend.nfev, "njev": backend.njev, "restarts": restarts, "wall_s": wall,
-             "steps": backend.steps if s.backend == "cvode" else None,
+             "steps": backend.steps if s.backend != "radau" else None,
              "solver": describe_settings(s), "n_samples": int(k_next)}
     return SimulationResult(cl, T_all, Y_all, A_all, events, terminated, reason, t_term, stats,
                             duration, initial_state_mode, y0)
