@@ -92,7 +92,8 @@ class SolverOptions(Strict):
         1.0, description="multiplies the per-state absolute tolerances"
     )
     max_order: Annotated[int, Field(ge=1, le=5)] = Field(
-        2, description="BDF order limit; 2 is A-stable (orders 3-5 are unstable on web modes)"
+        2, description="CVODE's BDF order limit (cvode only); 2 is A-stable (orders 3-5 are "
+        "unstable on web modes)"
     )
     chunk_memory_mb: Annotated[float, Field(gt=0)] = Field(
         64.0, description="memory for one integration chunk of dense output"

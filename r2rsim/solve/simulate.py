@@ -299,16 +299,15 @@ class _Radau5Backend:
         self.nlu = 0
         self.steps = 0
 
-    def _integrate(self, tspan, y0, with_events=True):
+    def _integrate(self, tspan, y0):
         r = self.radau
         cl = self.cl
         tq = np.ascontiguousarray(tspan, float)
         out = np.empty((len(tq), cl.n_states))
-        g = self.g if with_events else self.g[:0]
         status, t_reached, n_out, nfev, njev, nlu, nsteps = r.integrate(
             float(tq[0]), float(tq[-1]), np.ascontiguousarray(y0, float), tq, out, self.rtol,
             self.atol, 200000, self.line, self.rows, self.cols, max(cl.lband, 0),
-            max(cl.uband, 0), r.CONSTS, g, self.y_root, self.dirs)
+            max(cl.uband, 0), r.CONSTS, self.g, self.y_root, self.dirs)
         self.nfev += nfev
         self.njev += njev
         self.nlu += nlu
