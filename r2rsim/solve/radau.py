@@ -173,7 +173,7 @@ def _any_crossed(active, g0, g):
 
 @njit(cache=True)
 def integrate(t0, t_end, y0, tq, out, rtol, atol, max_steps, line, rows, cols, kl, ku,
-              consts, g_start, y_root, dirs):
+              consts, g_start, y_root, dirs, vals, h_init, jac_ready):
     """Integrate the compiled line from ``(t0, y0)`` to ``t_end``.
 
     Parameters
@@ -198,6 +198,13 @@ def integrate(t0, t_end, y0, tq, out, rtol, atol, max_steps, line, rows, cols, k
     y_root, dirs : ndarray
         Outputs when an event function changes sign: the state at the event and, per event
         function, +1 (rising) / -1 (falling) / 0.
+    vals : ndarray (n_pattern,)
+        Jacobian values on the pattern (kept between calls).
+    h_init : float
+        First step to try; <= 0 estimates it. Continuing a smooth integration (a chunk
+        boundary where nothing changes) passes the step the last call proposed.
+    jac_ready : bool
+        ``vals`` holds a recent Jacobian: reuse it (it is evaluated again if Newton fails).
 
     Returns
     -------
@@ -208,6 +215,8 @@ def integrate(t0, t_end, y0, tq, out, rtol, atol, max_steps, line, rows, cols, k
     n_out : int
         Samples written.
     nfev, njev, nlu, nsteps : int
+    h_next : float
+        The step size proposed for the next step.
     """
     I, Pl, W, GI, GC, GV, aux0, JJ, yd, J1 = line
     Cn, En, Tm, TIm, Pm, gamma, mu = consts
@@ -219,7 +228,6 @@ def integrate(t0, t_end, y0, tq, out, rtol, atol, max_steps, line, rows, cols, k
     ab_c = np.zeros((n, nb), np.complex128)
     piv_r = np.zeros(n, np.int64)
     piv_c = np.zeros(n, np.int64)
-    vals = np.zeros(rows.shape[0])
     y = y0.copy()
     f = np.empty(n)
     y_new = np.empty(n)
@@ -256,31 +264,19 @@ def integrate(t0, t_end, y0, tq, out, rtol, atol, max_steps, line, rows, cols, k
             active[m] = g_start[m] != 0.0
     interval = t_end - t0
     if interval <= 0.0:
-        return DONE, t, k_out, nfev, njev, nlu, nsteps
+        return DONE, t, k_out, nfev, njev, nlu, nsteps, h_init
 
-    # initial step (Hairer, Norsett & Wanner I, §II.4), for an error estimate of order 3
-    for i in range(n):
-        scale[i] = atol[i] + abs(y[i]) * rtol
-    d0 = _rms(y, scale)
-    d1 = _rms(f, scale)
-    h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
-    h0 = min(h0, interval)
-    for i in range(n):
-        ytmp[i] = y[i] + h0 * f[i]
-    evaluate(t + h0, ytmp, f_new, J1, MODE_RHS, I, Pl, W, GI, GC, GV, aux0)
-    nfev += 1
-    for i in range(n):
-        err[i] = f_new[i] - f[i]
-    d2 = _rms(err, scale) / h0
-    if d1 <= 1e-15 and d2 <= 1e-15:
-        h1 = max(1e-6, h0 * 1e-3)
+    if h_init > 0.0:
+        h_abs = min(h_init, interval)
     else:
-        h1 = (0.01 / max(d1, d2)) ** 0.25
-    h_abs = min(100.0 * h0, h1, interval)
-
-    jac_values(t, y, JJ, I, Pl, W, GI, GC, GV, yd, vals)
-    njev += 1
-    current_jac = True
+        h_abs = _initial_step(t, y, f, f_new, ytmp, err, scale, rtol, atol, interval, line)
+        nfev += 1
+    if jac_ready:
+        current_jac = False
+    else:
+        jac_values(t, y, JJ, I, Pl, W, GI, GC, GV, yd, vals)
+        njev += 1
+        current_jac = True
     lu_valid = False
     h_abs_old = -1.0
     err_old = -1.0
@@ -288,6 +284,7 @@ def integrate(t0, t_end, y0, tq, out, rtol, atol, max_steps, line, rows, cols, k
     t_prev = 0.0
     h_prev = 1.0
     h = h_abs
+    h_next = h_abs
     t_new = t
     n_iter = 0
     rate = -1.0
@@ -300,7 +297,7 @@ def integrate(t0, t_end, y0, tq, out, rtol, atol, max_steps, line, rows, cols, k
         safety = 0.9
         while not accepted:
             if h_abs < min_step:
-                return FAIL_SMALL_STEP, t, k_out, nfev, njev, nlu, nsteps
+                return FAIL_SMALL_STEP, t, k_out, nfev, njev, nlu, nsteps, h_abs
             t_new = t + h_abs
             if t_new > t_end:
                 t_new = t_end
@@ -464,7 +461,7 @@ def integrate(t0, t_end, y0, tq, out, rtol, atol, max_steps, line, rows, cols, k
                 while k_out < tq.shape[0] and tq[k_out] <= tr:
                     _dense(Q, y, (tq[k_out] - t) / h, out[k_out])
                     k_out += 1
-                return ROOT, tr, k_out, nfev, njev, nlu, nsteps
+                return ROOT, tr, k_out, nfev, njev, nlu, nsteps, h_abs
             for m in range(nev):
                 if not active[m] and g_new[m] != 0.0:
                     active[m] = True
@@ -484,9 +481,35 @@ def integrate(t0, t_end, y0, tq, out, rtol, atol, max_steps, line, rows, cols, k
         y[:] = y_new
         f[:] = f_new
         h_abs *= factor
+        if t_new < t_end:
+            h_next = h_abs  # the last step may be clipped to t_end: keep the unclipped one
         if nsteps >= max_steps:
-            return FAIL_MAX_STEPS, t, k_out, nfev, njev, nlu, nsteps
-    return DONE, t, k_out, nfev, njev, nlu, nsteps
+            return FAIL_MAX_STEPS, t, k_out, nfev, njev, nlu, nsteps, h_abs
+    return DONE, t, k_out, nfev, njev, nlu, nsteps, h_next
+
+
+@njit(cache=True)
+def _initial_step(t, y, f, f1, y1, df, scale, rtol, atol, interval, line):
+    """First step (Hairer, Norsett & Wanner I, §II.4) for an error estimate of order 3."""
+    I, Pl, W, GI, GC, GV, aux0, JJ, yd, J1 = line
+    n = y.shape[0]
+    for i in range(n):
+        scale[i] = atol[i] + abs(y[i]) * rtol
+    d0 = _rms(y, scale)
+    d1 = _rms(f, scale)
+    h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+    h0 = min(h0, interval)
+    for i in range(n):
+        y1[i] = y[i] + h0 * f[i]
+    evaluate(t + h0, y1, f1, J1, MODE_RHS, I, Pl, W, GI, GC, GV, aux0)
+    for i in range(n):
+        df[i] = f1[i] - f[i]
+    d2 = _rms(df, scale) / h0
+    if d1 <= 1e-15 and d2 <= 1e-15:
+        h1 = max(1e-6, h0 * 1e-3)
+    else:
+        h1 = (0.01 / max(d1, d2)) ** 0.25
+    return min(100.0 * h0, h1, interval)
 
 
 @njit(cache=True)

@@ -130,7 +130,7 @@ class _CVODEBackend:
         self.njev = 0
         self.steps = 0
 
-    def solve(self, tspan, y0, find_events=False):
+    def solve(self, tspan, y0, find_events=False, resume=False):
         """States at the times ``tspan``: CVODE returns every internal step (one-step mode,
         one return per step instead of one per sample), and the samples are interpolated
         with cubic Hermite polynomials from the step states and their exact derivatives.
@@ -222,7 +222,7 @@ class _RadauBackend:
                          jac=self.jac, rtol=self.s.rtol, atol=self.cl.atol * self.s.atol_scale,
                          events=events, dense_output=events is not None)
 
-    def solve(self, tspan, y0, find_events=False):
+    def solve(self, tspan, y0, find_events=False, resume=False):
         res = self._ivp(tspan, y0)
         self.nfev += int(res.nfev)
         self.njev += int(res.njev)
@@ -294,30 +294,37 @@ class _Radau5Backend:
         self.g = np.zeros(m)
         self.y_root = np.zeros(n)
         self.dirs = np.zeros(m, np.int64)
+        self.vals = np.zeros(len(self.rows))  # Jacobian on the pattern, kept between calls
+        self.h_next = 0.0
         self.nfev = 0
         self.njev = 0
         self.nlu = 0
         self.steps = 0
 
-    def _integrate(self, tspan, y0):
+    def _integrate(self, tspan, y0, resume=False):
         r = self.radau
         cl = self.cl
         tq = np.ascontiguousarray(tspan, float)
         out = np.empty((len(tq), cl.n_states))
-        status, t_reached, n_out, nfev, njev, nlu, nsteps = r.integrate(
+        warm = resume and self.h_next > 0.0
+        status, t_reached, n_out, nfev, njev, nlu, nsteps, self.h_next = r.integrate(
             float(tq[0]), float(tq[-1]), np.ascontiguousarray(y0, float), tq, out, self.rtol,
             self.atol, 200000, self.line, self.rows, self.cols, max(cl.lband, 0),
-            max(cl.uband, 0), r.CONSTS, self.g, self.y_root, self.dirs)
+            max(cl.uband, 0), r.CONSTS, self.g, self.y_root, self.dirs, self.vals,
+            self.h_next if warm else 0.0, warm)
         self.nfev += nfev
         self.njev += njev
         self.nlu += nlu
         self.steps += nsteps
         return status, t_reached, tq[:n_out], out[:n_out]
 
-    def solve(self, tspan, y0, find_events=False):
+    def solve(self, tspan, y0, find_events=False, resume=False):
         """Samples at ``tspan``. Events are always located (at every step, in the kernel):
-        the last return value is ``(t, y, directions)`` of the first one, else None."""
-        status, t_reached, tt, Y = self._integrate(tspan, y0)
+        the last return value is ``(t, y, directions)`` of the first one, else None.
+
+        ``resume``: the previous call ended here and nothing changed since (a memory chunk
+        boundary), so its proposed step size and its Jacobian are reused."""
+        status, t_reached, tt, Y = self._integrate(tspan, y0, resume)
         if status == self.radau.ROOT:
             root = (t_reached, self.y_root.copy(), self.dirs.copy())
             return tt, Y, None, tt, Y, root
@@ -463,6 +470,7 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
     # more events tend to follow (a splice joint crossing nodes, a dancer at its stops), so
     # the next chunks use CVODE's root finding, which stops at the event ("hot").
     hot = False
+    resume = False  # the last chunk ended at a memory boundary only: continue smoothly
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         while t < duration - 1e-12 and not terminated:
@@ -491,7 +499,9 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
                 tspan = np.append(tspan, t_chunk_end)
             if len(tspan) < 3:  # scikit-sundae: 2 points means "every step"; pad
                 tspan = np.array([t, 0.5 * (t + tspan[-1]), tspan[-1]])
-            tt, Y, err, ts, ys, root = backend.solve(tspan, y, find_events=hot)
+            tt, Y, err, ts, ys, root = backend.solve(tspan, y, find_events=hot,
+                                                     resume=resume)
+            resume = False
             restarts += 1
             if err is not None:
                 k_next = _emit_samples(emit, sample_t, k_next, tt, Y, k_end)
@@ -525,6 +535,7 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
                 if hit_row is None:
                     k_next = _emit_samples(emit, sample_t, k_next, tt, Y, k_end)
                     t, y = float(tt[-1]), Y[-1].copy()
+                    resume = k_hi < k_end and not hot
                     hot = False
                     if progress:
                         progress(t)
