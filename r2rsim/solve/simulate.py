@@ -482,6 +482,7 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
                     break
                 flags = refresh_mode_flags(t, y, flags)
                 hot = True
+                resume = False
             bps = [b for b in (*prog_breaks, *logic.extra_breakpoints()) if b > t + 1e-12]
             t_seg_end = min([*bps, logic.next_time(), duration])
             cl.set_segment_start(t)
