@@ -5,8 +5,6 @@ dataset run through the CLI. The physics.md verification tests run on it too
 
 from __future__ import annotations
 
-import textwrap
-
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
@@ -137,26 +135,27 @@ def test_events_match_a_tight_reference(repo):
     assert max(abs(a.t - b.t) for a, b in zip(sp.events, first, strict=True)) < 1e-6
 
 
-def test_scenario_selects_radau5_and_runs_are_reproducible(tmp_path, repo):
-    (tmp_path / "s.yaml").write_text(textwrap.dedent(f"""\
-        name: quick_radau5
-        line: {repo / "lines" / "pet_film_line.yaml"}
-        duration: 5 s
-        record_rate: 200 Hz
-        seed: 3
-        solver: {{backend: radau5, rtol: 1e-7}}
-        programme: [{{at: 0, line_speed: 2 m/s}}, {{at: 1, line_speed: 4 m/s, ramp: 2 s}}]
-        """))
+def test_shipped_radau5_scenario_runs_reproducibly(tmp_path, repo, capsys):
+    scen = repo / "scenarios" / "speed_ramp_radau5.yaml"
     tables = []
     for k in range(2):
         out = tmp_path / f"ds{k}"
-        assert main(["run", str(tmp_path / "s.yaml"), "-o", str(out), "-q"]) == 0
+        assert main(["run", str(scen), "-o", str(out), "--duration", "5", "-q"]) == 0
         runs = pq.read_table(out / "runs.parquet").to_pylist()[0]
-        assert "Radau IIA" in runs["solver"] and "rtol=1e-07" in runs["solver"]
+        assert "Radau IIA" in runs["solver"] and "rtol=1e-06" in runs["solver"]
         assert not runs["terminated"]
         tables.append(pq.read_table(next((out / "samples").glob("*/part-0.parquet"))))
-    assert tables[0].num_rows == 1001
+    assert tables[0].num_rows == 2501  # 5 s at 500 Hz
     assert tables[0].equals(tables[1])
+    # an unknown backend: one line naming the file and the key, exit 2, nothing written
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(scen.read_text().replace("backend: radau5", "backend: radau6")
+                   .replace("../lines", str(repo / "lines")))
+    capsys.readouterr()
+    assert main(["run", str(bad), "-o", str(tmp_path / "bad_out"), "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(bad) in err and "solver.backend" in err
+    assert "radau6" in err and not (tmp_path / "bad_out").exists()
 
 
 def test_memory_chunks_continue_warm_and_keep_the_answer(repo):
