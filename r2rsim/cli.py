@@ -68,6 +68,8 @@ def _cmd_run(args) -> int:
     finally:
         if bar is not None:
             bar.close()
+    for w in summary.warnings:  # also with -q, and apart from the summary on stdout
+        print(f"warning: {w}", file=sys.stderr)
     print(summary.format())
     return 0
 

@@ -51,6 +51,7 @@ class RunSummary:
     termination_time: float | None
     initial_state: str
     solver_stats: dict = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def real_time_factor(self) -> float:
@@ -63,6 +64,7 @@ class RunSummary:
                  f"solver       {self.solver_stats.get('solver', '')}, "
                  f"{self.solver_stats.get('nfev', 0)} RHS evaluations; initial state "
                  f"{self.initial_state}"]
+        lines += [f"WARNING      {w}" for w in self.warnings]
         if self.terminated:
             lines.append(f"TERMINATED   {self.termination_reason} at "
                          f"t = {self.termination_time:.4f} s")
@@ -130,12 +132,17 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
         if d.type == "out_of_round":
             y_nom[cl.index(f"{d.element}.angle")] = d.phase
     init_mode = "nominal"
+    run_warnings = []
     if init.state == "steady":
         y_ss = steady_state(cl, y_nom)
         if y_ss is not None:
             y0, init_mode = y_ss, "steady"
         else:
             y0, init_mode = y_nom, "nominal (no steady state at the t = 0 set-points)"
+            run_warnings.append(
+                f"{scenario_path}: initial.state: steady was asked for, but no steady state "
+                "was found at the t = 0 set-points (is the line at rest, or are span tensions "
+                "not held by any loop or draw?); the run starts from the nominal state")
     else:
         y0 = y_nom
 
@@ -295,4 +302,4 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
               for i, sid in enumerate(cl.span_ids)}
     return RunSummary(path, run_id, float(sim_end), wall, writer.n_rows, tstats, events,
                       res.terminated, res.termination_reason, res.termination_time, init_mode,
-                      res.stats)
+                      res.stats, run_warnings)

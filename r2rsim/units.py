@@ -1,13 +1,41 @@
 """Quantities in input files: bare numbers are SI, strings carry units and are parsed once.
 
-``parse_quantity("300 m/min", "speed")`` returns 5.0. Pint is used only here, at load time;
-nothing downstream of the schema sees a pint object.
+``parse_quantity("300 m/min", "speed")`` returns 5.0. Nothing downstream of the schema sees
+anything but SI floats.
+
+Quantity strings are read by a small restricted parser, not by pint's expression evaluator:
+pint evaluates arbitrary arithmetic (``"10**10**10 m"`` never returns, ``"1/0 m"`` raises
+ZeroDivisionError) and importing it costs a large part of a second. The grammar::
+
+    quantity  := [sign] number [space] [units]
+    number    := digits ["." [digits]] | "." digits, then optionally e|E [sign] digits
+                 (at most 30 characters before the power of ten, at most 3 digits in it;
+                 "_" may separate digits as in Python)
+    units     := operand (operator operand)*
+    operator  := "*" | "·" | "⋅" | "/" | "per" | space     (a space multiplies: "N m")
+    operand   := name [power] | "(" operand (operator operand)* ")" [power] | "1" (before "/")
+    power     := ("^" | "**") [sign] digits | ("^" | "**") "(" [sign] digits ")"
+                 | superscripts such as "²", "⁻¹"     (whole, |exponent| <= 4; sign: + - −)
+    name      := a letter, "_", "µ", "μ" or "°" followed by letters, digits, "_", "µ", "μ";
+                 or "%" or "‰"
+
+``*``, ``/`` and juxtaposition have equal precedence and group left to right, as in pint:
+``"N*s/m"`` is N·s/m, ``"m/s/s"`` is m/s², ``"kg/m s"`` is kg·s/m; a power binds tighter
+(``"m/s^2"`` is m/s²). Parentheses group a denominator, ``"kg/(m*s)"``; they do not nest.
+Commas are refused (pint drops them, so ``"1,5 m"`` would silently become 15 m). A string
+is at most 100 characters long.
+
+Names are looked up in a built-in table of SI-consistent units (:data:`_UNITS`). A name
+not in the table is handed, alone and only once it has been checked to be an identifier, to
+pint (``ureg.Quantity(1, name)``), so that feet, inches, lbf, psi... still work; only then
+is pint imported.
 """
 
 from __future__ import annotations
 
 import functools
 import math
+import re
 
 # Dimensions accepted by schema fields: name -> (pint dimensionality string, SI unit, example).
 DIMENSIONS: dict[str, tuple[str, str, str]] = {
@@ -31,17 +59,371 @@ DIMENSIONS: dict[str, tuple[str, str, str]] = {
     "dimensionless": ("", "1", "0.001"),
 }
 
+MAX_CHARS = 100  # longest quantity string accepted
+_MAX_MANTISSA = 30  # characters of a number before its power of ten
+_MAX_POWER_OF_TEN = 3  # digits of that power of ten
+_MAX_EXPONENT = 4  # |n| in m^n
+
 
 class QuantityError(ValueError):
     """A quantity string could not be parsed or has the wrong dimension."""
 
 
+class _Unreadable(Exception):
+    """Internal: why a string is not a quantity; turned into a :class:`QuantityError`."""
+
+
+# --- the unit table --------------------------------------------------------------------------
+# Dimensions are dicts {pint dimension name: exponent}, empty for dimensionless. Angles are
+# dimensionless with the radian as their SI unit, as in pint, so "90 deg" is pi/2 and "100 rpm"
+# is 10.47 (rad/s), exactly what the pint-based parser returned.
+_L, _M, _T = "[length]", "[mass]", "[time]"
+
+_SI_PREFIXES: dict[str, float] = {
+    "p": 1e-12, "n": 1e-9, "u": 1e-6, "\u00b5": 1e-6, "\u03bc": 1e-6, "m": 1e-3, "c": 1e-2,
+    "d": 1e-1, "da": 1e1, "h": 1e2, "k": 1e3, "M": 1e6, "G": 1e9, "T": 1e12,
+}
+_LONG_PREFIXES: dict[str, float] = {
+    "pico": 1e-12, "nano": 1e-9, "micro": 1e-6, "milli": 1e-3, "centi": 1e-2, "deci": 1e-1,
+    "deca": 1e1, "deka": 1e1, "hecto": 1e2, "kilo": 1e3, "mega": 1e6, "giga": 1e9,
+    "tera": 1e12,
+}
+_ANGLE_PREFIXES = ("n", "u", "\u00b5", "\u03bc", "m")
+_ANGLE_LONG_PREFIXES = ("nano", "micro", "milli")
+
+# (symbols, long names, SI factor, dimensions, symbol prefixes, long-name prefixes, plural)
+_BASE_UNITS: tuple = (
+    (("m",), ("meter", "metre"), 1.0, {_L: 1}, _SI_PREFIXES, _LONG_PREFIXES, True),
+    (("g",), ("gram",), 1e-3, {_M: 1}, _SI_PREFIXES, _LONG_PREFIXES, True),
+    (("s",), ("second",), 1.0, {_T: 1}, _SI_PREFIXES, _LONG_PREFIXES, True),
+    (("sec",), (), 1.0, {_T: 1}, (), (), False),
+    (("min",), ("minute",), 60.0, {_T: 1}, (), (), True),
+    (("h", "hr"), ("hour",), 3600.0, {_T: 1}, (), (), True),
+    (("Hz",), ("hertz",), 1.0, {_T: -1}, _SI_PREFIXES, _LONG_PREFIXES, False),
+    (("N",), ("newton",), 1.0, {_L: 1, _M: 1, _T: -2}, _SI_PREFIXES, _LONG_PREFIXES, True),
+    (("Pa",), ("pascal",), 1.0, {_M: 1, _L: -1, _T: -2}, _SI_PREFIXES, _LONG_PREFIXES, True),
+    (("bar",), (), 1e5, {_M: 1, _L: -1, _T: -2}, ("m", "k"), (), False),
+    (("J",), ("joule",), 1.0, {_L: 2, _M: 1, _T: -2}, _SI_PREFIXES, _LONG_PREFIXES, True),
+    (("W",), ("watt",), 1.0, {_L: 2, _M: 1, _T: -3}, _SI_PREFIXES, _LONG_PREFIXES, True),
+    (("rad",), ("radian",), 1.0, {}, _ANGLE_PREFIXES, _ANGLE_LONG_PREFIXES, True),
+    (("deg", "\u00b0"), ("degree",), math.pi / 180, {}, (), (), True),
+    # "rev" is not a pint name; it is added here because "1 rev" reads naturally.
+    (("rev",), ("revolution", "turn"), 2 * math.pi, {}, (), (), True),
+    (("rpm",), (), 2 * math.pi / 60, {_T: -1}, (), (), False),
+    (("%",), ("percent",), 0.01, {}, (), (), False),
+    (("\u2030",), ("permille",), 0.001, {}, (), (), False),
+)
+
+
+def _build_table() -> dict[str, tuple[float, dict[str, int]]]:
+    """Every accepted spelling -> (SI factor, dimensions); refuses a spelling defined twice."""
+    table: dict[str, tuple[float, dict[str, int]]] = {}
+
+    def add(name: str, factor: float, dims: dict[str, int]) -> None:
+        # "mm" must not be both milli-metre and something else: a clash is a table bug.
+        if name in table:
+            raise AssertionError(f"unit spelling {name!r} defined twice")
+        table[name] = (factor, dims)
+
+    for symbols, names, factor, dims, prefixes, long_prefixes, plural in _BASE_UNITS:
+        for sym in symbols:
+            add(sym, factor, dims)
+            for p in prefixes:
+                add(p + sym, _SI_PREFIXES[p] * factor, dims)
+        for name in names:
+            spellings = [(name, factor)] + [(p + name, _LONG_PREFIXES[p] * factor)
+                                            for p in long_prefixes]
+            for spelling, f in spellings:
+                add(spelling, f, dims)
+                if plural:
+                    add(spelling + "s", f, dims)
+    return table
+
+
+_UNITS = _build_table()
+
+
+# --- tokens ----------------------------------------------------------------------------------
+_NUMBER = re.compile(
+    r"([+-]?)((?:[0-9](?:_?[0-9])*(?:\.(?:[0-9](?:_?[0-9])*)?)?|\.[0-9](?:_?[0-9])*))"
+    r"(?:[eE]([+-]?[0-9]+))?"
+)
+_SUPERSCRIPTS = str.maketrans("\u2070\u00b9\u00b2\u00b3\u2074\u2075\u2076\u2077\u2078\u2079"
+                              "\u207b\u207a", "0123456789-+")
+_TOKEN = re.compile(
+    r"(?P<space>[ \t\u00a0\u202f]+)"
+    r"|(?P<pow>\*\*|\^)"
+    r"|(?P<mul>[*\u00b7\u22c5])"
+    r"|(?P<div>/)"
+    r"|(?P<open>\()"
+    r"|(?P<close>\))"
+    r"|(?P<sup>[\u207a\u207b]?[\u2070\u00b9\u00b2\u00b3\u2074-\u2079]+)"
+    r"|(?P<int>[+\-\u2212]?[0-9]+(?:\.[0-9]*)?)"
+    r"|(?P<name>[A-Za-z_\u00b5\u03bc\u00b0][A-Za-z0-9_\u00b5\u03bc]*|%|\u2030)"
+)
+# What may be handed to pint: a plain identifier, never an operator, number or bracket.
+_IDENTIFIER = re.compile(r"[A-Za-z_\u00b5\u03bc][A-Za-z0-9_\u00b5\u03bc]*")
+
+
+def _tokens(text: str, pos: int) -> list[tuple[str, str, int]]:
+    """Split ``text[pos:]`` into ``(kind, text, position)`` tokens, dropping spaces.
+
+    A space needs no token of its own: two operands in a row multiply, with or without one.
+    """
+    out = []
+    while pos < len(text):
+        m = _TOKEN.match(text, pos)
+        if m is None:
+            ch = text[pos]
+            hint = " (use a decimal point, no thousands separators)" if ch == "," else ""
+            raise _Unreadable(f"unexpected character {ch!r} at position {pos + 1}{hint}")
+        if m.lastgroup != "space":
+            out.append((m.lastgroup, m.group(), pos))
+        pos = m.end()
+    return out
+
+
+# --- dimensions ------------------------------------------------------------------------------
+def _combine(a: dict, b: dict, sign: int) -> dict:
+    """Dimensions of a*b (sign +1) or a/b (sign -1), zero exponents dropped."""
+    out = dict(a)
+    for k, v in b.items():
+        e = out.get(k, 0) + sign * v
+        if e:
+            out[k] = e
+        else:
+            out.pop(k, None)
+    return out
+
+
+def _format_dims(dims: dict) -> str:
+    """Pint's spelling of a dimensionality: ``"[length] * [mass] / [time] ** 2"``."""
+
+    def term(k: str, e: float) -> str:
+        e = abs(e)
+        return k if e == 1 else f"{k} ** {int(e) if float(e).is_integer() else e}"
+
+    num = [term(k, e) for k, e in sorted(dims.items()) if e > 0]
+    den = [term(k, e) for k, e in sorted(dims.items()) if e < 0]
+    if not num and not den:
+        return "dimensionless"
+    return " / ".join([" * ".join(num) or "1", *den])
+
+
+# --- units not in the table ------------------------------------------------------------------
 @functools.lru_cache(maxsize=1)
 def _registry():
     import pint
 
-    ureg = pint.UnitRegistry(autoconvert_offset_to_baseunit=True)
-    return ureg
+    return pint.UnitRegistry(autoconvert_offset_to_baseunit=True)
+
+
+@functools.lru_cache(maxsize=256)
+def _pint_unit(name: str) -> tuple[float, tuple[tuple[str, float], ...]]:
+    """SI factor and dimensions of one unit name pint knows and the table does not.
+
+    Parameters
+    ----------
+    name : str
+        A single identifier (checked again here): pint never sees an expression.
+
+    Returns
+    -------
+    tuple
+        ``(factor, ((dimension, exponent), ...))``; a tuple so the result can be cached.
+
+    Raises
+    ------
+    _Unreadable
+        If pint does not know the name, or it is an offset (degC) or logarithmic (dB) unit,
+        whose value is not a factor times the SI unit.
+    """
+    if not _IDENTIFIER.fullmatch(name):
+        raise _Unreadable(f"unknown unit {name!r}")
+    ureg = _registry()  # outside the try: a broken pint install should fail loudly
+    try:
+        q = ureg.Quantity(1, name)
+        if not q._is_multiplicative:
+            raise _Unreadable(f"{name!r} is an offset or logarithmic unit, not supported here")
+        base = q.to_base_units()
+        factor = float(base.magnitude)
+        dims = tuple((str(k), float(v)) for k, v in base.dimensionality.items() if v)
+    except _Unreadable:
+        raise
+    except Exception:  # UndefinedUnitError, or whatever pint makes of an odd name
+        raise _Unreadable(f"unknown unit {name!r}") from None
+    if not math.isfinite(factor) or factor == 0:
+        raise _Unreadable(f"unknown unit {name!r}")
+    return factor, dims
+
+
+def _unit(name: str) -> tuple[float, dict]:
+    """SI factor and dimensions of a unit name: the table first, pint for anything else."""
+    hit = _UNITS.get(name)
+    if hit is not None:
+        return hit
+    # pint reads "°C" as "degreeC"; do the same before handing the name over.
+    factor, dims = _pint_unit(name.replace("\u00b0", "degree"))
+    return factor, {k: int(v) if v.is_integer() else v for k, v in dims}
+
+
+# --- the parser ------------------------------------------------------------------------------
+def _exponent(tokens: list, i: int) -> tuple[int, int]:
+    """Read the exponent after a ``^``/``**`` at ``tokens[i]``: ``(value, index after it)``."""
+    if i < len(tokens) and tokens[i][0] == "open":
+        inner = tokens[i + 1:i + 3]
+        if len(inner) == 2 and inner[0][0] == "int" and inner[1][0] == "close":
+            return _small_int(inner[0][1]), i + 3
+        raise _Unreadable("an exponent in parentheses must be a whole number, as in 'm^(-1)'")
+    if i < len(tokens) and tokens[i][0] == "int":
+        return _small_int(tokens[i][1]), i + 1
+    raise _Unreadable("'^' or '**' must be followed by a whole number, as in 'm^2'")
+
+
+def _small_int(text: str) -> int:
+    """A whole exponent of at most :data:`_MAX_EXPONENT` in magnitude."""
+    if "." in text:
+        raise _Unreadable(f"exponent {text!r} is not a whole number")
+    text = text.replace("\u2212", "-")  # a typographic minus, as in "s^(−1)"
+    digits = text.lstrip("+-")
+    if len(digits) > 2 or int(digits) > _MAX_EXPONENT:
+        raise _Unreadable(f"exponent {text!r} is out of range: at most {_MAX_EXPONENT}")
+    return int(text)
+
+
+def _parse_units(tokens: list) -> tuple[float, dict]:
+    """Fold the unit tokens left to right into ``(SI factor, dimensions)``.
+
+    One pass over the tokens with an explicit one-level group, so nothing here recurses
+    or loops more than a fixed number of times per token.
+    """
+    acc_f, acc_d = 1.0, {}  # value of everything folded so far (the number is outside)
+    op = "*"  # how the pending operand joins acc
+    pend = None  # the latest operand, not yet folded: [factor, dims, may take a power]
+    after_operand = True  # the number itself is an operand: "5 /s" and "5*m" read fine
+    group = None  # (acc_f, acc_d, op) saved at "("; one level only
+
+    def fold():
+        nonlocal acc_f, acc_d, pend
+        if pend is not None:
+            f, d, _ = pend
+            acc_f = acc_f * f if op == "*" else acc_f / f
+            acc_d = _combine(acc_d, d, 1 if op == "*" else -1)
+            pend = None
+
+    def power(n: int | None) -> None:
+        if pend is None or not pend[2]:
+            raise _Unreadable("an exponent must follow a unit name or a parenthesis, "
+                              "as in 'm^2'")
+        if n is None:
+            return
+        pend[0] = pend[0] ** n
+        pend[1] = {k: v * n for k, v in pend[1].items() if v * n}
+        pend[2] = False  # "m^2^2" is refused: pint reads it right to left, people may not
+
+    i = 0
+    while i < len(tokens):
+        kind, tok, pos = tokens[i]
+        i += 1
+        if kind == "name" and tok == "per":
+            kind, tok = "div", "/"
+        if kind in ("mul", "div"):
+            if not after_operand:
+                raise _Unreadable(f"{tok!r} at position {pos + 1} must follow a unit")
+            fold()
+            op, after_operand = ("*" if kind == "mul" else "/"), False
+        elif kind in ("name", "int", "open"):
+            if after_operand:  # juxtaposition: "N m" is N*m
+                fold()
+                op = "*"
+            if kind == "name":
+                f, d = _unit(tok)
+                pend = [f, d, True]
+            elif kind == "int":
+                # "1/min", "5 1/s": a literal 1 is accepted only as a numerator
+                if tok != "1" or i >= len(tokens) or tokens[i][0] != "div":
+                    raise _Unreadable(f"unexpected number {tok!r} at position {pos + 1}; "
+                                      "only one number, at the start, is allowed")
+                pend = [1.0, {}, False]
+            else:
+                if group is not None:
+                    raise _Unreadable("parentheses cannot be nested; write e.g. 'kg/(m*s)'")
+                group = (acc_f, acc_d, op)
+                acc_f, acc_d, op, pend = 1.0, {}, "*", None
+                after_operand = False
+                continue
+            after_operand = True
+        elif kind == "close":
+            if group is None:
+                raise _Unreadable(f"')' at position {pos + 1} closes nothing")
+            if not after_operand:
+                raise _Unreadable(f"nothing before ')' at position {pos + 1}")
+            fold()
+            g_f, g_d = acc_f, acc_d
+            acc_f, acc_d, op = group
+            group = None
+            pend = [g_f, g_d, True]
+        elif kind == "pow":
+            power(None)  # check there is something to raise before reading the exponent
+            n, i = _exponent(tokens, i)
+            power(n)
+        elif kind == "sup":
+            power(_small_int(tok.translate(_SUPERSCRIPTS)))
+        else:  # pragma: no cover - every token kind is handled above
+            raise _Unreadable(f"unexpected {tok!r} at position {pos + 1}")
+    if group is not None:
+        raise _Unreadable("'(' is never closed")
+    if not after_operand:
+        raise _Unreadable("it ends with an operator")
+    fold()
+    return acc_f, acc_d
+
+
+def _parse_text(text: str) -> tuple[float, dict]:
+    """Read a quantity string: ``(value in SI units, dimensions)``.
+
+    Parameters
+    ----------
+    text : str
+        A stripped string such as ``"300 m/min"``, at most :data:`MAX_CHARS` long.
+
+    Returns
+    -------
+    tuple of (float, dict)
+        The value in SI units (angles in rad) and its dimensions as
+        ``{"[length]": 1, "[time]": -1}``.
+
+    Raises
+    ------
+    _Unreadable
+        With the reason, when the string does not follow the grammar of this module.
+    """
+    m = _NUMBER.match(text)
+    if m is None:
+        raise _Unreadable("it must start with a number")
+    _, mantissa, power10 = m.groups()
+    if len(mantissa) > _MAX_MANTISSA:
+        raise _Unreadable(f"the number has more than {_MAX_MANTISSA} digits")
+    if power10 is not None and len(power10.lstrip("+-")) > _MAX_POWER_OF_TEN:
+        raise _Unreadable(f"the power of ten has more than {_MAX_POWER_OF_TEN} digits")
+    number = float(m.group())  # the regex only admits what float() reads
+    try:
+        factor, dims = _parse_units(_tokens(text, m.end()))
+    except (OverflowError, ZeroDivisionError):  # a huge unit^4, or one that underflows to 0
+        raise _Unreadable("the value is out of range") from None
+    return number * factor, dims
+
+
+@functools.cache
+def _expected_dims(dimension: str) -> dict:
+    """Dimensions of a :data:`DIMENSIONS` entry, read from its SI unit by this parser."""
+    si_unit = DIMENSIONS[dimension][1]
+    return {} if si_unit == "1" else _parse_text("1 " + si_unit)[1]
+
+
+def _shown(text: str) -> str:
+    """``text`` for an error message, cut short if it is long."""
+    return text if len(text) <= 60 else f"{text[:40]}... ({len(text)} characters)"
 
 
 def parse_quantity(value: object, dimension: str) -> float:
@@ -50,7 +432,8 @@ def parse_quantity(value: object, dimension: str) -> float:
     Parameters
     ----------
     value : float, int or str
-        A bare number (taken as SI) or a string with units such as ``"50 um"``.
+        A bare number (taken as SI) or a string with units such as ``"50 um"``; the string
+        grammar is described in the module docstring.
     dimension : str
         One of the keys of :data:`DIMENSIONS`.
 
@@ -64,17 +447,22 @@ def parse_quantity(value: object, dimension: str) -> float:
     QuantityError
         If the string cannot be parsed, has the wrong dimension, or is not finite.
     """
-    dim, si_unit, example = DIMENSIONS[dimension]
+    _, si_unit, example = DIMENSIONS[dimension]
     if isinstance(value, bool):
         raise QuantityError(f"expected a {dimension.replace('_', ' ')}, got a boolean")
     if isinstance(value, (int, float)):
         out = float(value)
     elif isinstance(value, str):
         text = value.strip()
+        if len(text) > MAX_CHARS:
+            raise QuantityError(
+                f"cannot read {_shown(text)!r} as a quantity (longer than {MAX_CHARS} "
+                f"characters); write e.g. '{example}'"
+            )
         try:
-            out = float(text)
+            out = float(text)  # "1e3", "0.5": bare numbers are SI
         except ValueError:
-            out = _parse_string(text, dimension, dim, si_unit, example)
+            out = _parse_string(text, dimension, example)
     else:
         raise QuantityError(
             f"expected a {dimension.replace('_', ' ')} as a number in {si_unit} or a string "
@@ -85,26 +473,17 @@ def parse_quantity(value: object, dimension: str) -> float:
     return out
 
 
-def _parse_string(text: str, dimension: str, dim: str, si_unit: str, example: str) -> float:
-    import pint
-
-    ureg = _registry()
+def _parse_string(text: str, dimension: str, example: str) -> float:
+    """Value of a quantity string in SI units, after checking its dimension."""
     try:
-        q = ureg.Quantity(text)
-    except (pint.errors.PintError, ValueError, TypeError, AttributeError, SyntaxError) as exc:
+        out, dims = _parse_text(text)
+    except _Unreadable as exc:
         raise QuantityError(
-            f"cannot read {text!r} as a quantity ({exc.__class__.__name__}); "
-            f"write e.g. '{example}'"
+            f"cannot read {_shown(text)!r} as a quantity ({exc}); write e.g. '{example}'"
         ) from None
-    if not isinstance(q, ureg.Quantity):  # a plain number such as "1e3"
-        return float(q)
-    want = ureg.Quantity(1, si_unit if si_unit != "1" else "")
-    if q.dimensionality != want.dimensionality:
-        got = str(q.dimensionality) or "dimensionless"
+    if dims != _expected_dims(dimension):
         raise QuantityError(
-            f"{text!r} has dimension {got}, expected a {dimension.replace('_', ' ')} "
-            f"(e.g. '{example}')"
+            f"{text!r} has dimension {_format_dims(dims)}, expected a "
+            f"{dimension.replace('_', ' ')} (e.g. '{example}')"
         )
-    if dimension == "angular_speed":
-        return float(q.to("rad/s").magnitude) if q.check("1/[time]") else float(q.magnitude)
-    return float(q.to(want.units).magnitude)
+    return out

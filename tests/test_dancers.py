@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -153,8 +155,8 @@ def test_v15_dancer_web_spring_mode(tmp_path, V, expected, model):
     ev = np.linalg.eigvals(cl.jacobian(0.0, y)[np.ix_(idx, idx)])
     eps = 100.0 / 1e5
     # the exact model's span stiffness is EA/l = EA(1 + eps)/L (eq. 1.20 with T = EA·eps);
-    # V15's listed frequencies carry EA(1 - eps)/L, 0.1 % lower (see docs/model.md). The
-    # linear model (stiffness EA/L) sits between them, within 0.05 % of V15.
+    # V15's listed frequencies carry EA(1 - eps)/L, 0.1 % lower (see docs/model.md), which
+    # is the linear model's stiffness (1.4).
     shift = 1.0 if model == "linear" else (1 + eps) / (1 - eps)
     for target in expected:
         target = complex(target.real, target.imag * np.sqrt(shift)) if target else 0.0
@@ -210,3 +212,65 @@ def test_v16_festoon_kinematics(tmp_path):
     after = res.t > 7.05
     assert np.all(res["festoon.velocity_m_s"][after] == 0.0)
     assert np.all(res["festoon.position_m"][after] == 0.0)
+
+
+# ------------------------------------------------- the linear span form (1.4) with a moving span
+def _linear_dancer_matrix(EA, m, L, eps, v):
+    """The dancer and its two spans linearised by hand from (1.4), kinematic nodes at v:
+    states [x, dx/dt, eps_u, eps_d]; both spans lengthen at dx/dt (vertical spans along the
+    travel), m·x'' = F - EA(eps_u + eps_d), L·eps_u' = -v·eps_u + (1 - eps)·x' (the inflow
+    strain is fixed), L·eps_d' = v·eps_u - v·eps_d + (1 - eps)·x'."""
+    return np.array([[0.0, 1.0, 0.0, 0.0],
+                     [0.0, 0.0, -EA / m, -EA / m],
+                     [0.0, (1 - eps) / L, -v / L, 0.0],
+                     [0.0, (1 - eps) / L, v / L, -v / L]])
+
+
+@pytest.mark.parametrize("V", [0.0, 4.0])
+def test_v15_linear_form_web_spring_mode_against_its_closed_form(tmp_path, V):
+    # V15 for (1.4) with parameters where the strain is large enough (eps = 1 %) that the
+    # (1 - eps) of the moving-length term (EA - T)·dL/dt shows: the closed form at v = 0 is
+    # w = sqrt(EA(1 - eps)(1/L_u + 1/L_d)/m) = 157.321 rad/s; without the factor 158.114.
+    EA, T, m, L = 2.0e4, 200.0, 2.0, 0.8
+    eps = T / EA
+    path = dancer_line(tmp_path, EA=EA, mass=m, force_total=2 * T, T=T, inertia=1e8, L=L,
+                       outer=1000.0, model="linear")
+    line = r2rsim.load_line(path)
+    cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(
+        line, [ProgrammeStep(at=0.0, line_speed=V)]))
+    y = r2rsim.nominal_state(cl, T)
+    idx = [cl.index(n) for n in ("dancer.position", "dancer.velocity", "span2.strain",
+                                 "span3.strain")]
+    assert np.max(np.abs(cl.rhs(0.0, y)[idx])) < 1e-9  # an equilibrium
+    got = np.sort_complex(np.linalg.eigvals(cl.jacobian(0.0, y)[np.ix_(idx, idx)]))
+    want = np.sort_complex(np.linalg.eigvals(_linear_dancer_matrix(EA, m, L, eps, V)))
+    w = math.sqrt(EA * (1 - eps) * (2 / L) / m)
+    if V == 0.0:
+        assert w == pytest.approx(157.321, abs=1e-3)
+        assert max(abs(got.imag)) == pytest.approx(w, rel=1e-6)
+    np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-6 * w)
+
+
+def test_v13_linear_form_material_balance_with_a_moving_dancer(tmp_path):
+    # (1.4) conserves d/dt[L(1 - eps)] = v_in(1 - eps_in) - v_out(1 - eps): with the fluxes
+    # q = v(1 - eps) paid out (U_0) and taken up (U_N), sum L_i(1 - eps_i) + U_N - U_0 is
+    # constant while the dancer drifts (v_in > v_out) and rings after a speed change.
+    path = dancer_line(tmp_path, EA=2.25e5, mass=10.0, force_total=520.0, draw_in=0.001,
+                       damping=50.0, model="linear")
+    line = r2rsim.load_line(path)
+    cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(line, [
+        ProgrammeStep(at=0.0, line_speed=5.0), ProgrammeStep(at=10.0, line_speed=3.0, ramp=1.0)]))
+    res = r2rsim.simulate(cl, 30.0, 100.0, r2rsim.nominal_state(cl, 260.0),
+                          r2rsim.SolverSettings(rtol=1e-10, atol_scale=1e-4))
+    assert not res.terminated
+    L = {s: res[f"{s}.length_m"] for s in cl.span_ids}
+    eps = {s: res[f"{s}.geometric_strain"] for s in cl.span_ids}
+    ell = sum(L[s] * (1 - eps[s]) for s in cl.span_ids)
+    inv = (ell + res.states[:, cl.index("sink.unstretched_length")]
+           - res.states[:, cl.index("src.unstretched_length")])
+    scale = sum(L[s][0] for s in cl.span_ids)
+    assert np.ptp(res["dancer.position_m"]) > 0.05  # the dancer really moved
+    assert np.max(np.abs(inv - inv[0])) < 1e-9 * scale
+    # the term the fix restored: without (1 - eps) the balance drifts by -sum(int eps dL)
+    drift = sum(np.sum(0.5 * (eps[s][1:] + eps[s][:-1]) * np.diff(L[s])) for s in cl.span_ids)
+    assert abs(drift) > 1e3 * 1e-9 * scale

@@ -161,8 +161,19 @@ def test_readable_without_r2rsim(quick_dataset, tmp_path):
 
 
 def test_pyarrow_dataset_reads_all_tables(quick_dataset):
-    for name in ("runs", "channels", "faults", "events"):
-        pads.dataset(quick_dataset / f"{name}.parquet").to_table()
+    from r2rsim.dataset.writer import EVENTS_SCHEMA, FAULTS_SCHEMA
+
+    tables = {name: pads.dataset(quick_dataset / f"{name}.parquet").to_table()
+              for name in ("runs", "channels", "faults", "events")}
+    runs = tables["runs"].to_pylist()
+    assert len(runs) == 1 and runs[0]["run_id"] == "quickstart__s1"
+    assert runs[0]["n_samples"] == 801 and not runs[0]["terminated"]
+    samples = pq.read_schema(next((quick_dataset / "samples").glob("*/part-0.parquet")))
+    assert tables["channels"].num_rows == len(samples.names) + 1  # + the run_id partition
+    # the quickstart has no faults and no events in its first 4 s: empty, but typed
+    for name, schema in (("faults", FAULTS_SCHEMA), ("events", EVENTS_SCHEMA)):
+        assert tables[name].num_rows == 0
+        assert tables[name].schema.names == schema.names
 
 
 def test_progress_bar_on_a_terminal(tmp_path, repo, capsys, monkeypatch):

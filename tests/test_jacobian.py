@@ -240,3 +240,68 @@ def test_dancer_festoon_and_loop_jacobian_against_finite_differences(tmp_path, m
         cl.P[cl.I[H_OFF_MP] + 0 * NMP + MP_MODE] = -1.0
         cl.P[cl.I[H_OFF_MP] + 2 * NMP + MP_MODE] = 2.0
     _assert_jacobian_matches_fd(cl, 0.3, y, floor=1e-6)
+
+
+CONTROLS = """\
+span_model: {model}
+web: {{material: PET, thickness: 50 um, width: 1 m}}
+elements:
+  - id: unwind
+    type: unwind
+    roll: {{core_radius: 0.076, outer_radius: 0.4, core_inertia: 0.5}}
+    friction: {{viscous: 0.01, coulomb: 0.2}}
+    drive: {{torque_lag: 1 ms}}
+  - {{id: helper, type: driven, radius: 0.05, inertia: 0.011, friction: {{viscous: 5e-4,
+     coulomb: 0.02}}, drive: {{torque_lag: 2 ms, torque_max: 0.5, torque_command: 0.05}}}}
+  - {{id: s1, type: driven, radius: 0.1, inertia: 0.15, drive: {{torque_lag: 1 ms}}}}
+  - {{id: pull, type: driven, radius: 0.1, inertia: 0.2, drive: {{torque_lag: 0}}}}
+  - {{id: trim_roll, type: driven, radius: 0.1, inertia: 0.2, drive: {{type: ideal_speed,
+     draw: 0.001}}}}
+  - id: rewind
+    type: rewind
+    roll: {{core_radius: 0.076, outer_radius: 0.1, core_inertia: 0.5}}
+    friction: {{viscous: 0.01}}
+    drive: {{torque_lag: 1 ms}}
+spans: [{{length: 1.5}}, {{length: 1.0}}, {{length: 0.1}}, {{length: 3.0}}, {{length: 1.5}}]
+sensors:
+  - {{id: lc1, type: load_cell, element: helper, filter: 2 ms}}
+  - {{id: lc2, type: load_cell, element: rewind, filter: 5 ms}}
+  - {{id: enc, type: encoder, element: s1, filter: 1 ms}}
+  - {{id: dia, type: roll_diameter, element: unwind, filter: 20 ms}}
+controllers:
+  - {{id: c_pull, type: speed_pi, element: pull, master: true, kp: 25, ki: 790}}
+  - {{id: c_s1, type: speed_pi, element: s1, kp: 18, ki: 590, draw: 0.0005, encoder: enc}}
+  - {{id: c_unw, type: tension_pi, element: unwind, sensor: lc1, setpoint: 260, kp: 0.1,
+     ki: 0.5, radius_sensor: dia, output_limit: {limit},
+     feedforward: {{inertia: {{factor: 0.9}}, radius_rate: false}}}}
+  - {{id: c_trim, type: tension_pi, element: trim_roll, sensor: lc2, setpoint: 240, kp: 1e-4,
+     ki: 3e-4, output_limit: 0.5}}
+  - {{id: c_rew, type: tension_pi, element: rewind, sensor: lc2, setpoint: 240, kp: 0.1,
+     ki: 0.5, feedforward: {{tension: false, inertia: {{value: 2 kg*m^2}}, friction: false}}}}
+"""
+
+
+@pytest.mark.parametrize("model", ["exact", "linear"])
+@pytest.mark.parametrize("case", ["taut", "slack", "reverse", "saturated"])
+def test_feedforward_torque_command_and_draw_jacobian(tmp_path, model, case):
+    """Feed-forward terms switched one by one, an inertia estimate by factor and by value, an
+    open-loop torque command (saturated in the 'saturated' case), and programmed draws (on a
+    speed PI and an ideal-speed node) evaluated inside their ramps."""
+    limit = 1e-3 if case == "saturated" else 200
+    text = CONTROLS.format(model=model, limit=limit)
+    if case == "saturated":
+        text = text.replace("torque_max: 0.5", "torque_max: 0.01")
+    line = r2rsim.load_line(write(tmp_path / "controls.yaml", text))
+    prog = r2rsim.Programme.from_steps(line, [
+        ProgrammeStep(at=0, line_speed=2.0), ProgrammeStep(at=0.5, line_speed=5.0, ramp=4.0),
+        ProgrammeStep(at=0.5, draw={"s1": 0.002, "trim_roll": -0.001},
+                      torque={"helper": 0.2}, ramp=2.0)])
+    assert prog.names == ["line_speed", "c_unw", "c_trim", "c_rew", "torque:helper",
+                          "draw:s1", "draw:trim_roll"]
+    cl = r2rsim.compile_line(line, prog)
+    cl.set_segment_start(0.5)
+    rng = np.random.default_rng(7)
+    y = _state(cl, rng, slack=("span2", "span4") if case == "slack" else (),
+               reverse=case == "reverse")
+    y[cl.index("enc.filtered")] = 48.0
+    _assert_jacobian_matches_fd(cl, 1.7, y, floor=1e-7)

@@ -114,6 +114,21 @@ CASES = [
      "needs its deceleration limit"),
     ("scenario missing line file", None, _scen(_set(["line"], "missing.yaml")), "scen.yaml",
      "line", "not found"),
+    ("scenario draw of an idler", None,
+     _scen(_set(["programme"], [{"at": 1, "draw": {"idler1": 0.001}}])), "scen.yaml",
+     "programme[0].draw.idler1", "has no drive, so no draw"),
+    ("scenario draw of a torque-mode roll", None,
+     _scen(_set(["programme"], [{"at": 1, "draw": {"unwind": 0.001}}])), "scen.yaml",
+     "programme[0].draw.unwind", "tension-controlled in torque mode"),
+    ("scenario torque on a speed-controlled roller", None,
+     _scen(_set(["programme"], [{"at": 1, "torque": {"pull": 2}}])), "scen.yaml",
+     "programme[0].torque.pull", "commanded by speed_pi 'speed'"),
+    ("torque command on a controlled drive",
+     _line(_set(["elements", 2, "drive"], {"torque_command": "2 N*m"})), None, "line.yaml",
+     "elements[2].drive.torque_command", "commanded by speed_pi 'speed'"),
+    ("inertia estimate twice",
+     _line(_set(["controllers", 1, "feedforward"], {"inertia": {"factor": 1, "value": 2}})),
+     None, "line.yaml", "controllers[1].feedforward.inertia", "factor or as value"),
 ]
 
 

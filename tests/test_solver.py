@@ -9,33 +9,46 @@ import pytest
 import r2rsim
 from r2rsim.schema.scenario import ProgrammeStep
 
-# CVODE steps of the reference run below, measured when the guard was set (r2rsim 0.1.0,
-# CVODE BDF max_order=2, band, analytic Jacobian, rtol 1e-6): 6334 steps, 6904 RHS evaluations.
-# The same run with max_order=5 took 15535 steps and with max_order=3 26861.
+# CVODE steps of the reference run below (r2rsim 0.1.0, CVODE BDF max_order=2, band,
+# analytic Jacobian, rtol 1e-6), measured when the guard was set: 6334 steps, 6904 RHS
+# evaluations.
 REFERENCE_STEPS = 6334
+# How wide the guard is, and why. At max_order=2 the step count depends on rounding (numba
+# compiles for the host CPU; numpy, scipy and SUNDIALS releases change the last bits):
+# measured 6300-6334 across the newest and the lowest supported versions and two CPUs.
+# The regression the guard exists for, BDF orders 3-5 (not A-stable on the lightly damped
+# web modes, solver.md 4.1), is chaotic in its step count: max_order=5 took 11578, 15535
+# and 17666 steps on three machine/version sets, max_order=3 26849-26861. The upper bound
+# 1.25x sits 26 % above the spread of order 2 and 31 % below the smallest order-5 count.
+GUARD = (0.6, 1.25)
 
 
 def _line_a_run(repo, **settings):
     scen, line, _ = r2rsim.load_scenario(repo / "scenarios" / "speed_ramp.yaml")
     cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(line, scen.programme))
     y0 = r2rsim.steady_state(cl, r2rsim.nominal_state(cl))
+    settings = {"backend": "cvode", **settings}
     return cl, r2rsim.simulate(cl, scen.duration, scen.record_rate, y0,
                                r2rsim.SolverSettings(**settings))
+
+
+def _guard_passes(steps: int) -> bool:
+    return GUARD[0] * REFERENCE_STEPS <= steps <= GUARD[1] * REFERENCE_STEPS
 
 
 def test_step_count_guard(repo):
     _, res = _line_a_run(repo)
     steps = res.stats["steps"]
-    assert 0.6 * REFERENCE_STEPS <= steps <= 1.25 * REFERENCE_STEPS, steps
+    assert _guard_passes(steps), steps
     assert res.stats["nfev"] < 1.5 * steps  # ~1 Newton iteration per step
 
 
 def test_guard_would_catch_the_bdf_order_regression(repo):
-    # BDF orders 3-5 are not A-stable on the lightly damped web modes (solver.md 4.1): the
-    # guard above must fail for scikit-sundae's default max_order=5
+    # the guard above (the same bounds, not stricter ones) must fail for scikit-sundae's
+    # default max_order=5 and for order 3
     for order in (3, 5):
         _, res = _line_a_run(repo, max_order=order)
-        assert res.stats["steps"] > 2.0 * REFERENCE_STEPS, (order, res.stats["steps"])
+        assert not _guard_passes(res.stats["steps"]), (order, res.stats["steps"])
 
 
 def test_radau_backend_agrees_with_cvode(repo):
@@ -43,8 +56,9 @@ def test_radau_backend_agrees_with_cvode(repo):
     cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(line, scen.programme))
     y0 = r2rsim.steady_state(cl, r2rsim.nominal_state(cl))
     kw = dict(duration=12.0, record_rate=100.0, y0=y0)
-    ref = r2rsim.simulate(cl, settings=r2rsim.SolverSettings(rtol=1e-9, atol_scale=1e-3), **kw)
-    cv = r2rsim.simulate(cl, settings=r2rsim.SolverSettings(rtol=1e-6), **kw)
+    ref = r2rsim.simulate(cl, settings=r2rsim.SolverSettings(backend="cvode", rtol=1e-9,
+                                                             atol_scale=1e-3), **kw)
+    cv = r2rsim.simulate(cl, settings=r2rsim.SolverSettings(backend="cvode", rtol=1e-6), **kw)
     ra = r2rsim.simulate(cl, settings=r2rsim.SolverSettings(backend="radau", rtol=1e-6), **kw)
     # measured max errors against rtol 1e-9: CVODE BDF2 0.18 N, Radau 0.005 N (BDF2 is
     # second order; its error falls slowly with rtol: 0.08 N at 1e-7, 0.04 N at 1e-8)
@@ -111,3 +125,43 @@ def test_drive_torque_ripple_forces_the_roller_span_mode(tmp_path):
     w, wn = 2 * np.pi * f, 0.05 * np.sqrt((1e5 - 100.0) * 2.0 / 0.01)
     amp = 0.5 * (dT.max() - dT.min())
     assert amp == pytest.approx(A / 0.05 / (1 - (w / wn) ** 2), rel=0.02)
+
+
+@pytest.mark.parametrize("backend", ["cvode", "radau5", "radau"])
+def test_solver_failure_ends_the_run_with_its_reason(repo, backend, capfd):
+    # a state that is not finite: every backend ends the run as a solver failure (the
+    # compiled Radau looped forever on it, scipy raised), and SUNDIALS' own message stays
+    # off the terminal (kept in the stats)
+    scen, line, _ = r2rsim.load_scenario(repo / "scenarios" / "quickstart.yaml")
+    cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(line, scen.programme))
+    y0 = r2rsim.nominal_state(cl)
+    y0[cl.index("span2.strain")] = np.nan
+    capfd.readouterr()
+    res = r2rsim.simulate(cl, 1.0, 100.0, y0, r2rsim.SolverSettings(backend=backend))
+    assert res.terminated and res.termination_time == 0.0
+    assert res.termination_reason.startswith("solver_failure: ")
+    assert len(res.t) == 1  # the initial sample, as it was given
+    out = capfd.readouterr()
+    assert out.out == "" and out.err == ""
+    if backend == "cvode":
+        assert any("Error" in m for m in res.stats["solver_messages"])
+
+
+def test_solver_failure_is_recorded_in_runs_and_summary(tmp_path, repo, monkeypatch):
+    import pyarrow.parquet as pq
+
+    import r2rsim.run as run_module
+
+    def poisoned(cl, y):
+        y = y.copy()
+        y[cl.index("span2.strain")] = np.inf
+        return y
+
+    monkeypatch.setattr(run_module, "steady_state", poisoned)
+    summary = r2rsim.run_scenario(repo / "scenarios" / "quickstart.yaml",
+                                  output=tmp_path / "out", duration=1.0)
+    assert summary.terminated and summary.termination_reason.startswith("solver_failure: ")
+    assert "TERMINATED   solver_failure: " in summary.format()
+    runs = pq.read_table(tmp_path / "out" / "runs.parquet").to_pylist()[0]
+    assert runs["terminated"] and runs["termination_reason"] == summary.termination_reason
+    assert runs["termination_t_s"] == 0.0

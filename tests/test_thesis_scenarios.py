@@ -104,8 +104,13 @@ def test_thesis_scenario(path, run):
     t = s["t_s"].to_numpy()
     assert len(s) > 0 and np.all(np.diff(t) > 0)
     summary = r["summary"]
-    if path.stem != "dancer_failure" and not path.stem.startswith("sensor_b_gain"):
-        assert summary.terminated or summary.simulated_s == pytest.approx(DURATION)
+    if path.stem != "dancer_failure":  # every other scenario runs to its end
+        full = path.stem.startswith("sensor_b_gain")
+        duration = scenario.duration if full else DURATION
+        assert not summary.terminated, summary.termination_reason
+        assert summary.simulated_s == duration
+        assert t[-1] == pytest.approx(duration, abs=1e-9)
+        assert len(s) == round(duration * scenario.record_rate) + 1
     # labels agree with faults.parquet and the programme's mode (generic: covers new files)
     active = np.zeros(len(s), bool)
     for f in faults.itertuples():

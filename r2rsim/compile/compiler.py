@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError
-from ..schema.line import DANCERS, Line
+from ..schema.line import DANCERS, Line, draw_problem, torque_problem
 from . import kernels
 from .layout import *  # noqa: F403 - the record field names
 
@@ -31,9 +31,17 @@ N_JOINT_SLOTS = 2  # splice joints on the line at once (a joint leaves at the re
 
 @dataclass
 class Programme:
-    """Piecewise-linear set-point tables. Channel 0 is line speed [m/s]; channel c >= 1 the
-    tension set-point [N] of a tension controller. ``breakpoints`` are the times where a
-    set-point or its slope jumps: the solver stops and re-initialises there."""
+    """Piecewise-linear set-point tables, one channel each:
+
+    * channel 0: line speed [m/s];
+    * one per tension controller, named by its id: the tension set-point [N];
+    * ``torque:<element>``: the torque command [N m] of a torque drive without a controller
+      (the line's ``drive.torque_command``, or 0 until the programme sets one);
+    * ``draw:<element>``: the draw of an element whose draw the programme changes (it starts
+      at the line's ``draw``).
+
+    ``breakpoints`` are the times where a set-point or its slope jumps: the solver stops and
+    re-initialises there."""
 
     names: list[str]
     times: list[list[float]]
@@ -41,15 +49,40 @@ class Programme:
     breakpoints: list[float] = field(default_factory=list)
 
     @classmethod
-    def constant(cls, line: Line, line_speed: float = 0.0) -> Programme:
+    def constant(cls, line: Line, line_speed: float = 0.0, torque=(), draw=()) -> Programme:
+        """Constant set-points: ``line_speed``, the controllers' tension set-points, the
+        drives' torque commands; ``torque`` and ``draw`` name further elements that get a
+        channel (at 0 N m and at their line-file draw)."""
         names = ["line_speed"] + [c.id for c in line.controllers if c.type == "tension_pi"]
         vals = [line_speed] + [c.setpoint for c in line.controllers if c.type == "tension_pi"]
+        for e in line.elements:
+            cmd = getattr(getattr(e, "drive", None), "torque_command", None)
+            if cmd is not None or e.id in torque:
+                names.append(f"torque:{e.id}")
+                vals.append(cmd if cmd is not None else 0.0)
+        for e in line.elements:
+            if e.id in draw:
+                names.append(f"draw:{e.id}")
+                vals.append(_line_draw(line, e))
         return cls(names, [[0.0] for _ in names], [[v] for v in vals], [])
 
     @classmethod
     def from_steps(cls, line: Line, steps, file: str = "<scenario>") -> Programme:
         """Build the tables from scenario programme steps (validated, time-ordered)."""
-        prog = cls.constant(line)
+        tension_ids = {c.id for c in line.controllers if c.type == "tension_pi"}
+        for i, st in enumerate(steps):
+            for cid in st.tension or {}:
+                if cid not in tension_ids:
+                    known = ", ".join(sorted(tension_ids)) or "none defined"
+                    raise InputError(f"no tension controller '{cid}' in the line (known: "
+                                     f"{known})", file=file, path=f"programme[{i}].tension.{cid}")
+            for key, check in (("draw", draw_problem), ("torque", torque_problem)):
+                for eid in getattr(st, key) or {}:
+                    problem = check(line, eid)
+                    if problem:
+                        raise InputError(problem, file=file, path=f"programme[{i}].{key}.{eid}")
+        prog = cls.constant(line, torque={e for st in steps for e in st.torque or {}},
+                            draw={e for st in steps for e in st.draw or {}})
         chan = {n: i for i, n in enumerate(prog.names)}
         busy_until = [0.0] * len(prog.names)
         busy_by = [""] * len(prog.names)
@@ -59,6 +92,10 @@ class Programme:
                 changes.append((0, st.line_speed))
             for cid, val in (st.tension or {}).items():
                 changes.append((chan[cid], val))
+            for eid, val in (st.torque or {}).items():
+                changes.append((chan[f"torque:{eid}"], val))
+            for eid, val in (st.draw or {}).items():
+                changes.append((chan[f"draw:{eid}"], val))
             for ch, new in changes:
                 ts, vs = prog.times[ch], prog.values[ch]
                 old = vs[-1]
@@ -85,7 +122,9 @@ class Programme:
         return prog
 
     def value(self, name: str, t: float) -> float:
-        """Set-point value at time t (right-continuous), evaluated in Python."""
+        """Set-point value at time t (right-continuous), evaluated in Python; ``name`` is a
+        channel name (``line_speed``, a tension controller id, ``torque:<element>``,
+        ``draw:<element>``)."""
         ch = self.names.index(name)
         ts, vs = self.times[ch], self.values[ch]
         k = max(m for m in range(len(ts)) if ts[m] <= t)
@@ -93,6 +132,15 @@ class Programme:
             return vs[-1]
         dt = ts[k + 1] - ts[k]
         return vs[k] if dt <= 0 else vs[k] + (vs[k + 1] - vs[k]) * (t - ts[k]) / dt
+
+
+def _line_draw(line: Line, e) -> float:
+    """The draw an element has in the line file: its ideal_speed drive's or its speed_pi's."""
+    drive = getattr(e, "drive", None)
+    if drive is not None and drive.type == "ideal_speed":
+        return drive.draw
+    return next((c.draw for c in line.controllers
+                 if c.type == "speed_pi" and c.element == e.id), 0.0)
 
 
 @dataclass
@@ -268,7 +316,7 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
     nSe, nC = len(sensors), len(ctrls)
     sens_idx = {s.id: j for j, s in enumerate(sensors)}
     node_idx = {e.id: k for k, e in enumerate(els)}
-    tension_ctrls = [c.id for c in ctrls if c.type == "tension_pi"]
+    channel = {name: ch for ch, name in enumerate(prog.names)}
 
     names: list[str] = []
     units: list[str] = []
@@ -370,6 +418,8 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
         ni[NI_SPAN_DN] = k if k < nN - 1 else -1
         ni[NI_SPEEDC] = speed_of.get(e.id, -1)
         ni[NI_TENSC] = tens_of.get(e.id, -1)
+        ni[NI_DRAWCH] = channel.get(f"draw:{e.id}", -1)
+        ni[NI_TQCH] = channel.get(f"torque:{e.id}", -1)
         npr[NP_B], npr[NP_TC], npr[NP_WEPS] = f.viscous, f.coulomb, f.smoothing_speed
         npr[NP_TMAX] = math.inf
         if drive is not None:
@@ -435,9 +485,16 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
                     else C_TENSION_TRIM
                 ci[CI_SENSOR] = sens_idx[c.sensor]
                 ci[CI_RSENSOR] = sens_idx[c.radius_sensor] if c.radius_sensor else -1
-                ci[CI_CH] = 1 + tension_ctrls.index(c.id)
+                ci[CI_CH] = channel[c.id]
                 cp[CP_LIM] = c.output_limit if c.output_limit is not None else math.inf
-                cp[CP_FF] = 1.0 if c.feedforward else 0.0
+                ff = c.feedforward
+                cp[CP_FF] = 1.0 if ff.tension else 0.0
+                if ff.inertia.value is not None:
+                    cp[CP_JABS] = ff.inertia.value
+                else:
+                    cp[CP_JFAC] = ff.inertia.factor
+                cp[CP_RR] = 1.0 if ff.radius_rate else 0.0
+                cp[CP_FRF] = 1.0 if ff.friction else 0.0
                 # a trim raises the tension of a span upstream of the node, lowers one downstream
                 sm = sensors[sens_idx[c.sensor]]
                 meas = (span_ids.index(sm.span) + 1 if sm.type == "pitch_length"
@@ -585,9 +642,17 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
         aux_units += ["m", "1"]
     aux_names += ["setpoint.line_speed_m_s", "setpoint.line_acceleration_m_s2"]
     aux_units += ["m/s", "m/s^2"]
-    for cid in tension_ctrls:
-        aux_names.append(f"setpoint.{cid}.tension_N")
-        aux_units.append("N")
+    for name in prog.names[1:]:
+        kind, _, eid = name.rpartition(":")
+        if kind == "torque":
+            aux_names.append(f"setpoint.{eid}.torque_N_m")
+            aux_units.append("N*m")
+        elif kind == "draw":
+            aux_names.append(f"setpoint.{eid}.draw")
+            aux_units.append("1")
+        else:
+            aux_names.append(f"setpoint.{name}.tension_N")
+            aux_units.append("N")
 
     # the programme tables
     nch = len(prog.names)

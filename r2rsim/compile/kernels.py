@@ -392,6 +392,10 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
     # it is the joint, at strain T/EA_s (factor XF = EA/EA_s on the carried strain); without
     # this the span's tension would jump with its compliance as the joint enters. The
     # Jacobian treats the overlap as constant (it changes only while the joint crosses a node).
+    # Which nodes the joint straddles is latched by the joint-pass events (JP_SPAN holds the
+    # lead, JP_TSPAN the trail), not read from the state: the flux jumps there, and a jump
+    # inside a step makes an implicit method shrink its step until it fails (scipy's Radau
+    # did, at rtol 1e-5..1e-7). Between events the right-hand side stays smooth.
     for k in range(nN):
         W[oXF + k] = 1.0
     oJP = I[H_OFF_JP]
@@ -403,8 +407,12 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         lead = y[I[oNI + k0 * NI + NI_U]] - P[bj + JP_U0]
         trail = lead - P[bj + JP_LEN]
         xf = 1.0 / P[bj + JP_RATIO]
-        if trail < 0.0 < lead:
+        sp_lead = int(P[bj + JP_SPAN])
+        sp_trail = int(P[bj + JP_TSPAN])
+        if sp_trail < k0:  # the trail is still on the roll
             W[oXF + k0] = xf
+        for i in range(max(sp_trail, 0), min(sp_lead, nS)):
+            W[oXF + I[oSI + i * NSI + SI_DN]] = xf
         c0 = 0.0
         for i in range(nS):
             ell = W[oL + i] / max(1.0 + y[I[oSI + i * NSI + SI_E]], 1e-6)
@@ -413,8 +421,6 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
                 frac = min(ov / ell, 1.0)
                 W[oEAE + i] = W[oEAE + i] / (1.0 - frac * (1.0 - xf))
             c0 += ell
-            if trail < c0 < lead:
-                W[oXF + I[oSI + i * NSI + SI_DN]] = xf
             if c0 >= lead:
                 break
 
@@ -603,7 +609,14 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         if typ == C_SPEED:
             R = W[oR + k]
             vg = P[bn + NP_VGAIN]
-            vref = (V * (1.0 + P[b + CP_DRAW]) * vg + P[bn + NP_VOFF]
+            # a programmed draw is a set-point channel; its slope enters the feed-forward
+            dch = I[oNI + k * NI + NI_DRAWCH]
+            if dch >= 0:
+                draw, ddraw = setpoint(I, P, dch, t)
+            else:
+                draw = P[b + CP_DRAW]
+                ddraw = 0.0
+            vref = (V * (1.0 + draw) * vg + P[bn + NP_VOFF]
                     + P[bn + NP_VSLOPE] * (t - P[bn + NP_VT0]) + W[oTRIM + k])
             wref = vref / R
             sens = I[oCI + c * NCI + CI_SENSOR]
@@ -612,7 +625,10 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             W[oE + c] = e
             x = y[ix] if ix >= 0 else 0.0
             J = W[oJ + k]
-            aref = (A * (1.0 + P[b + CP_DRAW]) * vg + P[bn + NP_VSLOPE]) / R
+            acc = A * (1.0 + draw) * vg
+            if dch >= 0:
+                acc += V * ddraw * vg  # d/dt of V·(1 + draw)
+            aref = (acc + P[bn + NP_VSLOPE]) / R
             tau = kp * e + ki * x + ff * J * aref
             W[oTCMD + k] += tau
             if jac:
@@ -642,26 +658,41 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
                 live = 0.0
             Tref, _ = setpoint(I, P, I[oCI + c * NCI + CI_CH], t)
             u = W[oU + c]
-            Jh = P[bn + NP_JC] + 0.5 * PI * P[bn + NP_RHOW] * (Rh ** 4 - Rc ** 4)
-            dJh = 2.0 * PI * P[bn + NP_RHOW] * Rh ** 3
+            # feed-forward terms (layout CP_FF, CP_JFAC, CP_JABS, CP_RR, CP_FRF): the inertia
+            # estimate J_est = JFAC·J(R_hat) + JABS, the radius-rate part of alpha (rr) and
+            # friction (fr) are switched one by one; the defaults reproduce
+            # sgn·R_hat·(T_ref + u) + (J(R_hat)·alpha + tau_f) to the last bit
+            jfac = P[b + CP_JFAC]
+            rr = P[b + CP_RR]
+            fr = P[b + CP_FRF]
+            Jh = (jfac * (P[bn + NP_JC] + 0.5 * PI * P[bn + NP_RHOW] * (Rh ** 4 - Rc ** 4))
+                  + P[b + CP_JABS])
+            dJh = jfac * (2.0 * PI * P[bn + NP_RHOW] * Rh ** 3)
             cw = P[bn + NP_CW]
-            alpha = A / Rh - sgn * cw * V * V / (2.0 * PI * Rh ** 3)
-            dalpha = -A / (Rh * Rh) + 3.0 * sgn * cw * V * V / (2.0 * PI * Rh ** 4)
+            alpha = A / Rh - rr * sgn * cw * V * V / (2.0 * PI * Rh ** 3)
+            dalpha = -A / (Rh * Rh) + 3.0 * rr * sgn * cw * V * V / (2.0 * PI * Rh ** 4)
             om = W[oOM + k]
             weps = P[bn + NP_WEPS]
             th = math.tanh(om / weps)
             tf = P[bn + NP_B] * om + P[bn + NP_TC] * th
             dtf = P[bn + NP_B] + P[bn + NP_TC] * (1.0 - th * th) / weps
-            tau = sgn * Rh * (ff * Tref + u) + ff * (Jh * alpha + tf)
+            tau = sgn * Rh * (ff * Tref + u) + (Jh * alpha + fr * tf)
             W[oTCMD + k] += tau
             if jac:
-                dRh = live * (sgn * (ff * Tref + u) + ff * (dJh * alpha + Jh * dalpha))
+                dRh = live * (sgn * (ff * Tref + u) + (dJh * alpha + Jh * dalpha))
                 if rs >= 0:
                     _g_axpy(GI, GC, GV, maxd, qTCMD + k, 0.5 * dRh, qY + rs)
                 else:
                     _g_axpy(GI, GC, GV, maxd, qTCMD + k, dRh, qR + k)
                 _g_axpy(GI, GC, GV, maxd, qTCMD + k, sgn * Rh, qU + c)
-                _g_axpy(GI, GC, GV, maxd, qTCMD + k, ff * dtf, qOM + k)
+                _g_axpy(GI, GC, GV, maxd, qTCMD + k, fr * dtf, qOM + k)
+
+    # 5b. open-loop torque commands (a set-point channel; no state dependence)
+    for k in range(nN):
+        tch = I[oNI + k * NI + NI_TQCH]
+        if tch >= 0:
+            tq, _ = setpoint(I, P, tch, t)
+            W[oTCMD + k] += tq
 
     # 6. drives: saturation and first-order torque lag
     for k in range(nN):
@@ -717,7 +748,12 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
                 _g_axpy(GI, GC, GV, maxd, qV + k, rf * y[iw], qR + k)
         else:  # imposed speed
             bn = oNP + k * NP
-            v = (V * (1.0 + P[bn + NP_DRAW]) * P[bn + NP_VGAIN] + P[bn + NP_VOFF]
+            dch = I[oNI + k * NI + NI_DRAWCH]
+            if dch >= 0:
+                draw, _ = setpoint(I, P, dch, t)
+            else:
+                draw = P[bn + NP_DRAW]
+            v = (V * (1.0 + draw) * P[bn + NP_VGAIN] + P[bn + NP_VOFF]
                  + P[bn + NP_VSLOPE] * (t - P[bn + NP_VT0]) + W[oTRIM + k])
             W[oV + k] = rf * v
             W[oOM + k] = v / R
@@ -842,12 +878,13 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         sp_after = I[oNI + bnode * NI + NI_SPAN_DN]
         er = W[oEM + sp_after] if sp_after >= 0 else W[oEM + i]
         qb = _flux(W[oV + bnode], xb * W[oEM + i], xb * er, linear)
-        # moving length (dancer, festoon): + (1 + eg)/L·dL/dt (linear model: dL/dt / L)
+        # moving length (dancer, festoon): + (1 + eg)/L·dL/dt; the linear model (1.4) keeps
+        # d/dt[L(1 - eg)] = qa - qb, hence (1 - eg)/L·dL/dt
         if linear:
             fac = 1.0 / L
             dfac = 0.0
-            gl = 1.0 / L
-            dgl = 0.0
+            gl = (1.0 - eg) / L
+            dgl = -1.0 / L
         else:
             fac = (1.0 + eg) * (1.0 + eg) / L
             dfac = 2.0 * (1.0 + eg) / L

@@ -35,7 +35,10 @@ DRV_NONE, DRV_TORQUE, DRV_IDEAL = 0, 1, 2
 NI_KIND, NI_DRIVE, NI_W, NI_S, NI_U, NI_TAU = 0, 1, 2, 3, 4, 5
 NI_SPAN_UP, NI_SPAN_DN, NI_SPEEDC, NI_TENSC, NI_MOVER = 6, 7, 8, 9, 10
 NI_TH = 11  # roller angle state (only for an eccentric roller), else -1
-NI = 12
+# set-point channels of a node (-1: none): a programmed draw (replaces the speed PI's CP_DRAW
+# or the ideal-speed drive's NP_DRAW) and an open-loop torque command (added to tau_cmd)
+NI_DRAWCH, NI_TQCH = 12, 13
+NI = 14
 (NP_R, NP_J, NP_B, NP_TC, NP_WEPS, NP_R0, NP_RC, NP_JC, NP_CW, NP_RHOW, NP_EPSW,
  NP_TLAG, NP_TMAX, NP_DRAW, NP_EMB, NP_RIPA, NP_RIPW, NP_EPSW1, NP_EPSW2,
  NP_VGAIN, NP_VOFF, NP_VSLOPE, NP_VT0, NP_RTRIG,
@@ -71,7 +74,10 @@ C_SPEED, C_TENSION_TORQUE, C_TENSION_TRIM, C_DANCER = 1, 2, 3, 4
 CI_TYPE, CI_NODE, CI_X, CI_SENSOR, CI_RSENSOR, CI_CH, CI_MOVER = 0, 1, 2, 3, 4, 5, 6
 NCI = 7
 CP_KP, CP_KI, CP_KAW, CP_LIM, CP_DRAW, CP_FF, CP_SIGN, CP_SETP, CP_GATE = range(9)
-NCP = 9
+# torque-mode feed-forward terms of a tension PI on a roll (CP_FF: the tension term):
+#   J_est = JFAC·J(R_hat) + JABS; RR, FRF: 1/0 radius-rate and friction terms
+CP_JFAC, CP_JABS, CP_RR, CP_FRF = 9, 10, 11, 12
+NCP = 13
 
 # ---- mover records (dancer carriage/arm, festoon carriage): generalised coordinate q ----
 MV_LINEAR, MV_PIVOT, MV_FESTOON = 1, 2, 3

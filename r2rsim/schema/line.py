@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, WithJsonSchema, model_validator
 
 from .materials import MATERIALS
 from .quantities import (
@@ -110,8 +110,9 @@ class TorqueRipple(Strict):
 
 class Drive(Strict):
     """A motor drive. ``torque``: first-order torque lag and saturation, commanded by the
-    element's controllers. ``ideal_speed``: the surface speed is imposed (line speed x
-    (1 + draw) + trim), a kinematic node for verification and idealised studies."""
+    element's controllers, or open loop by ``torque_command``. ``ideal_speed``: the surface
+    speed is imposed (line speed x (1 + draw) + trim), a kinematic node for verification and
+    idealised studies."""
 
     type: Literal["torque", "ideal_speed"] = "torque"
     torque_lag: NonNegTime = Field(1e-3, description="current/torque loop time constant [s]")
@@ -122,6 +123,10 @@ class Drive(Strict):
     torque_ripple: TorqueRipple | None = Field(
         None, description="sinusoidal torque disturbance added at the shaft (cogging, "
         "gear mesh, an eccentric load)"
+    )
+    torque_command: Torque | None = Field(
+        None, description="torque drive without a controller: constant torque command [N m] "
+        "(positive drives the web forward); a scenario's programme can change it (torque:)"
     )
 
 
@@ -486,6 +491,65 @@ class SpeedPI(_Controller):
     encoder: Id | None = Field(None, description="encoder sensor read; default true speed")
 
 
+class InertiaEstimate(Strict):
+    """The roll inertia J_est the torque-mode feed-forward uses: ``factor``·J(R_hat) (J(R) of
+    physics.md eq. 1.12 at the radius estimate) or a fixed ``value``."""
+
+    factor: Annotated[Dimensionless, Field(ge=0)] | None = Field(
+        None, description="J_est = factor·J(R_hat); 1 is the exact inertia")
+    value: Annotated[Inertia, Field(ge=0)] | None = Field(
+        None, description="J_est = value [kg m^2], whatever the radius")
+
+    @model_validator(mode="after")
+    def _check(self):
+        if (self.factor is None) == (self.value is None):
+            raise ValueError("give the inertia estimate as factor or as value (one of them)")
+        return self
+
+
+def _inertia_from_bool(v):
+    # true: the exact J(R_hat); false: no inertia compensation (J_est = 0)
+    if isinstance(v, bool):
+        return {"factor": 1.0 if v else 0.0}
+    return v
+
+
+class FeedForward(Strict):
+    """Terms of the torque-mode feed-forward of a tension PI on an unwind/rewind:
+    tau = sgn·R_hat·(T_ref + u) + J_est·alpha + tau_f(omega), sgn = -1 unwind, +1 rewind,
+    alpha = a/R_hat - sgn·c_w·v^2/(2π·R_hat^3) (docs/model.md). Every term is on by default."""
+
+    tension: bool = Field(True, description="the tension term sgn·T_ref·R_hat")
+    inertia: Annotated[
+        InertiaEstimate, BeforeValidator(_inertia_from_bool),
+        WithJsonSchema({"anyOf": [{"type": "boolean"}, InertiaEstimate.model_json_schema()],
+                        "description": "inertia compensation J_est·alpha: true (J(R_hat)), "
+                        "false (off), {factor: f} or {value: J}"})] = Field(
+        default_factory=lambda: InertiaEstimate(factor=1.0))
+    radius_rate: bool = Field(
+        True, description="the radius-rate part -sgn·c_w·v^2/(2π·R_hat^3) of alpha (the roll "
+        "must spin up as its radius shrinks, physics.md 1.4)")
+    friction: bool = Field(True, description="friction compensation tau_f(omega) with the "
+                                             "element's nominal friction")
+
+    def is_default(self) -> bool:
+        """True when every term is on with the exact inertia."""
+        return (self.tension and self.radius_rate and self.friction
+                and self.inertia.factor == 1.0)
+
+    def is_off(self) -> bool:
+        """True when every term is off (``feedforward: false``)."""
+        return not (self.tension or self.radius_rate or self.friction
+                    or self.inertia.value or self.inertia.factor)
+
+
+def _feedforward_from_bool(v):
+    # the historical master switch: true = every term, false = none
+    if isinstance(v, bool):
+        return {"tension": v, "inertia": v, "radius_rate": v, "friction": v}
+    return v
+
+
 class TensionPI(_Controller):
     """Tension PI reading a load cell. On an unwind/rewind with a torque drive it commands
     torque (radius-compensated feed-forward T_ref·R + load-cell trim, kp [N/N], ki [N/(N s)]);
@@ -497,7 +561,12 @@ class TensionPI(_Controller):
     output_limit: Annotated[float, Field(gt=0)] | None = Field(
         None, description="|PI output| limit: N (torque mode) or m/s (speed trim)"
     )
-    feedforward: bool = Field(True, description="torque mode: T_ref·R + inertia·accel FF")
+    feedforward: Annotated[
+        FeedForward, BeforeValidator(_feedforward_from_bool),
+        WithJsonSchema({"anyOf": [{"type": "boolean"}, FeedForward.model_json_schema()],
+                        "description": "torque mode: true (every term), false (none) or the "
+                        "terms {tension, inertia, radius_rate, friction}"})] = Field(
+        default_factory=FeedForward)
     radius_sensor: Id | None = Field(
         None, description="roll_diameter sensor for the radius estimate; default true radius"
     )
@@ -724,7 +793,85 @@ def check_line(line: Line) -> list[tuple[str, str]]:
                                         f"tension_pi; use one of them"))
         if c.radius_sensor is not None and not roll:
             out.append((f"{p}.radius_sensor", "a radius sensor applies only to unwind/rewind"))
+        ff = c.feedforward
+        if not (roll and drive.type == "torque") and not (ff.is_default() or ff.is_off()):
+            out.append((f"{p}.feedforward", f"feed-forward terms apply to torque mode (a "
+                                            f"tension_pi on an unwind/rewind with a torque "
+                                            f"drive); on '{e.id}' the loop trims a speed"))
+    for i, e in enumerate(els):
+        drive = getattr(e, "drive", None)
+        if drive is None or drive.torque_command is None:
+            continue
+        if drive.type != "torque":
+            problem = "an ideal_speed drive imposes the speed; a torque command needs a " \
+                      "torque drive"
+        else:
+            problem = torque_problem(line, e.id)
+        if problem:
+            out.append((f"elements[{i}].drive.torque_command", problem))
     return out
+
+
+def _commanding_controller(line: Line, element_id: str):
+    """(index, controller) of the speed_pi or torque-mode tension_pi that commands the torque
+    of an element, or None."""
+    e = line.element(element_id)
+    roll = e.type in ("unwind", "rewind")
+    for j, c in enumerate(line.controllers):
+        if c.element != element_id:
+            continue
+        if c.type == "speed_pi" or (c.type == "tension_pi" and roll):
+            return j, c
+    return None
+
+
+def draw_problem(line: Line, element_id: str) -> str | None:
+    """Why the draw (speed ratio to the line) of an element cannot be programmed, or None.
+
+    A draw belongs to an ideal_speed drive (``drive.draw``) or to a non-master speed_pi
+    (``draw``)."""
+    ids = [e.id for e in line.elements]
+    if element_id not in ids:
+        return f"no element '{element_id}' in the line (known: {', '.join(ids)})"
+    e = line.element(element_id)
+    drive = getattr(e, "drive", None)
+    if drive is None:
+        return f"'{element_id}' ({e.type}) has no drive, so no draw"
+    if drive.type == "ideal_speed":
+        return None
+    cc = _commanding_controller(line, element_id)
+    if cc is None:
+        return (f"'{element_id}' has a torque drive without a speed_pi: it has no speed "
+                f"reference to draw")
+    j, c = cc
+    if c.type == "tension_pi":
+        return (f"'{element_id}' is tension-controlled in torque mode (controllers[{j}]): it "
+                f"has no speed reference to draw")
+    if c.master:
+        return (f"'{element_id}' is the master speed node (controllers[{j}]): it defines line "
+                f"speed, so its draw stays 0")
+    return None
+
+
+def torque_problem(line: Line, element_id: str) -> str | None:
+    """Why an element's drive cannot take an open-loop torque command, or None (it needs a
+    torque drive that no speed_pi or torque-mode tension_pi commands)."""
+    ids = [e.id for e in line.elements]
+    if element_id not in ids:
+        return f"no element '{element_id}' in the line (known: {', '.join(ids)})"
+    e = line.element(element_id)
+    drive = getattr(e, "drive", None)
+    if drive is None:
+        return f"'{element_id}' ({e.type}) has no drive to command"
+    if drive.type != "torque":
+        return (f"'{element_id}' has an ideal_speed drive (its speed is imposed); a torque "
+                f"command needs a torque drive")
+    cc = _commanding_controller(line, element_id)
+    if cc is not None:
+        j, c = cc
+        return (f"the torque of '{element_id}' is commanded by {c.type} '{c.id}' "
+                f"(controllers[{j}]); a torque command is for a drive without a controller")
+    return None
 
 
 def _check_geometry(line: Line) -> list[tuple[str, str]]:

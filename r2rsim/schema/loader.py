@@ -13,7 +13,7 @@ from pydantic import ValidationError
 from ..errors import InputError
 from ..units import QuantityError
 from .faults import check_faults, target_problem
-from .line import Line
+from .line import Line, draw_problem, torque_problem
 from .scenario import Scenario
 
 _CROSS = re.compile(r"^(?:Value error, )?@(?P<path>[^@]*)@ (?P<msg>.*)$", re.S)
@@ -174,6 +174,14 @@ def check_scenario_against_line(scenario: Scenario, line: Line, file: str) -> No
                 known = ", ".join(sorted(tension_ids)) or "none defined"
                 raise InputError(f"no tension controller '{cid}' in the line (known: {known})",
                                  file=file, path=f"programme[{i}].tension.{cid}")
+        for eid in step.draw or {}:
+            problem = draw_problem(line, eid)
+            if problem:
+                raise InputError(problem, file=file, path=f"programme[{i}].draw.{eid}")
+        for eid in step.torque or {}:
+            problem = torque_problem(line, eid)
+            if problem:
+                raise InputError(problem, file=file, path=f"programme[{i}].torque.{eid}")
         if step.rate is not None and step.line_speed is None:
             raise InputError("rate applies to a line_speed change", file=file,
                              path=f"programme[{i}].rate")

@@ -14,11 +14,12 @@ from pydantic import Field, model_validator
 from ..units import parse_quantity
 from .faults import Fault
 from .line import Id, Strict
-from .quantities import Acceleration, Force, Frequency, Length, Speed, Time
+from .quantities import Acceleration, Dimensionless, Force, Frequency, Length, Speed, Time, Torque
 
 
 class ProgrammeStep(Strict):
-    """A set-point change at time ``at``: line speed and/or tension set-points.
+    """A set-point change at time ``at``: line speed, tension set-points, draws of
+    speed-controlled elements and torque commands of open-loop torque drives.
 
     A change is a step unless ``ramp`` (duration) or ``rate`` (line-speed acceleration) is
     given, in which case the set-point moves linearly to its new value.
@@ -29,6 +30,14 @@ class ProgrammeStep(Strict):
     tension: dict[Id, Annotated[Force, Field(ge=0)]] | None = Field(
         None, description="new set-points of tension controllers, by controller id"
     )
+    draw: dict[Id, Annotated[Dimensionless, Field(gt=-1)]] | None = Field(
+        None, description="new draws (relative speed offsets to the line speed) of "
+        "elements with an ideal_speed drive or a non-master speed_pi, by element id"
+    )
+    torque: dict[Id, Torque] | None = Field(
+        None, description="new torque commands [N m] of torque drives without a controller, "
+        "by element id"
+    )
     ramp: Annotated[Time, Field(ge=0)] | None = Field(None, description="ramp duration [s]")
     rate: Annotated[Acceleration, Field(gt=0)] | None = Field(
         None, description="line-speed ramp rate [m/s^2] (instead of ramp)"
@@ -38,8 +47,10 @@ class ProgrammeStep(Strict):
 
     @model_validator(mode="after")
     def _check(self):
-        if self.line_speed is None and not self.tension and self.mode is None:
-            raise ValueError("a programme step must change line_speed, tension or mode")
+        if (self.line_speed is None and not self.tension and not self.draw
+                and not self.torque and self.mode is None):
+            raise ValueError("a programme step must change line_speed, tension, draw, torque "
+                             "or mode")
         if self.ramp is not None and self.rate is not None:
             raise ValueError("give either ramp (a duration) or rate, not both")
         return self
@@ -85,8 +96,9 @@ class SolverOptions(Strict):
     """Integrator settings (solver.md §6)."""
 
     backend: Literal["cvode", "radau5", "radau"] = Field(
-        "cvode", description="cvode: CVODE BDF (scikit-sundae); radau5: r2rsim's compiled "
-        "Radau IIA, order 5; radau: scipy's Radau (cross-check)")
+        "radau5", description="radau5: r2rsim's compiled Radau IIA, order 5 (default: the "
+        "fastest at equal accuracy on the project's benchmark); cvode: SUNDIALS CVODE BDF2 "
+        "(scikit-sundae); radau: scipy's Radau (cross-check)")
     rtol: Annotated[float, Field(gt=0, lt=1)] = 1e-6
     atol_scale: Annotated[float, Field(gt=0)] = Field(
         1.0, description="multiplies the per-state absolute tolerances"

@@ -671,6 +671,9 @@ class DiscreteLogic:
         for c in self.line.controllers:
             if c.type == "speed_pi" and c.element == self.cl.node_ids[k]:
                 draw = c.draw
+        name = f"draw:{self.cl.node_ids[k]}"
+        if name in self.cl.programme.names:  # a programmed draw
+            draw = self.cl.programme.value(name, t)
         return (self._line_speed(t, k) * (1.0 + draw) * P[self._np(k, NP_VGAIN)]
                 + P[self._np(k, NP_VOFF)]
                 + P[self._np(k, NP_VSLOPE)] * (t - P[self._np(k, NP_VT0)]))
@@ -736,6 +739,7 @@ class DiscreteLogic:
             if P[bj + JP_ACTIVE] != 0.0 and P[bj + JP_NODE] == k and \
                     P[bj + JP_LEN] == OPEN_JOINT:
                 P[bj + JP_LEN] = u_now - P[bj + JP_U0]
+                P[bj + JP_TSPAN] = float(k)  # its trail leaves the roll now
         # the joint
         slot = self._free_joint_slot()
         if slot is not None:

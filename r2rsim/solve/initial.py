@@ -97,12 +97,62 @@ def nominal_state(cl: CompiledLine, tension: float | None = None,
 
 def steady_state(cl: CompiledLine, y_guess: np.ndarray, tol: float = 1e-10,
                  max_iter: int = 60) -> np.ndarray | None:
-    """Newton's method on dy/dt = 0 at t = 0 for every state except the roll lengths and
-    roller angles.
+    """The steady state at the t = 0 set-points near ``y_guess``.
 
-    Returns None when no steady state is found (for example a line at rest, where span
-    strains are not determined by the speeds).
+    Newton's method with a backtracking line search on dy/dt = 0 for every state except
+    the roll lengths and roller angles. If it fails from the guess and the guess has spans
+    at or below zero strain (a nominal state at 0 N: a span's stiffness has its kink there,
+    so the Newton matrix is singular), it starts again from the guess made taut at the
+    line's tension set-points (:func:`taut_guess`).
+
+    Returns
+    -------
+    ndarray or None
+        None when no steady state is found (for example a line at rest, where span strains
+        are not determined by the speeds).
     """
+    y = _newton(cl, y_guess, tol, max_iter)
+    if y is None:
+        taut = taut_guess(cl, y_guess)
+        if taut is not None:
+            y = _newton(cl, taut, tol, max_iter)
+    return y
+
+
+def taut_guess(cl: CompiledLine, y: np.ndarray) -> np.ndarray | None:
+    """``y`` with every span at or below zero strain set to a taut strain, or None if none
+    is. The strain is that of the median of the tension set-points at t = 0 and the
+    tensions dancers and festoons hold at rest, else 1e-4."""
+    spans = [cl.index(f"{sp}.strain") for sp in cl.span_ids]
+    if all(y[i] > 0.0 for i in spans):
+        return None
+    line = cl.line
+    refs = [cl.programme.value(c.id, 0.0) for c in line.controllers if c.type == "tension_pi"]
+    refs += _mover_tensions(line)
+    refs = [r for r in refs if r > 0.0]
+    eps = float(np.median(refs)) / line.web.EA if refs else 1e-4
+    out = y.copy()
+    for i in spans:
+        if out[i] <= 0.0:
+            out[i] = eps
+    return out
+
+
+def _mover_tensions(line) -> list[float]:
+    """Rough web tensions [N] that translating dancers and festoons hold at rest: the load
+    shared by their strands (a guess for Newton, not a result)."""
+    out = []
+    for e in line.elements:
+        if e.type == "dancer":
+            out.append(0.5 * abs(e.load_force + e.mass * 9.81))
+    for sp in line.spans:
+        f = getattr(sp, "festoon", None)
+        if f is not None:
+            out.append(abs(f.force) / (2 * f.moving_rollers))
+    return out
+
+
+def _newton(cl: CompiledLine, y_guess: np.ndarray, tol: float, max_iter: int):
     free = np.array([k not in ("roll_length", "material", "angle") for k in cl.state_kinds])
     scale = np.abs(y_guess) + 1e3 * cl.atol
     y = y_guess.copy()
@@ -111,6 +161,8 @@ def steady_state(cl: CompiledLine, y_guess: np.ndarray, tol: float = 1e-10,
         warnings.simplefilter("ignore")
         for _ in range(max_iter):
             f = cl.rhs(0.0, y)[free]
+            if not np.all(np.isfinite(f)):
+                return None
             Jf = cl.jacobian(0.0, y)[np.ix_(free, free)]
             try:
                 dx = np.linalg.solve(Jf, -f)

@@ -16,11 +16,14 @@ transformation ``T`` block-diagonalises ``A^-1`` (real eigenvalue ``gamma``, com
 
 from __future__ import annotations
 
+import hashlib
 import math
+from pathlib import Path
 
 import numpy as np
 from numba import njit
 
+from ..compile import kernels, layout
 from ..compile.kernels import evaluate, event_values, jac_values
 from ..compile.layout import MODE_RHS
 
@@ -67,10 +70,11 @@ MAX_FACTOR = 10.0
 EPS = float(np.finfo(float).eps)
 
 #: status codes of :func:`integrate`
-DONE, ROOT, FAIL_SMALL_STEP, FAIL_MAX_STEPS = 0, 1, 2, 3
+DONE, ROOT, FAIL_SMALL_STEP, FAIL_MAX_STEPS, FAIL_NONFINITE = 0, 1, 2, 3, 4
 MESSAGES = {FAIL_SMALL_STEP: "Radau: step size below its minimum (the Newton iteration "
                              "fails or the error test cannot be met)",
-            FAIL_MAX_STEPS: "Radau: maximum number of steps reached"}
+            FAIL_MAX_STEPS: "Radau: maximum number of steps reached",
+            FAIL_NONFINITE: "Radau: the state or its derivative is not finite (nan or inf)"}
 
 
 # ---- banded LU with partial pivoting (real and complex) -----------------------------------
@@ -171,345 +175,387 @@ def _any_crossed(active, g0, g):
     return False
 
 
-@njit(cache=True)
-def integrate(t0, t_end, y0, tq, out, rtol, atol, max_steps, line, rows, cols, kl, ku,
-              consts, g_start, y_root, dirs, vals, h_init, jac_ready):
-    """Integrate the compiled line from ``(t0, y0)`` to ``t_end``.
+def _kernel_stamp() -> int:
+    """A hash of the sources the integrator compiles in (the line kernel and its layout).
 
-    Parameters
-    ----------
-    t0, t_end : float
-    y0 : ndarray (n,)
-    tq : ndarray (m,)
-        Sorted sample times in [t0, t_end]; ``out[k]`` receives the state at ``tq[k]``
-        (interpolated with the collocation polynomial of the step that covers it).
-    out : ndarray (m, n)
-    rtol : float
-    atol : ndarray (n,)
-    max_steps : int
-    line : tuple
-        ``(I, P, W, GI, GC, GV, aux0, JJ, yd, J1)`` of the compiled line.
-    rows, cols : ndarray
-        The Jacobian pattern; ``kl``, ``ku`` its band widths.
-    consts : tuple
-        ``(C, E, T, TI, P, gamma, mu)`` of the method.
-    g_start : ndarray (n_events,)
-        Work array for the event functions (length 0: no event location).
-    y_root, dirs : ndarray
-        Outputs when an event function changes sign: the state at the event and, per event
-        function, +1 (rising) / -1 (falling) / 0.
-    vals : ndarray (n_pattern,)
-        Jacobian values on the pattern (kept between calls).
-    h_init : float
-        First step to try; <= 0 estimates it. Continuing a smooth integration (a chunk
-        boundary where nothing changes) passes the step the last call proposed.
-    jac_ready : bool
-        ``vals`` holds a recent Jacobian: reuse it (it is evaluated again if Newton fails).
-
-    Returns
-    -------
-    status : int
-        ``DONE``, ``ROOT`` or a ``FAIL_*`` code.
-    t_reached : float
-        ``t_end``, the event time, or where the integration failed.
-    n_out : int
-        Samples written.
-    nfev, njev, nlu, nsteps : int
-    h_next : float
-        The step size proposed for the next step.
+    numba caches a compiled function under its own file's time stamp and its own bytecode:
+    an edit of ``compile/kernels.py`` alone would leave the cached integrator running the old
+    right-hand side. A closure variable is part of numba's cache key, so the two functions
+    that call the kernel are built in closures over this hash and compile again when the
+    kernel changes.
     """
-    I, Pl, W, GI, GC, GV, aux0, JJ, yd, J1 = line
-    Cn, En, Tm, TIm, Pm, gamma, mu = consts
-    n = y0.shape[0]
-    nev = g_start.shape[0]
-    ku2 = ku + kl
-    nb = 2 * kl + ku + 1
-    ab_r = np.zeros((n, nb))
-    ab_c = np.zeros((n, nb), np.complex128)
-    piv_r = np.zeros(n, np.int64)
-    piv_c = np.zeros(n, np.int64)
-    y = y0.copy()
-    f = np.empty(n)
-    y_new = np.empty(n)
-    f_new = np.empty(n)
-    ytmp = np.empty(n)
-    scale = np.empty(n)
-    err = np.empty(n)
-    ZE = np.empty(n)
-    Z = np.zeros((3, n))
-    Wn = np.zeros((3, n))
-    F = np.empty((3, n))
-    dW = np.empty((3, n))
-    Q = np.zeros((3, n))
-    Q_prev = np.zeros((3, n))
-    y_prev = np.empty(n)
-    rhs_c = np.empty(n, np.complex128)
-    g_new = np.empty(nev)
-    g_mid = np.empty(nev)
-    active = np.zeros(nev, np.bool_)
-    nfev = njev = nlu = nsteps = 0
-    newton_tol = max(10.0 * EPS / rtol, min(0.03, math.sqrt(rtol)))
+    h = hashlib.sha256()
+    for mod in (kernels, layout):
+        h.update(Path(mod.__file__).read_bytes())
+    return int(h.hexdigest()[:15], 16)
 
-    t = t0
-    evaluate(t, y, f, J1, MODE_RHS, I, Pl, W, GI, GC, GV, aux0)
-    nfev += 1
-    k_out = 0
-    while k_out < tq.shape[0] and tq[k_out] <= t0:
-        out[k_out, :] = y
-        k_out += 1
-    if nev:
-        event_values(t, y, g_start, I, Pl, W, GI, GC, GV, yd, J1)
-        for m in range(nev):
-            # a function exactly at 0 (the event just handled) counts once it leaves 0
-            active[m] = g_start[m] != 0.0
-    interval = t_end - t0
-    if interval <= 0.0:
-        return DONE, t, k_out, nfev, njev, nlu, nsteps, h_init
 
-    if h_init > 0.0:
-        h_abs = min(h_init, interval)
-    else:
-        h_abs = _initial_step(t, y, f, f_new, ytmp, err, scale, rtol, atol, interval, line)
-        nfev += 1
-    if jac_ready:
-        current_jac = False
-    else:
-        jac_values(t, y, JJ, I, Pl, W, GI, GC, GV, yd, vals)
-        njev += 1
-        current_jac = True
-    lu_valid = False
-    h_abs_old = -1.0
-    err_old = -1.0
-    have_prev = False
-    t_prev = 0.0
-    h_prev = 1.0
-    h = h_abs
-    h_next = h_abs
-    t_new = t
-    n_iter = 0
-    rate = -1.0
+def _build_initial_step(stamp):
+    """The first-step estimate, compiled against the line kernel of hash ``stamp``."""
 
-    while t < t_end:
-        min_step = 10.0 * EPS * max(abs(t), 1e-300)
-        rejected = False
-        accepted = False
-        err_norm = 0.0
-        safety = 0.9
-        while not accepted:
-            if h_abs < min_step:
-                return FAIL_SMALL_STEP, t, k_out, nfev, njev, nlu, nsteps, h_abs
-            t_new = t + h_abs
-            if t_new > t_end:
-                t_new = t_end
-            h = t_new - t
-            h_abs = h
-            # starting values: the previous step's collocation polynomial, extrapolated
-            if have_prev:
-                for s in range(3):
-                    x = (t + Cn[s] * h - t_prev) / h_prev
-                    _dense(Q_prev, y_prev, x, ytmp)
-                    for i in range(n):
-                        Z[s, i] = ytmp[i] - y[i]
-            else:
-                Z[:, :] = 0.0
-            for i in range(n):
-                scale[i] = atol[i] + abs(y[i]) * rtol
-            converged = False
-            while not converged:
-                if not lu_valid:
-                    _fill_band(ab_r, rows, cols, vals, gamma / h, ku2)
-                    _fill_band(ab_c, rows, cols, vals, mu / h, ku2)
-                    nlu += 1
-                    if not (band_lu(ab_r, piv_r, n, kl, ku2)
-                            and band_lu(ab_c, piv_c, n, kl, ku2)):
-                        break
-                    lu_valid = True
-                # simplified Newton iteration on the transformed collocation system
-                for s in range(3):
-                    for i in range(n):
-                        Wn[s, i] = TIm[s, 0] * Z[0, i] + TIm[s, 1] * Z[1, i] + TIm[s, 2] * Z[2, i]
-                dW_norm_old = -1.0
-                rate = -1.0
-                finite = True
-                for k in range(NEWTON_MAXITER):
-                    n_iter = k + 1
-                    for s in range(3):
-                        for i in range(n):
-                            ytmp[i] = y[i] + Z[s, i]
-                        evaluate(t + Cn[s] * h, ytmp, F[s], J1, MODE_RHS, I, Pl, W, GI, GC,
-                                 GV, aux0)
-                        nfev += 1
-                    for i in range(n):
-                        fr = TIm[0, 0] * F[0, i] + TIm[0, 1] * F[1, i] + TIm[0, 2] * F[2, i]
-                        f1 = TIm[1, 0] * F[0, i] + TIm[1, 1] * F[1, i] + TIm[1, 2] * F[2, i]
-                        f2 = TIm[2, 0] * F[0, i] + TIm[2, 1] * F[1, i] + TIm[2, 2] * F[2, i]
-                        if not (math.isfinite(fr) and math.isfinite(f1)
-                                and math.isfinite(f2)):
-                            finite = False
-                        dW[0, i] = fr - gamma / h * Wn[0, i]
-                        rhs_c[i] = complex(f1, f2) - mu / h * complex(Wn[1, i], Wn[2, i])
-                    if not finite:
-                        break
-                    band_solve(ab_r, piv_r, dW[0], n, kl, ku2)
-                    band_solve(ab_c, piv_c, rhs_c, n, kl, ku2)
-                    s2 = 0.0
-                    for i in range(n):
-                        dW[1, i] = rhs_c[i].real
-                        dW[2, i] = rhs_c[i].imag
-                        for s in range(3):
-                            q = dW[s, i] / scale[i]
-                            s2 += q * q
-                    dW_norm = math.sqrt(s2 / (3 * n))
-                    if dW_norm_old >= 0.0:
-                        rate = dW_norm / dW_norm_old
-                    if rate >= 0.0 and (rate >= 1.0 or rate ** (NEWTON_MAXITER - k)
-                                        / (1.0 - rate) * dW_norm > newton_tol):
-                        break
-                    for s in range(3):
-                        for i in range(n):
-                            Wn[s, i] += dW[s, i]
-                    for s in range(3):
-                        for i in range(n):
-                            Z[s, i] = (Tm[s, 0] * Wn[0, i] + Tm[s, 1] * Wn[1, i]
-                                       + Tm[s, 2] * Wn[2, i])
-                    if dW_norm == 0.0 or (rate >= 0.0
-                                          and rate / (1.0 - rate) * dW_norm < newton_tol):
-                        converged = True
-                        break
-                    dW_norm_old = dW_norm
-                if not converged:
-                    if current_jac:
-                        break
-                    jac_values(t, y, JJ, I, Pl, W, GI, GC, GV, yd, vals)
-                    njev += 1
-                    current_jac = True
-                    lu_valid = False
-            if not converged:
-                h_abs *= 0.5
-                lu_valid = False
-                continue
-            # error estimate
-            for i in range(n):
-                y_new[i] = y[i] + Z[2, i]
-                ZE[i] = (En[0] * Z[0, i] + En[1] * Z[1, i] + En[2] * Z[2, i]) / h
-                err[i] = f[i] + ZE[i]
-                scale[i] = atol[i] + max(abs(y[i]), abs(y_new[i])) * rtol
-            band_solve(ab_r, piv_r, err, n, kl, ku2)
-            err_norm = _rms(err, scale)
-            safety = 0.9 * (2 * NEWTON_MAXITER + 1) / (2 * NEWTON_MAXITER + n_iter)
-            if rejected and err_norm > 1.0:
-                # after a rejection: one more smoothing of the estimate (IV.8, p. 124)
-                for i in range(n):
-                    ytmp[i] = y[i] + err[i]
-                evaluate(t, ytmp, err, J1, MODE_RHS, I, Pl, W, GI, GC, GV, aux0)
-                nfev += 1
-                for i in range(n):
-                    err[i] += ZE[i]
-                band_solve(ab_r, piv_r, err, n, kl, ku2)
-                err_norm = _rms(err, scale)
-            if err_norm > 1.0:
-                h_abs *= max(MIN_FACTOR, safety * _predict(h_abs, h_abs_old, err_norm,
-                                                            err_old))
-                lu_valid = False
-                rejected = True
-            else:
-                accepted = True
-
-        nsteps += 1
-        recompute_jac = n_iter > 2 and rate > 1e-3
-        factor = min(MAX_FACTOR, safety * _predict(h_abs, h_abs_old, err_norm, err_old))
-        if not recompute_jac and factor < 1.2:
-            factor = 1.0
+    @njit(cache=True)
+    def _initial_step(t, y, f, f1, y1, df, scale, rtol, atol, interval, line):
+        """First step (Hairer, Norsett & Wanner I, §II.4) for an error estimate of order 3."""
+        _ = stamp  # part of numba's cache key: see _kernel_stamp
+        I, Pl, W, GI, GC, GV, aux0, JJ, yd, J1 = line
+        n = y.shape[0]
+        for i in range(n):
+            scale[i] = atol[i] + abs(y[i]) * rtol
+        d0 = _rms(y, scale)
+        d1 = _rms(f, scale)
+        h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+        h0 = min(h0, interval)
+        for i in range(n):
+            y1[i] = y[i] + h0 * f[i]
+        evaluate(t + h0, y1, f1, J1, MODE_RHS, I, Pl, W, GI, GC, GV, aux0)
+        for i in range(n):
+            df[i] = f1[i] - f[i]
+        d2 = _rms(df, scale) / h0
+        if d1 <= 1e-15 and d2 <= 1e-15:
+            h1 = max(1e-6, h0 * 1e-3)
         else:
-            lu_valid = False
-        evaluate(t_new, y_new, f_new, J1, MODE_RHS, I, Pl, W, GI, GC, GV, aux0)
+            h1 = (0.01 / max(d1, d2)) ** 0.25
+        return min(100.0 * h0, h1, interval)
+
+    return _initial_step
+
+
+_initial_step = _build_initial_step(_kernel_stamp())
+
+
+def _build_integrate(stamp):
+    """The integrator, compiled against the line kernel of hash ``stamp``."""
+
+    @njit(cache=True)
+    def integrate(t0, t_end, y0, tq, out, rtol, atol, max_steps, line, rows, cols, kl, ku,
+                  consts, g_start, y_root, dirs, vals, h_init, jac_ready):
+        """Integrate the compiled line from ``(t0, y0)`` to ``t_end``.
+
+        Parameters
+        ----------
+        t0, t_end : float
+        y0 : ndarray (n,)
+        tq : ndarray (m,)
+            Sorted sample times in [t0, t_end]; ``out[k]`` receives the state at ``tq[k]``
+            (interpolated with the collocation polynomial of the step that covers it).
+        out : ndarray (m, n)
+        rtol : float
+        atol : ndarray (n,)
+        max_steps : int
+        line : tuple
+            ``(I, P, W, GI, GC, GV, aux0, JJ, yd, J1)`` of the compiled line.
+        rows, cols : ndarray
+            The Jacobian pattern; ``kl``, ``ku`` its band widths.
+        consts : tuple
+            ``(C, E, T, TI, P, gamma, mu)`` of the method.
+        g_start : ndarray (n_events,)
+            Work array for the event functions (length 0: no event location).
+        y_root, dirs : ndarray
+            Outputs when an event function changes sign: the state at the event and, per event
+            function, +1 (rising) / -1 (falling) / 0.
+        vals : ndarray (n_pattern,)
+            Jacobian values on the pattern (kept between calls).
+        h_init : float
+            First step to try; <= 0 estimates it. Continuing a smooth integration (a chunk
+            boundary where nothing changes) passes the step the last call proposed.
+        jac_ready : bool
+            ``vals`` holds a recent Jacobian: reuse it (it is evaluated again if Newton fails).
+
+        Returns
+        -------
+        status : int
+            ``DONE``, ``ROOT`` or a ``FAIL_*`` code.
+        t_reached : float
+            ``t_end``, the event time, or where the integration failed.
+        n_out : int
+            Samples written.
+        nfev, njev, nlu, nsteps : int
+        h_next : float
+            The step size proposed for the next step.
+        """
+        _ = stamp  # part of numba's cache key: see _kernel_stamp
+        I, Pl, W, GI, GC, GV, aux0, JJ, yd, J1 = line
+        Cn, En, Tm, TIm, Pm, gamma, mu = consts
+        n = y0.shape[0]
+        nev = g_start.shape[0]
+        ku2 = ku + kl
+        nb = 2 * kl + ku + 1
+        ab_r = np.zeros((n, nb))
+        ab_c = np.zeros((n, nb), np.complex128)
+        piv_r = np.zeros(n, np.int64)
+        piv_c = np.zeros(n, np.int64)
+        y = y0.copy()
+        f = np.empty(n)
+        y_new = np.empty(n)
+        f_new = np.empty(n)
+        ytmp = np.empty(n)
+        scale = np.empty(n)
+        err = np.empty(n)
+        ZE = np.empty(n)
+        Z = np.zeros((3, n))
+        Wn = np.zeros((3, n))
+        F = np.empty((3, n))
+        dW = np.empty((3, n))
+        Q = np.zeros((3, n))
+        Q_prev = np.zeros((3, n))
+        y_prev = np.empty(n)
+        rhs_c = np.empty(n, np.complex128)
+        g_new = np.empty(nev)
+        g_mid = np.empty(nev)
+        active = np.zeros(nev, np.bool_)
+        nfev = njev = nlu = nsteps = 0
+        newton_tol = max(10.0 * EPS / rtol, min(0.03, math.sqrt(rtol)))
+
+        t = t0
+        evaluate(t, y, f, J1, MODE_RHS, I, Pl, W, GI, GC, GV, aux0)
         nfev += 1
-        if recompute_jac:
-            jac_values(t_new, y_new, JJ, I, Pl, W, GI, GC, GV, yd, vals)
+        k_out = 0
+        while k_out < tq.shape[0] and tq[k_out] <= t0:
+            out[k_out, :] = y
+            k_out += 1
+        for i in range(n):
+            # nan compares false everywhere below: the step control would loop or accept it
+            if not (math.isfinite(y[i]) and math.isfinite(f[i])):
+                return FAIL_NONFINITE, t, k_out, nfev, njev, nlu, nsteps, 0.0
+        if nev:
+            event_values(t, y, g_start, I, Pl, W, GI, GC, GV, yd, J1)
+            for m in range(nev):
+                # a function exactly at 0 (the event just handled) counts once it leaves 0
+                active[m] = g_start[m] != 0.0
+        interval = t_end - t0
+        if interval <= 0.0:
+            return DONE, t, k_out, nfev, njev, nlu, nsteps, h_init
+
+        if h_init > 0.0:
+            h_abs = min(h_init, interval)
+        else:
+            h_abs = _initial_step(t, y, f, f_new, ytmp, err, scale, rtol, atol, interval, line)
+            nfev += 1
+        if jac_ready:
+            current_jac = False
+        else:
+            jac_values(t, y, JJ, I, Pl, W, GI, GC, GV, yd, vals)
             njev += 1
             current_jac = True
-        else:
-            current_jac = False
-        h_abs_old = h_abs
-        err_old = err_norm
-        for k in range(3):
-            for i in range(n):
-                Q[k, i] = Pm[0, k] * Z[0, i] + Pm[1, k] * Z[1, i] + Pm[2, k] * Z[2, i]
+        lu_valid = False
+        h_abs_old = -1.0
+        err_old = -1.0
+        have_prev = False
+        t_prev = 0.0
+        h_prev = 1.0
+        h = h_abs
+        h_next = h_abs
+        t_new = t
+        n_iter = 0
+        rate = -1.0
 
-        # events: a sign change of an active event function over the step, located by
-        # bisection on the collocation polynomial to CVODE's time tolerance
-        if nev:
-            event_values(t_new, y_new, g_new, I, Pl, W, GI, GC, GV, yd, J1)
-            if _any_crossed(active, g_start, g_new):
-                tl, tr = t, t_new
-                ttol = 100.0 * EPS * (abs(t_new) + h)
-                g_r = g_new.copy()
-                while tr - tl > ttol:
-                    tm = 0.5 * (tl + tr)
-                    _dense(Q, y, (tm - t) / h, ytmp)
-                    event_values(tm, ytmp, g_mid, I, Pl, W, GI, GC, GV, yd, J1)
-                    if _any_crossed(active, g_start, g_mid):
-                        tr = tm
-                        g_r[:] = g_mid
-                    else:
-                        tl = tm
-                _dense(Q, y, (tr - t) / h, y_root)
+        while t < t_end:
+            min_step = 10.0 * EPS * max(abs(t), 1e-300)
+            rejected = False
+            accepted = False
+            err_norm = 0.0
+            safety = 0.9
+            while not accepted:
+                if not h_abs >= min_step:  # also a nan step
+                    return FAIL_SMALL_STEP, t, k_out, nfev, njev, nlu, nsteps, h_abs
+                t_new = t + h_abs
+                if t_new > t_end:
+                    t_new = t_end
+                h = t_new - t
+                h_abs = h
+                # starting values: the previous step's collocation polynomial, extrapolated
+                if have_prev:
+                    for s in range(3):
+                        x = (t + Cn[s] * h - t_prev) / h_prev
+                        _dense(Q_prev, y_prev, x, ytmp)
+                        for i in range(n):
+                            Z[s, i] = ytmp[i] - y[i]
+                else:
+                    Z[:, :] = 0.0
+                for i in range(n):
+                    scale[i] = atol[i] + abs(y[i]) * rtol
+                converged = False
+                while not converged:
+                    if not lu_valid:
+                        _fill_band(ab_r, rows, cols, vals, gamma / h, ku2)
+                        _fill_band(ab_c, rows, cols, vals, mu / h, ku2)
+                        nlu += 1
+                        if not (band_lu(ab_r, piv_r, n, kl, ku2)
+                                and band_lu(ab_c, piv_c, n, kl, ku2)):
+                            break
+                        lu_valid = True
+                    # simplified Newton iteration on the transformed collocation system
+                    for s in range(3):
+                        for i in range(n):
+                            Wn[s, i] = (TIm[s, 0] * Z[0, i] + TIm[s, 1] * Z[1, i]
+                                        + TIm[s, 2] * Z[2, i])
+                    dW_norm_old = -1.0
+                    rate = -1.0
+                    finite = True
+                    for k in range(NEWTON_MAXITER):
+                        n_iter = k + 1
+                        for s in range(3):
+                            for i in range(n):
+                                ytmp[i] = y[i] + Z[s, i]
+                            evaluate(t + Cn[s] * h, ytmp, F[s], J1, MODE_RHS, I, Pl, W, GI, GC,
+                                     GV, aux0)
+                            nfev += 1
+                        for i in range(n):
+                            fr = TIm[0, 0] * F[0, i] + TIm[0, 1] * F[1, i] + TIm[0, 2] * F[2, i]
+                            f1 = TIm[1, 0] * F[0, i] + TIm[1, 1] * F[1, i] + TIm[1, 2] * F[2, i]
+                            f2 = TIm[2, 0] * F[0, i] + TIm[2, 1] * F[1, i] + TIm[2, 2] * F[2, i]
+                            if not (math.isfinite(fr) and math.isfinite(f1)
+                                    and math.isfinite(f2)):
+                                finite = False
+                            dW[0, i] = fr - gamma / h * Wn[0, i]
+                            rhs_c[i] = complex(f1, f2) - mu / h * complex(Wn[1, i], Wn[2, i])
+                        if not finite:
+                            break
+                        band_solve(ab_r, piv_r, dW[0], n, kl, ku2)
+                        band_solve(ab_c, piv_c, rhs_c, n, kl, ku2)
+                        s2 = 0.0
+                        for i in range(n):
+                            dW[1, i] = rhs_c[i].real
+                            dW[2, i] = rhs_c[i].imag
+                            for s in range(3):
+                                q = dW[s, i] / scale[i]
+                                s2 += q * q
+                        dW_norm = math.sqrt(s2 / (3 * n))
+                        if dW_norm_old >= 0.0:
+                            rate = dW_norm / dW_norm_old
+                        if rate >= 0.0 and (rate >= 1.0 or rate ** (NEWTON_MAXITER - k)
+                                            / (1.0 - rate) * dW_norm > newton_tol):
+                            break
+                        for s in range(3):
+                            for i in range(n):
+                                Wn[s, i] += dW[s, i]
+                        for s in range(3):
+                            for i in range(n):
+                                Z[s, i] = (Tm[s, 0] * Wn[0, i] + Tm[s, 1] * Wn[1, i]
+                                           + Tm[s, 2] * Wn[2, i])
+                        if dW_norm == 0.0 or (rate >= 0.0
+                                              and rate / (1.0 - rate) * dW_norm < newton_tol):
+                            converged = True
+                            break
+                        dW_norm_old = dW_norm
+                    if not converged:
+                        if current_jac:
+                            break
+                        jac_values(t, y, JJ, I, Pl, W, GI, GC, GV, yd, vals)
+                        njev += 1
+                        current_jac = True
+                        lu_valid = False
+                if not converged:
+                    h_abs *= 0.5
+                    lu_valid = False
+                    continue
+                # error estimate
+                for i in range(n):
+                    y_new[i] = y[i] + Z[2, i]
+                    ZE[i] = (En[0] * Z[0, i] + En[1] * Z[1, i] + En[2] * Z[2, i]) / h
+                    err[i] = f[i] + ZE[i]
+                    scale[i] = atol[i] + max(abs(y[i]), abs(y_new[i])) * rtol
+                band_solve(ab_r, piv_r, err, n, kl, ku2)
+                err_norm = _rms(err, scale)
+                safety = 0.9 * (2 * NEWTON_MAXITER + 1) / (2 * NEWTON_MAXITER + n_iter)
+                if rejected and err_norm > 1.0:
+                    # after a rejection: one more smoothing of the estimate (IV.8, p. 124)
+                    for i in range(n):
+                        ytmp[i] = y[i] + err[i]
+                    evaluate(t, ytmp, err, J1, MODE_RHS, I, Pl, W, GI, GC, GV, aux0)
+                    nfev += 1
+                    for i in range(n):
+                        err[i] += ZE[i]
+                    band_solve(ab_r, piv_r, err, n, kl, ku2)
+                    err_norm = _rms(err, scale)
+                if not math.isfinite(err_norm):
+                    h_abs *= MIN_FACTOR
+                    lu_valid = False
+                    rejected = True
+                elif err_norm > 1.0:
+                    h_abs *= max(MIN_FACTOR, safety * _predict(h_abs, h_abs_old, err_norm,
+                                                                err_old))
+                    lu_valid = False
+                    rejected = True
+                else:
+                    accepted = True
+
+            nsteps += 1
+            recompute_jac = n_iter > 2 and rate > 1e-3
+            factor = min(MAX_FACTOR, safety * _predict(h_abs, h_abs_old, err_norm, err_old))
+            if not recompute_jac and factor < 1.2:
+                factor = 1.0
+            else:
+                lu_valid = False
+            evaluate(t_new, y_new, f_new, J1, MODE_RHS, I, Pl, W, GI, GC, GV, aux0)
+            nfev += 1
+            if recompute_jac:
+                jac_values(t_new, y_new, JJ, I, Pl, W, GI, GC, GV, yd, vals)
+                njev += 1
+                current_jac = True
+            else:
+                current_jac = False
+            h_abs_old = h_abs
+            err_old = err_norm
+            for k in range(3):
+                for i in range(n):
+                    Q[k, i] = Pm[0, k] * Z[0, i] + Pm[1, k] * Z[1, i] + Pm[2, k] * Z[2, i]
+
+            # events: a sign change of an active event function over the step, located by
+            # bisection on the collocation polynomial to CVODE's time tolerance
+            if nev:
+                event_values(t_new, y_new, g_new, I, Pl, W, GI, GC, GV, yd, J1)
+                if _any_crossed(active, g_start, g_new):
+                    tl, tr = t, t_new
+                    ttol = 100.0 * EPS * (abs(t_new) + h)
+                    g_r = g_new.copy()
+                    while tr - tl > ttol:
+                        tm = 0.5 * (tl + tr)
+                        _dense(Q, y, (tm - t) / h, ytmp)
+                        event_values(tm, ytmp, g_mid, I, Pl, W, GI, GC, GV, yd, J1)
+                        if _any_crossed(active, g_start, g_mid):
+                            tr = tm
+                            g_r[:] = g_mid
+                        else:
+                            tl = tm
+                    _dense(Q, y, (tr - t) / h, y_root)
+                    for m in range(nev):
+                        dirs[m] = 0
+                        if active[m] and _crossed(g_start[m], g_r[m]):
+                            dirs[m] = 1 if g_r[m] > g_start[m] else -1
+                    while k_out < tq.shape[0] and tq[k_out] <= tr:
+                        _dense(Q, y, (tq[k_out] - t) / h, out[k_out])
+                        k_out += 1
+                    return ROOT, tr, k_out, nfev, njev, nlu, nsteps, h_abs
                 for m in range(nev):
-                    dirs[m] = 0
-                    if active[m] and _crossed(g_start[m], g_r[m]):
-                        dirs[m] = 1 if g_r[m] > g_start[m] else -1
-                while k_out < tq.shape[0] and tq[k_out] <= tr:
-                    _dense(Q, y, (tq[k_out] - t) / h, out[k_out])
-                    k_out += 1
-                return ROOT, tr, k_out, nfev, njev, nlu, nsteps, h_abs
-            for m in range(nev):
-                if not active[m] and g_new[m] != 0.0:
-                    active[m] = True
-                g_start[m] = g_new[m]
+                    if not active[m] and g_new[m] != 0.0:
+                        active[m] = True
+                    g_start[m] = g_new[m]
 
-        # samples covered by this step
-        while k_out < tq.shape[0] and tq[k_out] <= t_new:
-            _dense(Q, y, (tq[k_out] - t) / h, out[k_out])
-            k_out += 1
+            # samples covered by this step
+            while k_out < tq.shape[0] and tq[k_out] <= t_new:
+                _dense(Q, y, (tq[k_out] - t) / h, out[k_out])
+                k_out += 1
 
-        Q_prev[:, :] = Q
-        y_prev[:] = y
-        t_prev = t
-        h_prev = h
-        have_prev = True
-        t = t_new
-        y[:] = y_new
-        f[:] = f_new
-        h_abs *= factor
-        if t_new < t_end:
-            h_next = h_abs  # the last step may be clipped to t_end: keep the unclipped one
-        if nsteps >= max_steps:
-            return FAIL_MAX_STEPS, t, k_out, nfev, njev, nlu, nsteps, h_abs
-    return DONE, t, k_out, nfev, njev, nlu, nsteps, h_next
+            Q_prev[:, :] = Q
+            y_prev[:] = y
+            t_prev = t
+            h_prev = h
+            have_prev = True
+            t = t_new
+            y[:] = y_new
+            f[:] = f_new
+            h_abs *= factor
+            if t_new < t_end:
+                h_next = h_abs  # the last step may be clipped to t_end: keep the unclipped one
+            if nsteps >= max_steps:
+                return FAIL_MAX_STEPS, t, k_out, nfev, njev, nlu, nsteps, h_abs
+        return DONE, t, k_out, nfev, njev, nlu, nsteps, h_next
+
+    return integrate
 
 
-@njit(cache=True)
-def _initial_step(t, y, f, f1, y1, df, scale, rtol, atol, interval, line):
-    """First step (Hairer, Norsett & Wanner I, §II.4) for an error estimate of order 3."""
-    I, Pl, W, GI, GC, GV, aux0, JJ, yd, J1 = line
-    n = y.shape[0]
-    for i in range(n):
-        scale[i] = atol[i] + abs(y[i]) * rtol
-    d0 = _rms(y, scale)
-    d1 = _rms(f, scale)
-    h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
-    h0 = min(h0, interval)
-    for i in range(n):
-        y1[i] = y[i] + h0 * f[i]
-    evaluate(t + h0, y1, f1, J1, MODE_RHS, I, Pl, W, GI, GC, GV, aux0)
-    for i in range(n):
-        df[i] = f1[i] - f[i]
-    d2 = _rms(df, scale) / h0
-    if d1 <= 1e-15 and d2 <= 1e-15:
-        h1 = max(1e-6, h0 * 1e-3)
-    else:
-        h1 = (0.01 / max(d1, d2)) ** 0.25
-    return min(100.0 * h0, h1, interval)
+integrate = _build_integrate(_kernel_stamp())
 
 
 @njit(cache=True)

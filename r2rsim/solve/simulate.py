@@ -11,6 +11,8 @@ than the sample period) is not seen; the record rate sets the event resolution.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import math
 import time as _time
 import warnings
@@ -25,6 +27,7 @@ from ..schema.scenario import SolverOptions
 from .discrete import MODE_EVENTS, DiscreteLogic, Event
 
 TERMINAL = {EV_BREAK, EV_EMPTY}
+NONFINITE = "the state is not finite (nan or inf)"
 PHYSICAL = {EV_SLACK, EV_BREAK, EV_CAPSTAN, EV_EMPTY}
 
 
@@ -129,6 +132,22 @@ class _CVODEBackend:
         self.nfev = 0
         self.njev = 0
         self.steps = 0
+        self.messages: list[str] = []
+
+    def _quiet(self, solve, *args):
+        """Call a scikit-sundae solve with SUNDIALS' messages kept off the terminal.
+
+        scikit-sundae prints every SUNDIALS warning and error with ``print`` (e.g. "root
+        functions identically 0" when a located event starts on its root, which r2rsim
+        handles). They are kept, the first few, in ``stats["solver_messages"]``; a failure
+        reaches the user as the run's termination reason."""
+        buf = io.StringIO()
+        with contextlib.redirect_stdout(buf):
+            res = solve(*args)
+        text = buf.getvalue().strip()
+        if text and len(self.messages) < 20:
+            self.messages.extend(m.strip() for m in text.split("\n\n") if m.strip())
+        return res
 
     def solve(self, tspan, y0, find_events=False, resume=False):
         """States at the times ``tspan``: CVODE returns every internal step (one-step mode,
@@ -142,7 +161,8 @@ class _CVODEBackend:
 
         cl = self.cl
         hot = find_events and len(cl.event_kinds) > 0
-        res = (self.locator if hot else self.solver).solve(np.array([tspan[0], tspan[-1]]), y0)
+        res = self._quiet((self.locator if hot else self.solver).solve,
+                          np.array([tspan[0], tspan[-1]]), y0)
         self.nfev += int(res.nfev)
         self.njev += int(res.njev)
         ts = np.ascontiguousarray(res.t)
@@ -171,7 +191,7 @@ class _CVODEBackend:
     def locate(self, t0, y0, t1):
         """Integrate [t0, t1] with root-finding; return (t, y, event indices) or None."""
         tspan = np.array([t0, 0.5 * (t0 + t1), t1])
-        res = self.locator.solve(tspan, y0)
+        res = self._quiet(self.locator.solve, tspan, y0)
         self.nfev += int(res.nfev)
         if res.status == 2 and res.t_events is not None and len(res.t_events):
             row = np.asarray(res.i_events)[-1]
@@ -223,6 +243,9 @@ class _RadauBackend:
                          events=events, dense_output=events is not None)
 
     def solve(self, tspan, y0, find_events=False, resume=False):
+        if not np.all(np.isfinite(y0)):  # solve_ivp raises on it: a failure like any other
+            Y = np.asarray(y0, float)[None, :]
+            return tspan[:1], Y, NONFINITE, tspan[:1], Y, None
         res = self._ivp(tspan, y0)
         self.nfev += int(res.nfev)
         self.njev += int(res.njev)
@@ -593,7 +616,8 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
     wall = _time.perf_counter() - wall0
     stats = {"nfev": backend.nfev, "njev": backend.njev, "restarts": restarts, "wall_s": wall,
              "steps": backend.steps if s.backend != "radau" else None,
-             "solver": describe_settings(s), "n_samples": int(k_next)}
+             "solver": describe_settings(s), "n_samples": int(k_next),
+             "solver_messages": list(getattr(backend, "messages", []))[:20]}
     return SimulationResult(cl, T_all, Y_all, A_all, events, terminated, reason, t_term, stats,
                             duration, initial_state_mode, y0)
 

@@ -1,0 +1,84 @@
+"""Initial states: the steady state found from a poor guess, and a run that says so when
+none is found."""
+
+from __future__ import annotations
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+import r2rsim
+from r2rsim.cli import main
+from r2rsim.solve.initial import taut_guess
+
+from conftest import write
+
+# one scenario per shipped line with tension loops, dancers or a festoon
+SCENARIOS = ["quickstart.yaml", "line_a_faults.yaml", "newsprint_splice.yaml",
+             "thesis_normal_cycles.yaml", "thesis/oc1_nominal.yaml", "torque_modes.yaml"]
+
+
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_steady_state_from_spans_at_zero_tension(repo, name):
+    # a nominal state at 0 N puts every span exactly on the slack boundary, where the span
+    # stiffness has its kink and the Newton matrix is singular: steady_state failed there
+    # on every shipped line and `r2rsim run` quietly started from the nominal state
+    scen, line, _ = r2rsim.load_scenario(repo / "scenarios" / name)
+    cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(line, scen.programme))
+    good = r2rsim.steady_state(cl, r2rsim.nominal_state(cl, scen.initial.tension,
+                                                         scen.initial.span_tension))
+    assert good is not None
+    zero = r2rsim.nominal_state(cl, 0.0)
+    assert taut_guess(cl, zero) is not None
+    found = r2rsim.steady_state(cl, zero)
+    assert found is not None
+    # the same steady state: every span's tension, and dy/dt = 0
+    for out in (good, found):
+        f = cl.rhs(0.0, out)
+        free = [k not in ("roll_length", "material", "angle") for k in cl.state_kinds]
+        assert np.max(np.abs(f[free]) / (np.abs(out[free]) + 1e3 * cl.atol[free])) < 1e-6
+    Tg = cl.outputs(0.0, good[None, :])[0]
+    Tf = cl.outputs(0.0, found[None, :])[0]
+    for sid in cl.span_ids:
+        i = cl.aux_index(f"{sid}.tension_N")
+        assert Tf[i] == pytest.approx(Tg[i], rel=1e-6, abs=1e-6), sid
+        assert Tg[i] > 0.0
+
+
+def test_taut_guess_leaves_a_taut_state_alone(repo):
+    scen, line, _ = r2rsim.load_scenario(repo / "scenarios" / "quickstart.yaml")
+    cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(line, scen.programme))
+    y = r2rsim.nominal_state(cl)
+    assert taut_guess(cl, y) is None
+    # one span at 0 N takes the median tension set-point at t = 0 (260 N on every loop)
+    y[cl.index("span2.strain")] = 0.0
+    taut = taut_guess(cl, y)
+    assert taut[cl.index("span2.strain")] * line.web.EA == pytest.approx(260.0, rel=1e-12)
+    assert np.array_equal(np.delete(taut, cl.index("span2.strain")),
+                          np.delete(y, cl.index("span2.strain")))
+
+
+def test_run_says_when_no_steady_state_is_found(tmp_path, repo, capsys):
+    # a line at rest between kinematic nodes: the span strain is not determined
+    scen = write(tmp_path / "rest.yaml", f"""\
+        name: rest
+        line: {repo / "lines" / "single_span.yaml"}
+        duration: 0.5 s
+        record_rate: 100 Hz
+        initial: {{state: steady}}
+        programme:
+          - {{at: 0 s, line_speed: 0 m/s}}
+        """)
+    assert main(["run", str(scen), "-o", str(tmp_path / "out"), "-q"]) == 0
+    cap = capsys.readouterr()
+    assert cap.err.count("warning:") == 1
+    assert str(scen) in cap.err and "initial.state" in cap.err
+    assert "no steady state" in cap.err
+    assert "WARNING" in cap.out and "no steady state" in cap.out
+    runs = pq.read_table(tmp_path / "out" / "runs.parquet").to_pylist()[0]
+    assert runs["initial_state"].startswith("nominal (no steady state")
+    # a steady state found: no warning
+    assert main(["run", str(repo / "scenarios" / "quickstart.yaml"), "-o",
+                 str(tmp_path / "qs"), "-q", "--duration", "0.5"]) == 0
+    cap = capsys.readouterr()
+    assert "warning" not in cap.err.lower() and "WARNING" not in cap.out
