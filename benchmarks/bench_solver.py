@@ -4,10 +4,11 @@ For each number of spans N the script builds the chain line (unwind roll -> N-1 
 rewind roll, PET web, random span lengths), runs the scenario (60 s of line time, 1 kHz
 output, line speed ramping 1 -> 5 m/s over 0...20 s) with
 
-* r2rsim with its default backend: :func:`r2rsim.simulate` (CVODE BDF, ``max_order=2``,
+* r2rsim with ``backend="cvode"``: :func:`r2rsim.simulate` on CVODE BDF (``max_order=2``,
   band, analytic Jacobian),
-* r2rsim with ``backend="radau5"``: its compiled Radau IIA (:mod:`r2rsim.solve.radau`, the
-  same method as scipy's, the whole integration in one numba kernel),
+* r2rsim with ``backend="radau5"`` (the default since 0.2): its compiled Radau IIA
+  (:mod:`r2rsim.solve.radau`, the same method as scipy's, the whole integration in one numba
+  kernel),
 * the peer: ``scipy.integrate.solve_ivp(method="Radau")`` fed the same compiled numba RHS
   and the analytic sparse Jacobian, integrated segment by segment like ``simulate`` does,
 
@@ -475,7 +476,7 @@ def bench_case(n_spans: int, repeat: int, log, rtol: float = RTOL, radau_rtol: f
     Returns
     -------
     dict
-        The table row: ``r_*`` r2rsim's default backend (CVODE), ``c_*`` r2rsim's compiled
+        The table row: ``r_*`` r2rsim on CVODE, ``c_*`` r2rsim's compiled
         Radau IIA (``radau5``), ``p_*`` the peer (scipy Radau); ``eq``/``c_eq`` the rung of
         each r2rsim backend's ladder that is at least as accurate as the peer.
     """
@@ -486,7 +487,7 @@ def bench_case(n_spans: int, repeat: int, log, rtol: float = RTOL, radau_rtol: f
         f"(built in {time.perf_counter() - t_build:.1f} s)")
     warm_up(cl, y0, rtol, radau_rtol)
 
-    cvode = r2rsim.SolverSettings(rtol=rtol)
+    cvode = r2rsim.SolverSettings(backend="cvode", rtol=rtol)
     radau5 = r2rsim.SolverSettings(backend="radau5", rtol=rtol)
     runs_r, runs_c, runs_p = [], [], []
     for i in range(repeat):
@@ -504,7 +505,8 @@ def bench_case(n_spans: int, repeat: int, log, rtol: float = RTOL, radau_rtol: f
             log(f"  WARNING: r2rsim {name} run terminated early: {run.extra['reason']}")
 
     t_ref = time.perf_counter()
-    ref = run_r2rsim(cl, y0, r2rsim.SolverSettings(rtol=REF_RTOL, atol_scale=REF_ATOL_SCALE))
+    ref = run_r2rsim(cl, y0, r2rsim.SolverSettings(backend="cvode", rtol=REF_RTOL,
+                                                   atol_scale=REF_ATOL_SCALE))
     log(f"  reference (CVODE, rtol {REF_RTOL:g}, atol x {REF_ATOL_SCALE:g}): "
         f"{time.perf_counter() - t_ref:.1f} s, {ref.nfev} RHS evals")
     if ref.extra["terminated"]:
@@ -559,7 +561,8 @@ def _ratio_verdict(eq: dict | None, p_wall: float) -> str:
 
 
 def verdicts(row: dict) -> tuple[str, str, str]:
-    """PASS/FAIL of the real-time-factor target (default backend, CVODE) and of the
+    """PASS/FAIL of the real-time-factor target (on CVODE, the slower r2rsim backend at
+    small N) and of the
     ">= 2x scipy Radau at equal or better accuracy" target for each r2rsim backend.
 
     Equal accuracy: the loosest rung of the backend's ladder whose max tension error is at
@@ -638,7 +641,7 @@ def main(argv: list[str] | None = None) -> int:
           "the loosest rung of the backend's tolerance ladder at least as accurate as scipy "
           "Radau. r2rsim cvode with every algebraic output at every sample (what `r2rsim run` "
           "writes): RTF " + ", ".join(f"{r['out_rtf']:.1f} (N={r['N']})" for r in rows) + ".")
-    # --strict: the RTF target (default backend) and >= 2x scipy Radau at equal accuracy
+    # --strict: the RTF target (CVODE) and >= 2x scipy Radau at equal accuracy
     # with at least one r2rsim backend
     all_ok = all(not v[0].startswith("FAIL") and not (v[1].startswith("FAIL")
                                                       and v[2].startswith("FAIL"))

@@ -21,8 +21,8 @@ MODELS = ["linear", "exact"]
 
 @pytest.fixture(params=["cvode", "radau5"])
 def backend(request):
-    """Every simulated verification runs on both r2rsim integrators (CVODE BDF2, the
-    default, and the compiled Radau IIA)."""
+    """Every simulated verification runs on both r2rsim integrators (the compiled Radau
+    IIA, the default, and CVODE BDF2)."""
     return request.param
 
 

@@ -825,18 +825,27 @@ def _commanding_controller(line: Line, element_id: str):
     return None
 
 
+def _drive_of(line: Line, element_id: str, purpose: str):
+    """``(drive, None)`` of an element, or ``(None, why not)`` if it is unknown or has no
+    drive (``purpose`` ends that message)."""
+    ids = [e.id for e in line.elements]
+    if element_id not in ids:
+        return None, f"no element '{element_id}' in the line (known: {', '.join(ids)})"
+    e = line.element(element_id)
+    drive = getattr(e, "drive", None)
+    if drive is None:
+        return None, f"'{element_id}' ({e.type}) has no drive, {purpose}"
+    return drive, None
+
+
 def draw_problem(line: Line, element_id: str) -> str | None:
     """Why the draw (speed ratio to the line) of an element cannot be programmed, or None.
 
     A draw belongs to an ideal_speed drive (``drive.draw``) or to a non-master speed_pi
     (``draw``)."""
-    ids = [e.id for e in line.elements]
-    if element_id not in ids:
-        return f"no element '{element_id}' in the line (known: {', '.join(ids)})"
-    e = line.element(element_id)
-    drive = getattr(e, "drive", None)
-    if drive is None:
-        return f"'{element_id}' ({e.type}) has no drive, so no draw"
+    drive, problem = _drive_of(line, element_id, "so no draw")
+    if problem:
+        return problem
     if drive.type == "ideal_speed":
         return None
     cc = _commanding_controller(line, element_id)
@@ -856,13 +865,9 @@ def draw_problem(line: Line, element_id: str) -> str | None:
 def torque_problem(line: Line, element_id: str) -> str | None:
     """Why an element's drive cannot take an open-loop torque command, or None (it needs a
     torque drive that no speed_pi or torque-mode tension_pi commands)."""
-    ids = [e.id for e in line.elements]
-    if element_id not in ids:
-        return f"no element '{element_id}' in the line (known: {', '.join(ids)})"
-    e = line.element(element_id)
-    drive = getattr(e, "drive", None)
-    if drive is None:
-        return f"'{element_id}' ({e.type}) has no drive to command"
+    drive, problem = _drive_of(line, element_id, "so no torque command")
+    if problem:
+        return problem
     if drive.type != "torque":
         return (f"'{element_id}' has an ideal_speed drive (its speed is imposed); a torque "
                 f"command needs a torque drive")
