@@ -71,6 +71,14 @@ def _cmd_run(args) -> int:
     for w in summary.warnings:  # also with -q, and apart from the summary on stdout
         print(f"warning: {w}", file=sys.stderr)
     print(summary.format())
+    if not summary.ok:  # batch users must be able to trust $?
+        why = (f"states not finite from t = {summary.nonfinite_t:g} s"
+               if summary.nonfinite_t is not None else
+               f"the run ended early: {summary.termination_reason} at "
+               f"t = {summary.termination_time:g} s")
+        print(f"error: {args.scenario}: {why}; the dataset is written and marked "
+              f"(runs.parquet termination_reason)", file=sys.stderr)
+        return EXIT_FAILURE
     return 0
 
 

@@ -52,10 +52,21 @@ class RunSummary:
     initial_state: str
     solver_stats: dict = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    expected_terminations: list[str] = field(default_factory=list)
+    nonfinite_t: float | None = None
 
     @property
     def real_time_factor(self) -> float:
         return self.simulated_s / self.wall_s if self.wall_s > 0 else math.inf
+
+    @property
+    def ok(self) -> bool:
+        """The run ended as its scenario meant: it reached its duration, or it ended early
+        in a way the scenario's ``expect.termination`` lists. A solver failure and states
+        that are not finite never are. ``r2rsim run`` exits 1 when this is False."""
+        if self.nonfinite_t is not None:
+            return False
+        return not self.terminated or self.termination_reason in self.expected_terminations
 
     def format(self) -> str:
         lines = [f"dataset      {self.output}",
@@ -66,8 +77,12 @@ class RunSummary:
                  f"{self.initial_state}"]
         lines += [f"WARNING      {w}" for w in self.warnings]
         if self.terminated:
+            how = "expected" if self.ok else "not expected by the scenario (expect.termination)"
             lines.append(f"TERMINATED   {self.termination_reason} at "
-                         f"t = {self.termination_time:.4f} s")
+                         f"t = {self.termination_time:.4f} s ({how})")
+        if self.nonfinite_t is not None:
+            lines.append(f"FAILED       states not finite (nan or inf) from t = "
+                         f"{self.nonfinite_t:.4f} s; the samples are kept, marked in runs.parquet")
         lines.append("tension [N]  span        min       mean        max")
         for sid, (lo, mean, hi) in self.tension_stats.items():
             lines.append(f"             {sid:<8} {lo:9.2f}  {mean:9.2f}  {hi:9.2f}")
@@ -177,8 +192,14 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
                                       terminated_k=k_last, sensor_channels=sensor_chan))
             writer.write_chunk(data)
 
+        nonfinite_t: list[float] = []  # the first sample whose states are not finite
+
         def on_chunk(t, Y, A):
             n = len(t)
+            if not nonfinite_t:
+                bad = ~np.isfinite(Y).all(axis=1)
+                if bad.any():
+                    nonfinite_t.append(float(t[np.argmax(bad)]))
             data = {"k": np.arange(k0[0], k0[0] + n, dtype=np.int64), "t_s": t}
             data.update(meas.measure(t, A))
             for c, j in zip(cols, aux_idx, strict=True):
@@ -281,6 +302,11 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
             "termination_reason": pa.array([res.termination_reason], pa.string()),
             "termination_t_s": pa.array([res.termination_time], pa.float64()),
             "simulated_s": [float(sim_end)],
+            "nonfinite_from_t_s": pa.array([nonfinite_t[0] if nonfinite_t else None],
+                                           pa.float64()),
+            "ended_as_expected": [not nonfinite_t and (not res.terminated or
+                                                      res.termination_reason
+                                                      in scenario.expect.termination)],
             "initial_state": [init_mode], "solver": [res.stats["solver"]],
             "rhs_evaluations": pa.array([res.stats["nfev"]], pa.int64()),
             "r2rsim_version": [__version__], "python_version": [platform.python_version()],
@@ -302,4 +328,5 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
               for i, sid in enumerate(cl.span_ids)}
     return RunSummary(path, run_id, float(sim_end), wall, writer.n_rows, tstats, events,
                       res.terminated, res.termination_reason, res.termination_time, init_mode,
-                      res.stats, run_warnings)
+                      res.stats, run_warnings, list(scenario.expect.termination),
+                      nonfinite_t[0] if nonfinite_t else None)

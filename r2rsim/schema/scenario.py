@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from ..units import parse_quantity
 from .faults import Fault
@@ -110,6 +110,28 @@ class SolverOptions(Strict):
     chunk_memory_mb: Annotated[float, Field(gt=0)] = Field(
         64.0, description="memory for one integration chunk of dense output"
     )
+    max_steps_per_s: Annotated[float, Field(gt=0)] = Field(
+        5.0e4, description="step budget per simulated second (of at least 1 s): a run that "
+        "needs more ends as 'solver_failure: step budget' instead of running for hours (the "
+        "shipped scenarios take 25-250 steps/s on radau5, about 10x on cvode)")
+    max_wall_s: Annotated[float, Field(gt=0)] | None = Field(
+        None, description="wall-clock budget of the integration [s]; off by default, since "
+        "it makes the data depend on the machine's speed")
+
+
+class Expect(Strict):
+    """How the scenario is meant to end. A run that ends early in a way not listed here
+    exits non-zero from ``r2rsim run`` (its data kept and marked in ``runs.parquet``)."""
+
+    termination: list[Literal["web_break", "roll_empty"]] = Field(
+        default_factory=list, description="early endings that are the point of the scenario "
+        "(e.g. [web_break] for a dancer failure that breaks the web); a solver failure is "
+        "never expected")
+
+    @field_validator("termination", mode="before")
+    @classmethod
+    def _one_or_many(cls, v):
+        return [v] if isinstance(v, str) else v
 
 
 class SplitBySeed(Strict):
@@ -198,6 +220,8 @@ class Scenario(Strict):
     disturbances: list[Disturbance] = Field(default_factory=list)
     split: Literal["train", "val", "test"] | SplitBySeed | None = Field(
         None, description="data split of the run: fixed, or {by: seed, train:, val:, test:}")
+    expect: Expect = Field(default_factory=Expect,
+                           description="how the run is meant to end ({termination: web_break})")
 
     @model_validator(mode="after")
     def _check(self):

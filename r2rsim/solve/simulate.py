@@ -446,6 +446,7 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
 def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mode, outputs,
          events, faults, backend, sample_t, wall0):
     logic = DiscreteLogic(cl, events, faults, duration)
+    step_budget = s.max_steps_per_s * max(duration, 1.0)
     prog_breaks = sorted(b for b in cl.programme.breakpoints if 0.0 < b < duration)
     rows_per_chunk = max(16, int(s.chunk_memory_mb * 1e6 / 8 / max(cl.n_states + len(
         cl.aux_names), 1)))
@@ -527,6 +528,8 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
                                                      resume=resume)
             resume = False
             restarts += 1
+            if err is None:
+                err = _over_budget(s, backend.steps, step_budget, wall0, ts)
             if err is not None:
                 k_next = _emit_samples(emit, sample_t, k_next, tt, Y, k_end)
                 terminated, reason = True, f"solver_failure: {err}"
@@ -620,6 +623,18 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
              "solver_messages": list(getattr(backend, "messages", []))[:20]}
     return SimulationResult(cl, T_all, Y_all, A_all, events, terminated, reason, t_term, stats,
                             duration, initial_state_mode, y0)
+
+
+def _over_budget(s: SolverSettings, steps: int | None, step_budget: float, wall0: float,
+                 ts: np.ndarray) -> str | None:
+    """Why the run must stop now (its step or wall-clock budget is spent), or None."""
+    t = float(ts[-1]) if ts is not None and len(ts) else 0.0
+    if steps is not None and steps > step_budget:
+        return (f"step budget: {steps} steps by t = {t:.6g} s (solver.max_steps_per_s x "
+                f"duration = {step_budget:.3g})")
+    if s.max_wall_s is not None and _time.perf_counter() - wall0 > s.max_wall_s:
+        return f"wall-clock budget: solver.max_wall_s = {s.max_wall_s:g} s spent by t = {t:.6g} s"
+    return None
 
 
 def _emit_samples(emit, sample_t, k_next, tt, Y, k_stop=None) -> int:
