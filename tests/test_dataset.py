@@ -119,6 +119,7 @@ def test_web_break_ends_run_and_is_recorded(tmp_path, repo):
         record_rate: 1 kHz
         initial: {state: nominal, tension: 0 N}
         programme: [{at: 0, line_speed: 1 m/s}]
+        expect: {termination: web_break}
         """))
     out = tmp_path / "ds"
     assert main(["run", str(tmp_path / "s.yaml"), "-o", str(out), "-q"]) == 0
