@@ -13,13 +13,14 @@ from r2rsim.schema.scenario import ProgrammeStep
 # analytic Jacobian, rtol 1e-6), measured when the guard was set: 6334 steps, 6904 RHS
 # evaluations.
 REFERENCE_STEPS = 6334
-# How wide the guard is, and why. At max_order=2 the step count depends on rounding (numba
-# compiles for the host CPU; numpy, scipy and SUNDIALS releases change the last bits):
-# measured 6300-6334 across the newest and the lowest supported versions and two CPUs.
-# The regression the guard exists for, BDF orders 3-5 (not A-stable on the lightly damped
-# web modes, solver.md 4.1), is chaotic in its step count: max_order=5 took 11578, 15535
-# and 17666 steps on three machine/version sets, max_order=3 26849-26861. The upper bound
-# 1.25x sits 26 % above the spread of order 2 and 31 % below the smallest order-5 count.
+# How wide the guard is, and why. At max_order=2 the step count depends on rounding, chiefly
+# on the OpenBLAS kernels numpy picks for the CPU (they change the steady-state y0 in its last
+# bits; numba's CPU target and the numpy/scipy/numba releases between the lowest and newest
+# supported versions changed nothing): measured 6292-6334. The regression the guard exists
+# for, BDF orders 3-5 (not A-stable on the lightly damped web modes, solver.md 4.1), is
+# chaotic in its step count: max_order=5 took 11578 (non-AVX-512 kernels), 15535 and 17666
+# steps, max_order=3 26751-26861. The upper bound 1.25x (7918) sits 25 % above the spread of
+# order 2 and 32 % below the smallest order-5 count.
 GUARD = (0.6, 1.25)
 
 
