@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import hashlib
 import math
+import shutil
+import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,8 +25,8 @@ import pandas as pd
 from pydantic import Field
 
 from ._version import __version__
-from .dataset.read import read_runs
-from .diagnostics.registry import get, unknown_parameter
+from .dataset.read import Run, read_runs
+from .diagnostics.registry import call, check_param, get, unknown_parameter
 from .errors import InputError
 from .evaluate.harness import METRICS, Evaluation, evaluate
 from .schema.line import Id, Strict
@@ -129,6 +131,10 @@ def load_spec(path: str | Path) -> BenchSpec:
             problem = unknown_parameter(cls, k)
             if problem:
                 raise InputError(problem, file=f, path=f"methods[{i}].params.{k}")
+            try:
+                m.params[k] = check_param(cls, k, m.params[k])
+            except InputError as exc:
+                raise InputError(exc.message, file=f, path=f"methods[{i}].params.{k}") from None
     return spec
 
 
@@ -144,10 +150,16 @@ class BenchResult:
     baseline: Path | None
 
 
-def _dataset(workdir: Path, scenario: Path, seed: int, duration: float | None) -> Path:
-    """Simulate one run into the work directory, or reuse it if it is already there (the
-    name holds a hash of the scenario file, its line file and the r2rsim version, the seed
-    and the duration, so an edit to either file or a new release simulates again)."""
+def _dataset(workdir: Path, scenario: Path, seed: int, duration: float | None,
+             verify: bool = True) -> list[Run]:
+    """The runs of one dataset of the work directory: simulated, or reused if it is already
+    there (the name holds a hash of the scenario file, its line file and the r2rsim version,
+    the seed and the duration, so an edit to either file or a new release simulates again).
+
+    The work directory is a cache that bench owns: a dataset there that is incomplete (no
+    manifest.json), or (``verify``) whose files differ from its manifest.json, is deleted and
+    simulated again, with a warning on stderr. Without ``verify`` one with a manifest.json is
+    used as it is. Anything else at that name (not a dataset) is refused, never deleted."""
     from .run import run_scenario
     from .schema import load_scenario
 
@@ -155,13 +167,30 @@ def _dataset(workdir: Path, scenario: Path, seed: int, duration: float | None) -
     h = hashlib.sha256(scenario.read_bytes() + line_path.read_bytes() + __version__.encode())
     sha = h.hexdigest()[:12]
     out = workdir / f"{scenario.stem}__{sha}__s{seed}__d{duration or 'scenario'}"
-    if not (out / "manifest.json").is_file():
-        run_scenario(scenario, output=out, seed=seed, duration=duration)
-    return out
+    if (out / "manifest.json").is_file():
+        try:
+            return read_runs(out, verify=verify)
+        except InputError as exc:
+            if not verify:
+                raise
+            why = exc.message
+    elif out.is_dir() and ((out / "runs.parquet").is_file() or (out / "samples").is_dir()):
+        why = f"dataset {out}: incomplete (no manifest.json)"
+    elif out.exists():  # not something bench wrote: never deleted
+        raise InputError(f"bench workdir: {out} exists and is not an r2rsim dataset; remove "
+                         f"it or choose another --workdir")
+    else:
+        why = None
+    if why is not None:
+        print(f"warning: bench workdir: {why}; deleting it and simulating it again",
+              file=sys.stderr)
+        shutil.rmtree(out)
+    run_scenario(scenario, output=out, seed=seed, duration=duration)
+    return read_runs(out, verify=False)  # just written and validated
 
 
 def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
-              update: bool = False, log=print) -> BenchResult:
+              update: bool = False, log=print, verify: bool = True) -> BenchResult:
     """Run a benchmark spec and compare with its baseline file.
 
     Parameters
@@ -174,6 +203,9 @@ def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
         Write the baseline file from this run's results instead of comparing.
     log : callable
         Receives progress and the printed tables.
+    verify : bool
+        Check the datasets reused from ``workdir`` against their manifest.json; one that
+        fails is simulated again (:func:`_dataset`).
     """
     spec_path = Path(spec_path)
     spec = load_spec(spec_path)
@@ -198,13 +230,14 @@ def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
                 runs = []
                 for rs in getattr(study, role):
                     for seed in rs.seeds:
-                        runs += read_runs(_dataset(workdir, spec_path.parent / rs.scenario,
-                                                   seed, spec.duration))
+                        runs += _dataset(workdir, spec_path.parent / rs.scenario, seed,
+                                         spec.duration, verify)
                 roles[role] = runs
             log(f"study {study.name}: {len(roles['train'])} train, {len(roles['val'])} val, "
                 f"{len(roles['test'])} test runs")
             for m in spec.methods:
-                est = get(m.method)(**m.params)
+                cls = get(m.method)
+                est = call(cls, "__init__", cls, **m.params)
                 ev = evaluate(est, roles["train"], roles["test"], roles["val"],
                               alpha=ev_set.alpha, m=ev_set.persistence, h=ev_set.grace,
                               n_boot=ev_set.n_boot, seed=ev_set.seed, split=study.name,

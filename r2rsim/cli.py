@@ -6,14 +6,19 @@ Errors are one line on stderr and a non-zero exit code; ``--debug`` shows the tr
 from __future__ import annotations
 
 import argparse
+import os
+import signal
 import sys
 from pathlib import Path
 
 from ._version import __version__
-from .errors import InputError, R2RError
+from .errors import InputError, R2RError, Terminated
 
 EXIT_INPUT = 2
 EXIT_FAILURE = 1
+EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, what a shell reports for a program killed by it
+EXIT_INTERRUPTED = 130  # 128 + SIGINT (Ctrl-C)
+EXIT_TERMINATED = 143  # 128 + SIGTERM
 
 ELEMENTS = {
     "unwind": "roll paying out web: roll (core/outer radius, core inertia, build per wrap, "
@@ -47,8 +52,44 @@ CONTROLLERS = {
 }
 
 
+COMPILING = "compiling (first run only)…"
+
+
+def _compile_notice(bar, quiet: bool):
+    """What to do when numba starts (True) and stops (False) compiling the kernels: on a
+    terminal the progress bar says so while it lasts; otherwise one line on stderr; with -q
+    nothing. Never on stdout."""
+    if quiet:
+        return None
+    if bar is not None:
+        fmt = bar.bar_format
+
+        def on_bar(compiling: bool) -> None:
+            bar.bar_format = "{desc}" if compiling else fmt  # no clock: nothing redraws it
+            bar.set_description_str(COMPILING if compiling else "simulating")
+
+        return on_bar
+    said = []
+
+    def on_stderr(compiling: bool) -> None:
+        if compiling and not said:
+            said.append(True)
+            print(COMPILING, file=sys.stderr, flush=True)
+
+    return on_stderr
+
+
+def _raise_terminated(signum, frame):
+    """SIGTERM handler of ``r2rsim run``: stop the run the way Ctrl-C does, so the dataset
+    writer cleans up. A second SIGTERM kills at once (its temporary directory is removed by
+    the next run into the same directory)."""
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    raise Terminated()
+
+
 def _cmd_run(args) -> int:
     from .run import run_scenario
+    from .solve.compilewatch import notify_compiling
 
     bar = None
     progress = None
@@ -63,8 +104,20 @@ def _cmd_run(args) -> int:
             bar.n = t
             bar.refresh()
     try:
-        summary = run_scenario(args.scenario, output=args.output, seed=args.seed,
-                               duration=args.duration, progress=progress)
+        try:
+            previous = signal.signal(signal.SIGTERM, _raise_terminated)
+            installed = True
+        except ValueError:  # not the main thread (embedded use): leave SIGTERM alone
+            installed = False
+        try:
+            with notify_compiling(_compile_notice(bar, args.quiet)):
+                summary = run_scenario(args.scenario, output=args.output, seed=args.seed,
+                                       duration=args.duration, progress=progress,
+                                       overwrite=args.overwrite)
+        finally:
+            if installed:  # None: a handler not set from Python, i.e. the default
+                signal.signal(signal.SIGTERM,
+                              previous if previous is not None else signal.SIG_DFL)
     finally:
         if bar is not None:
             bar.close()
@@ -86,7 +139,7 @@ def _parse_params(items: list[str], cls) -> dict:
     """``k=v`` pairs; values are YAML scalars or lists (``alpha=0.01``, ``lags=3``)."""
     import yaml
 
-    from .diagnostics.registry import unknown_parameter
+    from .diagnostics.registry import check_param, unknown_parameter
 
     out = {}
     for item in items:
@@ -100,19 +153,25 @@ def _parse_params(items: list[str], cls) -> dict:
             out[key] = yaml.safe_load(value)
         except yaml.YAMLError:
             raise InputError(f"--param {key}: cannot read the value '{value}'") from None
+        try:
+            out[key] = check_param(cls, key, out[key])
+        except InputError as exc:
+            raise InputError(f"--param {key}: {exc.message}") from None
     return out
 
 
 def _cmd_diagnose(args) -> int:
-    from .diagnostics.registry import get
+    from .diagnostics.registry import call, get
     from .evaluate.harness import evaluate, read_datasets, split_by_condition, split_by_seed
 
     cls = get(args.method)
-    est = cls(**_parse_params(args.param, cls))
+    params = _parse_params(args.param, cls)
+    est = call(cls, "__init__", cls, **params)
+    verify = not args.no_verify
     if args.data:
         if args.train or args.test or args.val:
             raise InputError("give either --data with --split, or --train/--val/--test")
-        runs = read_datasets(args.data)
+        runs = read_datasets(args.data, verify=verify)
         if args.split == "seed":
             split = split_by_seed(runs)
         else:
@@ -124,8 +183,9 @@ def _cmd_diagnose(args) -> int:
                              "pool them with --data and --split")
         from .evaluate.harness import Split
 
-        split = Split(read_datasets(args.train), read_datasets(args.val or []),
-                      read_datasets(args.test))
+        split = Split(read_datasets(args.train, verify=verify),
+                      read_datasets(args.val or [], verify=verify),
+                      read_datasets(args.test, verify=verify))
     print(split.describe())
     if not split.val:
         print("no validation runs: metrics at the plug-in's own threshold only (no *_cal)")
@@ -141,7 +201,8 @@ def _cmd_diagnose(args) -> int:
 def _cmd_bench(args) -> int:
     from .bench import run_bench
 
-    res = run_bench(args.spec, workdir=args.workdir, update=args.update)
+    res = run_bench(args.spec, workdir=args.workdir, update=args.update,
+                    verify=not args.no_verify)
     if args.output:
         out = Path(args.output)
         out.mkdir(parents=True, exist_ok=True)
@@ -211,15 +272,22 @@ def _cmd_schema(args) -> int:
 
 def _cmd_list(args) -> int:
     if args.what == "plugins":
-        from .diagnostics.registry import GROUP
-        from .diagnostics.registry import plugins as found
+        from .diagnostics.registry import GROUP, discover
 
         print(f"{'name':<12} {'class':<55} first line of its docstring")
-        for name, cls in found().items():
-            doc = (cls.__doc__ or "").strip().splitlines()
-            print(f"{name:<12} {cls.__module__ + '.' + cls.__qualname__:<55} "
+        broken = 0
+        for name, e in discover().items():
+            if e.cls is None:  # listed with its error; the other plug-ins still work
+                broken += 1
+                print(f"{name:<12} {e.value:<55} BROKEN: {e.error}")
+                continue
+            doc = (e.cls.__doc__ or "").strip().splitlines()
+            print(f"{name:<12} {e.cls.__module__ + '.' + e.cls.__qualname__:<55} "
                   f"{doc[0] if doc else ''}")
         print(f"(entry-point group '{GROUP}')")
+        if broken:
+            print(f"warning: {broken} registered plug-in{'s' if broken > 1 else ''} cannot be "
+                  f"loaded (marked BROKEN above); the others work", file=sys.stderr)
         return 0
     if args.what == "faults":
         from .schema.faults import CATALOGUE
@@ -261,6 +329,38 @@ def _list_channels(line_path: str) -> int:
     return 0
 
 
+def _duration_arg(text: str) -> float:
+    """``--duration``: a time like the files take (``90``, ``"90 s"``, ``"2 min"``)."""
+    from .units import QuantityError, parse_quantity
+
+    try:
+        return parse_quantity(text, "time")
+    except QuantityError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _run_command(args) -> int:
+    """Run the subcommand. Plausibility warnings (:class:`r2rsim.errors.PlausibilityWarning`,
+    issued while files load) are printed as ``warning: file: path: message`` on stderr, each
+    one, and the command carries on."""
+    import warnings
+
+    from .errors import PlausibilityWarning
+
+    with warnings.catch_warnings():
+        show_other = warnings.showwarning
+
+        def show(message, category, filename, lineno, file=None, line=None):
+            if issubclass(category, PlausibilityWarning):
+                print(f"warning: {message}", file=sys.stderr)
+            else:
+                show_other(message, category, filename, lineno, file, line)
+
+        warnings.simplefilter("always", PlausibilityWarning)
+        warnings.showwarning = show
+        return args.func(args)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="r2rsim", description="Roll-to-roll web-handling line "
                                 "simulator with labelled Parquet datasets.")
@@ -270,9 +370,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser("run", help="run a scenario and write its dataset")
     r.add_argument("scenario")
-    r.add_argument("-o", "--output", help="dataset directory (default: from the scenario)")
+    r.add_argument("-o", "--output", help="dataset directory (default: the scenario's "
+                   "output, else runs/NAME); must not exist, or be empty")
+    r.add_argument("--overwrite", action="store_true",
+                   help="replace the output directory if it holds an r2rsim dataset (never "
+                   "a directory holding other files)")
     r.add_argument("--seed", type=int, help="root seed (overrides the scenario)")
-    r.add_argument("--duration", type=float, help="simulated time [s] (overrides the scenario)")
+    r.add_argument("--duration", type=_duration_arg,
+                   help="simulated time, s or with units ('90 s', '2 min'); overrides the "
+                   "scenario")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=_cmd_run)
 
@@ -311,6 +417,8 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--n-boot", type=int, default=1000, help="bootstrap replicates over runs")
     d.add_argument("--seed", type=int, default=0, help="seed of the bootstrap")
     d.add_argument("-o", "--output", help="output directory (default: results/METHOD)")
+    d.add_argument("--no-verify", action="store_true",
+                   help="use datasets whose files differ from their manifest.json checksums")
     d.set_defaults(func=_cmd_diagnose)
 
     b = sub.add_parser("bench", help="run a diagnostic benchmark spec and compare with its "
@@ -319,6 +427,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--workdir", help="keep (and reuse) the simulated datasets here")
     b.add_argument("--update", action="store_true", help="write the baseline file")
     b.add_argument("-o", "--output", help="write results.parquet/.csv here")
+    b.add_argument("--no-verify", action="store_true",
+                   help="reuse --workdir datasets without checking their checksums")
     b.set_defaults(func=_cmd_bench)
 
     ls = sub.add_parser("list", help="list element, sensor, controller or fault types, "
@@ -327,6 +437,9 @@ def build_parser() -> argparse.ArgumentParser:
                                      "plugins", "channels"])
     ls.add_argument("line", nargs="?", help="line file (for 'channels')")
     ls.set_defaults(func=_cmd_list)
+    for sp in sub.choices.values():  # `r2rsim run X --debug` as well as `r2rsim --debug run X`
+        sp.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                        help="show tracebacks on errors")
     return p
 
 
@@ -335,7 +448,17 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return args.func(args)
+        code = _run_command(args)
+        sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
+        return code
+    except BrokenPipeError:
+        # the reader went away (`r2rsim list channels LINE | head`): stop quietly, and keep
+        # Python from complaining when it flushes stdout at exit
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        except (OSError, ValueError):  # stdout is not a file (embedded use): nothing to do
+            pass
+        return EXIT_BROKEN_PIPE
     except InputError as exc:
         if args.debug:
             raise
@@ -346,9 +469,12 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_FAILURE
+    except Terminated:
+        print("terminated (SIGTERM); no dataset written", file=sys.stderr)
+        return EXIT_TERMINATED
     except KeyboardInterrupt:
         print("interrupted; no dataset written", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -11,18 +11,8 @@ class R2RError(Exception):
     """Base class of all r2rsim errors."""
 
 
-class InputError(R2RError):
-    """A problem with a user's input file (line, scenario) or command-line value.
-
-    Parameters
-    ----------
-    message : str
-        What is wrong, in words a user understands.
-    file : str, optional
-        The file the problem is in.
-    path : str, optional
-        The YAML path of the offending value, e.g. ``elements[2].radius``.
-    """
+class _Located:
+    """A message about a place in an input file: ``file: path: message``."""
 
     def __init__(self, message: str, file: str | None = None, path: str | None = None):
         self.message = message
@@ -36,5 +26,46 @@ class InputError(R2RError):
         return ": ".join([*parts, self.message])
 
 
+class InputError(_Located, R2RError):
+    """A problem with a user's input file (line, scenario) or command-line value.
+
+    Parameters
+    ----------
+    message : str
+        What is wrong, in words a user understands.
+    file : str, optional
+        The file the problem is in.
+    path : str, optional
+        The YAML path of the offending value, e.g. ``elements[2].radius``.
+    """
+
+
+class PlausibilityWarning(_Located, UserWarning):
+    """A valid but physically unusual input (a web thicker than any in physics.md §2.1, a
+    tension set-point above the break tension, a loop faster than its drive...).
+
+    Issued with :func:`warnings.warn` while a file is loaded; ``r2rsim`` prints it as
+    ``warning: file: path: message`` on stderr and carries on. Turn it into an error with
+    ``warnings.simplefilter("error", PlausibilityWarning)``.
+
+    Parameters
+    ----------
+    message, file, path
+        As for :class:`InputError`.
+    """
+
+
 class SimulationError(R2RError):
     """The solver could not integrate a run (reported with the time it stopped)."""
+
+
+class Terminated(KeyboardInterrupt):
+    """The process received SIGTERM. ``r2rsim run`` raises it from a signal handler so that
+    the run stops and cleans up as on Ctrl-C (the dataset writer removes its temporary
+    directory); the command then exits 143 (128 + SIGTERM), as a shell reports a process
+    ended by SIGTERM."""
+
+
+class PluginError(R2RError):
+    """A diagnostic plug-in cannot be loaded, or raised in one of its methods (the message
+    names the plug-in, the method and the exception; the original is chained)."""

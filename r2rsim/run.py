@@ -12,6 +12,7 @@ import hashlib
 import json
 import math
 import platform
+import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,12 +28,15 @@ from .compile.faults import realise_faults
 from .dataset import DatasetWriter, true_state_columns
 from .dataset.labels import derive_labels
 from .dataset.validate import validate_dataset
-from .dataset.writer import EVENTS_SCHEMA, FAULTS_SCHEMA
-from .errors import InputError
+from .dataset.writer import EVENTS_SCHEMA, FAULTS_SCHEMA, check_output
+from .errors import InputError, R2RError
+from .limits import MAX_SEED, run_size_problem
 from .measure import MeasurementModel
 from .measure.sensors import channel_names
 from .schema import load_scenario
+from .schema.loader import read_yaml
 from .solve import Event, nominal_state, simulate, steady_state
+from .solve.compilewatch import compile_seconds
 
 
 @dataclass
@@ -75,6 +79,10 @@ class RunSummary:
                  f"solver       {self.solver_stats.get('solver', '')}, "
                  f"{self.solver_stats.get('nfev', 0)} RHS evaluations; initial state "
                  f"{self.initial_state}"]
+        compile_s = self.solver_stats.get("compile_s", 0.0)
+        if compile_s >= 1.0:  # a cold numba cache: reported apart from the wall time
+            lines.insert(2, f"compiled     numba kernels in {compile_s:.1f} s (first run only; "
+                            f"not in the wall time above)")
         lines += [f"WARNING      {w}" for w in self.warnings]
         if self.terminated:
             how = "expected" if self.ok else "not expected by the scenario (expect.termination)"
@@ -97,22 +105,68 @@ class RunSummary:
         return "\n".join(lines)
 
 
+def _refuse_line_file(path: Path) -> None:
+    """A line file given where a scenario is expected: say so (one line), rather than list
+    the scenario keys it lacks. Any other problem is left to load_scenario."""
+    try:
+        data = read_yaml(path)
+    except R2RError:
+        return
+    if ("elements" in data or "web" in data) and "line" not in data and "programme" not in data:
+        raise InputError("this is a line file, not a scenario: a scenario names a line file "
+                         "(line: ...) and drives it through a programme. Check the line with "
+                         f"`r2rsim validate {path}`, or write a scenario for it (see "
+                         "scenarios/quickstart.yaml)", file=str(path))
+
+
+def _name_from_stem(scenario_path: Path) -> str:
+    """A scenario without ``name:`` is named after its file, if that is a safe name."""
+    stem = scenario_path.stem
+    if not _STEM.fullmatch(stem):
+        raise InputError(f"the scenario has no name, and its file name '{stem}' cannot name "
+                         f"the run (letters, digits, '_', '-', '.'; starting with a letter or "
+                         f"digit): add a name", file=str(scenario_path), path="name")
+    return stem
+
+
+_STEM = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
+
+
+def _scenario_output(scenario_path: Path, output: str) -> Path:
+    """The scenario's ``output:`` as a path: relative to the scenario file, and inside the
+    directory that holds it (a scenario file does not choose to write elsewhere; ``-o``
+    does)."""
+    base = scenario_path.resolve().parent
+    target = (base / output).resolve()
+    if target == base or not target.is_relative_to(base):
+        raise InputError(f"'{output}' is outside the scenario's directory {base}: output "
+                         f"names a directory inside it (relative to the scenario file); to "
+                         f"write elsewhere give -o on the command line",
+                         file=str(scenario_path), path="output")
+    return base / output
+
+
 def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
                  seed: int | None = None, duration: float | None = None,
-                 progress=None) -> RunSummary:
+                 progress=None, overwrite: bool = False) -> RunSummary:
     """Run a scenario file and write its dataset.
 
     Parameters
     ----------
     scenario_path : str or Path
     output : str or Path, optional
-        Dataset directory (default: the scenario's ``output``, else ``runs/<name>``).
+        Dataset directory, anywhere (default: the scenario's ``output``, relative to the
+        scenario file and inside its directory, else ``runs/<name>`` in the working
+        directory). It must not exist, be empty, or be an r2rsim dataset to ``overwrite``.
     seed : int, optional
         Overrides the scenario's root seed.
     duration : float, optional
         Overrides the scenario's duration [s].
     progress : callable, optional
         Called as ``progress(t, duration)`` with the simulated time reached.
+    overwrite : bool
+        Replace an existing dataset at the output. Only a directory that is verifiably an
+        r2rsim dataset is ever replaced (:func:`r2rsim.dataset.writer.check_output`).
 
     Returns
     -------
@@ -121,20 +175,30 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
     Raises
     ------
     InputError
-        For any problem with the input files; nothing is written.
+        For any problem with the input files or the output directory; nothing is written.
     """
     scenario_path = Path(scenario_path)
+    compile0 = compile_seconds()
+    _refuse_line_file(scenario_path)
     scenario, line, line_path = load_scenario(scenario_path)
     if duration is not None:
         if not duration > 0:
             raise InputError(f"--duration must be > 0, got {duration:g}")
+        size = run_size_problem(duration, scenario.record_rate)
+        if size is not None:  # the same limits as the file's duration (r2rsim.limits)
+            raise InputError(f"--duration with record_rate {scenario.record_rate:g} Hz: "
+                             f"{size[1]}", file=str(scenario_path))
         scenario.duration = duration
     if seed is not None:
-        if seed < 0:
-            raise InputError(f"--seed must be >= 0, got {seed}")
+        if not 0 <= seed <= MAX_SEED:
+            raise InputError(f"--seed must be >= 0, got {seed}" if seed < 0 else
+                             f"--seed must be at most 2**64 - 1 = {MAX_SEED}, got {seed}")
         scenario.seed = seed
-    name = scenario.name or scenario_path.stem
-    out = Path(output) if output is not None else Path(scenario.output or f"runs/{name}")
+    name = scenario.name or _name_from_stem(scenario_path)
+    out = (Path(output) if output is not None else
+           _scenario_output(scenario_path, scenario.output) if scenario.output is not None
+           else Path(f"runs/{name}"))
+    check_output(out, overwrite)  # before the work: refuse early what commit would refuse
 
     prog = Programme.from_steps(line, scenario.programme, file=str(scenario_path))
     root = np.random.SeedSequence(scenario.seed)
@@ -173,7 +237,7 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
     rate = scenario.record_rate
     fault_rows = [f.record(run_id, int(math.ceil(f.onset * rate - 1e-9))) for f in faults]
     modes = [(st.at, st.mode) for st in scenario.programme if st.mode is not None]
-    writer = DatasetWriter(out, run_id, meta)
+    writer = DatasetWriter(out, run_id, meta, overwrite=overwrite)
     try:
         meas = MeasurementModel(cl, rate, ss_meas, faults)
         cols = true_state_columns(cl)
@@ -214,14 +278,16 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
             stats["n"] += n
             k0[0] += n
 
-        wall0 = time.perf_counter()
+        wall0, compile_sim0 = time.perf_counter(), compile_seconds()
         res = simulate(cl, scenario.duration, rate, y0,
                        scenario.solver, on_chunk=on_chunk,
                        progress=(lambda t: progress(t, scenario.duration)) if progress else None,
                        initial_state_mode=init_mode, events=scenario.events, faults=faults)
         if held:
             flush(res.terminated)
-        wall = time.perf_counter() - wall0
+        # the wall time and real-time factor without numba compiling (reported apart)
+        wall = time.perf_counter() - wall0 - (compile_seconds() - compile_sim0)
+        res.stats["compile_s"] = compile_seconds() - compile0
         sim_end = res.termination_time if res.terminated else scenario.duration
 
         # channels.parquet: the dictionary of every samples column
@@ -313,13 +379,16 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
             "numpy_version": [np.__version__], "wallclock_s": [wall],
         })
         writer.write_table("runs", runs)
+        # the two copies must not overwrite each other (a.yaml next to lines/a.yaml)
+        line_copy = (line_path.name if line_path.name != scenario_path.name
+                     else f"line.{line_path.name}")
         writer.write_text(f"scenario/{scenario_path.name}", scenario_text)
-        writer.write_text(f"scenario/{line_path.name}", line_text)
+        writer.write_text(f"scenario/{line_copy}", line_text)
         writer.write_text(f"scenario/{name}.normalised.yaml",
                           yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=True))
         path = writer.commit({"run_ids": [run_id], "scenario_sha256": scenario_sha,
                               "root_seed": scenario.seed, "scenario": scenario_path.name,
-                              "line": line_path.name}, check=validate_dataset)
+                              "line": line_copy}, check=validate_dataset)
     except BaseException:
         writer.abort()
         raise

@@ -12,6 +12,30 @@ from r2rsim.schema.scenario import ProgrammeStep
 
 REPO = Path(__file__).resolve().parents[1]
 
+# a small valid line and scenario (as parsed YAML) for the bad-input tests to break
+SMALL_LINE = {
+    "name": "small",
+    "web": {"material": "PET", "thickness": "50 um", "width": "1 m"},
+    "elements": [
+        {"id": "unwind", "type": "unwind",
+         "roll": {"core_radius": "76 mm", "outer_radius": "0.3 m", "core_inertia": 0.5}},
+        {"id": "idler1", "type": "idler", "radius": 0.05, "inertia": 0.011},
+        {"id": "pull", "type": "driven", "radius": 0.1, "inertia": 0.2},
+        {"id": "rewind", "type": "rewind",
+         "roll": {"core_radius": "76 mm", "outer_radius": "0.1 m", "core_inertia": 0.5}},
+    ],
+    "spans": [{"length": "1.5 m"}, {"length": 1.0}, {"length": 1.0}],
+    "sensors": [{"id": "lc", "type": "load_cell", "element": "idler1"}],
+    "controllers": [
+        {"id": "speed", "type": "speed_pi", "element": "pull", "master": True, "kp": 25,
+         "ki": 790},
+        {"id": "tens", "type": "tension_pi", "element": "unwind", "sensor": "lc",
+         "setpoint": "200 N", "kp": 0.1, "ki": 0.5},
+    ],
+}
+SMALL_SCENARIO = {"line": "line.yaml", "duration": "0.2 s", "record_rate": "100 Hz",
+            "programme": [{"at": 0, "line_speed": "1 m/s"}]}
+
 
 def write(path: Path, text: str) -> Path:
     path.write_text(textwrap.dedent(text), encoding="utf-8")

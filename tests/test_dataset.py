@@ -91,12 +91,17 @@ def test_same_seed_same_data_and_noise_seed_leaves_truth(tmp_path, repo):
             assert a[col].equals(c[col]), col
 
 
-def test_rerun_replaces_dataset(tmp_path, repo):
+def test_rerun_replaces_dataset_with_overwrite(tmp_path, repo, capsys):
     scen = str(repo / "scenarios" / "quickstart.yaml")
     out = tmp_path / "x"
     assert main(["run", scen, "-o", str(out), "--duration", "1", "-q"]) == 0
-    assert main(["run", scen, "-o", str(out), "--duration", "2", "-q"]) == 0
+    # no-clobber by default: the first dataset stays
+    assert main(["run", scen, "-o", str(out), "--duration", "2", "-q"]) == 2
+    assert "pass --overwrite to replace it" in capsys.readouterr().err
+    assert pq.read_table(out / "runs.parquet")["n_samples"][0].as_py() == 201
+    assert main(["run", scen, "-o", str(out), "--duration", "2", "-q", "--overwrite"]) == 0
     assert pq.read_table(out / "runs.parquet")["n_samples"][0].as_py() == 401
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x"]  # no .x.old-*/.x.tmp-* left
 
 
 def test_refuses_to_overwrite_a_foreign_directory(tmp_path, repo, capsys):
@@ -184,3 +189,22 @@ def test_progress_bar_on_a_terminal(tmp_path, repo, capsys, monkeypatch):
                  str(tmp_path / "p"), "--duration", "2"]) == 0
     err = capsys.readouterr().err
     assert "simulating: 2.0/2.0 s sim" in err, err[-300:]
+
+
+def test_scenario_and_line_of_the_same_file_name_are_both_kept(tmp_path, repo):
+    (tmp_path / "lines").mkdir()
+    line = (repo / "lines" / "single_span.yaml").read_text()
+    (tmp_path / "lines" / "a.yaml").write_text(line)
+    scen = textwrap.dedent("""\
+        name: same
+        line: lines/a.yaml
+        duration: 0.1 s
+        record_rate: 100 Hz
+        programme: [{at: 0, line_speed: 1 m/s}]
+        """)
+    (tmp_path / "a.yaml").write_text(scen)
+    out = tmp_path / "ds"
+    assert main(["run", str(tmp_path / "a.yaml"), "-o", str(out), "-q"]) == 0
+    assert (out / "scenario" / "a.yaml").read_text() == scen
+    assert (out / "scenario" / "line.a.yaml").read_text() == line
+    assert json.loads((out / "manifest.json").read_text())["line"] == "line.a.yaml"

@@ -38,7 +38,7 @@ def scenario(tmp_path, faults, *, duration=12.0, programme=None, name="f", seed=
 def run(tmp_path, faults, **kw):
     path = scenario(tmp_path, faults, **kw)
     out = tmp_path / f"out_{kw.get('name', 'f')}_{kw.get('seed', 3)}"
-    r2rsim.run_scenario(path, output=out)
+    r2rsim.run_scenario(path, output=out, overwrite=True)  # tests rerun the same name and seed
     s = pd.read_parquet(out / "samples")
     f = pd.read_parquet(out / "faults.parquet")
     return s, f, out

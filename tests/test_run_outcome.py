@@ -75,7 +75,7 @@ def test_an_expected_web_break_exits_0_and_an_unexpected_one_1(tmp_path, repo, c
 def test_a_solver_failure_is_never_expected(tmp_path, repo):
     d = yaml.safe_load((repo / "scenarios" / "quickstart.yaml").read_text())
     d["expect"] = {"termination": "solver_failure"}
-    d["line"] = str((repo / "lines" / "pet_film_line.yaml"))
+    d["line"] = str(repo / "lines" / "pet_film_line.yaml")
     bad = write(tmp_path / "bad.yaml", yaml.safe_dump(d))
     assert main(["run", str(bad), "-o", str(tmp_path / "o"), "-q"]) == 2
     assert not (tmp_path / "o").exists()
@@ -101,3 +101,11 @@ def test_states_that_are_not_finite_fail_the_run(tmp_path, repo, monkeypatch, ca
     summary = r2rsim.run_scenario(repo / "scenarios" / "quickstart.yaml",
                                   output=tmp_path / "api", duration=1.0)
     assert not summary.ok and summary.nonfinite_t == 0.0
+
+
+def test_wall_clock_budget(tmp_path, repo):
+    scen = _scenario(tmp_path, repo, "quickstart.yaml", solver={"max_wall_s": 1e-6})
+    assert main(["run", str(scen), "-o", str(tmp_path / "o"), "-q"]) == 1
+    runs = _runs(tmp_path / "o")
+    assert runs["termination_reason"].startswith("solver_failure: wall-clock budget: ")
+    assert runs["termination_t_s"] < 60.0

@@ -155,7 +155,7 @@ def test_solver_failure_is_recorded_in_runs_and_summary(tmp_path, repo, monkeypa
 
     def poisoned(cl, y):
         y = y.copy()
-        y[cl.index("span2.strain")] = np.inf
+        y[cl.index("span2.strain")] = np.nan
         return y
 
     monkeypatch.setattr(run_module, "steady_state", poisoned)

@@ -9,6 +9,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
+from ..limits import MAX_SAMPLES, wound_in_strain_points
+
 
 @dataclass
 class DisturbanceInstance:
@@ -65,6 +68,11 @@ def realise_disturbances(scenario, line, seed_sequence) -> list[DisturbanceInsta
                                            _ar1(rng, n, a, d.std_si())))
         else:  # wound_in_strain along the web, ten points per correlation length
             dx = d.correlation_length / 10.0
+            if wound_in_strain_points(v_max, scenario.duration, d.correlation_length) > \
+                    MAX_SAMPLES:  # checked at load; again for a --duration override
+                raise InputError(f"a correlation length of {d.correlation_length:g} m needs a "
+                                 f"table of more than {MAX_SAMPLES:.0e} points over this run",
+                                 path="disturbances[].correlation_length")
             length = 1.5 * v_max * scenario.duration + 10.0 * d.correlation_length
             n = int(math.ceil(length / dx)) + 2
             out.append(DisturbanceInstance(d.type, d.element, 0.0, dx,

@@ -4,6 +4,9 @@ row. The diagnostics and the evaluation harness work on these."""
 from __future__ import annotations
 
 import fnmatch
+import hashlib
+import io
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -60,26 +63,145 @@ class Run:
         return m if isinstance(m, str) else ""
 
 
-def read_runs(path: str | Path) -> list[Run]:
+#: columns the harness needs in each table
+_NEEDED = {"runs.parquet": ("run_id",), "faults.parquet": ("run_id",),
+           "samples": ("k", "t_s", "label.is_faulty", "label.score_mask",
+                       "label.primary_type")}
+_NO_VERIFY = "--no-verify reads it anyway"
+
+
+def is_dataset_dir(path: Path) -> bool:
+    """Whether ``path`` looks like a dataset directory (it has runs.parquet or
+    manifest.json), complete or not."""
+    return (path / "runs.parquet").is_file() or (path / "manifest.json").is_file()
+
+
+class _Reader:
+    """Reads the files of one dataset, checking each against manifest.json when verifying:
+    every listed file exists with its size (all of them, at once), and a file that is read has
+    its sha256 (hashed from the same bytes that are parsed, so it is read once)."""
+
+    def __init__(self, root: Path, verify: bool):
+        self.root = root
+        self.verify = verify
+        self.files: dict | None = None
+        if verify:
+            self._check_manifest()
+
+    def fail(self, msg: str, run: str | None = None) -> InputError:
+        return InputError(f"dataset {self.root}: {f'run {run}: ' if run else ''}{msg}")
+
+    def _check_manifest(self) -> None:
+        mf = self.root / "manifest.json"
+        if not mf.is_file():
+            raise self.fail("no manifest.json, so its files cannot be checked: not a "
+                            f"complete r2rsim dataset ({_NO_VERIFY})")
+        try:
+            files = json.loads(mf.read_text(encoding="utf-8"))["files"]
+            items = [(str(rel), str(info["sha256"]), info.get("bytes")) for rel, info in
+                     files.items()]
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+            raise self.fail(f"manifest.json is not readable ({type(exc).__name__}: "
+                            f"{str(exc).splitlines()[0] if str(exc) else ''}); "
+                            f"{_NO_VERIFY}") from None
+        self.files = {rel: (sha, size) for rel, sha, size in items}
+        for rel, (_, size) in self.files.items():
+            f = self.root / rel
+            part = rel.split("/")
+            run = (part[1][len("run_id="):] if len(part) > 2 and part[0] == "samples"
+                   and part[1].startswith("run_id=") else None)
+            if not f.is_file():
+                raise self.fail(f"{rel} is missing (listed in manifest.json): the directory "
+                                f"is not a complete r2rsim dataset", run)
+            if size is not None and f.stat().st_size != size:
+                raise self.fail(f"{rel} has {f.stat().st_size} bytes, manifest.json says "
+                                f"{size}: the file was changed or truncated after it was "
+                                f"written; refusing to use it (`r2rsim validate "
+                                f"{self.root}` lists every problem; {_NO_VERIFY})", run)
+
+    def table(self, rel: str, needed: tuple[str, ...] = (), run: str | None = None
+              ) -> pd.DataFrame:
+        """A Parquet file of the dataset as a DataFrame (``run``: named in errors)."""
+        f = self.root / rel
+        if not f.is_file():
+            raise self.fail(f"{rel} is missing: the directory is not a complete r2rsim "
+                            f"dataset", run)
+        source: object = f
+        if self.verify:
+            if rel not in self.files:
+                raise self.fail(f"{rel} is not listed in manifest.json: it was added after "
+                                f"the dataset was written; refusing to use it ({_NO_VERIFY})",
+                                run)
+            data = f.read_bytes()
+            if hashlib.sha256(data).hexdigest() != self.files[rel][0]:
+                raise self.fail(f"{rel}: checksum differs from manifest.json: the file was "
+                                f"changed after it was written; refusing to use it "
+                                f"(`r2rsim validate {self.root}` lists every problem; "
+                                f"{_NO_VERIFY})", run)
+            source = io.BytesIO(data)
+        try:
+            df = pd.read_parquet(source)
+        except Exception as exc:  # noqa: BLE001 - pyarrow raises several types on bad files
+            raise self.fail(f"{rel} is not a readable Parquet file ({type(exc).__name__}: "
+                            f"{(str(exc).strip().splitlines() or [''])[0]})", run) from None
+        missing = [c for c in needed if c not in df.columns]
+        if missing:
+            raise self.fail(f"{rel} has no column {', '.join(missing)}: not a complete "
+                            f"r2rsim dataset", run)
+        return df
+
+
+def read_runs(path: str | Path, verify: bool = True) -> list[Run]:
     """Read every run of a dataset directory written by ``r2rsim run``.
+
+    Parameters
+    ----------
+    path : str or Path
+    verify : bool
+        Check the files against manifest.json first: every listed file must exist with its
+        size, and the files read (``runs.parquet``, ``faults.parquet`` and the samples of each
+        run) must have their sha256. A dataset changed after it was written is refused.
 
     Raises
     ------
     InputError
-        If ``path`` is not a dataset.
+        If ``path`` is not a complete dataset, a file is unreadable, or (``verify``) a file
+        differs from the manifest; one line naming the dataset, the file and the problem.
     """
     path = Path(path)
-    if not (path / "runs.parquet").is_file() or not (path / "samples").is_dir():
-        raise InputError(f"{path}: not an r2rsim dataset (no runs.parquet or samples/)")
-    runs = pd.read_parquet(path / "runs.parquet")
-    faults = pd.read_parquet(path / "faults.parquet")
+    if not path.is_dir():
+        raise InputError(f"{path}: no such dataset directory")
+    if not is_dataset_dir(path) or not (path / "samples").is_dir():
+        what = "runs.parquet" if not (path / "runs.parquet").exists() else "samples/"
+        raise InputError(f"dataset {path}: {what} is missing: the directory is not a "
+                         f"complete r2rsim dataset")
+    rd = _Reader(path, verify)
+    runs = rd.table("runs.parquet", _NEEDED["runs.parquet"])
+    faults = rd.table("faults.parquet", _NEEDED["faults.parquet"])
     out = []
     for row in runs.to_dict("records"):
-        rid = row["run_id"]
+        rid = str(row["run_id"])
+        if rid in ("", ".", "..") or any(c in rid for c in "/\\\0"):
+            raise rd.fail(f"run id {rid!r} in runs.parquet is not a plain name (its samples "
+                          f"would lie outside samples/)")
         part = path / "samples" / f"run_id={rid}"
-        s = pd.read_parquet(part if part.is_dir() else path / "samples")
+        if part.is_dir():
+            files = sorted(p for p in part.iterdir() if p.is_file() and p.suffix == ".parquet")
+        else:  # a samples/ directory without hive partitions (filtered on run_id below)
+            files = sorted(p for p in (path / "samples").iterdir()
+                           if p.is_file() and p.suffix == ".parquet")
+        if not files:
+            raise rd.fail(f"no samples file (samples/run_id={rid}/part-0.parquet is "
+                          f"missing): the directory is not a complete r2rsim dataset", rid)
+        frames = [rd.table(f.relative_to(path).as_posix(), run=rid) for f in files]
+        s = frames[0] if len(frames) == 1 else pd.concat(frames, ignore_index=True)
         if "run_id" in s.columns:
             s = s[s["run_id"].astype(str) == rid].drop(columns="run_id")
+        missing = [c for c in _NEEDED["samples"] if c not in s.columns]
+        if missing:
+            raise rd.fail(f"the samples have no column {', '.join(missing)}: not a "
+                          f"complete r2rsim dataset", rid)
         s = s.set_index("k", drop=False).sort_index()
-        out.append(Run(rid, s, faults[faults.run_id == rid].reset_index(drop=True), row, path))
+        out.append(Run(rid, s, faults[faults.run_id.astype(str) == rid].reset_index(drop=True),
+                       row, path))
     return out

@@ -1,97 +1,208 @@
 """Check a dataset directory against the rules of DESIGN.md §4.3 / fdd-benchmarks.md §6.4.
 
-Rules: files listed in the manifest exist with their checksums; the samples' columns are
-exactly those of ``channels.parquet``; every ``label.*`` column equals what
+Rules: the directory holds exactly the files its manifest lists, with their sizes and
+checksums, and no listed path or run id leads outside it
+(:func:`r2rsim.dataset.paths.dataset_problems`); the samples' columns are exactly those of
+``channels.parquet``; ``k`` counts 0, 1, 2, ...; every ``label.*`` column equals what
 :func:`r2rsim.dataset.labels.derive_labels` derives from ``faults.parquet`` and
 ``runs.parquet`` (so no fault label before an onset); ``onset_k`` is the first sample at or
 after the onset; row counts match ``runs.n_samples``; a run that ended early says why and
 marks its last sample ``terminated``.
+
+The samples are read in batches of :data:`BATCH_ROWS` rows, and only the columns the rules
+need (``k``, ``t_s`` and the labels), so memory does not grow with the length of a run.
 """
 
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
 import pyarrow.parquet as pq
 
 from .labels import derive_labels
-from .writer import sha256_file
+from .paths import dataset_problems, inside, safe_component
+from .writer import sha256_file  # noqa: F401 - kept importable from here
+
+#: rows per batch read back from a samples file
+BATCH_ROWS = 1 << 13
 
 
 def validate_dataset(path: str | Path) -> list[str]:
-    """Every problem found in the dataset at ``path`` (empty: valid)."""
+    """Every problem found in the dataset at ``path`` (empty: valid).
+
+    Parameters
+    ----------
+    path : str or Path
+        A dataset directory.
+
+    Returns
+    -------
+    list of str
+        One message per problem, naming the file or the run.
+    """
     root = Path(path)
-    problems: list[str] = []
-    manifest_path = root / "manifest.json"
-    if not manifest_path.exists():
+    if not (root / "manifest.json").is_file():
         return [f"{root}: no manifest.json (not an r2rsim dataset?)"]
-    manifest = json.loads(manifest_path.read_text())
-    for rel, info in manifest.get("files", {}).items():
-        f = root / rel
-        if not f.exists():
-            problems.append(f"{rel}: listed in manifest.json but missing")
-        elif sha256_file(f) != info["sha256"]:
-            problems.append(f"{rel}: checksum differs from manifest.json")
-    runs = pq.read_table(root / "runs.parquet").to_pylist()
-    faults = pq.read_table(root / "faults.parquet").to_pylist()
-    channels = pq.read_table(root / "channels.parquet").column("channel").to_pylist()
+    problems = dataset_problems(root)
+    try:
+        manifest = json.loads((root / "manifest.json").read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return problems
+    for name in ("runs", "faults", "channels"):
+        if not (root / f"{name}.parquet").is_file():
+            return [*problems, f"{name}.parquet: missing"]
+    tables = {}
+    for name in ("runs", "faults", "channels"):
+        try:  # a file that is not Parquet is a problem to list, not a crash
+            tables[name] = pq.read_table(root / f"{name}.parquet")
+        except Exception as exc:  # noqa: BLE001 - pyarrow raises several types on bad files
+            problems.append(f"{name}.parquet: {_unreadable(exc)}")
+    if len(tables) < 3:
+        return problems
+    runs = tables["runs"].to_pylist()
+    faults = tables["faults"].to_pylist()
+    channels = tables["channels"].column("channel").to_pylist()
+    listed = manifest.get("run_ids") if isinstance(manifest, dict) else None
+    if listed is not None and listed != [r["run_id"] for r in runs]:
+        problems.append(f"manifest.json run_ids {listed} differ from runs.parquet")
     for run in runs:
         rid = run["run_id"]
-        part = root / "samples" / f"run_id={rid}" / "part-0.parquet"
-        if not part.exists():
-            problems.append(f"run {rid}: no samples file {part.relative_to(root)}")
+        # the run id names a directory: one that is not a plain name leads elsewhere
+        if not safe_component(rid):
+            problems.append(f"run {rid!r}: the run id is not a plain directory name, so its "
+                            f"samples path leaves samples/")
             continue
-        table = pq.read_table(part)
-        cols = ["run_id", *table.column_names]
-        if cols != channels:
-            extra = sorted(set(cols) - set(channels))
-            missing = sorted(set(channels) - set(cols))
-            problems.append(f"run {rid}: sample columns differ from channels.parquet "
-                            f"(not listed: {extra[:5]}, absent: {missing[:5]})")
-        n = table.num_rows
-        if n != run["n_samples"]:
-            problems.append(f"run {rid}: {n} rows but runs.n_samples = {run['n_samples']}")
-        k = table.column("k").to_numpy()
-        t = table.column("t_s").to_numpy()
+        try:
+            part = inside(root, f"samples/run_id={rid}/part-0.parquet")
+        except Exception:  # noqa: BLE001 - R2RError: resolves outside the dataset
+            problems.append(f"run {rid}: samples path leads outside the dataset")
+            continue
+        if not part.is_file():
+            problems.append(f"run {rid}: no samples file samples/run_id={rid}/part-0.parquet")
+            continue
         rows = [f for f in faults if f["run_id"] == rid]
-        for f in rows:
-            first = int(np.searchsorted(t, f["onset_t_s"] - 1e-9))
-            if first < n and f["onset_k"] != int(k[first]):
-                problems.append(f"run {rid}: fault {f['fault_id']} onset_k = {f['onset_k']}"
-                                f", but the first sample at or after its onset is {k[first]}")
-        if run["terminated"]:
-            if not run["termination_reason"]:
-                problems.append(f"run {rid}: terminated without a termination_reason")
-            if n and t[-1] > run["termination_t_s"] + 1e-9:
-                problems.append(f"run {rid}: samples after termination_t_s")
-        sensor_channels = {c[len("label.ch."):].split(".")[0]: c[len("label.ch."):]
-                           for c in table.column_names if c.startswith("label.ch.")}
-        modes = json.loads(run.get("modes_json") or "[]")
-        want = derive_labels(rows, k, t, warmup=run["warmup_s"], modes=modes,
-                             terminated_k=int(k[-1]) if run["terminated"] and n else None,
-                             sensor_channels=sensor_channels)
-        for name, expected in want.items():
-            if name not in table.column_names:
-                problems.append(f"run {rid}: label column {name} missing")
-                continue
-            got = table.column(name).to_pylist()
-            exp = expected if isinstance(expected, list) else np.asarray(expected).tolist()
-            if name == "label.severity":
-                same = np.allclose(np.asarray(got, float), np.asarray(exp, float), atol=1e-6)
-            else:
-                same = got == exp
-            if not same:
-                bad = next(i for i, (a, b) in enumerate(zip(got, exp, strict=True))
-                           if a != b and not (isinstance(a, float) and math.isclose(a, b)))
-                problems.append(f"run {rid}: {name} at k = {k[bad]} is {got[bad]!r}; "
-                                f"faults.parquet gives {exp[bad]!r}")
-        if rows:
-            first_onset = min(f["onset_t_s"] for f in rows)
-            early = table.column("label.is_faulty").to_numpy(zero_copy_only=False) & (
-                t < first_onset - 1e-12)
-            if early.any():
-                problems.append(f"run {rid}: fault labels before the first onset")
+        try:
+            problems += [f"run {rid}: {p}" for p in _check_samples(part, run, rows, channels)]
+        except Exception as exc:  # noqa: BLE001 - pyarrow raises several types on bad files
+            problems.append(f"run {rid}: samples/run_id={rid}/part-0.parquet: "
+                            f"{_unreadable(exc)}")
     return problems
+
+
+def _unreadable(exc: Exception) -> str:
+    """One line for a file pyarrow could not read."""
+    first = (str(exc).strip().splitlines() or [""])[0]
+    return f"not a readable Parquet file ({type(exc).__name__}: {first})"
+
+
+def _column(batch: pa.RecordBatch, name: str) -> np.ndarray | list:
+    """A column of a batch as numpy (strings decoded; lists as Python lists)."""
+    col = batch.column(name)
+    if pa.types.is_dictionary(col.type):
+        col = col.dictionary_decode()
+    if pa.types.is_list(col.type) or pa.types.is_large_list(col.type):
+        return col.to_pylist()
+    return col.to_numpy(zero_copy_only=False)
+
+
+def _check_samples(part: Path, run: dict, rows: list[dict], channels: list[str]) -> list[str]:
+    """The problems of one run's samples file, read batch by batch."""
+    problems: list[str] = []
+    pf = pq.ParquetFile(part)
+    names = pf.schema_arrow.names
+    if ["run_id", *names] != channels:
+        extra = sorted(set(names) - set(channels) - {"run_id"})
+        missing = sorted(set(channels) - set(names) - {"run_id"})
+        problems.append(f"sample columns differ from channels.parquet "
+                        f"(not listed: {extra[:5]}, absent: {missing[:5]})")
+    n = pf.metadata.num_rows
+    if n != run["n_samples"]:
+        problems.append(f"{n} rows but runs.n_samples = {run['n_samples']}")
+    if "k" not in names or "t_s" not in names:
+        return [*problems, "no k or t_s column"]
+    terminated_k = None
+    if run["terminated"]:
+        if not run["termination_reason"]:
+            problems.append("terminated without a termination_reason")
+        for i in reversed(range(pf.num_row_groups)):  # the last sample's k
+            last = pf.read_row_group(i, columns=["k"]).column("k")
+            if len(last):
+                terminated_k = int(last[-1].as_py())
+                break
+    sensor_channels = {c[len("label.ch."):].split(".")[0]: c[len("label.ch."):]
+                       for c in names if c.startswith("label.ch.")}
+    modes = json.loads(run.get("modes_json") or "[]")
+    first_onset = min((f["onset_t_s"] for f in rows), default=None)
+    onset_seen = {f["fault_id"]: False for f in rows}
+    reported: set[str] = set()  # one message per label column, at its first difference
+    k_next, t_last = 0, None
+    wanted = ["k", "t_s", *(c for c in names if c.startswith("label."))]
+    for batch in pf.iter_batches(batch_size=BATCH_ROWS, columns=wanted):
+        k = batch.column("k").to_numpy()
+        t = batch.column("t_s").to_numpy()
+        m = len(k)
+        if m == 0:
+            continue
+        if "k" not in reported and not np.array_equal(k, np.arange(k_next, k_next + m)):
+            bad = int(np.argmax(k != np.arange(k_next, k_next + m)))
+            problems.append(f"k is {k[bad]} in row {k_next + bad}; it must count 0, 1, 2, ...")
+            reported.add("k")
+        k_next += m
+        t_last = float(t[-1])
+        for f in rows:
+            if onset_seen[f["fault_id"]]:
+                continue
+            first = int(np.searchsorted(t, f["onset_t_s"] - 1e-9))
+            if first < m:
+                onset_seen[f["fault_id"]] = True
+                if f["onset_k"] != int(k[first]):
+                    problems.append(f"fault {f['fault_id']} onset_k = {f['onset_k']}, but "
+                                    f"the first sample at or after its onset is {k[first]}")
+        want = derive_labels(rows, k, t, warmup=run["warmup_s"], modes=modes,
+                             terminated_k=terminated_k, sensor_channels=sensor_channels)
+        for name, expected in want.items():
+            if name in reported:
+                continue
+            if name not in names:
+                problems.append(f"label column {name} missing")
+                reported.add(name)
+                continue
+            got = _column(batch, name)
+            bad = _first_difference(name, got, expected)
+            if bad is not None:
+                problems.append(f"{name} at k = {k[bad]} is {_item(got[bad])!r}; "
+                                f"faults.parquet gives {_item(expected[bad])!r}")
+                reported.add(name)
+        if first_onset is not None and "early" not in reported and "label.is_faulty" in names:
+            early = _column(batch, "label.is_faulty").astype(bool) & (t < first_onset - 1e-12)
+            if early.any():
+                problems.append("fault labels before the first onset")
+                reported.add("early")
+    if run["terminated"] and t_last is not None and run["termination_t_s"] is not None \
+            and t_last > run["termination_t_s"] + 1e-9:
+        problems.append("samples after termination_t_s")
+    return problems
+
+
+def _item(v):
+    return v.item() if isinstance(v, np.generic) else v
+
+
+def _first_difference(name: str, got, expected) -> int | None:
+    """Index of the first row where a label column differs from its derivation."""
+    if isinstance(expected, list):  # label.fault_ids: lists of ids
+        return next((i for i, (a, b) in enumerate(zip(got, expected, strict=True))
+                     if list(a) != list(b)), None)
+    exp = np.asarray(expected)
+    got = np.asarray(got)
+    if name == "label.severity":
+        diff = ~np.isclose(got.astype(float), exp.astype(float), rtol=1e-5, atol=1e-6)
+    elif exp.dtype == object or got.dtype == object:
+        diff = got.astype(object) != exp.astype(object)
+    else:
+        diff = got != exp
+    diff = np.asarray(diff, dtype=bool)
+    return int(np.argmax(diff)) if diff.any() else None

@@ -7,17 +7,21 @@ Layout::
       samples/run_id=<id>/part-0.parquet
       scenario/<name>.yaml  scenario/<line>.yaml
 
-Everything is written into a temporary sibling directory and moved into place only when the
-run is complete, so a failed run leaves no partial dataset.
+Everything is written into a temporary sibling directory ``.<dataset>.tmp-<pid>`` and moved
+into place only when the run is complete, so a failed run leaves no partial dataset. Every
+path is checked to stay inside that directory, an existing directory is replaced only if it
+is verifiably an r2rsim dataset and the caller asked for it, and the temporaries of dead
+processes are cleaned up (:mod:`r2rsim.dataset.paths`).
 """
 
 from __future__ import annotations
 
-import hashlib
+import contextlib
 import json
 import os
 import platform
 import shutil
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +30,15 @@ import pyarrow.parquet as pq
 
 from .._version import __version__
 from ..errors import InputError, R2RError
+from .paths import (
+    ACTIVE,
+    clean_stale,
+    dataset_problems,
+    inside,
+    remove_dataset,
+    safe_component,
+    sha256_file,
+)
 
 SCHEMA_VERSION = "0.1"
 
@@ -46,12 +59,73 @@ EVENTS_SCHEMA = pa.schema([
 ])
 
 
-def sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
+#: raw column data collected before it is written as one row group. The solver's chunks
+#: can be a few rows long (they end at every event); one row group each would make the
+#: Parquet footer, which the writer keeps in memory until it closes, grow with run length.
+ROW_GROUP_BYTES = 16 << 20
+
+__all__ = ["DatasetWriter", "EVENTS_SCHEMA", "FAULTS_SCHEMA", "SCHEMA_VERSION",
+           "check_output", "sha256_file"]
+
+
+def check_output(output: str | Path, overwrite: bool = False, *, hashes: bool = True) -> None:
+    """Refuse an output directory that a run must not write to.
+
+    A directory that does not exist, or an empty one, is fine. An existing r2rsim dataset
+    (:func:`r2rsim.dataset.paths.dataset_problems` finds nothing) is replaced only with
+    ``overwrite``. Anything else (a file, a symbolic link, a directory holding files that
+    r2rsim did not write, or a dataset changed since) is never replaced.
+
+    Parameters
+    ----------
+    output : str or Path
+        The dataset directory.
+    overwrite : bool
+        Replace an existing r2rsim dataset.
+    hashes : bool
+        Compare the sha256 of an existing dataset's files too, not only their sizes.
+
+    Raises
+    ------
+    InputError
+        Saying why and what to do.
+    """
+    out = Path(output)
+    if out.is_symlink():
+        raise InputError(f"output directory '{out}' is a symbolic link; give the directory "
+                         f"it points to, or another one, with -o")
+    if not out.exists():
+        return
+    if not out.is_dir():
+        raise InputError(f"output '{out}' exists and is not a directory; choose another "
+                         f"with -o")
+    if not any(out.iterdir()):
+        return  # an empty directory is filled
+    problems = dataset_problems(out, hashes=hashes)
+    if problems:
+        more = f" and {len(problems) - 1} more" if len(problems) > 1 else ""
+        raise InputError(f"output directory '{out}' exists and is not an r2rsim dataset "
+                         f"({problems[0]}{more}); r2rsim replaces only a directory holding "
+                         f"exactly a dataset it wrote: choose another directory with -o")
+    if not overwrite:
+        raise InputError(f"output directory '{out}' exists (an r2rsim dataset); pass "
+                         f"--overwrite to replace it")
+
+
+@contextlib.contextmanager
+def _signals_deferred():
+    """Hold SIGINT/SIGTERM until the block is done, so that a rename and the note of it
+    are not separated by an interrupt (the handler runs right after)."""
+    sigs = {signal.SIGINT, signal.SIGTERM}
+    try:
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
+    except (AttributeError, OSError, ValueError):  # no POSIX signals
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 class DatasetWriter:
@@ -60,28 +134,59 @@ class DatasetWriter:
     Parameters
     ----------
     output : Path
-        Final dataset directory.
+        Final dataset directory. It must not exist, be empty, or (with ``overwrite``) be an
+        r2rsim dataset (:func:`check_output`).
     run_id : str
+        The run's id; a single directory name (``samples/run_id=<run_id>/``).
     metadata : dict
         String key-value metadata stored in every Parquet file (``r2rsim.*`` keys).
+    overwrite : bool
+        Replace an existing r2rsim dataset at ``output``.
+
+    Raises
+    ------
+    InputError
+        For an output directory that may not be written to.
+    R2RError
+        For a run id that is not a single directory name.
     """
 
-    def __init__(self, output: Path, run_id: str, metadata: dict[str, str]):
+    def __init__(self, output: Path, run_id: str, metadata: dict[str, str], *,
+                 overwrite: bool = False):
         self.output = Path(output)
-        if self.output.exists() and not (self.output / "manifest.json").exists():
-            if any(self.output.iterdir()):
-                raise InputError(f"output directory '{self.output}' exists and is not an "
-                                 f"r2rsim dataset; choose another with -o")
+        self.overwrite = overwrite
+        if not safe_component(run_id) or not safe_component(self.output.name):
+            raise R2RError(f"run id '{run_id}' or dataset name '{self.output.name}' is not a "
+                           f"single directory name")
+        check_output(self.output, overwrite, hashes=False)  # commit() hashes what it replaces
         self.run_id = run_id
         self.metadata = {k: str(v) for k, v in metadata.items()}
         self.tmp = self.output.parent / f".{self.output.name}.tmp-{os.getpid()}"
-        if self.tmp.exists():
-            shutil.rmtree(self.tmp)
-        (self.tmp / "samples" / f"run_id={run_id}").mkdir(parents=True)
-        (self.tmp / "scenario").mkdir()
         self._writer = None
         self._schema = None
+        self._pending: list[pa.Table] = []  # chunks of the row group being collected
+        self._pending_bytes = 0
+        self._trash: Path | None = None  # the dataset being replaced, during the swap
+        self._committed = False
         self.n_rows = 0
+        # parent directories this writer creates, removed again if the run fails
+        self._made: list[Path] = []
+        p = self.output.parent
+        while not p.exists() and p != p.parent:
+            self._made.append(p)
+            p = p.parent
+        if not self._made:
+            clean_stale(self.output.parent)
+        if self.tmp.resolve() in ACTIVE:
+            raise R2RError(f"another writer of this process is writing {self.output}")
+        if self.tmp.exists():  # left by a dead process that had this pid (clean_stale kept it)
+            raise R2RError(f"'{self.tmp}' exists and is not r2rsim's own temporary directory; "
+                           f"move it away")
+        self.tmp.mkdir(parents=True)
+        ACTIVE.add(self.tmp.resolve())
+        self._samples = inside(self.tmp, f"samples/run_id={run_id}/part-0.parquet")
+        self._samples.parent.mkdir(parents=True)
+        inside(self.tmp, "scenario").mkdir()
 
     def write_chunk(self, columns: dict[str, np.ndarray]) -> None:
         """Append one chunk of samples (same columns in the same order every time)."""
@@ -106,8 +211,7 @@ class DatasetWriter:
             self._schema = pa.schema(fields, metadata=meta)
             float_cols = [f.name for f in fields if f.type in (pa.float32(), pa.float64())]
             self._writer = pq.ParquetWriter(
-                self.tmp / "samples" / f"run_id={self.run_id}" / "part-0.parquet",
-                self._schema, compression="zstd", compression_level=3,
+                self._samples, self._schema, compression="zstd", compression_level=3,
                 use_dictionary=[f.name for f in fields if pa.types.is_dictionary(f.type)],
                 use_byte_stream_split=float_cols, write_statistics=True,
             )
@@ -120,22 +224,43 @@ class DatasetWriter:
                 arrays.append(pa.array(arr, type=f.type))
             else:
                 arrays.append(pa.array(arr, type=f.type, from_pandas=False))
-        self._writer.write_table(pa.Table.from_arrays(arrays, schema=self._schema))
+        table = pa.Table.from_arrays(arrays, schema=self._schema)
+        self._pending.append(table)
+        self._pending_bytes += table.nbytes
+        if self._pending_bytes >= ROW_GROUP_BYTES:
+            self._flush_row_group()
         self.n_rows += len(columns["t_s"])
 
+    def _flush_row_group(self) -> None:
+        """Write the collected chunks as one row group."""
+        if self._pending:
+            table = pa.concat_tables(self._pending).unify_dictionaries()
+            self._writer.write_table(table, row_group_size=table.num_rows)
+        self._pending, self._pending_bytes = [], 0
+
     def write_table(self, name: str, table: pa.Table) -> None:
+        """Write ``<name>.parquet`` (runs, channels, faults, events) with the metadata."""
         meta = dict(table.schema.metadata or {})
         meta.update({k.encode(): v.encode() for k, v in self.metadata.items()})
-        pq.write_table(table.replace_schema_metadata(meta), self.tmp / f"{name}.parquet",
-                       compression="zstd")
+        pq.write_table(table.replace_schema_metadata(meta),
+                       inside(self.tmp, f"{name}.parquet"), compression="zstd")
 
     def write_text(self, relpath: str, text: str) -> None:
-        (self.tmp / relpath).write_text(text, encoding="utf-8")
+        """Write a text file at ``relpath`` inside the dataset."""
+        path = inside(self.tmp, relpath)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text, encoding="utf-8")
 
     def commit(self, manifest_extra: dict, check=None) -> Path:
         """Close the files, write the manifest with checksums, run ``check(directory)`` (a
-        list of problems; any problem aborts) and move the dataset in place."""
+        list of problems; any problem aborts) and move the dataset in place.
+
+        An existing directory at the output is checked again here, since it may have
+        changed during the run: it must still be empty or absent, or (``overwrite``) an
+        r2rsim dataset, which is replaced.
+        """
         if self._writer is not None:
+            self._flush_row_group()
             self._writer.close()
         files = sorted(p for p in self.tmp.rglob("*") if p.is_file())
         manifest = {
@@ -145,30 +270,69 @@ class DatasetWriter:
             "numpy_version": np.__version__,
             "pyarrow_version": pa.__version__,
             **manifest_extra,
-            "files": {str(p.relative_to(self.tmp)): {"sha256": sha256_file(p),
-                                                      "bytes": p.stat().st_size}
+            "files": {p.relative_to(self.tmp).as_posix(): {"sha256": sha256_file(p),
+                                                            "bytes": p.stat().st_size}
                       for p in files},
         }
-        (self.tmp / "manifest.json").write_text(json.dumps(manifest, indent=2, sort_keys=True))
+        inside(self.tmp, "manifest.json").write_text(json.dumps(manifest, indent=2,
+                                                                sort_keys=True))
         problems = check(self.tmp) if check is not None else []
         if problems:
             raise R2RError("the dataset failed its own validation (a bug in r2rsim; please "
                            "report it): " + "; ".join(problems[:5]))
-        if self.output.exists():
-            trash = self.output.parent / f".{self.output.name}.old-{os.getpid()}"
-            os.replace(self.output, trash)
-            os.replace(self.tmp, self.output)
-            shutil.rmtree(trash, ignore_errors=True)
-        else:
-            self.output.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(self.tmp, self.output)
-        return self.output
+        out = self.output
+        if out.is_symlink() or (out.exists() and (not out.is_dir() or any(out.iterdir()))):
+            # raises unless an r2rsim dataset to replace; hashed below, once it is moved
+            check_output(out, self.overwrite, hashes=False)
+            trash = out.parent / f".{out.name}.old-{os.getpid()}"
+            with _signals_deferred():
+                os.rename(out, trash)
+                self._trash = trash
+            # checked again where nobody else writes: what is removed is what was checked
+            problems = dataset_problems(trash)
+            if problems:
+                self._restore()
+                raise InputError(f"output directory '{out}' changed during the run and is "
+                                 f"no longer an r2rsim dataset ({problems[0]}); it is left "
+                                 f"as it was")
+        with _signals_deferred():
+            try:
+                os.rename(self.tmp, out)  # onto nothing, or an empty directory
+            except OSError as exc:
+                raise R2RError(f"cannot move the dataset into '{out}' ({exc.strerror}): was "
+                               f"it filled during the run?") from None
+            self._committed = True
+            ACTIVE.discard(self.tmp.resolve())
+        if self._trash is not None:
+            remove_dataset(self._trash)
+            self._trash = None
+        return out
+
+    def _restore(self) -> None:
+        """Put the dataset being replaced back in place (the swap did not finish)."""
+        if self._trash is not None and not self.output.exists():
+            with _signals_deferred():
+                os.rename(self._trash, self.output)
+                self._trash = None
 
     def abort(self) -> None:
-        """Remove the temporary directory (no partial output is left behind)."""
+        """Remove the temporary directory and the parent directories this writer made, and
+        put back a dataset it was replacing (no partial output is left behind)."""
         try:
             if self._writer is not None:
                 self._writer.close()
         except Exception:  # noqa: BLE001 - cleaning up after a failure
             pass
-        shutil.rmtree(self.tmp, ignore_errors=True)
+        self._pending = []
+        if not self._committed:
+            try:
+                self._restore()
+            except OSError:
+                pass  # clean_stale() puts it back on the next run
+            shutil.rmtree(self.tmp, ignore_errors=True)
+            ACTIVE.discard(self.tmp.resolve())
+        for p in self._made:  # deepest first; only while empty
+            try:
+                p.rmdir()
+            except OSError:
+                break

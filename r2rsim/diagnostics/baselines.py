@@ -66,7 +66,8 @@ class PCAMonitor(Diagnostic):
     name = "pca"
     lags = 0
 
-    def __init__(self, n_components=0.95, alpha: float = 0.01, limits: str = "analytic"):
+    def __init__(self, n_components: float | int = 0.95, alpha: float = 0.01,
+                 limits: str = "analytic"):
         self.n_components = n_components
         self.alpha = alpha
         self.limits = limits
@@ -135,7 +136,7 @@ class DynamicPCAMonitor(PCAMonitor):
 
     name = "dpca"
 
-    def __init__(self, lags: int = 2, n_components=0.95, alpha: float = 0.01,
+    def __init__(self, lags: int = 2, n_components: float | int = 0.95, alpha: float = 0.01,
                  limits: str = "analytic"):
         super().__init__(n_components=n_components, alpha=alpha, limits=limits)
         self.lags = lags
@@ -154,8 +155,8 @@ class IsolationForestDetector(Diagnostic):
 
     name = "iforest"
 
-    def __init__(self, n_estimators: int = 100, max_samples=256, alpha: float = 0.001,
-                 random_state=None):
+    def __init__(self, n_estimators: int = 100, max_samples: int = 256, alpha: float = 0.001,
+                 random_state: int | None = None):
         self.n_estimators = n_estimators
         self.max_samples = max_samples
         self.alpha = alpha

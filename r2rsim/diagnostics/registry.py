@@ -1,35 +1,184 @@
 """Discovery of diagnostic plug-ins through the ``r2rsim.diagnostics`` entry-point group, so
-a separate package can add a method without touching r2rsim."""
+a separate package can add a method without touching r2rsim.
+
+One broken plug-in (it fails to import, or its entry point is not a
+:class:`~r2rsim.diagnostics.Diagnostic` class) never stops the others: :func:`discover` reports
+it with its error, :func:`plugins` leaves it out, and :func:`get` raises
+:class:`~r2rsim.errors.PluginError` only when that plug-in is asked for.
+"""
 
 from __future__ import annotations
 
+import inspect
+import types
+import typing
+from dataclasses import dataclass
 from importlib.metadata import entry_points
 
-from ..errors import InputError
+from ..errors import InputError, PluginError
 
 GROUP = "r2rsim.diagnostics"
 
 
-def plugins() -> dict[str, type]:
-    """Every registered plug-in class by name (loaded on call)."""
+def one_line(exc: BaseException) -> str:
+    """``Type: first line of the message`` of an exception."""
+    lines = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {lines[0]}" if lines else type(exc).__name__
+
+
+@dataclass
+class Entry:
+    """A registered plug-in: its class, or why it cannot be loaded."""
+
+    name: str
+    value: str  # "module:attribute" of the entry point
+    cls: type | None
+    error: str | None
+
+
+def _load(ep) -> type:
+    """The class behind an entry point; PluginError naming it and the problem."""
+    from .base import Diagnostic
+
+    where = f"plug-in '{ep.name}' ({ep.value})"
+    try:
+        obj = ep.load()
+    except Exception as exc:  # noqa: BLE001 - any import failure of third-party code
+        raise PluginError(f"{where} cannot be loaded: {one_line(exc)}") from exc
+    if not isinstance(obj, type):
+        raise PluginError(f"{where} is not a class (it is a {type(obj).__name__}); an entry "
+                          f"point must name a subclass of r2rsim.diagnostics.Diagnostic")
+    if not issubclass(obj, Diagnostic):
+        raise PluginError(f"{where} is not a subclass of r2rsim.diagnostics.Diagnostic")
+    return obj
+
+
+def discover() -> dict[str, Entry]:
+    """Every registered plug-in by name, loaded, with the error of those that cannot be."""
     out = {}
     for ep in sorted(entry_points(group=GROUP), key=lambda e: e.name):
-        out[ep.name] = ep.load()
+        try:
+            out[ep.name] = Entry(ep.name, ep.value, _load(ep), None)
+        except PluginError as exc:
+            out[ep.name] = Entry(ep.name, ep.value, None, str(exc))
     return out
 
 
+def plugins() -> dict[str, type]:
+    """Every registered plug-in class that loads, by name (see :func:`discover` for the
+    broken ones)."""
+    return {name: e.cls for name, e in discover().items() if e.cls is not None}
+
+
 def get(name: str) -> type:
-    """The plug-in class registered as ``name``."""
+    """The plug-in class registered as ``name`` (only that entry point is loaded).
+
+    Raises
+    ------
+    InputError
+        No plug-in of that name.
+    PluginError
+        It is registered but cannot be loaded.
+    """
     found = {ep.name: ep for ep in entry_points(group=GROUP)}
     if name not in found:
         raise InputError(f"no diagnostic plug-in '{name}' (registered: "
                          f"{', '.join(sorted(found)) or 'none'}; `r2rsim list plugins`)")
-    return found[name].load()
+    return _load(found[name])
+
+
+def call(cls_or_est, method: str, fn, *args, **kwargs):
+    """``fn(*args, **kwargs)``, a method of a plug-in: any exception it raises (except an
+    :class:`InputError` and a ``MemoryError``) becomes a one-line :class:`PluginError` naming
+    the plug-in, the method and the exception, chained to the original."""
+    try:
+        return fn(*args, **kwargs)
+    except (InputError, MemoryError):
+        raise
+    except Exception as exc:  # noqa: BLE001 - third-party code may raise anything
+        name = getattr(cls_or_est, "name", None) or getattr(cls_or_est, "__name__", None) \
+            or type(cls_or_est).__name__
+        raise PluginError(f"plug-in '{name}': {method} raised {one_line(exc)}") from exc
+
+
+def default_params(cls: type) -> dict:
+    """The parameters of plug-in ``cls`` with their defaults (``cls().get_params()``)."""
+    est = call(cls, "__init__ (with its default parameters)", cls)
+    return call(cls, "get_params", est.get_params)
 
 
 def unknown_parameter(cls: type, key: str) -> str | None:
     """The problem with giving plug-in ``cls`` the parameter ``key`` (None if it has it)."""
-    known = cls().get_params()
+    known = default_params(cls)
     if key in known:
         return None
     return f"{cls.name} has no parameter '{key}' (its parameters: {', '.join(known) or 'none'})"
+
+
+# --------------------------------------------------------------------------- parameter types
+
+_NAMES = {int: "an integer", float: "a number", str: "a string", bool: "true or false",
+          type(None): "null", list: "a list", dict: "a mapping", tuple: "a list"}
+
+
+def _expected(cls: type, key: str) -> tuple[tuple[type, ...], str] | None:
+    """The types a parameter accepts and how to say so: from the annotation of ``__init__``
+    when it is made of plain types, else from the type of a non-None default; None when
+    nothing is known (any value is passed on)."""
+    try:
+        sig = inspect.signature(cls.__init__, eval_str=True)
+    except Exception:  # noqa: BLE001 - an annotation that does not evaluate: no check
+        try:
+            sig = inspect.signature(cls.__init__)
+        except (TypeError, ValueError):
+            return None
+    p = sig.parameters.get(key)
+    if p is None:
+        return None
+    ann = p.annotation
+    types_: tuple[type, ...] | None = None
+    if ann is not inspect.Parameter.empty and not isinstance(ann, str):
+        args = (typing.get_args(ann) if typing.get_origin(ann) in (typing.Union, types.UnionType)
+                else (ann,))
+        args = tuple(typing.get_origin(a) or a for a in args)
+        if all(a in _NAMES for a in args):
+            types_ = args
+    if types_ is None and p.default is not inspect.Parameter.empty and p.default is not None:
+        if type(p.default) in _NAMES:
+            types_ = (type(p.default),)
+            if types_ == (float,):
+                types_ = (float, int)
+    if types_ is None:
+        return None
+    if float in types_ and int not in types_:
+        types_ = (*types_, int)  # an integer is a number
+    words = []
+    for t in types_:
+        w = _NAMES[t]
+        if w not in words and not (t is int and float in types_):
+            words.append(w)
+    return types_, " or ".join(words)
+
+
+def check_param(cls: type, key: str, value):
+    """``value`` for parameter ``key`` of plug-in ``cls``, converted where a number was
+    given as text (``1e-3`` is a string to YAML); raises InputError naming the parameter and
+    the type it expects when the value has another type."""
+    exp = _expected(cls, key)
+    if exp is None:
+        return value
+    types_, words = exp
+    if isinstance(value, str) and str not in types_:
+        for t in (int, float):
+            if t in types_:
+                try:
+                    return t(value)
+                except ValueError:
+                    pass
+    ok = isinstance(value, types_) and not (isinstance(value, bool) and bool not in types_)
+    if isinstance(value, int) and not isinstance(value, bool) and float in types_:
+        ok = True
+    if not ok:
+        raise InputError(f"{cls.name} expects {words} for {key}, got {value!r} "
+                         f"({_NAMES.get(type(value), type(value).__name__)})")
+    return value

@@ -32,8 +32,9 @@ import numpy as np
 import pandas as pd
 from sklearn.base import clone
 
-from ..dataset.read import Run, read_runs
-from ..errors import InputError
+from ..dataset.read import Run, is_dataset_dir, read_runs
+from ..diagnostics.registry import call
+from ..errors import InputError, PluginError
 from ..schema.scenario import SplitBySeed
 from .metrics import (
     RunData,
@@ -188,21 +189,22 @@ def split_by_condition(runs: Sequence[Run], train: str = "OC1", test: str = "OC2
     return out
 
 
-def read_datasets(paths: Sequence[str | Path]) -> list[Run]:
+def read_datasets(paths: Sequence[str | Path], verify: bool = True) -> list[Run]:
     """Every run of the given dataset directories; a directory that is not a dataset but
-    holds datasets (one level down) contributes all of them."""
+    holds datasets (one level down) contributes all of them. ``verify``: check each
+    dataset's files against its manifest.json (:func:`r2rsim.dataset.read.read_runs`)."""
     runs: list[Run] = []
     for p in map(Path, paths):
         if not p.is_dir():
             raise InputError(f"{p}: no such dataset directory")
-        if (p / "runs.parquet").is_file():
-            runs += read_runs(p)
+        if is_dataset_dir(p):
+            runs += read_runs(p, verify=verify)
             continue
-        subs = sorted(d for d in p.iterdir() if (d / "runs.parquet").is_file())
+        subs = sorted(d for d in p.iterdir() if d.is_dir() and is_dataset_dir(d))
         if not subs:
             raise InputError(f"{p}: not an r2rsim dataset and holds none")
         for d in subs:
-            runs += read_runs(d)
+            runs += read_runs(d, verify=verify)
     return runs
 
 
@@ -473,9 +475,9 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
     _check_healthy(train, "training")
     _check_healthy(val, "validation")
     _check_disjoint({"train": train, "val": val, "test": test})
-    est = clone(estimator)
+    est = call(estimator, "clone", clone, estimator)
     name = getattr(est, "name", type(est).__name__)
-    params = est.get_params()
+    params = call(est, "get_params", est.get_params)
 
     def frame(run: Run) -> pd.DataFrame:
         # the plug-in gets the visible columns only: no labels, faults or true states
@@ -488,19 +490,28 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
 
     train_frames = [frame(r) for r in train]
     t0 = time.perf_counter()
-    est.fit(train_frames)
+    call(est, "fit", est.fit, train_frames)
     fit_s = time.perf_counter() - t0
 
     def outputs(run: Run):
         f = frame(run)
-        scores = est.score(f)
+        where = f"run {run.run_id} of {run.path}"
+        scores = call(est, f"score ({where})", est.score, f)
+        if not isinstance(scores, pd.DataFrame) or "statistic" not in scores.columns:
+            got = ("a DataFrame without a 'statistic' column"
+                   if isinstance(scores, pd.DataFrame) else f"a {type(scores).__name__}")
+            raise PluginError(f"plug-in '{name}': score ({where}) returned {got}; it must "
+                              f"return a DataFrame with a 'statistic' column")
         if not scores.index.equals(f.index):
             raise InputError(f"{name}: score() returned rows not aligned to the samples of "
                              f"run {run.run_id}")
-        stat = scores["statistic"].to_numpy(float)
-        alarm = est.decide(scores).to_numpy(bool)
-        diag = (est.diagnose(scores).astype(str).to_numpy()
+        stat = call(est, f"score ({where})", scores["statistic"].to_numpy, float)
+        alarm = np.asarray(call(est, f"decide ({where})", est.decide, scores), dtype=bool)
+        diag = (np.asarray(call(est, f"diagnose ({where})", est.diagnose, scores)).astype(str)
                 if hasattr(est, "diagnose") else None)
+        if len(alarm) != len(f) or (diag is not None and len(diag) != len(f)):
+            raise PluginError(f"plug-in '{name}': decide/diagnose ({where}) returned "
+                              f"{len(alarm)} values for {len(f)} samples")
         return stat, alarm, diag
 
     theta = math.nan

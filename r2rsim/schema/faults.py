@@ -12,12 +12,12 @@ import math
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
-from pydantic import Field, model_validator
+from pydantic import BeforeValidator, Field, model_validator
 
 from ..errors import InputError
 from ..units import QuantityError, parse_quantity
-from .line import Id, Strict
-from .quantities import Frequency, Time
+from .line import Id, Strict, pair
+from .quantities import Frequency, NumberOrText, Time, number_or_text
 
 
 @dataclass(frozen=True)
@@ -121,19 +121,19 @@ def superposable(a: str, b: str) -> bool:
 class Uniform(Strict):
     """A value drawn uniformly from [low, high] (seeded by the fault-sampling stream)."""
 
-    uniform: tuple[float | str, float | str]
+    uniform: pair(NumberOrText)
 
 
 class LogUniform(Strict):
     """A value whose logarithm is uniform on [log low, log high] (low, high > 0)."""
 
-    loguniform: tuple[float | str, float | str]
+    loguniform: pair(NumberOrText)
 
 
 class Choice(Strict):
     """One of the listed values, each equally likely."""
 
-    choice: list[float | str] = Field(min_length=1)
+    choice: list[NumberOrText] = Field(min_length=1, max_length=1000)
 
 
 Sampled = Uniform | LogUniform | Choice
@@ -177,7 +177,7 @@ class Fault(Strict):
     end: Annotated[Time, Field(gt=0)] | None = Field(
         None, description="when the fault stops acting; default: to the end of the run")
     profile: Profile = Field(default_factory=Profile)
-    magnitude: float | str | Sampled | None = Field(
+    magnitude: Annotated[float | str | Sampled | None, BeforeValidator(number_or_text)] = Field(
         None, description="in the unit the type fixes (see `r2rsim list faults`); a number "
         "is SI, a string may carry units ('5 N')")
     rate: Annotated[Frequency, Field(gt=0)] | None = Field(

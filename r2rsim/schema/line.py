@@ -13,6 +13,7 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, WithJsonSchema, model_validator
 
+from ..limits import MAX_LINE_ITEMS
 from .materials import MATERIALS
 from .quantities import (
     Acceleration,
@@ -34,18 +35,34 @@ from .quantities import (
     ViscousTorque,
 )
 
+
+def pair(item):
+    """``[a, b]`` of two ``item`` values: a YAML list is accepted for the tuple (the items
+    stay strict)."""
+    return Annotated[tuple[item, item], Field(strict=False)]
+
+
 Id = Annotated[str, Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$", max_length=64)]
 PosLength = Annotated[Length, Field(gt=0)]
 NonNegTime = Annotated[Time, Field(ge=0)]
-Vec2 = tuple[Length, Length]
+Vec2 = pair(Length)
 Wrap = Literal["cw", "ccw"]
 GRAVITY = (0.0, -9.81)
 
 
 class Strict(BaseModel):
-    """Base model: unknown keys are errors."""
+    """Base model of every line and scenario model: unknown keys are errors, and every
+    number is strict and finite.
 
-    model_config = ConfigDict(extra="forbid", frozen=False)
+    ``strict``: a boolean is not a number (``std: true`` is refused, not read as 1.0), a
+    number is not a boolean, a string is not a plain number (quantities, which take unit
+    strings, convert them first); an integer is still accepted where a float is expected.
+    ``allow_inf_nan=False``: ``.nan``, ``.inf`` and ``-.inf`` are refused for every float
+    field, in lists and dict values too. Tuples (``[x, y]`` pairs) are declared with
+    :func:`pair`, which accepts the YAML list.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=False, strict=True, allow_inf_nan=False)
 
 
 class Web(Strict):
@@ -287,10 +304,10 @@ class Dancer(_Element):
     inertia: Annotated[Inertia, Field(gt=0)] = Field(description="roller spin inertia")
     position: Vec2 = Field(description="roller centre at travel 0 [m]")
     wrap: Wrap
-    direction: tuple[float, float] = Field(
+    direction: pair(float) = Field(
         (0.0, -1.0), description="unit vector along which the travel x grows (normalised)"
     )
-    travel_range: tuple[Length, Length] = Field(description="end stops [x_min, x_max] [m]")
+    travel_range: pair(Length) = Field(description="end stops [x_min, x_max] [m]")
     initial_travel: Length = Field(0.0, description="travel x at t = 0 [m]")
     mass: Annotated[Mass, Field(gt=0)] = Field(description="moving mass incl. roller [kg]")
     load_force: Force = Field(
@@ -303,7 +320,7 @@ class Dancer(_Element):
     smoothing_speed: Annotated[Speed, Field(gt=0)] = Field(
         1e-3, description="tanh smoothing of the Coulomb friction [m/s]"
     )
-    gravity: tuple[Acceleration, Acceleration] = GRAVITY
+    gravity: pair(Acceleration) = GRAVITY
 
 
 class Cylinder(Strict):
@@ -333,7 +350,7 @@ class PivotDancer(_Element):
     pivot: Vec2
     arm_length: PosLength
     arm_angle: Angle = Field(description="arm angle from +x at t = 0 [rad]")
-    angle_range: tuple[Angle, Angle] = Field(description="end stops [min, max] [rad]")
+    angle_range: pair(Angle) = Field(description="end stops [min, max] [rad]")
     arm_inertia: Annotated[Inertia, Field(ge=0)] = Field(
         description="arm inertia about the pivot, without the roller [kg m^2]"
     )
@@ -347,7 +364,7 @@ class PivotDancer(_Element):
     damping: Annotated[ViscousTorque, Field(ge=0)] = 0.0
     coulomb: Annotated[Torque, Field(ge=0)] = 0.0
     smoothing_speed: Annotated[AngularSpeed, Field(gt=0)] = 1e-3
-    gravity: tuple[Acceleration, Acceleration] = GRAVITY
+    gravity: pair(Acceleration) = GRAVITY
 
 
 Element = Annotated[Unwind | Rewind | Idler | Driven | Nip | Dancer | PivotDancer,
@@ -362,7 +379,7 @@ class Festoon(Strict):
 
     moving_rollers: Annotated[int, Field(ge=1)]
     carriage_mass: Annotated[Mass, Field(gt=0)]
-    stroke: tuple[Length, Length] = Field(description="carriage end stops [x_min, x_max] [m]")
+    stroke: pair(Length) = Field(description="carriage end stops [x_min, x_max] [m]")
     initial_position: Length = Field(description="carriage position x at t = 0 [m]")
     force: Force = Field(description="carriage actuator force along +x (storage grows) [N]")
     gravity: Acceleration = Field(
@@ -392,7 +409,7 @@ class _Sensor(Strict):
     )
     filter: NonNegTime = Field(0.0, description="first-order filter time constant [s]")
     gain: float = Field(1.0, description="calibration gain g in y = g·x + b")
-    range: tuple[float, float] | None = Field(
+    range: pair(float) | None = Field(
         None, description="measuring range [low, high] in the reading's SI unit; recorded "
         "samples outside are clipped and flagged (censored data)")
     quantization: Annotated[float, Field(ge=0)] = Field(
@@ -461,7 +478,7 @@ class PitchLength(Strict):
     gain: float = 1.0
     noise: Annotated[Length, Field(ge=0)] = 0.0
     offset: Length = 0.0
-    range: tuple[float, float] | None = Field(None, description="[low, high] in m")
+    range: pair(float) | None = Field(None, description="[low, high] in m")
     quantization: Annotated[float, Field(ge=0)] = Field(0.0, description="resolution [m]")
     delay: NonNegTime = Field(0.0, description="processing delay of the record [s]")
 
@@ -599,10 +616,12 @@ class Line(Strict):
         "exact", description="exact mass conservation (default) or the textbook linear form"
     )
     web: Web
-    elements: Annotated[list[Element], Field(min_length=2)]
-    spans: list[Span]
-    sensors: list[Sensor] = Field(default_factory=list)
-    controllers: list[Controller] = Field(default_factory=list)
+    elements: Annotated[list[Element], Field(min_length=2, max_length=MAX_LINE_ITEMS)]
+    spans: Annotated[list[Span], Field(max_length=MAX_LINE_ITEMS)]
+    sensors: Annotated[list[Sensor], Field(max_length=MAX_LINE_ITEMS)] = Field(
+        default_factory=list)
+    controllers: Annotated[list[Controller], Field(max_length=MAX_LINE_ITEMS)] = Field(
+        default_factory=list)
 
     @model_validator(mode="after")
     def _cross_check(self):

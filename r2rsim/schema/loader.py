@@ -2,16 +2,22 @@
 
 from __future__ import annotations
 
+import codecs
 import json
+import os
 import re
+import stat
+import warnings
 from pathlib import Path
 from typing import Any
 
 import yaml
 from pydantic import ValidationError
 
-from ..errors import InputError
+from .. import limits
+from ..errors import InputError, PlausibilityWarning
 from ..units import QuantityError
+from . import plausibility
 from .faults import check_faults, target_problem
 from .line import Line, draw_problem, torque_problem
 from .scenario import Scenario
@@ -19,45 +25,285 @@ from .scenario import Scenario
 _CROSS = re.compile(r"^(?:Value error, )?@(?P<path>[^@]*)@ (?P<msg>.*)$", re.S)
 
 
-def read_yaml(path: str | Path) -> Any:
-    """Read a YAML file with the safe loader; errors become :class:`InputError`."""
-    path = Path(path)
+class _Problem(yaml.YAMLError):
+    """A refused YAML construct, reported without the "invalid YAML" prefix."""
+
+    def __init__(self, problem: str, mark=None):
+        super().__init__(problem)
+        self.problem = problem
+        self.problem_mark = mark
+
+
+_BaseLoader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml when it is there
+
+
+class _Loader(_BaseLoader):
+    """The safe loader (no Python objects, no code) with duplicate keys refused and integers
+    limited to :data:`r2rsim.limits.MAX_INT_CHARS` characters."""
+
+    def construct_mapping(self, node, deep=False):
+        if isinstance(node, yaml.MappingNode):
+            seen: dict = {}
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge" or not isinstance(
+                        key_node, yaml.ScalarNode):
+                    continue  # '<<' merges may be overridden; other keys fail as unhashable
+                key = self.construct_object(key_node)
+                try:
+                    first = seen.setdefault(key, key_node)
+                except TypeError:
+                    continue
+                if first is not key_node:
+                    raise _Problem(f"duplicate key '{key}' (first given at line "
+                                   f"{first.start_mark.line + 1}); give each key once",
+                                   key_node.start_mark)
+        return super().construct_mapping(node, deep=deep)
+
+    def construct_yaml_int(self, node):
+        if len(node.value) > limits.MAX_INT_CHARS:
+            raise _Problem(f"an integer of {len(node.value)} characters is too long (at most "
+                           f"{limits.MAX_INT_CHARS})", node.start_mark)
+        return super().construct_yaml_int(node)
+
+
+_Loader.add_constructor("tag:yaml.org,2002:int", _Loader.construct_yaml_int)
+# YAML 1.1 reads 1e-4 (no decimal point) as a string; YAML 1.2 and people read a number.
+# The models take no strings for plain numbers, so resolve it as a float here.
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"))
+
+_BOMS = ((codecs.BOM_UTF32_LE, "UTF-32"), (codecs.BOM_UTF32_BE, "UTF-32"),
+         (codecs.BOM_UTF16_LE, "UTF-16"), (codecs.BOM_UTF16_BE, "UTF-16"))
+_CONTROL = re.compile(r"[\x00-\x08\x0b\x0c\x0e-\x1f\x7f]")
+
+
+def _read_bytes(path: Path) -> bytes:
+    """The bytes of a regular file of at most :data:`r2rsim.limits.MAX_FILE_BYTES`.
+
+    Opened without blocking and checked with ``fstat`` on the open descriptor, so a FIFO, a
+    device (``/dev/zero`` reads forever) or a directory is refused before a byte is read.
+    """
+    file = str(path)
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0)
     try:
-        text = path.read_text(encoding="utf-8")
+        fd = os.open(path, flags)
     except FileNotFoundError:
-        raise InputError("file not found", file=str(path)) from None
+        raise InputError("file not found", file=file) from None
     except OSError as exc:
-        raise InputError(f"cannot read file ({exc.strerror})", file=str(path)) from None
+        raise InputError(f"cannot read file ({exc.strerror})", file=file) from None
     try:
-        data = yaml.safe_load(text)
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            kind = ("a directory" if stat.S_ISDIR(st.st_mode) else
+                    "a FIFO (named pipe)" if stat.S_ISFIFO(st.st_mode) else
+                    "a device" if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else
+                    "a socket" if stat.S_ISSOCK(st.st_mode) else "not a regular file")
+            raise InputError(f"is {kind}; line and scenario files must be regular files",
+                             file=file)
+        if st.st_size > limits.MAX_FILE_BYTES:
+            raise InputError(_too_big(st.st_size), file=file)
+        with os.fdopen(fd, "rb") as f:
+            fd = None
+            data = f.read(limits.MAX_FILE_BYTES + 1)
+    except OSError as exc:
+        raise InputError(f"cannot read file ({exc.strerror})", file=file) from None
+    finally:
+        if fd is not None:
+            os.close(fd)
+    if len(data) > limits.MAX_FILE_BYTES:  # it grew while being read
+        raise InputError(_too_big(len(data)), file=file)
+    return data
+
+
+def _too_big(size: int) -> str:
+    return (f"the file is {size} bytes, more than the limit of {limits.MAX_FILE_BYTES} bytes "
+            "(1 MiB; docs/security.md)")
+
+
+def _decode(data: bytes, file: str) -> str:
+    """UTF-8 text (a UTF-8 byte-order mark is dropped); anything else is refused, with the
+    line and column of the first byte that is not UTF-8."""
+    for bom, name in _BOMS:
+        if data.startswith(bom):
+            raise InputError(f"the file is {name} text; save it as UTF-8", file=file)
+    if data.startswith(codecs.BOM_UTF8):
+        data = data[len(codecs.BOM_UTF8):]
+    nul = data.find(b"\x00")
+    if nul >= 0:
+        raise InputError("the file contains NUL bytes (a binary file, or UTF-16 text without "
+                         "a byte-order mark?); save it as UTF-8 text", file=file,
+                         path=_where(data, nul))
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"not UTF-8 text: byte 0x{data[exc.start]:02x} cannot be read "
+                         "(Latin-1 or another encoding?); save the file as UTF-8", file=file,
+                         path=_where(data, exc.start)) from None
+
+
+def _where(data, offset: int) -> str:
+    """``line L, column C`` of a byte or character offset."""
+    nl = "\n" if isinstance(data, str) else b"\n"
+    line = data.count(nl, 0, offset) + 1
+    return f"line {line}, column {offset - (data.rfind(nl, 0, offset) + 1) + 1}"
+
+
+def _check_nesting(text: str) -> None:
+    """Refuse nesting deeper than :data:`r2rsim.limits.MAX_NESTING` from the parser's event
+    stream, before the composer (which recurses once per level, and crashes libyaml when
+    deep enough) builds anything."""
+    depth = 0
+    for ev in yaml.parse(text, Loader=_Loader):
+        if isinstance(ev, (yaml.SequenceStartEvent, yaml.MappingStartEvent)):
+            depth += 1
+            if depth > limits.MAX_NESTING:
+                raise _Problem(f"lists and mappings are nested more than "
+                               f"{limits.MAX_NESTING} levels deep", ev.start_mark)
+        elif isinstance(ev, (yaml.SequenceEndEvent, yaml.MappingEndEvent)):
+            depth -= 1
+
+
+def _check_values(data: Any, file: str) -> None:
+    """Walk the parsed data once, without recursion: refuse control characters (NUL,
+    escape...) in strings and keys, nesting deeper than :data:`r2rsim.limits.MAX_NESTING`
+    and data that expands to more than :data:`r2rsim.limits.MAX_VALUES` values (the text was
+    checked, but YAML aliases can nest data in itself or repeat it exponentially)."""
+
+    def path_of(entry) -> str | None:  # built only for a message: cheap walk, long paths
+        parts = []
+        while entry is not None and entry[3] is not None:
+            key = entry[3]
+            parts.append(f"[{key}]" if isinstance(key, int) else f".{key}")
+            entry = entry[2]
+        return "".join(reversed(parts)).lstrip(".") or None
+
+    stack = [(data, 0, None, None)]  # (node, depth, parent entry, key in the parent)
+    count = 0
+    while stack:
+        entry = stack.pop()
+        node, depth = entry[0], entry[1]
+        count += 1
+        if count > limits.MAX_VALUES:
+            raise InputError(f"the file expands to more than {limits.MAX_VALUES} values "
+                             "(YAML aliases that repeat other aliases?)", file=file)
+        if depth > limits.MAX_NESTING:
+            raise InputError(f"lists and mappings are nested more than {limits.MAX_NESTING} "
+                             "levels deep (through YAML aliases; one that refers to itself?)",
+                             file=file, path=path_of(entry[2]))
+        if isinstance(node, str):
+            m = _CONTROL.search(node)
+            if m:
+                raise InputError(f"the string contains the control character "
+                                 f"{m.group()!r} (NUL, escape and other control characters "
+                                 "are not allowed)", file=file, path=path_of(entry))
+        elif isinstance(node, dict):
+            for k, v in node.items():
+                if isinstance(k, str) and _CONTROL.search(k):
+                    raise InputError(f"the key {k!r} contains a control character", file=file,
+                                     path=path_of(entry))
+                stack.append((v, depth + 1, entry, k))
+        elif isinstance(node, list):
+            stack.extend((v, depth + 1, entry, i) for i, v in enumerate(node))
+
+
+def read_yaml(path: str | Path) -> Any:
+    """Read a YAML file with the safe loader; errors become :class:`InputError`.
+
+    The file must be a regular file of at most 1 MiB of UTF-8 text (:mod:`r2rsim.limits`);
+    duplicate keys, control characters in strings, nesting deeper than 32 levels and
+    integers longer than 100 characters are refused.
+    """
+    path = Path(path)
+    file = str(path)
+    text = _decode(_read_bytes(path), file)
+    try:
+        _check_nesting(text)
+        data = yaml.load(text, Loader=_Loader)  # noqa: S506 - a safe loader
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else None
-        problem = getattr(exc, "problem", None) or str(exc)
-        raise InputError(f"invalid YAML: {problem}", file=str(path), path=where) from None
+        if isinstance(exc, yaml.reader.ReaderError) or (
+                mark is None and isinstance(getattr(exc, "position", None), int)):
+            where = _where(text, exc.position)
+            ch = exc.character
+            problem = (f"unacceptable character U+{ch:04X} ({exc.reason})" if isinstance(ch, int)
+                       else f"unacceptable character {ch!r}")
+        else:
+            problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        prefix = "" if isinstance(exc, _Problem) else "invalid YAML: "
+        raise InputError(f"{prefix}{problem}", file=file, path=where) from None
+    except (RecursionError, MemoryError, ValueError, OverflowError) as exc:
+        raise InputError(f"invalid YAML: {str(exc).splitlines()[0] if str(exc) else exc!r}",
+                         file=file) from None
     if not isinstance(data, dict):
-        raise InputError("expected a mapping of keys at the top level", file=str(path))
+        raise InputError("expected a mapping of keys at the top level", file=file)
+    _check_values(data, file)
     return data
+
+
+# the tag pydantic puts in an error's location for the member of a union it tried: a model
+# name (CamelCase), a type (float, list[...]) or a validator (function-before[...])
+_UNION_LABEL = re.compile(r"^(?:[A-Z]\w*|float|int|str|bool|none|[\w-]+\[.*\])$", re.S)
+
+
+def _locate(loc: tuple, data: Any) -> tuple[str, int, tuple | None]:
+    """A pydantic location in the data: ``(yaml_path, depth, member)``. ``depth`` counts the
+    parts found in the data; ``member`` is ``(path, tag)`` of the first union member's tag
+    pydantic inserted (None when there is none)."""
+    out = ""
+    node = data
+    depth = 0
+    member = None
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+            if isinstance(node, list) and part < len(node):
+                node, depth = node[part], depth + 1
+            else:
+                node = None
+            continue
+        if isinstance(node, dict) and part in node:
+            out += ("." if out else "") + str(part)
+            node, depth = node[part], depth + 1
+        elif isinstance(node, dict) and node.get("type") == part:
+            continue  # discriminated-union tag: the one member tried, not an alternative
+        elif (node is not None and not isinstance(node, dict)) or (
+                isinstance(node, dict) and _UNION_LABEL.match(str(part))):
+            if member is None:  # the tag of a union member pydantic tried
+                member = (out, str(part))
+        else:
+            out += ("." if out else "") + str(part)
+            node = None
+    return out, depth, member
 
 
 def _yaml_path(loc: tuple, data: Any) -> str:
     """Turn a pydantic location into ``elements[2].roll.core_radius``, dropping union tags."""
-    out = ""
-    node = data
-    for part in loc:
-        if isinstance(part, int):
-            out += f"[{part}]"
-            node = node[part] if isinstance(node, list) and part < len(node) else None
-        else:
-            if isinstance(node, dict) and part in node:
-                out += ("." if out else "") + str(part)
-                node = node[part]
-            elif isinstance(node, dict) and part not in node and node.get("type") == part:
-                continue  # discriminated-union tag inserted by pydantic
-            else:
-                out += ("." if out else "") + str(part)
-                node = None
-    return out
+    return _locate(loc, data)[0]
+
+
+def _union_errors(errors: list[dict], data: Any) -> list[dict]:
+    """Of the union members that each reported errors for one value, keep the ones that got
+    furthest into the data, and of those the ones whose errors are not all plain type
+    mismatches: ``wound_in_strain: [0.001, .inf]`` is about the .inf (the list member), not
+    about a list not being a number (the scalar member)."""
+    info = [_locate(e["loc"], data) for e in errors]
+    unions: dict[str, dict[str, list[int]]] = {}
+    for i, (_, _, member) in enumerate(info):
+        if member is not None:
+            unions.setdefault(member[0], {}).setdefault(member[1], []).append(i)
+    drop: set[int] = set()
+    for members in unions.values():
+        depth = {tag: max(info[i][1] for i in idx) for tag, idx in members.items()}
+        best = [tag for tag in members if depth[tag] == max(depth.values())]
+        typed = {tag for tag in best
+                 if all(errors[i]["type"].endswith("_type") for i in members[tag])}
+        if len(typed) < len(best):
+            best = [tag for tag in best if tag not in typed]
+        drop |= {i for tag, idx in members.items() if tag not in best for i in idx}
+    return [e for i, e in enumerate(errors) if i not in drop]
 
 
 def _describe(err: dict) -> tuple[str, str | None]:
@@ -83,6 +329,22 @@ def _describe(err: dict) -> tuple[str, str | None]:
         return f"got {inp!r}, expected {ctx.get('expected')}", None
     if kind == "string_pattern_mismatch":
         return f"{inp!r} is not a valid id (letters, digits and '_', starting with a letter)", None
+    if kind == "finite_number":
+        return f"{inp} is not a finite number (.nan and .inf are not allowed)", None
+    if kind in ("float_type", "int_type", "bool_type", "float_parsing", "int_parsing",
+                "int_from_float"):
+        want = {"bool_type": "true or false", "int_type": "a whole number",
+                "int_parsing": "a whole number", "int_from_float": "a whole number"}.get(
+                    kind, "a number")
+        if isinstance(inp, bool):
+            return f"expected {want}, got {str(inp).lower()} (a boolean)", None
+        return f"expected {want}, got {inp!r}", None
+    if kind == "too_long":
+        n, most = ctx.get("actual_length"), ctx.get("max_length")
+        return (f"too many entries ({n}); at most {most} (docs/security.md)"
+                if n is not None else f"too many entries; at most {most}"), None
+    if kind == "recursion_loop":
+        return "the data refers to itself (a YAML alias inside its own anchor)", None
     msg = err["msg"]
     if msg.startswith("Value error, "):
         msg = msg[len("Value error, "):]
@@ -92,7 +354,7 @@ def _describe(err: dict) -> tuple[str, str | None]:
 def validation_errors(exc: ValidationError, data: Any) -> list[tuple[str, str]]:
     """All problems of a failed validation as ``[(yaml_path, message), ...]``."""
     out = []
-    for err in exc.errors():
+    for err in _union_errors(exc.errors(), data):
         msg, extra = _describe(err)
         m = _CROSS.match(msg)
         if m:
@@ -137,10 +399,11 @@ def load_line(source: str | Path | dict) -> Line:
     InputError
         Naming the file, the YAML path and the problem.
     """
-    if isinstance(source, dict):
-        return _validate(Line, source, "<line>")
-    data = read_yaml(source)
-    return _validate(Line, data, str(source))
+    file = "<line>" if isinstance(source, dict) else str(source)
+    data = source if isinstance(source, dict) else read_yaml(source)
+    line = _validate(Line, data, file)
+    _report(plausibility.line_problems(line), file)
+    return line
 
 
 def load_scenario(source: str | Path) -> tuple[Scenario, Line, Path]:
@@ -156,13 +419,38 @@ def load_scenario(source: str | Path) -> tuple[Scenario, Line, Path]:
     source = Path(source)
     data = read_yaml(source)
     scenario = _validate(Scenario, data, str(source))
-    line_path = (source.parent / scenario.line).resolve()
-    if not line_path.exists():
+    try:
+        line_path = (source.parent / scenario.line).resolve()
+        found = line_path.exists()
+    except (OSError, ValueError) as exc:
+        raise InputError(f"cannot use '{scenario.line}' as a path ({exc})", file=str(source),
+                         path="line") from None
+    if found and not line_path.is_file():  # a device (/dev/zero), FIFO or directory
+        raise InputError(f"'{scenario.line}' is not a regular file ({line_path}); a line file "
+                         "must be one", file=str(source), path="line")
+    if not found:
         raise InputError(f"line file '{scenario.line}' not found (looked at {line_path})",
                          file=str(source), path="line")
     line = load_line(line_path)
     check_scenario_against_line(scenario, line, str(source))
+    _report(plausibility.scenario_problems(scenario, line), str(source))
     return scenario, line, line_path
+
+
+def _report(problems: list[tuple[str, str, str]], file: str) -> None:
+    """Raise the plausibility errors (all of them in ``.problems``, for ``r2rsim validate``),
+    else issue the warnings as :class:`PlausibilityWarning`."""
+    errors = [(path, msg) for level, path, msg in problems if level == plausibility.ERROR]
+    if errors:
+        path, msg = errors[0]
+        if len(errors) > 1:
+            msg += f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''}; " \
+                   f"`r2rsim validate` lists them all)"
+        err = InputError(msg, file=file, path=path)
+        err.problems = errors
+        raise err
+    for _, path, msg in problems:
+        warnings.warn(PlausibilityWarning(msg, file=file, path=path), stacklevel=3)
 
 
 def check_scenario_against_line(scenario: Scenario, line: Line, file: str) -> None:
@@ -217,6 +505,8 @@ def check_scenario_against_line(scenario: Scenario, line: Line, file: str) -> No
 def check_disturbances(scenario, line, file: str) -> None:
     """Targets and values of the scenario's process disturbances."""
     eccentric_faults = {f.target for f in scenario.faults if f.type == "process.eccentricity"}
+    v_max = max((abs(s.line_speed) for s in scenario.programme if s.line_speed is not None),
+                default=0.0)
     ids = [e.id for e in line.elements]
     for i, d in enumerate(scenario.disturbances):
         where = f"disturbances[{i}]"
@@ -233,6 +523,13 @@ def check_disturbances(scenario, line, file: str) -> None:
                            "process.eccentricity fault; give it one or the other")
         elif d.type == "wound_in_strain" and e.type != "unwind":
             problem = f"wound_in_strain applies to an unwind; '{d.element}' is a {e.type}"
+        elif d.type == "wound_in_strain" and limits.wound_in_strain_points(
+                v_max, scenario.duration, d.correlation_length) > limits.MAX_SAMPLES:
+            raise InputError(f"a correlation length of {d.correlation_length:g} m needs a table "
+                             f"of more than {limits.MAX_SAMPLES:.0e} points (ten per "
+                             f"correlation length over the {v_max:g} m/s x "
+                             f"{scenario.duration:g} s of web of this run; docs/security.md)",
+                             file=file, path=f"{where}.correlation_length")
         elif d.type == "bearing_drag" and drive is not None and drive.type == "ideal_speed":
             problem = (f"'{d.element}' turns at an imposed speed (ideal_speed drive): a drag "
                        "torque would have no effect")

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Annotated
 
 from pydantic import BeforeValidator, WithJsonSchema
@@ -41,3 +42,19 @@ Dimensionless = _quantity("dimensionless")
 Stiffness = _quantity("stiffness")
 Damping = _quantity("damping")
 Acceleration = _quantity("acceleration")
+
+
+def number_or_text(value):
+    """Before-validator of a field that takes a number or a string (parsed later, with the
+    unit its context fixes): refuses booleans and non-finite numbers with one message,
+    before a union's members would each report their own."""
+    if isinstance(value, bool):
+        raise ValueError(f"expected a number or a string with units, got {str(value).lower()} "
+                         "(a boolean)")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ValueError(f"{value} is not a finite number (.nan and .inf are not allowed)")
+    return value
+
+
+#: a number (SI) or a string with units whose dimension is checked later
+NumberOrText = Annotated[float | str, BeforeValidator(number_or_text)]

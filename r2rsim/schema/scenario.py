@@ -11,10 +11,21 @@ from typing import Annotated, Literal
 
 from pydantic import Field, field_validator, model_validator
 
+from .. import limits
 from ..units import parse_quantity
 from .faults import Fault
 from .line import Id, Strict
-from .quantities import Acceleration, Dimensionless, Force, Frequency, Length, Speed, Time, Torque
+from .quantities import (
+    Acceleration,
+    Dimensionless,
+    Force,
+    Frequency,
+    Length,
+    NumberOrText,
+    Speed,
+    Time,
+    Torque,
+)
 
 
 class ProgrammeStep(Strict):
@@ -172,7 +183,7 @@ class Disturbance(Strict):
 
     type: Literal["bearing_drag", "wound_in_strain", "out_of_round"]
     element: Id
-    std: float | str | None = Field(
+    std: NumberOrText | None = Field(
         None, description="bearing_drag: torque [N m]; wound_in_strain: strain [1]")
     bandwidth: Annotated[Frequency, Field(gt=0)] | None = None
     correlation_length: Annotated[Length, Field(gt=0)] | None = None
@@ -199,25 +210,34 @@ class Disturbance(Strict):
 class Scenario(Strict):
     """An operating scenario for a line."""
 
-    name: str | None = None
+    name: Id | None = Field(
+        None, description="the run's name, an identifier (letters, digits and '_', starting "
+        "with a letter): it names the run id <name>__s<seed> and paths in the dataset; "
+        "default the file name")
     description: str | None = None
     line: str = Field(description="path of the line file, relative to the scenario file")
     duration: Annotated[Time, Field(gt=0)]
     record_rate: Annotated[Frequency, Field(gt=0)] = Field(1000.0, description="[Hz]")
-    seed: Annotated[int, Field(ge=0)] = 0
+    seed: Annotated[int, Field(ge=0, le=limits.MAX_SEED)] = Field(
+        0, description="root seed, 0 to 2**64 - 1")
     output: str | None = Field(
-        None, description="output directory (relative to the working directory); "
-        "default runs/<scenario name>"
+        None, description="output directory, relative to the scenario file and inside the "
+        "directory that holds it (-o writes anywhere); default runs/<scenario name> in the "
+        "working directory"
     )
     initial: Initial = Field(default_factory=Initial)
-    programme: list[ProgrammeStep] = Field(default_factory=list)
-    events: list[ScenarioEvent] = Field(default_factory=list)
+    programme: Annotated[list[ProgrammeStep], Field(max_length=limits.MAX_PROGRAMME_STEPS)] = \
+        Field(default_factory=list)
+    events: Annotated[list[ScenarioEvent], Field(max_length=limits.MAX_EVENTS)] = Field(
+        default_factory=list)
     solver: SolverOptions = Field(default_factory=SolverOptions)
     warmup: Annotated[Time, Field(ge=0)] = Field(
         0.0, description="initial period labelled 'warmup' in the dataset [s]"
     )
-    faults: list[Fault] = Field(default_factory=list)
-    disturbances: list[Disturbance] = Field(default_factory=list)
+    faults: Annotated[list[Fault], Field(max_length=limits.MAX_FAULTS)] = Field(
+        default_factory=list)
+    disturbances: Annotated[list[Disturbance], Field(max_length=limits.MAX_DISTURBANCES)] = \
+        Field(default_factory=list)
     split: Literal["train", "val", "test"] | SplitBySeed | None = Field(
         None, description="data split of the run: fixed, or {by: seed, train:, val:, test:}")
     expect: Expect = Field(default_factory=Expect,
@@ -225,6 +245,9 @@ class Scenario(Strict):
 
     @model_validator(mode="after")
     def _check(self):
+        size = limits.run_size_problem(self.duration, self.record_rate)
+        if size is not None:
+            raise ValueError(f"@{size[0]}@ {size[1]}")
         last = -1.0
         for i, step in enumerate(self.programme):
             if step.at < last:

@@ -23,7 +23,10 @@ import numpy as np
 
 from ..compile.compiler import EVENT_NAMES, CompiledLine
 from ..compile.layout import EV_BREAK, EV_CAPSTAN, EV_EMPTY, EV_SLACK
+from ..errors import InputError
+from ..limits import run_size_problem
 from ..schema.scenario import SolverOptions
+from .compilewatch import compile_seconds
 from .discrete import MODE_EVENTS, DiscreteLogic, Event
 
 TERMINAL = {EV_BREAK, EV_EMPTY}
@@ -421,6 +424,9 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
     from .initial import nominal_state
 
     s = settings or SolverSettings()
+    size = run_size_problem(duration, record_rate)  # before any array is sized by them
+    if size is not None:
+        raise InputError(size[1], path=size[0])
     wall0 = _time.perf_counter()
     if y0 is None:
         y0 = nominal_state(cl)
@@ -447,6 +453,7 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
          events, faults, backend, sample_t, wall0):
     logic = DiscreteLogic(cl, events, faults, duration)
     step_budget = s.max_steps_per_s * max(duration, 1.0)
+    compile0 = compile_seconds()
     prog_breaks = sorted(b for b in cl.programme.breakpoints if 0.0 < b < duration)
     rows_per_chunk = max(16, int(s.chunk_memory_mb * 1e6 / 8 / max(cl.n_states + len(
         cl.aux_names), 1)))
@@ -489,6 +496,19 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
     k_next = 0  # next sample index to emit
     terminated, reason, t_term = False, None, None
     restarts = 0
+    # A span that starts above its break tension breaks at once. Events are found as sign
+    # changes of their functions, and its break condition is true from t = 0 on, so no change
+    # would ever report it (a 20 kN start on a 10.5 kN web ran on, and later logged "web
+    # break" when the tension fell through the limit).
+    broken = [m for m in np.nonzero(flags)[0] if cl.event_kinds[m] == EV_BREAK]
+    if broken:
+        aux0 = cl.outputs(np.array([0.0]), y[None, :])[0]
+        for m in broken:
+            state, msg, vals = _message(cl, EV_BREAK, cl.event_components[m], True, aux0)
+            log.append(Event(0.0, EVENT_NAMES[EV_BREAK], cl.event_components[m], state,
+                             msg + " (above the break tension from the start)", vals))
+        k_next = _emit_samples(emit, sample_t, k_next, np.array([0.0]), y[None, :])
+        terminated, reason, t_term = True, EVENT_NAMES[EV_BREAK], 0.0
     # Event detection: normally on the solver's steps after each chunk (cheap, but the part
     # of the chunk after an event is integrated again). After a discrete change or an event
     # more events tend to follow (a splice joint crossing nodes, a dancer at its stops), so
@@ -529,7 +549,8 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
             resume = False
             restarts += 1
             if err is None:
-                err = _over_budget(s, backend.steps, step_budget, wall0, ts)
+                err = _over_budget(s, backend.steps, step_budget, wall0, ts,
+                                   compile_seconds() - compile0)
             if err is not None:
                 k_next = _emit_samples(emit, sample_t, k_next, tt, Y, k_end)
                 terminated, reason = True, f"solver_failure: {err}"
@@ -626,13 +647,14 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
 
 
 def _over_budget(s: SolverSettings, steps: int | None, step_budget: float, wall0: float,
-                 ts: np.ndarray) -> str | None:
-    """Why the run must stop now (its step or wall-clock budget is spent), or None."""
+                 ts: np.ndarray, compiled_s: float) -> str | None:
+    """Why the run must stop now (its step or wall-clock budget is spent), or None. The
+    wall-clock budget does not count ``compiled_s``, numba compiling (a cold cache)."""
     t = float(ts[-1]) if ts is not None and len(ts) else 0.0
     if steps is not None and steps > step_budget:
         return (f"step budget: {steps} steps by t = {t:.6g} s (solver.max_steps_per_s x "
                 f"duration = {step_budget:.3g})")
-    if s.max_wall_s is not None and _time.perf_counter() - wall0 > s.max_wall_s:
+    if s.max_wall_s is not None and _time.perf_counter() - wall0 > s.max_wall_s + compiled_s:
         return f"wall-clock budget: solver.max_wall_s = {s.max_wall_s:g} s spent by t = {t:.6g} s"
     return None
 

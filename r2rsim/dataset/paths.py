@@ -1,0 +1,285 @@
+"""Where the dataset writer may write, what it may replace and what it may clean up.
+
+Three rules keep ``r2rsim run`` from touching files it did not write:
+
+* every path the writer builds stays inside its temporary dataset directory
+  (:func:`inside`, :func:`safe_component`);
+* an existing output directory is replaced only if it is verifiably an r2rsim dataset
+  (:func:`dataset_problems` is empty: its ``manifest.json`` lists every file in it, with
+  sizes and sha256, and nothing else is there), and only when asked (``overwrite``);
+* a temporary directory ``.NAME.tmp-PID`` (or a dataset being replaced, ``.NAME.old-PID``)
+  left by a process that no longer exists is cleaned up on the next write into the same
+  parent directory (:func:`clean_stale`); nothing else is ever removed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+import shutil
+from pathlib import Path, PurePosixPath
+
+from ..errors import R2RError
+
+MANIFEST = "manifest.json"
+#: r2rsim's own temporaries next to a dataset: ``.NAME.tmp-PID`` while a run writes,
+#: ``.NAME.old-PID`` for the dataset an ``--overwrite`` run replaces, during the swap
+TEMP_RE = re.compile(r"^\.(?P<name>.+)\.(?P<kind>tmp|old)-(?P<pid>[1-9][0-9]{0,9})$")
+#: what the writer creates at the top of a temporary directory
+_TMP_TOP = {"samples", "scenario", "runs.parquet", "channels.parquet", "faults.parquet",
+            "events.parquet", MANIFEST}
+#: temporary directories in use by writers of this process (a process that reuses the PID
+#: of a dead one, as the first process of a container does, must still clean its leftovers)
+ACTIVE: set[Path] = set()
+
+
+def sha256_file(path: Path) -> str:
+    """Hex SHA-256 of a file, read in 1 MiB blocks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def safe_component(name: str) -> bool:
+    """Whether ``name`` can be used as one directory or file name: not empty, not ``.`` or
+    ``..``, no path separator and no NUL."""
+    return (isinstance(name, str) and name not in ("", ".", "..")
+            and not any(c in name for c in "/\\\0"))
+
+
+def inside(base: Path, rel: str | Path) -> Path:
+    """``base / rel``, checked to stay inside ``base`` once resolved.
+
+    Parameters
+    ----------
+    base : Path
+        The directory everything must stay in (the writer's temporary directory).
+    rel : str or Path
+        A path relative to ``base``.
+
+    Returns
+    -------
+    Path
+        The resolved path.
+
+    Raises
+    ------
+    R2RError
+        If the path resolves to ``base`` itself or to anywhere outside it (``..``
+        components, an absolute path, a symbolic link that leads out).
+    """
+    root = Path(base).resolve()
+    path = (root / rel).resolve()
+    if path == root or not path.is_relative_to(root):
+        raise R2RError(f"refusing to write '{rel}': it resolves to {path}, outside the "
+                       f"dataset directory {base}")
+    return path
+
+
+def _relpath_problem(rel: object) -> str | None:
+    """Why a manifest key cannot be a file of the dataset (None: it can)."""
+    if not isinstance(rel, str) or not rel:
+        return "which is not a relative path"
+    p = PurePosixPath(rel)
+    if p.is_absolute():
+        return "an absolute path outside the dataset"
+    if any(part in ("", ".", "..") for part in rel.split("/")) or "\\" in rel or "\0" in rel:
+        return "a path that leaves the dataset or is not normalised"
+    if rel == MANIFEST:
+        return "the manifest itself"
+    return None
+
+
+def read_manifest(root: Path) -> tuple[dict | None, str | None]:
+    """``(manifest, None)`` or ``(None, why it is not an r2rsim manifest)``."""
+    mpath = Path(root) / MANIFEST
+    if mpath.is_symlink() or not mpath.is_file():
+        return None, "no manifest.json"
+    try:
+        manifest = json.loads(mpath.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        return None, f"manifest.json is not readable JSON ({exc})"
+    if not isinstance(manifest, dict) or not isinstance(manifest.get("files"), dict) \
+            or "schema_version" not in manifest:
+        return None, "manifest.json is not an r2rsim manifest (no schema_version and files)"
+    return manifest, None
+
+
+def dataset_problems(root: str | Path, *, hashes: bool = True) -> list[str]:
+    """Why the directory ``root`` is not verifiably a dataset written by r2rsim.
+
+    The rule: ``manifest.json`` is an r2rsim manifest; every regular file under ``root``
+    except the manifest is listed in it with its size in bytes (and, with ``hashes``, its
+    sha256); every listed file is there; there are no symbolic links, special files or
+    directories without a listed file, and no listed path leaves ``root``.
+
+    Parameters
+    ----------
+    root : str or Path
+    hashes : bool
+        Also compare each file's sha256 (reads every byte; the sizes are always compared).
+
+    Returns
+    -------
+    list of str
+        The problems, each naming the file relative to ``root``; empty when ``root`` is a
+        dataset exactly as r2rsim wrote it.
+    """
+    root = Path(root)
+    manifest, why = read_manifest(root)
+    if manifest is None:
+        return [why]
+    problems: list[str] = []
+    listed: dict[str, dict] = {}
+    for rel, info in manifest["files"].items():
+        bad = _relpath_problem(rel)
+        if bad is None and not isinstance(info, dict):
+            bad = "without its sha256 and size"
+        if bad:
+            problems.append(f"manifest.json lists '{rel}', {bad}")
+        else:
+            listed[rel] = info
+    present: dict[str, Path] = {}
+    dirs: list[str] = []
+    # os.walk does not follow symbolic links to directories; they are reported below
+    for dirpath, dirnames, filenames in os.walk(root):
+        here = Path(dirpath)
+        for name in [*dirnames, *filenames]:
+            p = here / name
+            rel = p.relative_to(root).as_posix()
+            if p.is_symlink():
+                problems.append(f"{rel}: a symbolic link (r2rsim writes none)")
+            elif p.is_dir():
+                dirs.append(rel)
+            elif rel == MANIFEST:
+                continue
+            elif not p.is_file():
+                problems.append(f"{rel}: not a regular file")
+            elif rel not in listed:
+                problems.append(f"{rel}: not listed in manifest.json")
+            else:
+                present[rel] = p
+    for d in dirs:
+        if not any(rel.startswith(d + "/") for rel in present):
+            problems.append(f"{d}/: a directory with no file listed in manifest.json")
+    for rel, info in listed.items():
+        p = present.get(rel)
+        if p is None:
+            if not (root / rel).is_symlink():
+                problems.append(f"{rel}: listed in manifest.json but missing")
+            continue
+        size = p.stat().st_size
+        if size != info.get("bytes"):
+            problems.append(f"{rel}: checksum differs from manifest.json (so does its size: "
+                            f"{size} bytes, not {info.get('bytes')})")
+        elif hashes and sha256_file(p) != info.get("sha256"):
+            problems.append(f"{rel}: checksum differs from manifest.json")
+    return problems
+
+
+def remove_dataset(root: Path) -> None:
+    """Remove a dataset that :func:`dataset_problems` has just found clean: the files its
+    manifest lists, the manifest, then the directories that are left empty. Anything that
+    appeared in the meantime stays (with the directories holding it)."""
+    root = Path(root)
+    manifest, _ = read_manifest(root)
+    for rel in (manifest or {}).get("files", {}):
+        if _relpath_problem(rel) is None:
+            (root / rel).unlink(missing_ok=True)
+    (root / MANIFEST).unlink(missing_ok=True)
+    for dirpath, _, _ in os.walk(root, topdown=False):
+        try:
+            os.rmdir(dirpath)
+        except OSError:
+            pass  # not empty: something r2rsim did not write
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether a process with this id exists (one of another user counts)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError, ValueError):
+        return True  # exists but is not ours, or no valid pid: leave its files alone
+    return True
+
+
+def _looks_like_tmp(path: Path) -> bool:
+    """Whether a directory holds nothing but what the writer puts in its temporary
+    directory (so a foreign ``.x.tmp-123`` directory is never removed)."""
+    for dirpath, dirnames, filenames in os.walk(path):
+        here = Path(dirpath)
+        rel = here.relative_to(path).parts
+        for name in [*dirnames, *filenames]:
+            p = here / name
+            if p.is_symlink():
+                return False
+            if not rel:
+                ok = name in _TMP_TOP and p.is_dir() == (name in ("samples", "scenario"))
+            elif rel == ("samples",):
+                ok = name.startswith("run_id=") and p.is_dir()
+            elif rel[0] == "samples" and len(rel) == 2 or rel == ("scenario",):
+                ok = p.is_file()
+            else:
+                ok = False
+            if not ok:
+                return False
+    return True
+
+
+def _owner_gone(pid: int, path: Path) -> bool:
+    if pid == os.getpid():  # this process: stale unless one of its writers uses it
+        return path.resolve() not in ACTIVE
+    return not pid_alive(pid)
+
+
+def clean_stale(parent: str | Path) -> list[Path]:
+    """Clean up after r2rsim runs in ``parent`` whose process is gone (killed, power cut).
+
+    * ``.NAME.tmp-PID``: a run's unfinished dataset. Removed if it holds only what the
+      writer writes there.
+    * ``.NAME.old-PID``: a dataset that ``--overwrite`` was replacing. Moved back to
+      ``NAME`` if ``NAME`` does not exist (the swap did not finish), else removed if it is
+      verifiably an r2rsim dataset.
+
+    Directories of live processes, and anything else, are left alone.
+
+    Returns
+    -------
+    list of Path
+        What was removed or restored.
+    """
+    parent = Path(parent)
+    done: list[Path] = []
+    try:
+        entries = list(os.scandir(parent))
+    except OSError:
+        return done
+    for e in entries:
+        m = TEMP_RE.match(e.name)
+        if m is None or not e.is_dir(follow_symlinks=False):
+            continue
+        path = Path(e.path)
+        if not _owner_gone(int(m["pid"]), path):
+            continue
+        try:
+            if m["kind"] == "tmp":
+                if _looks_like_tmp(path):
+                    shutil.rmtree(path)
+                    done.append(path)
+                continue
+            target = parent / m["name"]
+            if not target.exists() and not target.is_symlink():
+                os.rename(path, target)
+                done.append(target)
+            elif not dataset_problems(path):
+                remove_dataset(path)
+                done.append(path)
+        except OSError:
+            pass  # another process got there first, or no permission: not ours to force
+    return done
