@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
-from pydantic import BeforeValidator, Field, model_validator
+from pydantic import BeforeValidator, Discriminator, Field, Tag, model_validator
 
 from ..errors import InputError
 from ..units import QuantityError, parse_quantity
@@ -136,7 +136,18 @@ class Choice(Strict):
     choice: list[NumberOrText] = Field(min_length=1, max_length=1000)
 
 
-Sampled = Uniform | LogUniform | Choice
+def _sampled_kind(value) -> str | None:
+    """Which distribution a mapping names (its one key), for the tagged union below."""
+    if isinstance(value, dict):
+        return next((k for k in ("uniform", "loguniform", "choice") if k in value), None)
+    return {Uniform: "uniform", LogUniform: "loguniform", Choice: "choice"}.get(type(value))
+
+
+# Tagged by the distribution's key, so each form is validated once: an untagged union of
+# strict models is tried strictly first, and before pydantic 2.11 the [low, high] list of
+# `uniform` then failed (a list is no tuple in strict mode) with a misleading message.
+Sampled = Annotated[Annotated[Uniform, Tag("uniform")] | Annotated[LogUniform, Tag("loguniform")]
+                    | Annotated[Choice, Tag("choice")], Discriminator(_sampled_kind)]
 
 
 class Profile(Strict):

@@ -36,10 +36,15 @@ from .quantities import (
 )
 
 
+def _list_to_tuple(value):
+    return tuple(value) if isinstance(value, list) else value
+
+
 def pair(item):
     """``[a, b]`` of two ``item`` values: a YAML list is accepted for the tuple (the items
-    stay strict)."""
-    return Annotated[tuple[item, item], Field(strict=False)]
+    stay strict). The list is turned into a tuple before validation: ``Field(strict=False)``
+    alone is not honoured inside a union before pydantic 2.11."""
+    return Annotated[tuple[item, item], BeforeValidator(_list_to_tuple)]
 
 
 Id = Annotated[str, Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$", max_length=64)]
