@@ -157,6 +157,7 @@ def test_shipped_radau5_scenario_runs_reproducibly(tmp_path, repo, capsys):
         assert main(["run", str(scen), "-o", str(out), "--duration", "5", "-q"]) == 0
         runs = pq.read_table(out / "runs.parquet").to_pylist()[0]
         assert "Radau IIA" in runs["solver"] and "rtol=1e-06" in runs["solver"]
+        assert runs["ended_as_expected"]  # its step and wall-clock budgets are not hit
         assert not runs["terminated"]
         tables.append(pq.read_table(next((out / "samples").glob("*/part-0.parquet"))))
     assert tables[0].num_rows == 2501  # 5 s at 500 Hz
