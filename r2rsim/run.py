@@ -39,6 +39,12 @@ from .solve import Event, nominal_state, simulate, steady_state
 from .solve.compilewatch import compile_seconds
 
 
+def ended_as_expected(terminated: bool, reason: str | None, expected, nonfinite_t) -> bool:
+    """A run reached its duration, or ended early in a way its scenario's
+    ``expect.termination`` lists, with finite states (a solver failure never is expected)."""
+    return nonfinite_t is None and (not terminated or reason in expected)
+
+
 @dataclass
 class RunSummary:
     """What ``r2rsim run`` reports at the end."""
@@ -68,9 +74,8 @@ class RunSummary:
         """The run ended as its scenario meant: it reached its duration, or it ended early
         in a way the scenario's ``expect.termination`` lists. A solver failure and states
         that are not finite never are. ``r2rsim run`` exits 1 when this is False."""
-        if self.nonfinite_t is not None:
-            return False
-        return not self.terminated or self.termination_reason in self.expected_terminations
+        return ended_as_expected(self.terminated, self.termination_reason,
+                                 self.expected_terminations, self.nonfinite_t)
 
     def format(self) -> str:
         lines = [f"dataset      {self.output}",
@@ -370,9 +375,9 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
             "simulated_s": [float(sim_end)],
             "nonfinite_from_t_s": pa.array([nonfinite_t[0] if nonfinite_t else None],
                                            pa.float64()),
-            "ended_as_expected": [not nonfinite_t and (not res.terminated or
-                                                      res.termination_reason
-                                                      in scenario.expect.termination)],
+            "ended_as_expected": [ended_as_expected(
+                res.terminated, res.termination_reason, scenario.expect.termination,
+                nonfinite_t[0] if nonfinite_t else None)],
             "initial_state": [init_mode], "solver": [res.stats["solver"]],
             "rhs_evaluations": pa.array([res.stats["nfev"]], pa.int64()),
             "r2rsim_version": [__version__], "python_version": [platform.python_version()],
