@@ -135,6 +135,53 @@ def _cmd_run(args) -> int:
     return 0
 
 
+def _cmd_sweep(args) -> int:
+    from .sweep import run_sweep
+
+    bar = None
+    progress = None
+    if sys.stderr.isatty() and not args.quiet:
+        from tqdm import tqdm
+
+        def progress(n, total, rec):
+            nonlocal bar
+            if bar is None:
+                bar = tqdm(total=total, unit="run", desc="sweep", leave=False)
+            if rec is not None:
+                bar.update(1)
+    try:
+        previous = signal.signal(signal.SIGTERM, _raise_terminated)
+        installed = True
+    except ValueError:  # not the main thread
+        installed = False
+    try:
+        try:
+            summary = run_sweep(args.sweep, output=args.output, workers=args.workers,
+                                scheduler=args.scheduler, retry_failed=args.retry_failed,
+                                overwrite=args.overwrite, progress=progress)
+        finally:
+            if bar is not None:
+                bar.close()
+            if installed:
+                signal.signal(signal.SIGTERM,
+                              previous if previous is not None else signal.SIG_DFL)
+    except KeyboardInterrupt as exc:
+        what = "terminated (SIGTERM)" if isinstance(exc, Terminated) else "interrupted"
+        print(f"{what}; the finished runs are kept: run the same command again to continue",
+              file=sys.stderr)
+        return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
+    for w in summary.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    print(summary.format())
+    if not summary.ok:
+        n = summary.failed + summary.skipped_failed
+        print(f"error: {n} run{'s' if n != 1 else ''} of the sweep failed (listed above; "
+              f"failures.parquet, runs.parquet termination_reason); the others are written. "
+              f"--retry-failed runs them again", file=sys.stderr)
+        return EXIT_FAILURE
+    return 0
+
+
 def _parse_params(items: list[str], cls) -> dict:
     """``k=v`` pairs; values are YAML scalars or lists (``alpha=0.01``, ``lags=3``)."""
     import yaml
@@ -247,6 +294,12 @@ def _cmd_validate(args) -> int:
             if "elements" in data:
                 load_line(path)
                 kind = "line"
+            elif "axes" in data or ("scenario" in data and "line" not in data):
+                from .sweep import plan_sweep
+
+                plan = plan_sweep(path)
+                kind = (f"sweep ({len(plan.runs)} runs: {plan.n_combinations} combinations x "
+                        f"{len(plan.seeds)} seeds)")
             else:
                 load_scenario(path)
                 kind = "scenario"
@@ -382,12 +435,32 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=_cmd_run)
 
-    v = sub.add_parser("validate", help="check line and scenario files, list every problem")
+    sw = sub.add_parser("sweep", help="run a sweep file (a base scenario x axes x seeds) "
+                        "into one dataset; continues an unfinished one")
+    sw.add_argument("sweep")
+    sw.add_argument("-o", "--output", help="dataset directory (default: the sweep's output, "
+                    "else runs/NAME); a directory holding this sweep is continued")
+    sw.add_argument("--workers", type=int, help="worker processes (default: the number of "
+                    "cores; 0: in this process)")
+    sw.add_argument("--scheduler", metavar="ADDRESS", help="run on a Dask cluster: a "
+                    "scheduler address, or 'local' to start a LocalCluster of --workers "
+                    "processes (needs r2rsim[dask])")
+    sw.add_argument("--retry-failed", action="store_true",
+                    help="run again the runs that failed before")
+    sw.add_argument("--overwrite", action="store_true",
+                    help="replace a finished r2rsim dataset at the output (never a directory "
+                    "holding other files)")
+    sw.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    sw.set_defaults(func=_cmd_sweep)
+
+    v = sub.add_parser("validate", help="check line, scenario and sweep files and datasets, "
+                       "list every problem")
     v.add_argument("files", nargs="+")
     v.set_defaults(func=_cmd_validate)
 
-    s = sub.add_parser("schema", help="print the JSON Schema of a line or scenario file")
-    s.add_argument("kind", choices=["line", "scenario"])
+    s = sub.add_parser("schema", help="print the JSON Schema of a line, scenario or sweep "
+                       "file")
+    s.add_argument("kind", choices=["line", "scenario", "sweep"])
     s.set_defaults(func=_cmd_schema)
 
     d = sub.add_parser("diagnose", help="fit a diagnostic plug-in on healthy runs, score "

@@ -104,3 +104,11 @@ def wound_in_strain_points(v_max: float, duration: float, correlation_length: fl
     held in memory, so it is bounded like the samples (:data:`MAX_SAMPLES`)."""
     dx = correlation_length / 10.0
     return (1.5 * v_max * duration + 10.0 * correlation_length) / dx + 2
+
+#: Most runs in one sweep: 100 000 (combinations x seeds). The Tennessee Eastman sets have
+#: 500 runs per fault; 100 000 short runs is days of CPU on one machine, and every run is a
+#: row of runs.parquet and a directory of samples/. Checked before anything is validated.
+MAX_SWEEP_RUNS = 100_000
+
+#: Most values of one sweep axis (a list or a range): 10 000.
+MAX_AXIS_VALUES = 10_000

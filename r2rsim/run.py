@@ -151,6 +151,96 @@ def _scenario_output(scenario_path: Path, output: str) -> Path:
     return base / output
 
 
+@dataclass
+class RunPlan:
+    """A validated scenario and line, ready to simulate (what :func:`run_scenario` reads
+    from the files; a sweep builds one per run from its overrides).
+
+    Attributes
+    ----------
+    scenario, line
+        The validated models (SI).
+    name : str
+        The scenario's name (the run id is ``<name>__s<seed>`` unless given).
+    source : str
+        The scenario file, for messages.
+    scenario_sha256 : str
+        Hash of what defines the run (the scenario and line texts, or a sweep run's
+        configuration).
+    files : dict
+        Text files copied into the dataset (relative path -> text).
+    manifest : dict
+        Extra keys of the dataset's manifest.json.
+    line_config : str
+        What runs.parquet calls the line when it has no name (the line file's stem).
+    """
+
+    scenario: object
+    line: object
+    name: str
+    source: str
+    scenario_sha256: str
+    files: dict[str, str] = field(default_factory=dict)
+    manifest: dict = field(default_factory=dict)
+    line_config: str = ""
+
+
+def plan_from_file(scenario_path: str | Path, seed: int | None = None,
+                   duration: float | None = None) -> RunPlan:
+    """Load a scenario file (and its line) into a :class:`RunPlan`, with ``--seed`` and
+    ``--duration`` applied.
+
+    Raises
+    ------
+    InputError
+        For any problem with the files or the overrides.
+    """
+    scenario_path = Path(scenario_path)
+    _refuse_line_file(scenario_path)
+    scenario, line, line_path = load_scenario(scenario_path)
+    if duration is not None:
+        if not duration > 0:
+            raise InputError(f"--duration must be > 0, got {duration:g}")
+        size = run_size_problem(duration, scenario.record_rate)
+        if size is not None:  # the same limits as the file's duration (r2rsim.limits)
+            raise InputError(f"--duration with record_rate {scenario.record_rate:g} Hz: "
+                             f"{size[1]}", file=str(scenario_path))
+        scenario.duration = duration
+    if seed is not None:
+        if not 0 <= seed <= MAX_SEED:
+            raise InputError(f"--seed must be >= 0, got {seed}" if seed < 0 else
+                             f"--seed must be at most 2**64 - 1 = {MAX_SEED}, got {seed}")
+        scenario.seed = seed
+    name = scenario.name or _name_from_stem(scenario_path)
+    scenario_text = scenario_path.read_text(encoding="utf-8")
+    line_text = line_path.read_text(encoding="utf-8")
+    # the two copies must not overwrite each other (a.yaml next to lines/a.yaml)
+    line_copy = (line_path.name if line_path.name != scenario_path.name
+                 else f"line.{line_path.name}")
+    files = {f"scenario/{scenario_path.name}": scenario_text,
+             f"scenario/{line_copy}": line_text,
+             f"scenario/{name}.normalised.yaml":
+                 yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=True)}
+    sha = hashlib.sha256((scenario_text + "\0" + line_text).encode()).hexdigest()
+    return RunPlan(scenario, line, name, str(scenario_path), sha, files,
+                   {"scenario": scenario_path.name, "line": line_copy}, line_path.stem)
+
+
+def sample_columns(scenario, line) -> tuple[str, ...]:
+    """The columns the samples of a run of ``scenario`` on ``line`` will have, without
+    simulating (compiles the line: ~1 ms once numba's kernels are loaded). A sweep checks
+    with it that all its runs fit one dataset."""
+    prog = Programme.from_steps(line, scenario.programme)
+    disturbances = realise_disturbances(scenario, line, np.random.SeedSequence(0))
+    cl = compile_line(line, prog, scenario.faults, disturbances)
+    cols = []
+    for s in cl.sensors:
+        meas, true, _ = channel_names(cl, s)
+        cols += [meas, true] + ([f"flag.{s.id}.clipped"] if s.range is not None else [])
+    cols += [c["column"] for c in true_state_columns(cl)]
+    return tuple(cols)
+
+
 def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
                  seed: int | None = None, duration: float | None = None,
                  progress=None, overwrite: bool = False) -> RunSummary:
@@ -184,28 +274,47 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
     """
     scenario_path = Path(scenario_path)
     compile0 = compile_seconds()
-    _refuse_line_file(scenario_path)
-    scenario, line, line_path = load_scenario(scenario_path)
-    if duration is not None:
-        if not duration > 0:
-            raise InputError(f"--duration must be > 0, got {duration:g}")
-        size = run_size_problem(duration, scenario.record_rate)
-        if size is not None:  # the same limits as the file's duration (r2rsim.limits)
-            raise InputError(f"--duration with record_rate {scenario.record_rate:g} Hz: "
-                             f"{size[1]}", file=str(scenario_path))
-        scenario.duration = duration
-    if seed is not None:
-        if not 0 <= seed <= MAX_SEED:
-            raise InputError(f"--seed must be >= 0, got {seed}" if seed < 0 else
-                             f"--seed must be at most 2**64 - 1 = {MAX_SEED}, got {seed}")
-        scenario.seed = seed
-    name = scenario.name or _name_from_stem(scenario_path)
+    plan = plan_from_file(scenario_path, seed, duration)
+    scenario = plan.scenario
     out = (Path(output) if output is not None else
            _scenario_output(scenario_path, scenario.output) if scenario.output is not None
-           else Path(f"runs/{name}"))
+           else Path(f"runs/{plan.name}"))
+    return execute(plan, out, progress=progress, overwrite=overwrite, compile0=compile0)
+
+
+def execute(plan: RunPlan, out: str | Path, *, run_id: str | None = None, progress=None,
+            overwrite: bool = False, run_columns: dict | None = None,
+            compile0: float | None = None, clean_stale: bool = True) -> RunSummary:
+    """Simulate a :class:`RunPlan` and write its dataset at ``out``.
+
+    Parameters
+    ----------
+    plan : RunPlan
+    out : str or Path
+        The dataset directory (:func:`r2rsim.dataset.writer.check_output` rules).
+    run_id : str, optional
+        Default ``<name>__s<seed>``.
+    progress : callable, optional
+        ``progress(t, duration)``.
+    overwrite : bool
+        Replace an r2rsim dataset at ``out``.
+    run_columns : dict, optional
+        Extra columns of the run's row of runs.parquet (name -> one-element pyarrow array).
+    compile0 : float, optional
+        :func:`r2rsim.solve.compilewatch.compile_seconds` when the work began.
+    clean_stale : bool
+        Let the dataset writer clean up dead processes' temporaries next to ``out``.
+
+    Returns
+    -------
+    RunSummary
+    """
+    out = Path(out)
+    compile0 = compile_seconds() if compile0 is None else compile0
+    scenario, line, name = plan.scenario, plan.line, plan.name
     check_output(out, overwrite)  # before the work: refuse early what commit would refuse
 
-    prog = Programme.from_steps(line, scenario.programme, file=str(scenario_path))
+    prog = Programme.from_steps(line, scenario.programme, file=plan.source)
     root = np.random.SeedSequence(scenario.seed)
     ss_process, ss_meas, ss_faults = root.spawn(3)
     disturbances = realise_disturbances(scenario, line, ss_process)
@@ -224,25 +333,23 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
         else:
             y0, init_mode = y_nom, "nominal (no steady state at the t = 0 set-points)"
             run_warnings.append(
-                f"{scenario_path}: initial.state: steady was asked for, but no steady state "
+                f"{plan.source}: initial.state: steady was asked for, but no steady state "
                 "was found at the t = 0 set-points (is the line at rest, or are span tensions "
                 "not held by any loop or draw?); the run starts from the nominal state")
     else:
         y0 = y_nom
 
-    scenario_text = scenario_path.read_text(encoding="utf-8")
-    line_text = line_path.read_text(encoding="utf-8")
-    scenario_sha = hashlib.sha256((scenario_text + "\0" + line_text).encode()).hexdigest()
-    run_id = f"{name}__s{scenario.seed}"
+    scenario_sha = plan.scenario_sha256
+    run_id = run_id or f"{name}__s{scenario.seed}"
     meta = {"r2rsim.schema_version": "0.1", "r2rsim.version": __version__,
             "r2rsim.scenario_sha256": scenario_sha, "r2rsim.root_seed": str(scenario.seed)}
     sensor_chan = {s.id: channel_names(cl, s)[0][len("meas."):] for s in cl.sensors}
-    faults = realise_faults(scenario, line, ss_faults, str(scenario_path),
+    faults = realise_faults(scenario, line, ss_faults, plan.source,
                             channel_of=lambda sid: f"meas.{sensor_chan[sid]}")
     rate = scenario.record_rate
     fault_rows = [f.record(run_id, int(math.ceil(f.onset * rate - 1e-9))) for f in faults]
     modes = [(st.at, st.mode) for st in scenario.programme if st.mode is not None]
-    writer = DatasetWriter(out, run_id, meta, overwrite=overwrite)
+    writer = DatasetWriter(out, run_id, meta, overwrite=overwrite, clean=clean_stale)
     try:
         meas = MeasurementModel(cl, rate, ss_meas, faults)
         cols = true_state_columns(cl)
@@ -361,7 +468,7 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
                                                          ("measurement", pa.uint64()),
                                                          ("fault_sampling", pa.uint64())])),
             "split": pa.array([scenario.split_of(scenario.seed)], pa.string()),
-            "line_config": [line.name or line_path.stem],
+            "line_config": [line.name or plan.line_config],
             "operating_mode": pa.array(["+".join(dict.fromkeys(m for _, m in modes)) or None],
                                        pa.string()),
             "modes_json": [json.dumps(modes)],
@@ -383,17 +490,14 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
             "r2rsim_version": [__version__], "python_version": [platform.python_version()],
             "numpy_version": [np.__version__], "wallclock_s": [wall],
         })
+        for col, arr in (run_columns or {}).items():
+            runs = runs.append_column(col, arr)
         writer.write_table("runs", runs)
-        # the two copies must not overwrite each other (a.yaml next to lines/a.yaml)
-        line_copy = (line_path.name if line_path.name != scenario_path.name
-                     else f"line.{line_path.name}")
-        writer.write_text(f"scenario/{scenario_path.name}", scenario_text)
-        writer.write_text(f"scenario/{line_copy}", line_text)
-        writer.write_text(f"scenario/{name}.normalised.yaml",
-                          yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=True))
+        for rel, text in plan.files.items():
+            writer.write_text(rel, text)
         path = writer.commit({"run_ids": [run_id], "scenario_sha256": scenario_sha,
-                              "root_seed": scenario.seed, "scenario": scenario_path.name,
-                              "line": line_copy}, check=validate_dataset)
+                              "root_seed": scenario.seed, **plan.manifest},
+                             check=validate_dataset)
     except BaseException:
         writer.abort()
         raise

@@ -487,3 +487,25 @@ def _parse_string(text: str, dimension: str, example: str) -> float:
             f"{dimension.replace('_', ' ')} (e.g. '{example}')"
         )
     return out
+
+
+def parse_any(text: str) -> tuple[float, dict]:
+    """Read a quantity string of any dimension: ``(value in SI units, dimensions)``, the
+    dimensions as ``{"[length]": 1, "[time]": -1}`` (empty for a plain number).
+
+    Raises
+    ------
+    QuantityError
+        If the string does not follow the grammar of this module or is not finite.
+    """
+    text = text.strip()
+    if len(text) > MAX_CHARS:
+        raise QuantityError(f"cannot read {_shown(text)!r} as a quantity (longer than "
+                            f"{MAX_CHARS} characters)")
+    try:
+        out, dims = _parse_text(text)
+    except _Unreadable as exc:
+        raise QuantityError(f"cannot read {_shown(text)!r} as a quantity ({exc})") from None
+    if not math.isfinite(out):
+        raise QuantityError(f"{text!r} is not a finite number")
+    return out, dims

@@ -142,6 +142,9 @@ class DatasetWriter:
         String key-value metadata stored in every Parquet file (``r2rsim.*`` keys).
     overwrite : bool
         Replace an existing r2rsim dataset at ``output``.
+    clean : bool
+        Clean up the temporaries of dead processes next to ``output`` first
+        (:func:`r2rsim.dataset.paths.clean_stale`); a sweep does it once for all its runs.
 
     Raises
     ------
@@ -152,7 +155,7 @@ class DatasetWriter:
     """
 
     def __init__(self, output: Path, run_id: str, metadata: dict[str, str], *,
-                 overwrite: bool = False):
+                 overwrite: bool = False, clean: bool = True):
         self.output = Path(output)
         self.overwrite = overwrite
         if not safe_component(run_id) or not safe_component(self.output.name):
@@ -175,7 +178,7 @@ class DatasetWriter:
         while not p.exists() and p != p.parent:
             self._made.append(p)
             p = p.parent
-        if not self._made:
+        if not self._made and clean:
             clean_stale(self.output.parent)
         if self.tmp.resolve() in ACTIVE:
             raise R2RError(f"another writer of this process is writing {self.output}")
@@ -186,7 +189,6 @@ class DatasetWriter:
         ACTIVE.add(self.tmp.resolve())
         self._samples = inside(self.tmp, f"samples/run_id={run_id}/part-0.parquet")
         self._samples.parent.mkdir(parents=True)
-        inside(self.tmp, "scenario").mkdir()
 
     def write_chunk(self, columns: dict[str, np.ndarray]) -> None:
         """Append one chunk of samples (same columns in the same order every time)."""

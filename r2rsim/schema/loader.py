@@ -381,13 +381,15 @@ def _validate(model, data: Any, file: str):
         raise err from None
 
 
-def load_line(source: str | Path | dict) -> Line:
+def load_line(source: str | Path | dict, file: str | None = None) -> Line:
     """Load and validate a line.
 
     Parameters
     ----------
     source : str, Path or dict
         Path of a line YAML file, or the already-parsed mapping.
+    file : str, optional
+        The file named in error messages (default: the path, or ``<line>`` for a mapping).
 
     Returns
     -------
@@ -399,11 +401,69 @@ def load_line(source: str | Path | dict) -> Line:
     InputError
         Naming the file, the YAML path and the problem.
     """
-    file = "<line>" if isinstance(source, dict) else str(source)
+    if file is None:
+        file = "<line>" if isinstance(source, dict) else str(source)
     data = source if isinstance(source, dict) else read_yaml(source)
     line = _validate(Line, data, file)
     _report(plausibility.line_problems(line), file)
     return line
+
+
+def line_path_of(scenario_data: dict, scenario_file: str | Path) -> Path:
+    """The line file a scenario names (``line:``, relative to the scenario file), checked to
+    be a regular file.
+
+    Raises
+    ------
+    InputError
+        When ``line`` is missing or not a string, or the file is not there or not a regular
+        file.
+    """
+    source = Path(scenario_file)
+    name = scenario_data.get("line") if isinstance(scenario_data, dict) else None
+    if not isinstance(name, str):
+        # the scenario's own validation says what is wrong with it
+        _validate(Scenario, scenario_data, str(source))
+        raise InputError("missing required key 'line'", file=str(source), path="line")
+    try:
+        line_path = (source.parent / name).resolve()
+        found = line_path.exists()
+    except (OSError, ValueError) as exc:
+        raise InputError(f"cannot use '{name}' as a path ({exc})", file=str(source),
+                         path="line") from None
+    if found and not line_path.is_file():  # a device (/dev/zero), FIFO or directory
+        raise InputError(f"'{name}' is not a regular file ({line_path}); a line file "
+                         "must be one", file=str(source), path="line")
+    if not found:
+        raise InputError(f"line file '{name}' not found (looked at {line_path})",
+                         file=str(source), path="line")
+    return line_path
+
+
+def build_scenario(data: dict, line_data: dict | Line, file: str, line_file: str
+                   ) -> tuple[Scenario, Line]:
+    """Validate a scenario and its line from parsed mappings (what :func:`load_scenario`
+    does after reading the files; a sweep calls it with its overrides applied).
+
+    Parameters
+    ----------
+    data : dict
+        The scenario, as read from YAML.
+    line_data : dict or Line
+        The line, as read from YAML (or already validated).
+    file, line_file : str
+        The files named in error messages.
+
+    Raises
+    ------
+    InputError
+        Naming the file, the YAML path and the problem.
+    """
+    scenario = _validate(Scenario, data, file)
+    line = line_data if isinstance(line_data, Line) else load_line(line_data, file=line_file)
+    check_scenario_against_line(scenario, line, file)
+    _report(plausibility.scenario_problems(scenario, line), file)
+    return scenario, line
 
 
 def load_scenario(source: str | Path) -> tuple[Scenario, Line, Path]:
@@ -418,22 +478,9 @@ def load_scenario(source: str | Path) -> tuple[Scenario, Line, Path]:
     """
     source = Path(source)
     data = read_yaml(source)
-    scenario = _validate(Scenario, data, str(source))
-    try:
-        line_path = (source.parent / scenario.line).resolve()
-        found = line_path.exists()
-    except (OSError, ValueError) as exc:
-        raise InputError(f"cannot use '{scenario.line}' as a path ({exc})", file=str(source),
-                         path="line") from None
-    if found and not line_path.is_file():  # a device (/dev/zero), FIFO or directory
-        raise InputError(f"'{scenario.line}' is not a regular file ({line_path}); a line file "
-                         "must be one", file=str(source), path="line")
-    if not found:
-        raise InputError(f"line file '{scenario.line}' not found (looked at {line_path})",
-                         file=str(source), path="line")
-    line = load_line(line_path)
-    check_scenario_against_line(scenario, line, str(source))
-    _report(plausibility.scenario_problems(scenario, line), str(source))
+    _validate(Scenario, data, str(source))  # the scenario's own problems first
+    line_path = line_path_of(data, source)
+    scenario, line = build_scenario(data, read_yaml(line_path), str(source), str(line_path))
     return scenario, line, line_path
 
 
@@ -551,6 +598,8 @@ def check_disturbances(scenario, line, file: str) -> None:
 
 
 def json_schema(kind: str) -> str:
-    """JSON Schema of a ``line`` or ``scenario`` file, for editors."""
-    model = {"line": Line, "scenario": Scenario}[kind]
+    """JSON Schema of a ``line``, ``scenario`` or ``sweep`` file, for editors."""
+    from .sweep import Sweep
+
+    model = {"line": Line, "scenario": Scenario, "sweep": Sweep}[kind]
     return json.dumps(model.model_json_schema(), indent=2)

@@ -1,0 +1,194 @@
+"""``r2rsim sweep``: many seeded runs of one base scenario as one dataset.
+
+A sweep file names a base scenario and the axes along which its runs differ (docs/sweeps.md)::
+
+    from r2rsim.sweep import run_sweep
+    summary = run_sweep("sweeps/quickstart.yaml", output="runs/qs_sweep", workers=2)
+
+Every combination is validated before anything runs; runs go to local worker processes (or
+a Dask cluster); finished runs are kept and skipped when the sweep is run again.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import InputError
+from ._plan import RunSpec, SweepPlan, load_sweep, plan_sweep
+from ._store import SweepStore
+
+__all__ = ["RunSpec", "SweepPlan", "SweepSummary", "default_workers", "load_sweep",
+           "plan_sweep", "run_sweep"]
+
+
+def default_workers() -> int:
+    """The cores this process may use."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+@dataclass
+class SweepSummary:
+    """What ``r2rsim sweep`` reports at the end."""
+
+    output: Path
+    n_runs: int
+    done: int = 0
+    failed: int = 0
+    skipped: int = 0
+    skipped_failed: int = 0
+    simulated_s: float = 0.0
+    solver_s: float = 0.0
+    wall_s: float = 0.0
+    complete: bool = False
+    failures: list[tuple[str, str]] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    executor: str = ""
+
+    @property
+    def runs_per_minute(self) -> float:
+        ran = self.done + self.failed
+        return 60.0 * ran / self.wall_s if self.wall_s > 0 else 0.0
+
+    @property
+    def ok(self) -> bool:
+        """Every run has data and none failed (``r2rsim sweep`` exits 1 otherwise)."""
+        return self.complete and self.failed == 0 and self.skipped_failed == 0
+
+    def format(self) -> str:
+        lines = [f"dataset      {self.output}" + ("" if self.complete else " (unfinished)"),
+                 f"runs         {self.n_runs}: {self.done} done, {self.failed} failed, "
+                 f"{self.skipped} skipped (already done"
+                 + (f", {self.skipped_failed} of them failed before" if self.skipped_failed
+                    else "") + ")",
+                 f"executor     {self.executor}",
+                 f"simulated    {self.simulated_s:.1f} s of line time in {self.wall_s:.1f} s "
+                 f"wall ({self.runs_per_minute:.1f} runs per minute)"]
+        for rid, why in self.failures[:20]:
+            lines.append(f"FAILED       {rid}: {why}")
+        if len(self.failures) > 20:
+            lines.append(f"  ... {len(self.failures) - 20} more (failures.parquet, "
+                         f"runs.parquet termination_reason)")
+        return "\n".join(lines)
+
+
+def run_sweep(sweep_path: str | Path, output: str | Path | None = None, *,
+              workers: int | None = None, scheduler: str | None = None,
+              retry_failed: bool = False, overwrite: bool = False,
+              progress=None) -> SweepSummary:
+    """Run a sweep file into one dataset.
+
+    Parameters
+    ----------
+    sweep_path : str or Path
+    output : str or Path, optional
+        The dataset directory (default: the sweep's ``output``, else ``runs/<name>``). A
+        directory holding this sweep, finished or not, is continued.
+    workers : int, optional
+        Local worker processes (default: the number of cores); 0 runs in this process.
+        With ``scheduler: local`` the workers of the LocalCluster.
+    scheduler : str, optional
+        A Dask scheduler address, or ``local`` to start a LocalCluster.
+    retry_failed : bool
+        Run again the runs that failed before (kept as failed otherwise).
+    overwrite : bool
+        Replace a finished r2rsim dataset at the output (another sweep's, a run's, or this
+        sweep's to start again).
+    progress : callable, optional
+        ``progress(n_finished, n_to_run, record)`` after every run (record None at start).
+
+    Returns
+    -------
+    SweepSummary
+
+    Raises
+    ------
+    InputError
+        For a bad sweep file, invalid combinations (all listed) or an output directory that
+        may not be used; nothing is written then.
+    """
+    from . import _execute
+
+    t0 = time.perf_counter()
+    plan = plan_sweep(sweep_path)
+    out = Path(output) if output is not None else plan.default_output
+    workers = default_workers() if workers is None else workers
+    if workers < 0 or (scheduler is not None and workers < 1):
+        raise InputError(f"--workers must be >= {1 if scheduler else 0}, got {workers}")
+    store = SweepStore(out, plan, overwrite)
+    store.inspect()
+    outcomes = store.outcomes(retry_failed)
+    todo = [s for s in plan.runs if s.run_id not in outcomes]
+    summary = SweepSummary(out, len(plan.runs), warnings=plan.warnings,
+                           executor=_describe(workers, scheduler))
+    summary.skipped = len(outcomes)
+    summary.skipped_failed = sum(o.status == "failed" for o in outcomes.values())
+    summary.failures = [(k, o.reason) for k, o in outcomes.items() if o.status == "failed"]
+    if not todo and store.mode == "reopen":  # finished, nothing new: nothing is written
+        summary.complete = True
+        summary.wall_s = time.perf_counter() - t0
+        return summary
+    store.begin()
+    try:
+        for spec in todo:
+            store.clear(spec.run_id)
+        work = str(store.work.resolve())
+        if progress:
+            progress(0, len(todo), None)
+
+        def on_result(spec, rec):
+            from ._store import Outcome
+
+            if rec["status"] == "failed" and not rec["has_data"]:
+                _persist_failure(store.work, spec, rec["reason"])
+            outcomes[spec.run_id] = Outcome(rec["status"], "work" if rec["has_data"]
+                                            else None, rec["reason"])
+            if rec["status"] == "done":
+                summary.done += 1
+            else:
+                summary.failed += 1
+                summary.failures.append((spec.run_id, rec["reason"]))
+            summary.simulated_s += rec["simulated_s"]
+            summary.solver_s += rec["solver_s"]
+            if progress:
+                progress(summary.done + summary.failed, len(todo), rec)
+
+        if not todo:
+            pass
+        elif scheduler is not None:
+            _execute.run_dask(todo, work, on_result, scheduler, workers)
+        elif workers == 0:
+            _execute.run_serial(todo, work, on_result)
+        else:
+            _execute.run_processes(todo, work, on_result, min(workers, len(todo)))
+        store.finalise(outcomes)
+        summary.complete = True
+    finally:
+        store.close()
+        summary.wall_s = time.perf_counter() - t0
+    return summary
+
+
+def _persist_failure(work: Path, spec, reason: str) -> None:
+    """Record a failure the worker could not (it died) so a resumed sweep knows it."""
+    path = work / f"{spec.run_id}.failed.json"
+    if path.exists():
+        return
+    tmp = work / f".{spec.run_id}.failed.tmp-{os.getpid()}"
+    tmp.write_text(json.dumps({"run_id": spec.run_id, "config_sha256": spec.config_sha256,
+                               "error": reason}), encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def _describe(workers: int, scheduler: str | None) -> str:
+    if scheduler == "local":
+        return f"Dask LocalCluster, {workers} worker processes"
+    if scheduler is not None:
+        return f"Dask scheduler {scheduler}"
+    return "this process (serial)" if workers == 0 else f"{workers} local worker processes"

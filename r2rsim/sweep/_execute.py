@@ -1,0 +1,216 @@
+"""Running a sweep's runs: in this process, on local worker processes, or on a Dask cluster.
+
+Every executor calls :func:`run_one` once per run and hands each result to ``on_result`` in
+the parent as it arrives. A worker process imports r2rsim and loads the compiled kernels once,
+then runs many scenarios. At most ``2 x workers`` runs are submitted at a time, so the parent's
+memory does not grow with the number of runs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import time
+import traceback
+import warnings
+from pathlib import Path
+
+from ..errors import InputError, PlausibilityWarning
+
+#: a run is given up (recorded as failed) when the worker process running it died this often
+MAX_ATTEMPTS = 3
+#: seconds to wait for a Dask scheduler to answer
+CONNECT_TIMEOUT_S = 30
+
+
+def run_one(spec, work: str) -> dict:
+    """Run one sweep run into ``<work>/<run_id>/`` (in a worker).
+
+    A run that raises is recorded as failed in ``<work>/<run_id>.failed.json`` and reported;
+    it does not stop the sweep. Returns a small record: ``run_id``, ``status`` (done or
+    failed), ``reason``, ``simulated_s``, ``solver_s`` (the simulation's wall time, numba
+    compilation excluded), ``wall_s`` (the whole run in the worker) and ``has_data``.
+    """
+    from ..run import RunPlan, execute
+    from ..schema.loader import build_scenario
+    from ._store import failed_reason, run_columns
+
+    t0 = time.perf_counter()
+    try:
+        with warnings.catch_warnings():  # reported once, by the plan
+            warnings.simplefilter("ignore", PlausibilityWarning)
+            scenario, line = build_scenario(spec.scenario_data, spec.line_data, spec.source,
+                                            spec.line_file)
+        scenario.seed = spec.seed
+        plan = RunPlan(scenario, line, spec.name, spec.source, spec.config_sha256, {},
+                       {"sweep": spec.columns["sweep"]}, spec.line_config)
+        s = execute(plan, Path(work) / spec.run_id, run_id=spec.run_id,
+                    run_columns=run_columns(spec), clean_stale=False)
+    except Exception as exc:  # noqa: BLE001 - a failed run is recorded, the sweep goes on
+        reason = f"{type(exc).__name__}: {exc}"
+        record = {"run_id": spec.run_id, "config_sha256": spec.config_sha256, "error": reason,
+                  "traceback": traceback.format_exc()}
+        tmp = Path(work) / f".{spec.run_id}.failed.tmp-{os.getpid()}"
+        tmp.write_text(json.dumps(record), encoding="utf-8")
+        os.replace(tmp, Path(work) / f"{spec.run_id}.failed.json")
+        return {"run_id": spec.run_id, "status": "failed", "reason": reason, "has_data": False,
+                "simulated_s": 0.0, "solver_s": 0.0, "wall_s": time.perf_counter() - t0}
+    reason = failed_reason({"termination_reason": s.termination_reason,
+                            "nonfinite_from_t_s": s.nonfinite_t})
+    return {"run_id": spec.run_id, "status": "failed" if reason else "done", "reason": reason,
+            "has_data": True, "simulated_s": s.simulated_s, "solver_s": s.wall_s,
+            "wall_s": time.perf_counter() - t0}
+
+
+def run_serial(specs, work: str, on_result) -> None:
+    """Every run in this process, one after another."""
+    for spec in specs:
+        on_result(spec, run_one(spec, work))
+
+
+def _worker_init() -> None:
+    # the parent decides what an interrupt does (it stops the workers)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@contextlib.contextmanager
+def _one_thread_each():
+    """Worker processes started inside use one BLAS/OpenMP thread each (N workers on N
+    cores; the solver's linear algebra is small)."""
+    keys = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
+    saved = {k: os.environ.get(k) for k in keys}
+    os.environ.update({k: "1" for k in keys})
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def _died(spec, attempts: dict) -> dict | None:
+    """Count a worker death against a run; a record once it has died too often."""
+    attempts[spec.run_id] = attempts.get(spec.run_id, 0) + 1
+    if attempts[spec.run_id] < MAX_ATTEMPTS:
+        return None
+    return {"run_id": spec.run_id, "status": "failed", "has_data": False,
+            "reason": f"the worker process running it died {MAX_ATTEMPTS} times (killed, or "
+                      f"out of memory?)", "simulated_s": 0.0, "solver_s": 0.0, "wall_s": 0.0}
+
+
+def run_processes(specs, work: str, on_result, workers: int) -> None:
+    """The runs on ``workers`` local processes (spawned, one BLAS thread each)."""
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures.process import BrokenProcessPool
+
+    queue = list(reversed(specs))
+    attempts: dict[str, int] = {}
+    while queue:
+        with _one_thread_each():
+            pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
+                                       initializer=_worker_init)
+        pending = {}
+        try:
+            broken = False
+            while (queue or pending) and not broken:
+                while queue and len(pending) < 2 * workers:
+                    spec = queue.pop()
+                    pending[pool.submit(run_one, spec, work)] = spec
+                done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for f in done:
+                    spec = pending.pop(f)
+                    try:
+                        rec = f.result()
+                    except BrokenProcessPool:
+                        broken = True
+                        rec = _died(spec, attempts)
+                        if rec is None:
+                            queue.append(spec)
+                            continue
+                    on_result(spec, rec)
+            if broken:  # run again what was still in the pool
+                for spec in pending.values():
+                    rec = _died(spec, attempts)
+                    if rec is None:
+                        queue.append(spec)
+                    else:
+                        on_result(spec, rec)
+                pending = {}
+        except BaseException:
+            _stop(pool)
+            raise
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _stop(pool) -> None:
+    """Terminate the pool's workers now (an interrupt, SIGTERM); what they were writing is
+    left as temporaries that the next sweep into the directory removes."""
+    for p in list(getattr(pool, "_processes", {}) .values()):
+        with contextlib.suppress(Exception):
+            p.terminate()
+
+
+def run_dask(specs, work: str, on_result, scheduler: str, workers: int) -> None:
+    """The runs on a Dask cluster: ``scheduler`` is an address (``tcp://host:8786``) or
+    ``local`` to start a :class:`distributed.LocalCluster` of ``workers`` processes. The
+    output directory must be on a file system every worker sees."""
+    try:
+        import logging
+
+        from distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise InputError("--scheduler needs dask.distributed: pip install "
+                         "'r2rsim[dask]'") from None
+    cluster = None
+    try:
+        if scheduler == "local":
+            with _one_thread_each():
+                cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                       dashboard_address=None, silence_logs=logging.ERROR)
+            client = Client(cluster)
+        else:
+            try:
+                client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
+            except (OSError, TimeoutError, ValueError) as exc:
+                raise InputError(f"--scheduler: cannot reach a Dask scheduler at '{scheduler}' "
+                                 f"({type(exc).__name__}: {exc})") from None
+        try:
+            _dask_loop(client, as_completed, specs, work, on_result,
+                       max(2 * workers, 2 * len(client.nthreads() or {0: 1})))
+        finally:
+            client.close()
+    finally:
+        if cluster is not None:
+            cluster.close()
+
+
+def _dask_loop(client, as_completed, specs, work, on_result, window: int) -> None:
+    queue = list(reversed(specs))
+    pending = {}
+    ac = as_completed()
+
+    def submit():
+        while queue and len(pending) < window:
+            spec = queue.pop()
+            f = client.submit(run_one, spec, work, key=f"r2rsim-{spec.run_id}", pure=False)
+            pending[f.key] = spec
+            ac.add(f)
+
+    submit()
+    for f in ac:
+        spec = pending.pop(f.key)
+        try:
+            rec = f.result()
+        except Exception as exc:  # noqa: BLE001 - KilledWorker and the like: recorded
+            rec = {"run_id": spec.run_id, "status": "failed", "has_data": False,
+                   "reason": f"{type(exc).__name__}: {exc}", "simulated_s": 0.0,
+                   "solver_s": 0.0, "wall_s": 0.0}
+        f.release()
+        on_result(spec, rec)
+        submit()

@@ -1,0 +1,463 @@
+"""The output directory of a sweep: one dataset for all its runs, built so that a sweep can
+stop at any moment and continue.
+
+While a sweep runs, its directory holds a marker (:data:`MARKER`, which also carries the lock
+that keeps two sweeps out of one directory) and ``.work/``: every finished run is a complete
+single-run dataset ``.work/<run_id>/`` (written atomically by the dataset writer, with its
+checksums), every run that failed without data a ``.work/<run_id>.failed.json``. A run whose
+directory passes its checksums is not run again.
+
+When every run has an outcome the sweep is *finalised*: the runs' samples are hard-linked to
+``samples/run_id=<id>/part-0.parquet``, their rows are concatenated into ``runs.parquet``,
+``faults.parquet``, ``events.parquet`` and ``failures.parquet``, ``manifest.json`` is written
+last, and ``.work/`` and the marker are removed. Every step can be repeated, so an
+interruption during finalisation is finished by running the sweep again. A finished sweep
+can be reopened (more seeds, ``--retry-failed``): its runs stay, the new ones are added.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import platform
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from .._version import __version__
+from ..dataset.paths import (
+    MANIFEST,
+    clean_stale,
+    dataset_problems,
+    read_manifest,
+    remove_dataset,
+    sha256_file,
+)
+from ..dataset.writer import EVENTS_SCHEMA, FAULTS_SCHEMA, SCHEMA_VERSION
+from ..errors import InputError, R2RError
+
+MARKER = ".r2rsim-sweep.json"
+WORK = ".work"
+TABLES = ("runs", "faults", "events")
+_PYARROW_TYPES = {"string": pa.string(), "float64": pa.float64(), "bool": pa.bool_(),
+                  "int64": pa.int64()}
+
+
+def failed_reason(row: dict) -> str | None:
+    """Why a run with data counts as failed in a sweep (None: it did not fail). A solver
+    failure or states that are not finite fail; a web break or an emptied roll do not."""
+    reason = row.get("termination_reason")
+    if isinstance(reason, str) and reason.startswith("solver_failure"):
+        return reason
+    t = row.get("nonfinite_from_t_s")
+    if t is not None and not (isinstance(t, float) and np.isnan(t)):
+        return f"states not finite from t = {t:g} s"
+    return None
+
+
+def run_columns(spec) -> dict[str, pa.Array]:
+    """A run's sweep columns of runs.parquet as one-element arrays."""
+    return {c: pa.array([spec.columns[c]], _PYARROW_TYPES[t]) for c, t in spec.column_types}
+
+
+def failures_schema(plan) -> pa.Schema:
+    types = plan.runs[0].column_types if plan.runs else ()
+    return pa.schema([("run_id", pa.string()), ("seed", pa.uint64()),
+                      *((c, _PYARROW_TYPES[t]) for c, t in types), ("error", pa.string())])
+
+
+class Outcome:
+    """What happened to one run: ``done`` or ``failed`` (``reason``); ``where`` says where
+    its data is: ``work`` (.work/<id>/), ``final`` (the finished dataset) or None (a
+    failure without data)."""
+
+    __slots__ = ("status", "where", "reason")
+
+    def __init__(self, status: str, where: str | None, reason: str | None = None):
+        self.status, self.where, self.reason = status, where, reason
+
+
+class SweepStore:
+    """The output directory of one sweep (see the module docstring).
+
+    Parameters
+    ----------
+    out : Path
+    plan : SweepPlan
+    overwrite : bool
+        Replace a finished r2rsim dataset at ``out`` (of another sweep, of a run, or of this
+        sweep to start it again).
+    """
+
+    def __init__(self, out: Path, plan, overwrite: bool = False):
+        self.out = Path(out)
+        self.plan = plan
+        self.overwrite = overwrite
+        self.work = self.out / WORK
+        self.marker = self.out / MARKER
+        self.mode = "new"
+        self.final: dict | None = None  # the manifest of a finished dataset being reopened
+        self._lock = None
+
+    # ------------------------------------------------------------------ before writing
+    def inspect(self) -> None:
+        """Decide what the directory is (new, an unfinished sweep, a finished one) and refuse
+        what may not be written to; nothing is written."""
+        out = self.out
+        if out.is_symlink():
+            raise InputError(f"output directory '{out}' is a symbolic link; give the "
+                             f"directory it points to, or another one, with -o")
+        if out.exists() and not out.is_dir():
+            raise InputError(f"output '{out}' exists and is not a directory; choose another "
+                             f"with -o")
+        name = self.plan.sweep.name
+        if self.marker.is_file():
+            try:
+                info = json.loads(self.marker.read_text(encoding="utf-8"))
+            except (OSError, ValueError):
+                info = {}
+            if info.get("sweep") != name:
+                raise InputError(f"output directory '{out}' holds an unfinished sweep "
+                                 f"'{info.get('sweep')}', not '{name}': choose another "
+                                 f"directory with -o")
+            self.mode = "resume"
+            manifest, _ = read_manifest(out)
+            if manifest and (manifest.get("sweep") or {}).get("name") == name:
+                self.final = manifest  # a finished sweep being extended
+            return
+        if not out.exists() or not any(out.iterdir()):
+            return
+        manifest, why = read_manifest(out)
+        if manifest is None:
+            raise InputError(f"output directory '{out}' exists and is not an r2rsim dataset "
+                             f"({why}); choose another directory with -o")
+        same = (manifest.get("sweep") or {}).get("name") == name
+        if same and not self.overwrite:
+            problems = dataset_problems(out, hashes=False)
+            if problems:
+                raise InputError(f"output directory '{out}' holds sweep '{name}' but its "
+                                 f"files differ from its manifest.json ({problems[0]}); "
+                                 f"r2rsim does not continue it: choose another directory")
+            self.mode, self.final = "reopen", manifest
+            return
+        problems = dataset_problems(out)
+        if problems:
+            raise InputError(f"output directory '{out}' exists and is not an intact r2rsim "
+                             f"dataset ({problems[0]}); choose another directory with -o")
+        if not self.overwrite:
+            what = (f"sweep '{manifest['sweep'].get('name')}'" if manifest.get("sweep")
+                    else "a run's dataset")
+            raise InputError(f"output directory '{out}' holds {what}; pass --overwrite to "
+                             f"replace it, or choose another directory with -o")
+        self.mode = "replace"
+
+    def outcomes(self, retry_failed: bool) -> dict[str, Outcome]:
+        """The outcome of every run that has one (reading and checking, writing nothing).
+
+        Raises
+        ------
+        InputError
+            When the directory holds runs this sweep does not make, or runs made from
+            another configuration (the base scenario, its line or r2rsim changed).
+        """
+        plan_ids = {s.run_id: s for s in self.plan.runs}
+        found: dict[str, Outcome] = {}
+        foreign: list[str] = []
+        changed: list[str] = []
+        if self.final is not None:
+            self._final_outcomes(plan_ids, found, foreign, changed)
+        if self.work.is_dir():
+            self._work_outcomes(plan_ids, found, foreign, changed)
+        if foreign:
+            raise InputError(f"output directory '{self.out}' holds {len(foreign)} run(s) this "
+                             f"sweep file does not make (e.g. {foreign[0]}): was the sweep "
+                             f"file changed? Restore it, or write to another directory with -o"
+                             + (" (or --overwrite)" if self.mode == "reopen" else ""))
+        if changed:
+            raise InputError(f"{len(changed)} run(s) in '{self.out}' were made from another "
+                             f"base scenario, line or r2rsim version (e.g. {changed[0]}); "
+                             f"continuing would mix them: write to another directory with -o"
+                             + (" (or --overwrite)" if self.mode == "reopen" else ""))
+        if retry_failed:
+            found = {k: o for k, o in found.items() if o.status != "failed"}
+        return found
+
+    def _final_outcomes(self, plan_ids, found, foreign, changed) -> None:
+        files = self.final.get("files", {})
+        runs = pq.read_table(self.out / "runs.parquet").to_pylist()
+        for row in runs:
+            rid = row["run_id"]
+            spec = plan_ids.get(rid)
+            if spec is None:
+                foreign.append(rid)
+                continue
+            if row.get("config_sha256") != spec.config_sha256:
+                changed.append(rid)
+                continue
+            rel = f"samples/run_id={rid}/part-0.parquet"
+            f = self.out / rel
+            if not f.is_file() or sha256_file(f) != files.get(rel, {}).get("sha256"):
+                continue  # damaged: run again
+            reason = failed_reason(row)
+            found[rid] = Outcome("failed" if reason else "done", "final", reason)
+        failures = self.out / "failures.parquet"
+        if failures.is_file():
+            for row in pq.read_table(failures).to_pylist():
+                rid = row["run_id"]
+                if rid not in plan_ids:
+                    foreign.append(rid)
+                elif row.get("config_sha256") != plan_ids[rid].config_sha256:
+                    changed.append(rid)
+                else:
+                    found[rid] = Outcome("failed", None, row.get("error"))
+
+    def _work_outcomes(self, plan_ids, found, foreign, changed) -> None:
+        for entry in sorted(os.scandir(self.work), key=lambda e: e.name):
+            name = entry.name
+            if name.startswith("."):
+                continue  # a writer's temporary, or the finalisation's
+            if name.endswith(".failed.json"):
+                rid = name[: -len(".failed.json")]
+                if rid not in plan_ids:
+                    foreign.append(rid)
+                    continue
+                try:
+                    rec = json.loads(Path(entry.path).read_text(encoding="utf-8"))
+                except (OSError, ValueError):
+                    continue
+                if rec.get("config_sha256") != plan_ids[rid].config_sha256:
+                    changed.append(rid)
+                else:
+                    found[rid] = Outcome("failed", None, rec.get("error"))
+                continue
+            if name not in plan_ids:
+                foreign.append(name)
+                continue
+            path = Path(entry.path)
+            if dataset_problems(path):
+                continue  # damaged (not as written): run again
+            row = pq.read_table(path / "runs.parquet").to_pylist()[0]
+            if row.get("config_sha256") != plan_ids[name].config_sha256:
+                changed.append(name)
+                continue
+            reason = failed_reason(row)
+            found[name] = Outcome("failed" if reason else "done", "work", reason)
+
+    # ------------------------------------------------------------------ writing
+    def begin(self) -> None:
+        """Create the directory and the marker, and take the lock."""
+        if self.mode == "replace":
+            remove_dataset(self.out)
+        self.out.mkdir(parents=True, exist_ok=True)
+        if not self.marker.exists():
+            tmp = self.out / f"{MARKER}.tmp-{os.getpid()}"
+            tmp.write_text(json.dumps({"sweep": self.plan.sweep.name,
+                                       "r2rsim_version": __version__,
+                                       "sweep_file": self.plan.file.name}), encoding="utf-8")
+            os.replace(tmp, self.marker)
+        self._lock = open(self.marker, "rb")  # noqa: SIM115 - held for the whole sweep
+        try:
+            import fcntl
+
+            fcntl.flock(self._lock.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except ImportError:  # no fcntl (Windows): no lock
+            pass
+        except OSError:
+            self._lock.close()
+            self._lock = None
+            raise InputError(f"another r2rsim sweep is writing '{self.out}'; wait for it, or "
+                             f"choose another directory with -o") from None
+        self.work.mkdir(exist_ok=True)
+        clean_stale(self.work)
+        final_tmp = self.work / ".final"
+        if final_tmp.is_dir():
+            shutil.rmtree(final_tmp)  # an interrupted finalisation's tables
+
+    def clear(self, run_id: str) -> None:
+        """Remove what a run left in .work/ before it runs again (--retry-failed, or a run
+        whose files no longer match their checksums)."""
+        failed = self.work / f"{run_id}.failed.json"
+        failed.unlink(missing_ok=True)
+        path = self.work / run_id
+        if path.is_dir() and not path.is_symlink():
+            manifest, _ = read_manifest(path)
+            listed = set((manifest or {}).get("files", {})) | {MANIFEST}
+            files = {p.relative_to(path).as_posix() for p in path.rglob("*") if not p.is_dir()}
+            if not files <= listed:
+                raise R2RError(f"'{path}' holds files r2rsim did not write; move it away")
+            shutil.rmtree(path)
+
+    def close(self) -> None:
+        if self._lock is not None:
+            self._lock.close()
+            self._lock = None
+
+    # ------------------------------------------------------------------ finalising
+    def finalise(self, outcomes: dict[str, Outcome]) -> Path:
+        """Build the dataset from the runs' outcomes (every run of the plan has one)."""
+        plan = self.plan
+        tmp = self.work / ".final"
+        if tmp.exists():
+            shutil.rmtree(tmp)
+        tmp.mkdir()
+        old = _OldTables(self.out) if self.final is not None else None
+        writers: dict[str, _TableWriter] = {}
+        schemas = {"faults": FAULTS_SCHEMA, "events": EVENTS_SCHEMA}
+        meta = {b"r2rsim.schema_version": SCHEMA_VERSION.encode(),
+                b"r2rsim.version": __version__.encode(),
+                b"r2rsim.sweep": plan.sweep.name.encode()}
+        channels = None
+        run_ids, failure_rows, known_sha = [], [], {}
+        try:
+            for spec in plan.runs:
+                o = outcomes[spec.run_id]
+                if o.where is None:
+                    failure_rows.append({"run_id": spec.run_id, "seed": spec.seed,
+                                         **spec.columns, "error": o.reason})
+                    continue
+                run_ids.append(spec.run_id)
+                for name in TABLES:
+                    table = (pq.read_table(self.work / spec.run_id / f"{name}.parquet")
+                             if o.where == "work" else old.rows(name, spec.run_id))
+                    schema = schemas.get(name) or table.schema.remove_metadata()
+                    schemas[name] = schema
+                    if name not in writers:
+                        writers[name] = _TableWriter(tmp / f"{name}.parquet",
+                                                     schema.with_metadata(meta))
+                    writers[name].add(table.replace_schema_metadata(None).cast(schema))
+                if channels is None:
+                    channels = pq.read_table(self.work / spec.run_id / "channels.parquet"
+                                             if o.where == "work"
+                                             else self.out / "channels.parquet")
+            for name in TABLES:
+                if name not in writers:  # no run has data
+                    pq.write_table(pa.Table.from_pylist([], schema=schemas.get(
+                        name, pa.schema([("run_id", pa.string())]))).replace_schema_metadata(
+                        meta), tmp / f"{name}.parquet", compression="zstd")
+        finally:
+            for w in writers.values():
+                w.close()
+        pq.write_table(pa.Table.from_pylist(failure_rows, schema=failures_schema(plan))
+                       .replace_schema_metadata(meta), tmp / "failures.parquet",
+                       compression="zstd")
+        if channels is None:
+            channels = pa.table({"channel": pa.array([], pa.string())})
+        pq.write_table(channels.replace_schema_metadata(meta), tmp / "channels.parquet",
+                       compression="zstd")
+        self._place_samples(outcomes, known_sha)
+        with contextlib.suppress(FileNotFoundError):
+            (self.out / MANIFEST).unlink()  # the dataset is incomplete from here on
+        for p in tmp.iterdir():
+            os.replace(p, self.out / p.name)
+        for rel, text in plan.files.items():
+            target = self.out / rel
+            target.parent.mkdir(parents=True, exist_ok=True)
+            target.write_text(text, encoding="utf-8")
+        self._write_manifest(run_ids, [r["run_id"] for r in failure_rows], known_sha)
+        shutil.rmtree(self.work)
+        self.close()
+        self.marker.unlink()
+        return self.out
+
+    def _place_samples(self, outcomes: dict[str, Outcome], known_sha: dict) -> None:
+        """Hard-link (else copy) the samples of the runs in .work/ into samples/, and
+        remove the samples of runs that have none any more (retried and failed)."""
+        samples = self.out / "samples"
+        samples.mkdir(exist_ok=True)
+        for rid, o in outcomes.items():
+            rel = f"samples/run_id={rid}/part-0.parquet"
+            dst = self.out / rel
+            if o.where != "work":
+                if o.where is None and dst.parent.is_dir():
+                    shutil.rmtree(dst.parent)
+                continue
+            src = self.work / rid / rel
+            wm, _ = read_manifest(self.work / rid)
+            known_sha[rel] = (wm or {}).get("files", {}).get(rel, {}).get("sha256")
+            if dst.exists():
+                if os.path.samefile(src, dst):
+                    continue
+                dst.unlink()  # an earlier version of the run (retried)
+            dst.parent.mkdir(exist_ok=True)
+            try:
+                os.link(src, dst)
+            except OSError:  # a file system without hard links
+                shutil.copy2(src, dst)
+
+    def _write_manifest(self, run_ids: list[str], failed_ids: list[str], known_sha: dict
+                        ) -> None:
+        old = (self.final or {}).get("files", {})
+        files = {}
+        for p in sorted(self.out.rglob("*")):
+            rel = p.relative_to(self.out).as_posix()
+            if p.is_dir() or rel == MANIFEST or rel == MARKER or rel.startswith(WORK + "/"):
+                continue
+            size = p.stat().st_size
+            sha = known_sha.get(rel)
+            if sha is None and rel.startswith("samples/") and old.get(rel, {}).get(
+                    "bytes") == size:
+                sha = old[rel]["sha256"]
+            files[rel] = {"sha256": sha or sha256_file(p), "bytes": size}
+        sw = self.plan.sweep
+        manifest = {
+            "schema_version": SCHEMA_VERSION, "r2rsim_version": __version__,
+            "python_version": platform.python_version(), "numpy_version": np.__version__,
+            "pyarrow_version": pa.__version__, "run_ids": run_ids,
+            "sweep": {"name": sw.name, "file": f"sweep/{self.plan.file.name}",
+                      "combine": sw.combine, "n_combinations": self.plan.n_combinations,
+                      "seeds": self.plan.seeds, "axes": self.plan.axes,
+                      "n_runs": len(self.plan.runs), "failed_without_data": failed_ids},
+            "files": files,
+        }
+        tmp = self.out / f"{MANIFEST}.tmp-{os.getpid()}"
+        tmp.write_text(json.dumps(manifest, indent=2, sort_keys=True), encoding="utf-8")
+        os.replace(tmp, self.out / MANIFEST)
+
+
+class _TableWriter:
+    """Concatenates the runs' rows of one table, a row group per :data:`ROWS_PER_GROUP`
+    rows (not one per run), without holding more than that in memory."""
+
+    ROWS_PER_GROUP = 1 << 14
+
+    def __init__(self, path: Path, schema: pa.Schema):
+        self.schema = schema
+        self.writer = pq.ParquetWriter(path, schema, compression="zstd")
+        self.pending: list[pa.Table] = []
+        self.rows = 0
+
+    def add(self, table: pa.Table) -> None:
+        self.pending.append(table.replace_schema_metadata(self.schema.metadata))
+        self.rows += table.num_rows
+        if self.rows >= self.ROWS_PER_GROUP:
+            self._flush()
+
+    def _flush(self) -> None:
+        if self.pending:
+            self.writer.write_table(pa.concat_tables(self.pending))
+        self.pending, self.rows = [], 0
+
+    def close(self) -> None:
+        self._flush()
+        self.writer.close()
+
+
+class _OldTables:
+    """The tables of the finished dataset being reopened, by run."""
+
+    def __init__(self, root: Path):
+        self.tables = {n: pq.read_table(root / f"{n}.parquet") for n in TABLES}
+        self.index = {}
+        for n, t in self.tables.items():
+            ids = t.column("run_id").to_pylist()
+            idx: dict[str, list[int]] = {}
+            for i, rid in enumerate(ids):
+                idx.setdefault(rid, []).append(i)
+            self.index[n] = idx
+
+    def rows(self, name: str, run_id: str) -> pa.Table:
+        return self.tables[name].take(pa.array(self.index[name].get(run_id, []), pa.int64()))
