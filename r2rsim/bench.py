@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import pandas as pd
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from ._version import __version__
 from .dataset.read import Run, read_runs
@@ -37,10 +37,29 @@ KEY = ["study", "label", "condition", "fault", "magnitude", "metric"]
 
 
 class RunSet(Strict):
-    """Runs of one scenario file, one per seed."""
+    """Runs of one scenario file, one per seed; or the runs of a sweep file, optionally
+    selected by their axis values."""
 
-    scenario: str = Field(description="scenario file, relative to the spec")
-    seeds: Annotated[list[int], Field(min_length=1)] = Field(description="root seeds")
+    scenario: str | None = Field(None, description="scenario file, relative to the spec")
+    seeds: Annotated[list[int], Field(min_length=1)] | None = Field(
+        None, description="root seeds (with scenario)")
+    sweep: str | None = Field(None, description="sweep file, relative to the spec")
+    where: dict[str, Any] = Field(
+        default_factory=dict, description="with sweep: only the runs with these axis values "
+        "(axis name or runs.parquet column: value or list of values)")
+
+    @model_validator(mode="after")
+    def _one_source(self):
+        if (self.scenario is None) == (self.sweep is None):
+            raise ValueError("give either scenario (with seeds) or sweep")
+        if self.scenario is not None and self.seeds is None:
+            raise ValueError("a scenario needs its seeds")
+        if self.sweep is not None and self.seeds is not None:
+            raise ValueError("a sweep has its own seeds (give no seeds); select its runs "
+                             "with where")
+        if self.scenario is not None and self.where:
+            raise ValueError("where selects runs of a sweep, not of a scenario")
+        return self
 
 
 class Study(Strict):
@@ -111,9 +130,14 @@ def load_spec(path: str | Path) -> BenchSpec:
     for i, st in enumerate(spec.studies):
         for role in ("train", "val", "test"):
             for j, rs in enumerate(getattr(st, role)):
-                if not (path.parent / rs.scenario).is_file():
-                    raise InputError(f"scenario file '{rs.scenario}' not found",
-                                     file=f, path=f"studies[{i}].{role}[{j}].scenario")
+                key = "scenario" if rs.scenario is not None else "sweep"
+                if not (path.parent / getattr(rs, key)).is_file():
+                    raise InputError(f"{key} file '{getattr(rs, key)}' not found",
+                                     file=f, path=f"studies[{i}].{role}[{j}].{key}")
+                if key == "sweep" and spec.duration is not None:
+                    raise InputError("duration overrides scenarios, not sweeps: set the "
+                                     "sweep's duration in the sweep file (set: {duration: "
+                                     "...})", file=f, path="duration")
     for name in spec.compare.metrics if spec.compare else ():
         if name not in METRICS:
             raise InputError(f"unknown metric '{name}' (known: {', '.join(METRICS)})", file=f,
@@ -189,6 +213,23 @@ def _dataset(workdir: Path, scenario: Path, seed: int, duration: float | None,
     return read_runs(out, verify=False)  # just written and validated
 
 
+def _sweep_dataset(workdir: Path, sweep: Path, where: dict, log) -> list[Run]:
+    """The runs of a sweep in the work directory, selected by ``where``: the sweep is run
+    (or continued; its finished runs are checked by their checksums and kept) into a
+    directory named by a hash of the sweep file, its base scenario and line, and the r2rsim
+    version."""
+    from .sweep import plan_sweep, run_sweep
+
+    plan = plan_sweep(sweep)
+    h = hashlib.sha256("\0".join([*plan.files.values(), __version__]).encode())
+    out = workdir / f"{sweep.stem}__{h.hexdigest()[:12]}"
+    summary = run_sweep(sweep, output=out)
+    if not summary.ok:
+        log(f"warning: sweep {sweep}: {summary.failed + summary.skipped_failed} run(s) "
+            f"failed; the bench uses the runs that have data")
+    return read_runs(out, verify=False, where=where or None)  # checked by run_sweep
+
+
 def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
               update: bool = False, log=print, verify: bool = True) -> BenchResult:
     """Run a benchmark spec and compare with its baseline file.
@@ -229,6 +270,10 @@ def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
             for role in ("train", "val", "test"):
                 runs = []
                 for rs in getattr(study, role):
+                    if rs.sweep is not None:
+                        runs += _sweep_dataset(workdir, spec_path.parent / rs.sweep, rs.where,
+                                               log)
+                        continue
                     for seed in rs.seeds:
                         runs += _dataset(workdir, spec_path.parent / rs.scenario, seed,
                                          spec.duration, verify)

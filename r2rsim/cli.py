@@ -207,6 +207,26 @@ def _parse_params(items: list[str], cls) -> dict:
     return out
 
 
+def parse_where(items: list[str]) -> dict:
+    """``--where KEY=V[,V...]`` (repeatable): runs.parquet columns, a sweep's axes by name;
+    values are YAML scalars or strings with units (``top_speed=3 m/s``)."""
+    import yaml
+
+    out: dict = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip() or not text.strip():
+            raise InputError(f"--where expects KEY=VALUE[,VALUE...], got '{item}'")
+        values = []
+        for part in text.split(","):
+            try:
+                values.append(yaml.safe_load(part))
+            except yaml.YAMLError:
+                values.append(part.strip())
+        out.setdefault(key.strip(), []).extend(values)
+    return out
+
+
 def _cmd_diagnose(args) -> int:
     from .diagnostics.registry import call, get
     from .evaluate.harness import evaluate, read_datasets, split_by_condition, split_by_seed
@@ -215,10 +235,11 @@ def _cmd_diagnose(args) -> int:
     params = _parse_params(args.param, cls)
     est = call(cls, "__init__", cls, **params)
     verify = not args.no_verify
+    where = parse_where(args.where)
     if args.data:
         if args.train or args.test or args.val:
             raise InputError("give either --data with --split, or --train/--val/--test")
-        runs = read_datasets(args.data, verify=verify)
+        runs = read_datasets(args.data, verify=verify, where=where)
         if args.split == "seed":
             split = split_by_seed(runs)
         else:
@@ -230,9 +251,9 @@ def _cmd_diagnose(args) -> int:
                              "pool them with --data and --split")
         from .evaluate.harness import Split
 
-        split = Split(read_datasets(args.train, verify=verify),
-                      read_datasets(args.val or [], verify=verify),
-                      read_datasets(args.test, verify=verify))
+        split = Split(read_datasets(args.train, verify=verify, where=where),
+                      read_datasets(args.val or [], verify=verify, where=where),
+                      read_datasets(args.test, verify=verify, where=where))
     print(split.describe())
     if not split.val:
         print("no validation runs: metrics at the plug-in's own threshold only (no *_cal)")
@@ -483,6 +504,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also show the plug-in cmd.*, act.* and ctrl.* (drive data)")
     d.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="plug-in parameter (repeatable)")
+    d.add_argument("--where", action="append", default=[], metavar="KEY=VALUE[,VALUE]",
+                   help="only the runs with these runs.parquet values, e.g. a sweep's axis: "
+                   "offset=-10,10 (repeatable)")
     d.add_argument("--alpha", type=float, default=0.01, help="calibration false-alarm rate")
     d.add_argument("-m", "--persistence", type=int, default=1,
                    help="consecutive alarms that confirm a detection")

@@ -7,6 +7,7 @@ import fnmatch
 import hashlib
 import io
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -151,8 +152,61 @@ class _Reader:
         return df
 
 
-def read_runs(path: str | Path, verify: bool = True) -> list[Run]:
-    """Read every run of a dataset directory written by ``r2rsim run``.
+def _matches(value, wanted) -> bool:
+    """Whether a runs.parquet value is one of the wanted ones (numbers to 1e-9 relative)."""
+    missing = value is None or (not isinstance(value, (list, dict)) and bool(pd.isna(value)))
+    for w in wanted:
+        if w is None:
+            if missing:  # null: an axis that did not apply to the run (a removed fault)
+                return True
+        elif missing:
+            continue
+        elif isinstance(w, (int, float)) and not isinstance(w, bool) and isinstance(
+                value, (int, float)) and not isinstance(value, bool):
+            if math.isclose(float(value), float(w), rel_tol=1e-9, abs_tol=1e-12):
+                return True
+        elif value == w:
+            return True
+    return False
+
+
+def select_rows(rows: list[dict], where: dict, dataset: Path) -> list[dict]:
+    """The rows of runs.parquet whose columns have the wanted values.
+
+    ``where`` maps a column (an axis may be named without its ``axis.`` prefix) to a value
+    or a list of values; a string with units (``"3 m/s"``) is compared in SI.
+
+    Raises
+    ------
+    InputError
+        For a column runs.parquet does not have (naming the axis columns it has).
+    """
+    from ..units import QuantityError, parse_any
+
+    columns = set(rows[0]) if rows else set()
+    out = rows
+    for key, wanted in where.items():
+        col = key if key in columns or not rows else (
+            f"axis.{key}" if f"axis.{key}" in columns else key)
+        if rows and col not in columns:
+            axes = sorted(c[len("axis."):] for c in columns if c.startswith("axis."))
+            raise InputError(f"dataset {dataset}: runs.parquet has no column '{key}' to select "
+                             f"runs by (axes: {', '.join(axes) or 'none, not a sweep'})")
+        values = wanted if isinstance(wanted, (list, tuple)) else [wanted]
+        si = []
+        for v in values:
+            if isinstance(v, str):
+                try:
+                    v = parse_any(v)[0]  # "3 m/s" as stored, in SI
+                except QuantityError:
+                    pass  # a text value ("OC1")
+            si.append(v)
+        out = [r for r in out if _matches(r.get(col), si)]
+    return out
+
+
+def read_runs(path: str | Path, verify: bool = True, where: dict | None = None) -> list[Run]:
+    """Read every run of a dataset directory written by ``r2rsim run`` or ``r2rsim sweep``.
 
     Parameters
     ----------
@@ -161,6 +215,10 @@ def read_runs(path: str | Path, verify: bool = True) -> list[Run]:
         Check the files against manifest.json first: every listed file must exist with its
         size, and the files read (``runs.parquet``, ``faults.parquet`` and the samples of each
         run) must have their sha256. A dataset changed after it was written is refused.
+    where : dict, optional
+        Only the runs whose runs.parquet columns have these values (:func:`select_rows`):
+        ``{"offset": [-10, 10], "seed": 1}`` selects by a sweep's axis ``axis.offset`` and
+        by seed.
 
     Raises
     ------
@@ -171,6 +229,9 @@ def read_runs(path: str | Path, verify: bool = True) -> list[Run]:
     path = Path(path)
     if not path.is_dir():
         raise InputError(f"{path}: no such dataset directory")
+    if (path / ".r2rsim-sweep.json").is_file():
+        raise InputError(f"dataset {path}: an unfinished sweep (interrupted, or still "
+                         f"running): run the same `r2rsim sweep` command again to finish it")
     if not is_dataset_dir(path) or not (path / "samples").is_dir():
         what = "runs.parquet" if not (path / "runs.parquet").exists() else "samples/"
         raise InputError(f"dataset {path}: {what} is missing: the directory is not a "
@@ -179,7 +240,10 @@ def read_runs(path: str | Path, verify: bool = True) -> list[Run]:
     runs = rd.table("runs.parquet", _NEEDED["runs.parquet"])
     faults = rd.table("faults.parquet", _NEEDED["faults.parquet"])
     out = []
-    for row in runs.to_dict("records"):
+    rows = runs.to_dict("records")
+    if where:
+        rows = select_rows(rows, where, path)
+    for row in rows:
         rid = str(row["run_id"])
         if rid in ("", ".", "..") or any(c in rid for c in "/\\\0"):
             raise rd.fail(f"run id {rid!r} in runs.parquet is not a plain name (its samples "

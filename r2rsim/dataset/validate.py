@@ -44,6 +44,9 @@ def validate_dataset(path: str | Path) -> list[str]:
         One message per problem, naming the file or the run.
     """
     root = Path(path)
+    if (root / ".r2rsim-sweep.json").is_file():
+        return [f"{root}: an unfinished sweep (interrupted, or still running): run the same "
+                f"`r2rsim sweep` command again to finish it"]
     if not (root / "manifest.json").is_file():
         return [f"{root}: no manifest.json (not an r2rsim dataset?)"]
     problems = dataset_problems(root)

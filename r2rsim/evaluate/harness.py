@@ -189,22 +189,27 @@ def split_by_condition(runs: Sequence[Run], train: str = "OC1", test: str = "OC2
     return out
 
 
-def read_datasets(paths: Sequence[str | Path], verify: bool = True) -> list[Run]:
-    """Every run of the given dataset directories; a directory that is not a dataset but
-    holds datasets (one level down) contributes all of them. ``verify``: check each
-    dataset's files against its manifest.json (:func:`r2rsim.dataset.read.read_runs`)."""
+def read_datasets(paths: Sequence[str | Path], verify: bool = True,
+                  where: dict | None = None) -> list[Run]:
+    """Every run of the given dataset directories (runs or sweeps); a directory that is not
+    a dataset but holds datasets (one level down) contributes all of them. ``verify``: check
+    each dataset's files against its manifest.json; ``where``: only the runs with these
+    runs.parquet values, e.g. a sweep's axis values (:func:`r2rsim.dataset.read.read_runs`)."""
     runs: list[Run] = []
     for p in map(Path, paths):
         if not p.is_dir():
             raise InputError(f"{p}: no such dataset directory")
-        if is_dataset_dir(p):
-            runs += read_runs(p, verify=verify)
+        if is_dataset_dir(p) or (p / ".r2rsim-sweep.json").is_file():
+            runs += read_runs(p, verify=verify, where=where)
             continue
         subs = sorted(d for d in p.iterdir() if d.is_dir() and is_dataset_dir(d))
         if not subs:
             raise InputError(f"{p}: not an r2rsim dataset and holds none")
         for d in subs:
-            runs += read_runs(d, verify=verify)
+            runs += read_runs(d, verify=verify, where=where)
+    if where and paths and not runs:
+        raise InputError(f"no run of {', '.join(map(str, paths))} has "
+                         + ", ".join(f"{k} = {v}" for k, v in where.items()))
     return runs
 
 

@@ -220,16 +220,23 @@ class _Combination:
         self.where: dict[int, tuple[str, str]] = {}  # axis -> (root, index path)
         self.applied: dict[str, object] = {}  # path -> value, what makes the run id
         self.removed: list[tuple[str, str]] = []
+        self.missing: dict[int, str] = {}  # axis -> why its path is not in the base
         removals = []
         for i, (axis, value) in enumerate(zip(sweep.axes, values, strict=True)):
             root, parts = _paths.split_root(axis.path)
             data = self.line if root == "line" else self.scenario
+            try:
+                _paths.resolve(data, parts)
+            except _paths.PathError as exc:
+                self.missing[i] = str(exc)
             if value is None and not isinstance(parts[-1], int):
                 parent = _paths.resolve(data, parts, create=True)[0]
                 if isinstance(parent, list):
                     removals.append((i, root, parts))
                     continue
-            self.where[i] = (root, _paths.set_value(data, parts, value))
+            # a copy: a value (a whole fault) is shared by every combination that has it,
+            # and a later axis may set a value inside it (faults.f, then faults.f.magnitude)
+            self.where[i] = (root, _paths.set_value(data, parts, copy.deepcopy(value)))
         for i, root, parts in removals:  # after the values set inside the element
             data = self.line if root == "line" else self.scenario
             self.where[i] = (root, _paths.remove(data, parts))
@@ -250,7 +257,7 @@ def _apply_set(sweep: Sweep, scenario: dict, line: dict, file: str) -> None:
     for key, value in sweep.set.items():
         root, parts = _paths.split_root(key)
         try:
-            _paths.set_value(line if root == "line" else scenario, parts, value)
+            _paths.set_value(line if root == "line" else scenario, parts, copy.deepcopy(value))
         except _paths.PathError as exc:
             raise InputError(str(exc), file=file, path=f"set.{key}") from None
 
@@ -305,6 +312,7 @@ def plan_sweep(path: str | Path) -> SweepPlan:
     combos = combinations(sweep, file)
 
     problems: list[str] = []
+    invalid: set[int] = set()  # the combinations with a problem (one may have several)
     seen_warnings: dict[str, int] = {}
     line_cache: dict[str, object] = {}
     columns_of: dict[str, tuple] = {}  # structure -> sample columns
@@ -316,12 +324,23 @@ def plan_sweep(path: str | Path) -> SweepPlan:
             combo = _Combination(sweep, values, base, base_line)
         except _paths.PathError as exc:
             problems.append(_path_problem(sweep, values, base, base_line, file, exc))
+            invalid.add(k)
             continue
         digest = _digest(combo.applied)[:10]
         if digest in ids:
-            problems.append(f"{file}: combinations {ids[digest]} and {k} make the same run "
-                            f"({_shown(sweep, values)}): an axis value inside a removed "
-                            f"element, or a value listed twice")
+            if len(combo.applied) < len(sweep.axes):
+                # an axis value inside an element another axis removed: the run of the
+                # combination without it (a grid of [null, fault] x magnitudes has one
+                # run without the fault, not one per magnitude)
+                continue
+            problems.append(
+                f"{file}: draws {ids[digest]} and {k} of combine: random make the same run "
+                f"({_shown(sweep, values)}): the axes' values repeat; draw from uniform or "
+                f"loguniform, draw fewer (n), or combine by grid"
+                if sweep.combine == "random" else
+                f"{file}: combinations {ids[digest]} and {k} make the same run "
+                f"({_shown(sweep, values)}): a value is listed twice")
+            invalid.add(k)
             continue
         ids[digest] = k
         try:
@@ -338,6 +357,7 @@ def plan_sweep(path: str | Path) -> SweepPlan:
                 seen_warnings[msg] = seen_warnings.get(msg, 0) + 1
         except InputError as exc:
             problems += _problems(exc, combo, sweep, files, file)
+            invalid.add(k)
             continue
         structure = _digest([_structure(combo.line), _structure(combo.scenario)])
         if structure not in columns_of:
@@ -347,6 +367,7 @@ def plan_sweep(path: str | Path) -> SweepPlan:
                 columns_of[structure] = sample_columns(scenario, line)
             except R2RError as exc:
                 problems.append(f"{file}: {_shown(sweep, values)}: {exc}")
+                invalid.add(k)
                 continue
         cols = columns_of[structure]
         if first_columns is None:
@@ -357,12 +378,19 @@ def plan_sweep(path: str | Path) -> SweepPlan:
                             f"have other sample columns than those of combination {first_k} "
                             f"({', '.join(diff)}...); one dataset holds runs of one set of "
                             f"columns: make two sweeps")
+            invalid.add(k)
             continue
         made.append((combo, scenario, line))
     if problems:
+        # one line per problem: the same one in several combinations (an invalid value of
+        # one axis, crossed with the others) is listed once, with their number
+        counts: dict[str, int] = {}
+        for p in problems:
+            counts[p] = counts.get(p, 0) + 1
+        problems = [p if n == 1 else f"{p} (in {n} combinations)" for p, n in counts.items()]
         more = len(problems) - MAX_LISTED
         listed = problems[:MAX_LISTED] + ([f"... and {more} more"] if more > 0 else [])
-        err = InputError(f"{len(problems)} of {len(combos)} combinations are invalid "
+        err = InputError(f"{len(invalid)} of {len(combos)} combinations are invalid "
                          f"(nothing was run):\n  " + "\n  ".join(listed), file=file)
         err.problems = [("", p) for p in problems]
         raise err
@@ -374,7 +402,7 @@ def plan_sweep(path: str | Path) -> SweepPlan:
               f"scenario/{line_copy}": line_path.read_text(encoding="utf-8")}
     shown_warnings = [m if n == 1 else f"{m} (in {n} combinations)"
                       for m, n in seen_warnings.items()]
-    return SweepPlan(sweep, path, scenario_path, line_path, runs, len(combos), seeds, axes,
+    return SweepPlan(sweep, path, scenario_path, line_path, runs, len(made), seeds, axes,
                      copies, shown_warnings)
 
 
@@ -404,6 +432,12 @@ def _problems(exc: InputError, combo, sweep, files, file) -> list[str]:
                             for i in blamed)
         else:
             who = _shown(sweep, combo.values)
+        for i in blamed:  # the error is about a mapping the path made on its way
+            root, where = combo.where[i]
+            if i in combo.missing and p and where.startswith((p + ".", p + "[")):
+                who += (f": the path leads nowhere in the base {root} ({combo.missing[i]}); "
+                        f"the sweep made a mapping on the way")
+                break
         out.append(f"{file}: {who}: {one.format()}")
     return out
 
