@@ -177,7 +177,8 @@ def _cmd_sweep(args) -> int:
         n = summary.failed + summary.skipped_failed
         print(f"error: {n} run{'s' if n != 1 else ''} of the sweep failed (listed above; "
               f"failures.parquet, runs.parquet termination_reason); the others are written. "
-              f"--retry-failed runs them again", file=sys.stderr)
+              f"--retry-failed runs them again (a solver failure repeats unless the cause, "
+              f"e.g. the solver settings, changes)", file=sys.stderr)
         return EXIT_FAILURE
     return 0
 
@@ -319,8 +320,12 @@ def _cmd_validate(args) -> int:
                 from .sweep import plan_sweep
 
                 plan = plan_sweep(path)
-                kind = (f"sweep ({len(plan.runs)} runs: {plan.n_combinations} combinations x "
-                        f"{len(plan.seeds)} seeds)")
+                def n(k, what):
+                    return f"{k} {what}{'' if k == 1 else 's'}"
+
+                kind = (f"sweep ({n(len(plan.runs), 'run')}: "
+                        f"{n(plan.n_combinations, 'combination')} x "
+                        f"{n(len(plan.seeds), 'seed')})")
             else:
                 load_scenario(path)
                 kind = "scenario"

@@ -226,11 +226,11 @@ def plan_from_file(scenario_path: str | Path, seed: int | None = None,
                    {"scenario": scenario_path.name, "line": line_copy}, line_path.stem)
 
 
-def sample_columns(scenario, line) -> tuple[str, ...]:
+def sample_columns(scenario, line, file: str | None = None) -> tuple[str, ...]:
     """The columns the samples of a run of ``scenario`` on ``line`` will have, without
     simulating (compiles the line: ~1 ms once numba's kernels are loaded). A sweep checks
-    with it that all its runs fit one dataset."""
-    prog = Programme.from_steps(line, scenario.programme)
+    with it that all its runs fit one dataset; ``file`` names the scenario in errors."""
+    prog = Programme.from_steps(line, scenario.programme, file=file)
     disturbances = realise_disturbances(scenario, line, np.random.SeedSequence(0))
     cl = compile_line(line, prog, scenario.faults, disturbances)
     cols = []

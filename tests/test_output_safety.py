@@ -256,6 +256,7 @@ def test_writer_keeps_every_path_inside_its_temporary_directory(tmp_path):
             w.write_text(rel, "x")
     with pytest.raises(R2RError, match="outside the dataset directory"):
         w.write_table("../runs", pa.table({"a": [1]}))
+    (w.tmp / "scenario").mkdir(exist_ok=True)  # made by the first write_text
     (w.tmp / "scenario" / "leak").symlink_to(tmp_path, target_is_directory=True)
     with pytest.raises(R2RError, match="outside the dataset directory"):
         w.write_text("scenario/leak/escape.yaml", "x")

@@ -132,8 +132,11 @@ def run_sweep(sweep_path: str | Path, output: str | Path | None = None, *,
     summary.failures = [(k, o.reason) for k, o in outcomes.items() if o.status == "failed"]
     if not todo and store.mode == "reopen":  # finished, nothing new: nothing is written
         summary.complete = True
+        summary.executor = "none (nothing to run)"
         summary.wall_s = time.perf_counter() - t0
         return summary
+    if scheduler is not None and todo:
+        _execute.check_scheduler(scheduler)  # before anything is written
     store.begin()
     try:
         for spec in todo:
@@ -160,7 +163,7 @@ def run_sweep(sweep_path: str | Path, output: str | Path | None = None, *,
                 progress(summary.done + summary.failed, len(todo), rec)
 
         if not todo:
-            pass
+            summary.executor = "none (nothing to run)"
         elif scheduler is not None:
             _execute.run_dask(todo, work, on_result, scheduler, workers)
         elif workers == 0:

@@ -35,13 +35,20 @@ def run_one(spec, work: str) -> dict:
     """
     from ..run import RunPlan, execute
     from ..schema.loader import build_scenario
-    from ._store import failed_reason, run_columns
+    from ._store import failed_reason, finished, run_columns
 
     t0 = time.perf_counter()
+    done = finished(Path(work) / spec.run_id, spec.config_sha256)
+    if done is not None:  # written by a worker that died before it could report it
+        reason = failed_reason(done)
+        return {"run_id": spec.run_id, "status": "failed" if reason else "done",
+                "reason": reason, "has_data": True, "simulated_s": done["simulated_s"],
+                "solver_s": done["wallclock_s"], "wall_s": time.perf_counter() - t0}
     try:
         with warnings.catch_warnings():  # reported once, by the plan
             warnings.simplefilter("ignore", PlausibilityWarning)
-            scenario, line = build_scenario(spec.scenario_data, spec.line_data, spec.source,
+            scenario_data, line_data = spec.data()
+            scenario, line = build_scenario(scenario_data, line_data, spec.source,
                                             spec.line_file)
         scenario.seed = spec.seed
         plan = RunPlan(scenario, line, spec.name, spec.source, spec.config_sha256, {},
@@ -70,9 +77,27 @@ def run_serial(specs, work: str, on_result) -> None:
         on_result(spec, run_one(spec, work))
 
 
-def _worker_init() -> None:
+#: seconds between a worker's checks that the sweep that started it still runs
+PARENT_POLL_S = 0.5
+
+
+def _worker_init(parent: int) -> None:
     # the parent decides what an interrupt does (it stops the workers)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    import threading
+
+    threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True,
+                     name="r2rsim-parent-watch").start()
+
+
+def _exit_with_parent(parent: int) -> None:
+    """End this worker when the sweep process that started it is gone (kill -9, the OOM
+    killer): a pool worker holds both ends of its task queue, so it would otherwise wait for
+    tasks for ever. What the run was writing is a temporary that the next sweep into the
+    directory removes."""
+    while os.getppid() == parent:
+        time.sleep(PARENT_POLL_S)
+    os._exit(1)
 
 
 @contextlib.contextmanager
@@ -113,7 +138,7 @@ def run_processes(specs, work: str, on_result, workers: int) -> None:
     while queue:
         with _one_thread_each():
             pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                                       initializer=_worker_init)
+                                       initializer=_worker_init, initargs=(os.getpid(),))
         pending = {}
         try:
             broken = False
@@ -156,6 +181,28 @@ def _stop(pool) -> None:
             p.terminate()
 
 
+def check_scheduler(scheduler: str) -> None:
+    """Refuse ``--scheduler`` before anything is written: dask.distributed must be installed,
+    and an address must answer.
+
+    Raises
+    ------
+    InputError
+    """
+    try:
+        from distributed import Client
+    except ImportError:
+        raise InputError("--scheduler needs dask.distributed: pip install "
+                         "'r2rsim[dask]'") from None
+    if scheduler == "local":
+        return
+    try:
+        Client(scheduler, timeout=CONNECT_TIMEOUT_S).close()
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise InputError(f"--scheduler: cannot reach a Dask scheduler at '{scheduler}' "
+                         f"({type(exc).__name__}: {exc})") from None
+
+
 def run_dask(specs, work: str, on_result, scheduler: str, workers: int) -> None:
     """The runs on a Dask cluster: ``scheduler`` is an address (``tcp://host:8786``) or
     ``local`` to start a :class:`distributed.LocalCluster` of ``workers`` processes. The
@@ -171,8 +218,13 @@ def run_dask(specs, work: str, on_result, scheduler: str, workers: int) -> None:
     try:
         if scheduler == "local":
             with _one_thread_each():
+                # the scheduler's HTTP server (metrics) starts even without a dashboard, on
+                # port 8787 unless told otherwise: a free port instead, so that two sweeps
+                # (or a user's own cluster) do not warn "Port 8787 is already in use"
                 cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                       dashboard_address=None, silence_logs=logging.ERROR)
+                                       dashboard_address=None, silence_logs=logging.ERROR,
+                                       scheduler_kwargs={"dashboard": False,
+                                                         "dashboard_address": "127.0.0.1:0"})
             client = Client(cluster)
         else:
             try:

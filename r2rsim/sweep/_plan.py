@@ -31,14 +31,29 @@ MAX_LISTED = 50
 
 
 @dataclass(frozen=True)
+class Template:
+    """The base scenario and line with the sweep's ``set:`` applied, and the axes' paths:
+    every run's data is made from it and the run's axis values (so a plan holds one copy of
+    the data, not one per run)."""
+
+    scenario: dict
+    line: dict
+    paths: tuple[str, ...]
+
+    def build(self, values: tuple) -> _Combination:
+        return _Combination(self.paths, values, self.scenario, self.line)
+
+
+@dataclass(frozen=True)
 class RunSpec:
-    """One run of a sweep, as a worker needs it (plain data, cheap to send to a process)."""
+    """One run of a sweep, as a worker needs it (small: cheap to keep for every run and to
+    send to a process)."""
 
     run_id: str
     seed: int
     combination: int
-    scenario_data: dict
-    line_data: dict
+    values: tuple
+    template: Template
     source: str
     line_file: str
     name: str
@@ -46,6 +61,19 @@ class RunSpec:
     config_sha256: str
     columns: dict
     column_types: tuple
+
+    def data(self) -> tuple[dict, dict]:
+        """The run's scenario and line, as mappings read from YAML."""
+        combo = self.template.build(self.values)
+        return combo.scenario, combo.line
+
+    @property
+    def scenario_data(self) -> dict:
+        return self.data()[0]
+
+    @property
+    def line_data(self) -> dict:
+        return self.data()[1]
 
 
 @dataclass
@@ -213,7 +241,7 @@ def _structure(obj):
 class _Combination:
     """One combination applied to copies of the base scenario and line."""
 
-    def __init__(self, sweep: Sweep, values: tuple, scenario: dict, line: dict):
+    def __init__(self, paths: tuple[str, ...], values: tuple, scenario: dict, line: dict):
         self.scenario = copy.deepcopy(scenario)
         self.line = copy.deepcopy(line)
         self.values = values
@@ -222,8 +250,8 @@ class _Combination:
         self.removed: list[tuple[str, str]] = []
         self.missing: dict[int, str] = {}  # axis -> why its path is not in the base
         removals = []
-        for i, (axis, value) in enumerate(zip(sweep.axes, values, strict=True)):
-            root, parts = _paths.split_root(axis.path)
+        for i, (path, value) in enumerate(zip(paths, values, strict=True)):
+            root, parts = _paths.split_root(path)
             data = self.line if root == "line" else self.scenario
             try:
                 _paths.resolve(data, parts)
@@ -241,9 +269,9 @@ class _Combination:
             data = self.line if root == "line" else self.scenario
             self.where[i] = (root, _paths.remove(data, parts))
             self.removed.append(self.where[i])
-        for i, axis in enumerate(sweep.axes):
+        for i, path in enumerate(paths):
             if self.applies(i):
-                self.applied[axis.path] = values[i]
+                self.applied[path] = values[i]
 
     def applies(self, i: int) -> bool:
         """Whether axis ``i`` has an effect (it is not inside an element another removed)."""
@@ -281,6 +309,131 @@ def _value(v) -> str:
     return json.dumps(v) if not isinstance(v, str) else repr(v)
 
 
+@dataclass
+class _Made:
+    """What the plan keeps of a valid combination (not its data: the template rebuilds
+    it)."""
+
+    values: tuple
+    digest: str
+    configs: list[str]  # config_sha256 per seed
+    row: dict  # axis column -> SI value
+    overrides_json: str
+    name: str | None
+
+
+class _Checker:
+    """Validates combinations one by one, collecting problems, warnings and sample-column
+    sets (every combination must give the runs the same columns)."""
+
+    def __init__(self, sweep: Sweep, file: str, files: dict, seeds: list[int]):
+        self.sweep, self.file, self.files, self.seeds = sweep, file, files, seeds
+        self.problems: list[str] = []
+        self.invalid: set[int] = set()  # combinations with a problem (one may have several)
+        self.warnings: dict[str, int] = {}
+        self.lines: dict[str, object] = {}  # validated lines by their data's digest
+        self.columns_of: dict[str, tuple] = {}  # data structure -> sample columns
+        self.first: tuple | None = None  # (sample columns, combination) of the first
+        self.ids: dict[str, int] = {}
+
+    def fail(self, k: int, problems: list[str]) -> None:
+        self.problems += problems
+        self.invalid.add(k)
+
+    def check(self, k: int, combo: _Combination) -> _Made | None:
+        """The combination's record, or None (a problem noted, or a duplicate skipped)."""
+        sweep, file = self.sweep, self.file
+        digest = _digest(combo.applied)[:10]
+        if digest in self.ids:
+            if len(combo.applied) < len(sweep.axes):
+                # an axis value inside an element another axis removed: the run of the
+                # combination without it (a grid of [null, fault] x magnitudes has one
+                # run without the fault, not one per magnitude)
+                return None
+            self.fail(k, [
+                f"{file}: draws {self.ids[digest]} and {k} of combine: random make the same "
+                f"run ({_shown(sweep, combo.values)}): the axes' values repeat; draw from "
+                f"uniform or loguniform, draw fewer (n), or combine by grid"
+                if sweep.combine == "random" else
+                f"{file}: combinations {self.ids[digest]} and {k} make the same run "
+                f"({_shown(sweep, combo.values)}): a value is listed twice"])
+            return None
+        self.ids[digest] = k
+        try:
+            scenario, line = self._validate(combo)
+        except InputError as exc:
+            self.fail(k, _problems(exc, combo, sweep, self.files, file))
+            return None
+        if not self._same_columns(k, combo, scenario, line):
+            return None
+        data = {"scenario": combo.scenario, "line": combo.line}
+        configs = [_digest({**data, "seed": seed, "r2rsim": __version__}) for seed in self.seeds]
+        return _Made(combo.values, digest, configs, _axis_row(sweep, combo, scenario, line),
+                     json.dumps(combo.applied, sort_keys=True, default=repr), scenario.name)
+
+    def _validate(self, combo: _Combination):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", PlausibilityWarning)
+            key = _digest(combo.line)
+            line = self.lines.get(key)
+            if line is None:
+                line = self.lines[key] = load_line(combo.line, file=self.files["line"])
+            scenario, line = build_scenario(combo.scenario, line, self.files["scenario"],
+                                            self.files["line"])
+        for w in caught:
+            msg = w.message.format() if hasattr(w.message, "format") else str(w.message)
+            self.warnings[msg] = self.warnings.get(msg, 0) + 1
+        return scenario, line
+
+    def _same_columns(self, k: int, combo: _Combination, scenario, line) -> bool:
+        structure = _digest([_structure(combo.line), _structure(combo.scenario)])
+        if structure not in self.columns_of:
+            from ..run import sample_columns
+
+            try:
+                self.columns_of[structure] = sample_columns(scenario, line,
+                                                            file=self.files["scenario"])
+            except R2RError as exc:
+                self.fail(k, [f"{self.file}: {_shown(self.sweep, combo.values)}: {exc}"])
+                return False
+        cols = self.columns_of[structure]
+        if self.first is None:
+            self.first = (cols, k)
+        elif cols != self.first[0]:
+            diff = sorted(set(cols) ^ set(self.first[0]))[:3]
+            self.fail(k, [f"{self.file}: {_shown(self.sweep, combo.values)}: the runs of this "
+                          f"combination have other sample columns than those of combination "
+                          f"{self.first[1]} ({', '.join(diff)}...); one dataset holds runs of "
+                          f"one set of columns: make two sweeps"])
+            return False
+        return True
+
+    def raise_problems(self, n_combos: int) -> None:
+        if not self.problems:
+            return
+        # one line per problem: the same one in several combinations (an invalid value of
+        # one axis, crossed with the others) is listed once, with their number
+        counts: dict[str, int] = {}
+        for p in self.problems:
+            counts[p] = counts.get(p, 0) + 1
+        # the sweep file is named once, in front of the list
+        problems = [p.removeprefix(f"{self.file}: ") + ("" if n == 1 else
+                                                         f" (in {n} combinations)")
+                    for p, n in counts.items()]
+        more = len(problems) - MAX_LISTED
+        listed = problems[:MAX_LISTED] + ([f"... and {more} more"] if more > 0 else [])
+        n = len(self.invalid)
+        err = InputError(f"{n} of {_count(n_combos, 'combination')} {'is' if n == 1 else 'are'}"
+                         f" invalid (nothing was run):\n  " + "\n  ".join(listed),
+                         file=self.file)
+        err.problems = [("", p) for p in problems]
+        raise err
+
+
+def _count(n: int, what: str) -> str:
+    return f"{n} {what}{'' if n == 1 else 's'}"
+
+
 def plan_sweep(path: str | Path) -> SweepPlan:
     """Read a sweep file and make and validate every one of its runs.
 
@@ -310,98 +463,27 @@ def plan_sweep(path: str | Path) -> SweepPlan:
         raise InputError(f"the last seed {seeds[-1]} is above 2**64 - 1", file=file,
                          path="seeds")
     combos = combinations(sweep, file)
-
-    problems: list[str] = []
-    invalid: set[int] = set()  # the combinations with a problem (one may have several)
-    seen_warnings: dict[str, int] = {}
-    line_cache: dict[str, object] = {}
-    columns_of: dict[str, tuple] = {}  # structure -> sample columns
-    first_columns: tuple | None = None
-    made: list[tuple[_Combination, object, object]] = []
-    ids: dict[str, int] = {}
+    template = Template(base, base_line, tuple(a.path for a in sweep.axes))
+    checker = _Checker(sweep, file, files, seeds)
+    made: list[_Made] = []
     for k, values in enumerate(combos):
         try:
-            combo = _Combination(sweep, values, base, base_line)
+            combo = template.build(values)
         except _paths.PathError as exc:
-            problems.append(_path_problem(sweep, values, base, base_line, file, exc))
-            invalid.add(k)
+            checker.fail(k, [_path_problem(sweep, values, base, base_line, file, exc)])
             continue
-        digest = _digest(combo.applied)[:10]
-        if digest in ids:
-            if len(combo.applied) < len(sweep.axes):
-                # an axis value inside an element another axis removed: the run of the
-                # combination without it (a grid of [null, fault] x magnitudes has one
-                # run without the fault, not one per magnitude)
-                continue
-            problems.append(
-                f"{file}: draws {ids[digest]} and {k} of combine: random make the same run "
-                f"({_shown(sweep, values)}): the axes' values repeat; draw from uniform or "
-                f"loguniform, draw fewer (n), or combine by grid"
-                if sweep.combine == "random" else
-                f"{file}: combinations {ids[digest]} and {k} make the same run "
-                f"({_shown(sweep, values)}): a value is listed twice")
-            invalid.add(k)
-            continue
-        ids[digest] = k
-        try:
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always", PlausibilityWarning)
-                key = _digest(combo.line)
-                line = line_cache.get(key)
-                if line is None:
-                    line = line_cache[key] = load_line(combo.line, file=files["line"])
-                scenario, line = build_scenario(combo.scenario, line, files["scenario"],
-                                                files["line"])
-            for w in caught:
-                msg = w.message.format() if hasattr(w.message, "format") else str(w.message)
-                seen_warnings[msg] = seen_warnings.get(msg, 0) + 1
-        except InputError as exc:
-            problems += _problems(exc, combo, sweep, files, file)
-            invalid.add(k)
-            continue
-        structure = _digest([_structure(combo.line), _structure(combo.scenario)])
-        if structure not in columns_of:
-            from ..run import sample_columns
-
-            try:
-                columns_of[structure] = sample_columns(scenario, line)
-            except R2RError as exc:
-                problems.append(f"{file}: {_shown(sweep, values)}: {exc}")
-                invalid.add(k)
-                continue
-        cols = columns_of[structure]
-        if first_columns is None:
-            first_columns, first_k = cols, k
-        elif cols != first_columns:
-            diff = sorted(set(cols) ^ set(first_columns))[:3]
-            problems.append(f"{file}: {_shown(sweep, values)}: the runs of this combination "
-                            f"have other sample columns than those of combination {first_k} "
-                            f"({', '.join(diff)}...); one dataset holds runs of one set of "
-                            f"columns: make two sweeps")
-            invalid.add(k)
-            continue
-        made.append((combo, scenario, line))
-    if problems:
-        # one line per problem: the same one in several combinations (an invalid value of
-        # one axis, crossed with the others) is listed once, with their number
-        counts: dict[str, int] = {}
-        for p in problems:
-            counts[p] = counts.get(p, 0) + 1
-        problems = [p if n == 1 else f"{p} (in {n} combinations)" for p, n in counts.items()]
-        more = len(problems) - MAX_LISTED
-        listed = problems[:MAX_LISTED] + ([f"... and {more} more"] if more > 0 else [])
-        err = InputError(f"{len(invalid)} of {len(combos)} combinations are invalid "
-                         f"(nothing was run):\n  " + "\n  ".join(listed), file=file)
-        err.problems = [("", p) for p in problems]
-        raise err
-    axes, runs = _runs(sweep, made, seeds, files, scenario_path, line_path)
+        record = checker.check(k, combo)
+        if record is not None:
+            made.append(record)
+    checker.raise_problems(len(combos))
+    axes, runs = _runs(sweep, made, seeds, template, files, scenario_path, line_path)
     line_copy = (line_path.name if line_path.name != scenario_path.name
                  else f"line.{line_path.name}")
     copies = {f"sweep/{path.name}": path.read_text(encoding="utf-8"),
               f"scenario/{scenario_path.name}": scenario_path.read_text(encoding="utf-8"),
               f"scenario/{line_copy}": line_path.read_text(encoding="utf-8")}
     shown_warnings = [m if n == 1 else f"{m} (in {n} combinations)"
-                      for m, n in seen_warnings.items()]
+                      for m, n in checker.warnings.items()]
     return SweepPlan(sweep, path, scenario_path, line_path, runs, len(made), seeds, axes,
                      copies, shown_warnings)
 
@@ -465,31 +547,34 @@ def _column_type(values: list) -> str:
 def _as_type(v, kind: str):
     if v is None:
         return None
-    if kind == "float64":
-        return float(v)
+    if kind == "float64":  # 15 digits: '50 um' is stored as 5e-05, not 4.9999999999999996e-05
+        return float(f"{float(v):.15g}")
     if kind == "bool":
         return bool(v)
     return v if isinstance(v, str) else json.dumps(v, sort_keys=True)
 
 
-def _runs(sweep, made, seeds, files, scenario_path, line_path):
-    """The axis columns (SI values read back from the validated models) and the runs."""
-    raw: list[dict] = []
-    for combo, scenario, line in made:
-        dumped = {"scenario": scenario.model_dump(), "line": line.model_dump()}
-        row = {}
-        for i, axis in enumerate(sweep.axes):
-            if not combo.applies(i) or combo.values[i] is None:
-                row[axis.column] = None
-                continue
-            root, parts = _paths.split_root(axis.path)
-            try:
-                value = _paths.get_value(dumped[root], parts)
-            except _paths.PathError:  # a key the model stores under another name
-                value = combo.values[i]
-            row[axis.column] = _si_or_text(value)
-        raw.append(row)
-    kinds = {a.column: _column_type([r[a.column] for r in raw]) for a in sweep.axes}
+def _axis_row(sweep: Sweep, combo: _Combination, scenario, line) -> dict:
+    """The axis values of a combination as stored: read back from the validated models (in
+    SI), None for an axis that did not apply."""
+    dumped = {"scenario": scenario.model_dump(), "line": line.model_dump()}
+    row = {}
+    for i, axis in enumerate(sweep.axes):
+        if not combo.applies(i) or combo.values[i] is None:
+            row[axis.column] = None
+            continue
+        root, parts = _paths.split_root(axis.path)
+        try:
+            value = _paths.get_value(dumped[root], parts)
+        except _paths.PathError:  # a key the model stores under another name
+            value = combo.values[i]
+        row[axis.column] = _si_or_text(value)
+    return row
+
+
+def _runs(sweep, made: list[_Made], seeds, template, files, scenario_path, line_path):
+    """The axes' descriptions and the runs (combination by combination, seeds inside)."""
+    kinds = {a.column: _column_type([m.row[a.column] for m in made]) for a in sweep.axes}
     axes = [{"column": a.column, "path": a.path, "type": kinds[a.column],
              "source": next(k for k in ("values", "range", "uniform", "loguniform")
                             if getattr(a, k) is not None)} for a in sweep.axes]
@@ -497,19 +582,13 @@ def _runs(sweep, made, seeds, files, scenario_path, line_path):
              *((a.column, kinds[a.column]) for a in sweep.axes),
              ("overrides_json", "string"), ("config_sha256", "string"))
     runs = []
-    base_name = made[0][1].name if made else None
-    for k, ((combo, scenario, _), row) in enumerate(zip(made, raw, strict=True)):
-        digest = _digest(combo.applied)[:10]
-        for seed in seeds:
-            run_id = f"{sweep.name}__{digest}__s{seed}"
-            config = _digest({"scenario": combo.scenario, "line": combo.line, "seed": seed,
-                              "r2rsim": __version__})
+    base_name = next((m.name for m in made if m.name), None) or scenario_path.stem
+    for k, m in enumerate(made):
+        for seed, config in zip(seeds, m.configs, strict=True):
             cols = {"sweep": sweep.name, "combination": k,
-                    **{c: _as_type(v, kinds[c]) for c, v in row.items()},
-                    "overrides_json": json.dumps(combo.applied, sort_keys=True, default=repr),
-                    "config_sha256": config}
-            runs.append(RunSpec(run_id, seed, k, combo.scenario, combo.line,
-                                files["scenario"], files["line"],
-                                scenario.name or base_name or scenario_path.stem,
-                                line_path.stem, config, cols, types))
+                    **{c: _as_type(v, kinds[c]) for c, v in m.row.items()},
+                    "overrides_json": m.overrides_json, "config_sha256": config}
+            runs.append(RunSpec(f"{sweep.name}__{m.digest}__s{seed}", seed, k, m.values,
+                                template, files["scenario"], files["line"],
+                                m.name or base_name, line_path.stem, config, cols, types))
     return axes, runs

@@ -17,10 +17,10 @@ can be reopened (more seeds, ``--retry-failed``): its runs stay, the new ones ar
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import platform
+import re
 import shutil
 from pathlib import Path
 
@@ -43,6 +43,10 @@ from ..errors import InputError, R2RError
 MARKER = ".r2rsim-sweep.json"
 WORK = ".work"
 TABLES = ("runs", "faults", "events")
+#: what a sweep writes at the top of its directory, besides samples/, scenario/, sweep/
+_TOP_FILES = {f"{t}.parquet" for t in (*TABLES, "channels", "failures")} | {MANIFEST}
+#: the temporaries of the marker and the manifest (written, then renamed)
+_TOP_TEMP = re.compile(rf"^(?:{re.escape(MARKER)}|{re.escape(MANIFEST)})\.tmp-[0-9]+$")
 _PYARROW_TYPES = {"string": pa.string(), "float64": pa.float64(), "bool": pa.bool_(),
                   "int64": pa.int64()}
 
@@ -68,6 +72,16 @@ def failures_schema(plan) -> pa.Schema:
     types = plan.runs[0].column_types if plan.runs else ()
     return pa.schema([("run_id", pa.string()), ("seed", pa.uint64()),
                       *((c, _PYARROW_TYPES[t]) for c, t in types), ("error", pa.string())])
+
+
+def finished(path: Path, config_sha256: str) -> dict | None:
+    """The runs.parquet row of a run already written at ``path`` (intact, and made from
+    this configuration), else None. A worker that died after writing its run but before
+    reporting it has its run given to another worker, which finds it here."""
+    if not (path / MANIFEST).is_file() or dataset_problems(path):
+        return None
+    row = pq.read_table(path / "runs.parquet").to_pylist()[0]
+    return row if row.get("config_sha256") == config_sha256 else None
 
 
 class Outcome:
@@ -128,6 +142,7 @@ class SweepStore:
             manifest, _ = read_manifest(out)
             if manifest and (manifest.get("sweep") or {}).get("name") == name:
                 self.final = manifest  # a finished sweep being extended
+            self.check_foreign()
             return
         if not out.exists() or not any(out.iterdir()):
             return
@@ -179,7 +194,8 @@ class SweepStore:
                              + (" (or --overwrite)" if self.mode == "reopen" else ""))
         if changed:
             raise InputError(f"{len(changed)} run(s) in '{self.out}' were made from another "
-                             f"base scenario, line or r2rsim version (e.g. {changed[0]}); "
+                             f"base scenario, line, sweep set: or r2rsim version (e.g. "
+                             f"{changed[0]}); "
                              f"continuing would mix them: write to another directory with -o"
                              + (" (or --overwrite)" if self.mode == "reopen" else ""))
         if retry_failed:
@@ -297,9 +313,50 @@ class SweepStore:
             self._lock = None
 
     # ------------------------------------------------------------------ finalising
+    def foreign_files(self) -> list[str]:
+        """What is in the directory of an unfinished sweep that neither the sweep nor the
+        dataset it reopens wrote (a user's notes, an analysis/ directory): the manifest lists
+        every file there, so these must not be there when it is written."""
+        ours = set(self.plan.files) | set((self.final or {}).get("files", {}))
+        runs = {s.run_id for s in self.plan.runs}
+        found = []
+        for top in sorted(self.out.iterdir(), key=lambda p: p.name):
+            name = top.name
+            if name in (WORK, MARKER) or _TOP_TEMP.match(name):
+                continue
+            if top.is_symlink() or not top.is_dir():
+                if name not in _TOP_FILES or top.is_symlink():
+                    found.append(name)
+                continue
+            if name not in ("samples", "scenario", "sweep"):
+                found.append(name + "/")
+                continue
+            for p in sorted(top.rglob("*")):
+                rel = p.relative_to(self.out).as_posix()
+                if p.is_dir() and not p.is_symlink():
+                    if not (name == "samples" and p.parent == top
+                            and p.name.startswith("run_id=")):
+                        found.append(rel + "/")
+                elif rel not in ours and not (
+                        p.name == "part-0.parquet" and not p.is_symlink()
+                        and p.parent.parent == top and name == "samples"
+                        and p.parent.name.removeprefix("run_id=") in runs):
+                    found.append(rel)
+        return found
+
+    def check_foreign(self) -> None:
+        """Refuse to continue a sweep whose directory holds files r2rsim did not write."""
+        foreign = self.foreign_files()
+        if foreign:
+            raise InputError(f"output directory '{self.out}' holds an unfinished sweep and "
+                             f"{len(foreign)} file(s) r2rsim did not write ("
+                             f"{', '.join(foreign[:3])}{', ...' if len(foreign) > 3 else ''})"
+                             f": move them out of it, then run the sweep again to finish it")
+
     def finalise(self, outcomes: dict[str, Outcome]) -> Path:
         """Build the dataset from the runs' outcomes (every run of the plan has one)."""
         plan = self.plan
+        self.check_foreign()  # files put there while the sweep ran are not adopted
         tmp = self.work / ".final"
         if tmp.exists():
             shutil.rmtree(tmp)
@@ -310,7 +367,7 @@ class SweepStore:
         meta = {b"r2rsim.schema_version": SCHEMA_VERSION.encode(),
                 b"r2rsim.version": __version__.encode(),
                 b"r2rsim.sweep": plan.sweep.name.encode()}
-        channels = None
+        channels, old_channels = None, False
         run_ids, failure_rows, known_sha = [], [], {}
         try:
             for spec in plan.runs:
@@ -323,16 +380,21 @@ class SweepStore:
                 for name in TABLES:
                     table = (pq.read_table(self.work / spec.run_id / f"{name}.parquet")
                              if o.where == "work" else old.rows(name, spec.run_id))
+                    if name == "runs":  # as this plan numbers and names them
+                        table = _sweep_columns(table, spec)
                     schema = schemas.get(name) or table.schema.remove_metadata()
                     schemas[name] = schema
                     if name not in writers:
                         writers[name] = _TableWriter(tmp / f"{name}.parquet",
                                                      schema.with_metadata(meta))
                     writers[name].add(table.replace_schema_metadata(None).cast(schema))
-                if channels is None:
-                    channels = pq.read_table(self.work / spec.run_id / "channels.parquet"
-                                             if o.where == "work"
-                                             else self.out / "channels.parquet")
+                if o.where == "work" or not old_channels:
+                    # every run's (those of a reopened dataset as one): a swept record_rate,
+                    # sensor rate or range changes them
+                    channels = _merge_channels(channels, pq.read_table(
+                        self.work / spec.run_id / "channels.parquet" if o.where == "work"
+                        else self.out / "channels.parquet"))
+                    old_channels = old_channels or o.where != "work"
             for name in TABLES:
                 if name not in writers:  # no run has data
                     pq.write_table(pa.Table.from_pylist([], schema=schemas.get(
@@ -349,10 +411,13 @@ class SweepStore:
         pq.write_table(channels.replace_schema_metadata(meta), tmp / "channels.parquet",
                        compression="zstd")
         self._place_samples(outcomes, known_sha)
-        with contextlib.suppress(FileNotFoundError):
-            (self.out / MANIFEST).unlink()  # the dataset is incomplete from here on
+        # the old manifest stays until the new one replaces it: the marker already says the
+        # dataset is unfinished, and a resume needs the old checksums
         for p in tmp.iterdir():
             os.replace(p, self.out / p.name)
+        for rel in (self.final or {}).get("files", {}):  # copies of renamed files
+            if rel.startswith(("sweep/", "scenario/")) and rel not in plan.files:
+                (self.out / rel).unlink(missing_ok=True)
         for rel, text in plan.files.items():
             target = self.out / rel
             target.parent.mkdir(parents=True, exist_ok=True)
@@ -416,6 +481,43 @@ class SweepStore:
         tmp = self.out / f"{MANIFEST}.tmp-{os.getpid()}"
         tmp.write_text(json.dumps(manifest, indent=2, sort_keys=True), encoding="utf-8")
         os.replace(tmp, self.out / MANIFEST)
+
+
+#: the description of a channel whose description differs between the runs of a sweep
+VARIES = " (differs between the runs of this sweep; see each run's configuration)"
+
+
+def _merge_channels(merged: pa.Table | None, table: pa.Table) -> pa.Table:
+    """channels.parquet of a sweep: one run's, with ``rate_hz`` null and the description
+    marked where the runs differ (a swept record rate, sensor rate or range; a run's record
+    rate is 1 / ``sample_period_s`` in runs.parquet)."""
+    table = table.replace_schema_metadata(None)
+    if merged is None or merged.equals(table):
+        return table if merged is None else merged
+    a, b = merged.to_pydict(), table.to_pydict()
+    if a["channel"] != b["channel"] or any(a[c] != b[c] for c in ("kind", "unit", "component")):
+        raise R2RError("the runs of the sweep have different channels (channels.parquet); "
+                       "one dataset holds runs of one set of channels")
+    for i in range(len(a["channel"])):
+        if a["rate_hz"][i] != b["rate_hz"][i]:
+            a["rate_hz"][i] = None
+        if a["description"][i].removesuffix(VARIES) != b["description"][i]:
+            a["description"][i] = a["description"][i].removesuffix(VARIES) + VARIES
+    return pa.table(a, schema=merged.schema)
+
+
+_SWEEP_COLUMNS = ("sweep", "combination", "overrides_json", "config_sha256")
+
+
+def _sweep_columns(table: pa.Table, spec) -> pa.Table:
+    """A run's row with the sweep's columns as the current plan has them: a reopened sweep
+    may number its combinations anew (a value added to an axis) or rename an axis."""
+    keep = [c for c in table.column_names
+            if c not in _SWEEP_COLUMNS and not c.startswith("axis.")]
+    table = table.select(keep)
+    for col, arr in run_columns(spec).items():
+        table = table.append_column(col, arr)
+    return table
 
 
 class _TableWriter:
