@@ -44,10 +44,12 @@ def _run_cli(argv: list[str], heavy: tuple[str, ...]) -> tuple[int, list[str]]:
     (["--version"], HEAVY + ("numpy", "pydantic", "pint")),
     (["list", "elements"], HEAVY + ("numpy", "pydantic", "pint")),
     (["schema", "line"], HEAVY + ("numpy", "pint")),
+    (["schema", "sweep"], HEAVY + ("numpy", "pint")),
     (["list", "faults"], HEAVY + ("numpy", "pint")),
     # quantity strings are read by r2rsim.units' own parser; pint only for exotic unit names
     (["validate", LINE], HEAVY + ("numpy", "pint")),
-], ids=["version", "list-elements", "schema-line", "list-faults", "validate-line"])
+], ids=["version", "list-elements", "schema-line", "schema-sweep", "list-faults",
+        "validate-line"])
 def test_quick_commands_do_not_import_the_numerical_stack(argv, heavy):
     rc, loaded = _run_cli(argv, heavy)
     assert rc == 0

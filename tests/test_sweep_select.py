@@ -90,3 +90,24 @@ def test_diagnose_bad_where(dataset, tmp_path, capsys, arg, msg):
                  "-o", str(tmp_path / "res")])
     err = capsys.readouterr().err
     assert code == 2 and msg in err and len(err.strip().splitlines()) == 1
+
+
+def test_json_schema_of_the_sweep_file(capsys):
+    """`r2rsim schema sweep` prints the sweep file's JSON Schema, whose keys are the ones
+    the shipped sweeps use."""
+    import json
+
+    import yaml
+
+    assert main(["schema", "sweep"]) == 0
+    schema = json.loads(capsys.readouterr().out)
+    assert schema["additionalProperties"] is False
+    keys = set(schema["properties"])
+    assert {"name", "scenario", "set", "axes", "combine", "n", "seed", "seeds"} <= keys
+    assert set(schema["$defs"]["Axis"]["properties"]) == {"path", "name", "values", "range",
+                                                          "uniform", "loguniform"}
+    for path in sorted((REPO / "sweeps").glob("*.yaml")):
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        assert set(data) <= keys, path
+        for axis in data.get("axes", []):
+            assert set(axis) <= set(schema["$defs"]["Axis"]["properties"]), path

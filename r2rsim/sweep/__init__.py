@@ -19,7 +19,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from ._plan import RunSpec, SweepPlan, load_sweep, plan_sweep
-from ._store import SweepStore
+from ._store import Outcome, SweepStore
 
 __all__ = ["RunSpec", "SweepPlan", "SweepSummary", "default_workers", "load_sweep",
            "plan_sweep", "run_sweep"]
@@ -50,6 +50,16 @@ class SweepSummary:
     failures: list[tuple[str, str]] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     executor: str = ""
+
+    def add(self, run_id: str, record: dict) -> None:
+        """Count a run's result (a record of :func:`r2rsim.sweep._execute.run_one`)."""
+        if record["status"] == "done":
+            self.done += 1
+        else:
+            self.failed += 1
+            self.failures.append((run_id, record["reason"]))
+        self.simulated_s += record["simulated_s"]
+        self.solver_s += record["solver_s"]
 
     @property
     def runs_per_minute(self) -> float:
@@ -146,19 +156,11 @@ def run_sweep(sweep_path: str | Path, output: str | Path | None = None, *,
             progress(0, len(todo), None)
 
         def on_result(spec, rec):
-            from ._store import Outcome
-
             if rec["status"] == "failed" and not rec["has_data"]:
                 _persist_failure(store.work, spec, rec["reason"])
             outcomes[spec.run_id] = Outcome(rec["status"], "work" if rec["has_data"]
                                             else None, rec["reason"])
-            if rec["status"] == "done":
-                summary.done += 1
-            else:
-                summary.failed += 1
-                summary.failures.append((spec.run_id, rec["reason"]))
-            summary.simulated_s += rec["simulated_s"]
-            summary.solver_s += rec["solver_s"]
+            summary.add(spec.run_id, rec)
             if progress:
                 progress(summary.done + summary.failed, len(todo), rec)
 
