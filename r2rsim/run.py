@@ -284,7 +284,8 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
 
 def execute(plan: RunPlan, out: str | Path, *, run_id: str | None = None, progress=None,
             overwrite: bool = False, run_columns: dict | None = None,
-            compile0: float | None = None, clean_stale: bool = True) -> RunSummary:
+            compile0: float | None = None, clean_stale: bool = True,
+            check_labels: bool = True) -> RunSummary:
     """Simulate a :class:`RunPlan` and write its dataset at ``out``.
 
     Parameters
@@ -304,6 +305,9 @@ def execute(plan: RunPlan, out: str | Path, *, run_id: str | None = None, progre
         :func:`r2rsim.solve.compilewatch.compile_seconds` when the work began.
     clean_stale : bool
         Let the dataset writer clean up dead processes' temporaries next to ``out``.
+    check_labels : bool
+        Read the labels back and derive them again when the dataset checks itself
+        (:func:`r2rsim.dataset.validate.validate_dataset`).
 
     Returns
     -------
@@ -497,7 +501,7 @@ def execute(plan: RunPlan, out: str | Path, *, run_id: str | None = None, progre
             writer.write_text(rel, text)
         path = writer.commit({"run_ids": [run_id], "scenario_sha256": scenario_sha,
                               "root_seed": scenario.seed, **plan.manifest},
-                             check=validate_dataset)
+                             check=lambda d: validate_dataset(d, labels=check_labels))
     except BaseException:
         writer.abort()
         raise

@@ -367,7 +367,7 @@ class SweepStore:
         meta = {b"r2rsim.schema_version": SCHEMA_VERSION.encode(),
                 b"r2rsim.version": __version__.encode(),
                 b"r2rsim.sweep": plan.sweep.name.encode()}
-        channels, old_channels = None, False
+        channels, old_channels, seen_channels = None, False, set()
         run_ids, failure_rows, known_sha = [], [], {}
         try:
             for spec in plan.runs:
@@ -390,10 +390,15 @@ class SweepStore:
                     writers[name].add(table.replace_schema_metadata(None).cast(schema))
                 if o.where == "work" or not old_channels:
                     # every run's (those of a reopened dataset as one): a swept record_rate,
-                    # sensor rate or range changes them
-                    channels = _merge_channels(channels, pq.read_table(
-                        self.work / spec.run_id / "channels.parquet" if o.where == "work"
-                        else self.out / "channels.parquet"))
+                    # sensor rate or range changes them. Runs whose file has the same bytes
+                    # (its sha256 in their manifest) are not read again.
+                    sha = (_listed_sha(self.work / spec.run_id, "channels.parquet")
+                           if o.where == "work" else None)
+                    if sha is None or sha not in seen_channels:
+                        channels = _merge_channels(channels, pq.read_table(
+                            self.work / spec.run_id / "channels.parquet" if o.where == "work"
+                            else self.out / "channels.parquet"))
+                        seen_channels.add(sha)
                     old_channels = old_channels or o.where != "work"
             for name in TABLES:
                 if name not in writers:  # no run has data
@@ -506,6 +511,12 @@ def _merge_channels(merged: pa.Table | None, table: pa.Table) -> pa.Table:
     return pa.table(a, schema=merged.schema)
 
 
+def _listed_sha(root: Path, rel: str) -> str | None:
+    """The sha256 that a dataset's manifest.json lists for one of its files."""
+    manifest, _ = read_manifest(root)
+    return ((manifest or {}).get("files", {}).get(rel) or {}).get("sha256")
+
+
 _SWEEP_COLUMNS = ("sweep", "combination", "overrides_json", "config_sha256")
 
 
@@ -525,6 +536,7 @@ class _TableWriter:
     rows (not one per run), without holding more than that in memory."""
 
     ROWS_PER_GROUP = 1 << 14
+    TABLES_PER_MERGE = 32
 
     def __init__(self, path: Path, schema: pa.Schema):
         self.schema = schema
@@ -537,6 +549,10 @@ class _TableWriter:
         self.rows += table.num_rows
         if self.rows >= self.ROWS_PER_GROUP:
             self._flush()
+        elif len(self.pending) >= self.TABLES_PER_MERGE:
+            # a table per run costs ~60 kB of bookkeeping: merge them as they come, so
+            # memory does not grow with the number of runs
+            self.pending = [pa.concat_tables(self.pending).combine_chunks()]
 
     def _flush(self) -> None:
         if self.pending:
