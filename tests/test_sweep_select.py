@@ -111,3 +111,27 @@ def test_json_schema_of_the_sweep_file(capsys):
         assert set(data) <= keys, path
         for axis in data.get("axes", []):
             assert set(axis) <= set(schema["$defs"]["Axis"]["properties"]), path
+
+
+def test_workers_that_cannot_start_fail_fast(tmp_path):
+    """A script that calls run_sweep without the ``__main__`` guard: every spawned worker
+    re-runs the script and dies. The sweep stops after two pools in a row finish nothing,
+    with a message that says what to do, instead of retrying every run."""
+    import subprocess
+    import sys
+    import time
+
+    (tmp_path / "s.yaml").write_text(
+        f"name: nm\nscenario: {REPO / 'scenarios/quickstart.yaml'}\n"
+        "set: {duration: 1 s}\nseeds: 40\n", encoding="utf-8")
+    script = tmp_path / "script.py"
+    script.write_text("from r2rsim.sweep import run_sweep\n"
+                      f"run_sweep({str(tmp_path / 's.yaml')!r}, "
+                      f"output={str(tmp_path / 'out')!r}, workers=2)\n", encoding="utf-8")
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          timeout=300, cwd=tmp_path)
+    assert proc.returncode != 0
+    assert "died twice before finishing any run" in proc.stderr
+    assert 'if __name__ == "__main__":' in proc.stderr
+    assert time.perf_counter() - t0 < 60
