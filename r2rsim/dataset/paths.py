@@ -24,6 +24,8 @@ from pathlib import Path, PurePosixPath
 from ..errors import R2RError
 
 MANIFEST = "manifest.json"
+#: the marker of an unfinished sweep's directory (r2rsim.sweep): not a dataset until it is gone
+SWEEP_MARKER = ".r2rsim-sweep.json"
 #: r2rsim's own temporaries next to a dataset: ``.NAME.tmp-PID`` while a run writes,
 #: ``.NAME.old-PID`` for the dataset an ``--overwrite`` run replaces, during the swap
 TEMP_RE = re.compile(r"^\.(?P<name>.+)\.(?P<kind>tmp|old)-(?P<pid>[1-9][0-9]{0,9})$")

@@ -14,6 +14,7 @@ from pathlib import Path
 import pandas as pd
 
 from ..errors import InputError
+from .paths import SWEEP_MARKER
 
 #: column families a diagnosis algorithm sees by default (docs/dataset.md §2): the time, the
 #: recorded readings with their clipping flags, and the set-points. Never ``true.``,
@@ -229,7 +230,7 @@ def read_runs(path: str | Path, verify: bool = True, where: dict | None = None) 
     path = Path(path)
     if not path.is_dir():
         raise InputError(f"{path}: no such dataset directory")
-    if (path / ".r2rsim-sweep.json").is_file():
+    if (path / SWEEP_MARKER).is_file():
         raise InputError(f"dataset {path}: an unfinished sweep (interrupted, or still "
                          f"running): run the same `r2rsim sweep` command again to finish it")
     if not is_dataset_dir(path) or not (path / "samples").is_dir():

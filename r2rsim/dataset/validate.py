@@ -23,7 +23,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from .labels import derive_labels
-from .paths import dataset_problems, inside, safe_component
+from .paths import SWEEP_MARKER, dataset_problems, inside, safe_component
 from .writer import sha256_file  # noqa: F401 - kept importable from here
 
 #: rows per batch read back from a samples file
@@ -50,7 +50,7 @@ def validate_dataset(path: str | Path, labels: bool = True) -> list[str]:
         One message per problem, naming the file or the run.
     """
     root = Path(path)
-    if (root / ".r2rsim-sweep.json").is_file():
+    if (root / SWEEP_MARKER).is_file():
         return [f"{root}: an unfinished sweep (interrupted, or still running): run the same "
                 f"`r2rsim sweep` command again to finish it"]
     if not (root / "manifest.json").is_file():

@@ -32,6 +32,7 @@ import numpy as np
 import pandas as pd
 from sklearn.base import clone
 
+from ..dataset.paths import SWEEP_MARKER
 from ..dataset.read import Run, is_dataset_dir, read_runs
 from ..diagnostics.registry import call
 from ..errors import InputError, PluginError
@@ -199,7 +200,7 @@ def read_datasets(paths: Sequence[str | Path], verify: bool = True,
     for p in map(Path, paths):
         if not p.is_dir():
             raise InputError(f"{p}: no such dataset directory")
-        if is_dataset_dir(p) or (p / ".r2rsim-sweep.json").is_file():
+        if is_dataset_dir(p) or (p / SWEEP_MARKER).is_file():
             runs += read_runs(p, verify=verify, where=where)
             continue
         subs = sorted(d for d in p.iterdir() if d.is_dir() and is_dataset_dir(d))

@@ -31,6 +31,7 @@ import pyarrow.parquet as pq
 from .._version import __version__
 from ..dataset.paths import (
     MANIFEST,
+    SWEEP_MARKER,
     clean_stale,
     dataset_problems,
     read_manifest,
@@ -40,7 +41,7 @@ from ..dataset.paths import (
 from ..dataset.writer import EVENTS_SCHEMA, FAULTS_SCHEMA, SCHEMA_VERSION
 from ..errors import InputError, R2RError
 
-MARKER = ".r2rsim-sweep.json"
+MARKER = SWEEP_MARKER
 WORK = ".work"
 TABLES = ("runs", "faults", "events")
 #: what a sweep writes at the top of its directory, besides samples/, scenario/, sweep/
