@@ -6,6 +6,7 @@ Errors are one line on stderr and a non-zero exit code; ``--debug`` shows the tr
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import signal
 import sys
@@ -87,6 +88,22 @@ def _raise_terminated(signum, frame):
     raise Terminated()
 
 
+@contextlib.contextmanager
+def _sigterm_as_interrupt():
+    """Within the block, SIGTERM stops the work the way Ctrl-C does (:func:`_raise_terminated`);
+    the previous handler is put back after it. Outside the main thread (embedded use) SIGTERM
+    is left alone."""
+    try:
+        previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    except ValueError:
+        yield
+        return
+    try:
+        yield
+    finally:  # None: a handler not set from Python, i.e. the default
+        signal.signal(signal.SIGTERM, previous if previous is not None else signal.SIG_DFL)
+
+
 def _cmd_run(args) -> int:
     from .run import run_scenario
     from .solve.compilewatch import notify_compiling
@@ -104,20 +121,10 @@ def _cmd_run(args) -> int:
             bar.n = t
             bar.refresh()
     try:
-        try:
-            previous = signal.signal(signal.SIGTERM, _raise_terminated)
-            installed = True
-        except ValueError:  # not the main thread (embedded use): leave SIGTERM alone
-            installed = False
-        try:
-            with notify_compiling(_compile_notice(bar, args.quiet)):
-                summary = run_scenario(args.scenario, output=args.output, seed=args.seed,
-                                       duration=args.duration, progress=progress,
-                                       overwrite=args.overwrite)
-        finally:
-            if installed:  # None: a handler not set from Python, i.e. the default
-                signal.signal(signal.SIGTERM,
-                              previous if previous is not None else signal.SIG_DFL)
+        with _sigterm_as_interrupt(), notify_compiling(_compile_notice(bar, args.quiet)):
+            summary = run_scenario(args.scenario, output=args.output, seed=args.seed,
+                                   duration=args.duration, progress=progress,
+                                   overwrite=args.overwrite)
     finally:
         if bar is not None:
             bar.close()
@@ -150,26 +157,18 @@ def _cmd_sweep(args) -> int:
             if rec is not None:
                 bar.update(1)
     try:
-        previous = signal.signal(signal.SIGTERM, _raise_terminated)
-        installed = True
-    except ValueError:  # not the main thread
-        installed = False
-    try:
-        try:
+        with _sigterm_as_interrupt():
             summary = run_sweep(args.sweep, output=args.output, workers=args.workers,
                                 scheduler=args.scheduler, retry_failed=args.retry_failed,
                                 overwrite=args.overwrite, progress=progress)
-        finally:
-            if bar is not None:
-                bar.close()
-            if installed:
-                signal.signal(signal.SIGTERM,
-                              previous if previous is not None else signal.SIG_DFL)
     except KeyboardInterrupt as exc:
         what = "terminated (SIGTERM)" if isinstance(exc, Terminated) else "interrupted"
         print(f"{what}; the finished runs are kept: run the same command again to continue",
               file=sys.stderr)
         return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
+    finally:
+        if bar is not None:
+            bar.close()
     for w in summary.warnings:
         print(f"warning: {w}", file=sys.stderr)
     print(summary.format())

@@ -461,6 +461,12 @@ BAD = {
         f"axes:\n  - {{path: {SPEED}, values: [1 m/s], colour: red}}\n",
         ["axes[0].colour: unknown key 'colour'"]),
     "unknown top-level key": ("sweeps: 3\n", ["sweeps: unknown key 'sweeps'"]),
+    "a path that is not a path": (
+        "axes:\n  - {path: '../x', values: [1]}\n",
+        ["axes[0].path: '../x' is not a YAML path"]),
+    "a column name that is not one": (
+        f"axes:\n  - {{path: {SPEED}, name: 'a b', values: [1 m/s]}}\n",
+        ["axes[0].name: 'a b' is not a column name"]),
     "missing scenario": (
         "__scenario__: nope.yaml\n", ["scenario: scenario file 'nope.yaml' not found"]),
     "fault id that is not there": (

@@ -11,7 +11,7 @@ from __future__ import annotations
 import re
 from typing import Annotated, Any, Literal
 
-from pydantic import Field, model_validator
+from pydantic import AfterValidator, Field, model_validator
 
 from .. import limits
 from .line import Id, Strict, pair
@@ -20,8 +20,28 @@ from .quantities import NumberOrText
 #: one component of an axis path: a key, a list index, or the id of a list element
 PATH_PART = r"(?:[A-Za-z_][A-Za-z0-9_-]*|[0-9]+)"
 PATH_RE = re.compile(rf"^{PATH_PART}(?:\.{PATH_PART}|\[[0-9]+\])*$")
-AxisName = Annotated[str, Field(pattern=r"^[A-Za-z][A-Za-z0-9_.-]*$", max_length=100)]
-Path_ = Annotated[str, Field(pattern=PATH_RE.pattern, max_length=300)]
+NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_.-]*$")
+
+
+def _matching(regex: re.Pattern, what: str):
+    """A validator that refuses a string ``regex`` does not match, saying what it must be
+    (a pattern constraint would call every such string "not a valid id")."""
+
+    def check(value: str) -> str:
+        if not regex.match(value):
+            raise ValueError(f"{value!r} is not {what}")
+        return value
+
+    return AfterValidator(check)
+
+
+AxisName = Annotated[str, Field(max_length=100, json_schema_extra={"pattern": NAME_RE.pattern}),
+                     _matching(NAME_RE, "a column name (letters, digits, '_', '.', '-', "
+                               "starting with a letter)")]
+Path_ = Annotated[str, Field(max_length=300, json_schema_extra={"pattern": PATH_RE.pattern}),
+                  _matching(PATH_RE, "a YAML path (keys, list indices [i] and list element "
+                            "ids joined by '.': programme[1].line_speed, "
+                            "faults.my_fault.magnitude)")]
 
 
 class Range(Strict):

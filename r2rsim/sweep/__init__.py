@@ -11,7 +11,6 @@ a Dask cluster); finished runs are kept and skipped when the sweep is run again.
 
 from __future__ import annotations
 
-import json
 import os
 import time
 from dataclasses import dataclass, field
@@ -19,7 +18,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from ._plan import RunSpec, SweepPlan, load_sweep, plan_sweep
-from ._store import Outcome, SweepStore
+from ._store import Outcome, SweepStore, write_failure
 
 __all__ = ["RunSpec", "SweepPlan", "SweepSummary", "default_workers", "load_sweep",
            "plan_sweep", "run_sweep"]
@@ -157,7 +156,7 @@ def run_sweep(sweep_path: str | Path, output: str | Path | None = None, *,
 
         def on_result(spec, rec):
             if rec["status"] == "failed" and not rec["has_data"]:
-                _persist_failure(store.work, spec, rec["reason"])
+                write_failure(store.work, spec, rec["reason"])  # the worker died
             outcomes[spec.run_id] = Outcome(rec["status"], "work" if rec["has_data"]
                                             else None, rec["reason"])
             summary.add(spec.run_id, rec)
@@ -178,17 +177,6 @@ def run_sweep(sweep_path: str | Path, output: str | Path | None = None, *,
         store.close()
         summary.wall_s = time.perf_counter() - t0
     return summary
-
-
-def _persist_failure(work: Path, spec, reason: str) -> None:
-    """Record a failure the worker could not (it died) so a resumed sweep knows it."""
-    path = work / f"{spec.run_id}.failed.json"
-    if path.exists():
-        return
-    tmp = work / f".{spec.run_id}.failed.tmp-{os.getpid()}"
-    tmp.write_text(json.dumps({"run_id": spec.run_id, "config_sha256": spec.config_sha256,
-                               "error": reason}), encoding="utf-8")
-    os.replace(tmp, path)
 
 
 def _describe(workers: int, scheduler: str | None) -> str:

@@ -9,7 +9,6 @@ memory does not grow with the number of runs.
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import signal
 import time
@@ -35,7 +34,7 @@ def run_one(spec, work: str) -> dict:
     """
     from ..run import RunPlan, execute
     from ..schema.loader import build_scenario
-    from ._store import failed_reason, finished, run_columns
+    from ._store import failed_reason, finished, run_columns, write_failure
 
     t0 = time.perf_counter()
     done = finished(Path(work) / spec.run_id, spec.config_sha256)
@@ -59,11 +58,7 @@ def run_one(spec, work: str) -> dict:
                     run_columns=run_columns(spec), clean_stale=False, check_labels=False)
     except Exception as exc:  # noqa: BLE001 - a failed run is recorded, the sweep goes on
         reason = f"{type(exc).__name__}: {exc}"
-        record = {"run_id": spec.run_id, "config_sha256": spec.config_sha256, "error": reason,
-                  "traceback": traceback.format_exc()}
-        tmp = Path(work) / f".{spec.run_id}.failed.tmp-{os.getpid()}"
-        tmp.write_text(json.dumps(record), encoding="utf-8")
-        os.replace(tmp, Path(work) / f"{spec.run_id}.failed.json")
+        write_failure(work, spec, reason, traceback.format_exc())
         return {"run_id": spec.run_id, "status": "failed", "reason": reason, "has_data": False,
                 "simulated_s": 0.0, "solver_s": 0.0, "wall_s": time.perf_counter() - t0}
     reason = failed_reason({"termination_reason": s.termination_reason,
@@ -200,15 +195,25 @@ def check_scheduler(scheduler: str) -> None:
     ------
     InputError
     """
+    _distributed()
+    if scheduler != "local":
+        _connect(scheduler).close()
+
+
+def _distributed():
+    """The dask.distributed module, or an InputError saying how to install it."""
     try:
-        from distributed import Client
+        import distributed
     except ImportError:
         raise InputError("--scheduler needs dask.distributed: pip install "
                          "'r2rsim[dask]'") from None
-    if scheduler == "local":
-        return
+    return distributed
+
+
+def _connect(scheduler: str):
+    """A client of the Dask scheduler at an address, or an InputError naming it."""
     try:
-        Client(scheduler, timeout=CONNECT_TIMEOUT_S).close()
+        return _distributed().Client(scheduler, timeout=CONNECT_TIMEOUT_S)
     except (OSError, TimeoutError, ValueError) as exc:
         raise InputError(f"--scheduler: cannot reach a Dask scheduler at '{scheduler}' "
                          f"({type(exc).__name__}: {exc})") from None
@@ -218,14 +223,12 @@ def run_dask(specs, work: str, on_result, scheduler: str, workers: int) -> None:
     """The runs on a Dask cluster: ``scheduler`` is an address (``tcp://host:8786``) or
     ``local`` to start a :class:`distributed.LocalCluster` of ``workers`` processes. The
     output directory must be on a file system every worker sees."""
-    try:
-        import logging
+    import logging
 
-        from dask import config as dask_config
-        from distributed import Client, LocalCluster, as_completed
-    except ImportError:
-        raise InputError("--scheduler needs dask.distributed: pip install "
-                         "'r2rsim[dask]'") from None
+    _distributed()
+    from dask import config as dask_config
+    from distributed import Client, LocalCluster, as_completed
+
     cluster = None
     environ = dict(os.environ)  # a LocalCluster's nannies change it: put back at the end
     try:
@@ -245,11 +248,7 @@ def run_dask(specs, work: str, on_result, scheduler: str, workers: int) -> None:
                                                          "dashboard_address": "127.0.0.1:0"})
             client = Client(cluster)
         else:
-            try:
-                client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
-            except (OSError, TimeoutError, ValueError) as exc:
-                raise InputError(f"--scheduler: cannot reach a Dask scheduler at '{scheduler}' "
-                                 f"({type(exc).__name__}: {exc})") from None
+            client = _connect(scheduler)
         try:
             _dask_loop(client, as_completed, specs, work, on_result,
                        max(2 * workers, 2 * len(client.nthreads() or {0: 1})))

@@ -85,6 +85,19 @@ def finished(path: Path, config_sha256: str) -> dict | None:
     return row if row.get("config_sha256") == config_sha256 else None
 
 
+def write_failure(work: Path, spec, reason: str, detail: str | None = None) -> None:
+    """Record that a run failed without data: ``<work>/<run_id>.failed.json``, written
+    atomically (a resumed sweep reads it, and keeps the run failed unless --retry-failed).
+    A record that is there already (the worker's own, with its traceback) is kept."""
+    path = Path(work) / f"{spec.run_id}.failed.json"
+    if path.exists():
+        return
+    tmp = Path(work) / f".{spec.run_id}.failed.tmp-{os.getpid()}"
+    tmp.write_text(json.dumps({"run_id": spec.run_id, "config_sha256": spec.config_sha256,
+                               "error": reason, "traceback": detail}), encoding="utf-8")
+    os.replace(tmp, path)
+
+
 class Outcome:
     """What happened to one run: ``done`` or ``failed`` (``reason``); ``where`` says where
     its data is: ``work`` (.work/<id>/), ``final`` (the finished dataset) or None (a
