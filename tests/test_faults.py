@@ -247,6 +247,29 @@ def test_validator_rederives_every_label_from_faults_parquet(tmp_path, capsys):
     assert main(["validate", str(out)]) == 2
 
 
+@pytest.mark.parametrize("row, ids, shown", [(299, ["f1"], "['f1']"),   # before the onset
+                                             (400, ["f2"], "['f2']"),   # the wrong id
+                                             (400, [], "[]")])          # a lost id
+def test_validator_rederives_fault_id_lists(tmp_path, row, ids, shown):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from r2rsim.dataset.validate import validate_dataset
+
+    _, _, out = run(tmp_path, [{"id": "f1", "type": "sensor.offset", "target": "lc_mon",
+                                "onset": 3.0, "magnitude": 10.0}])
+    part = next((out / "samples").glob("*/part-0.parquet"))
+    table = pq.read_table(part)
+    lists = table.column("label.fault_ids").to_pylist()
+    assert lists[299] == [] and lists[400] == ["f1"]
+    lists[row] = ids
+    i = table.column_names.index("label.fault_ids")
+    pq.write_table(table.set_column(i, "label.fault_ids",
+                                    pa.array(lists, type=pa.list_(pa.string()))), part)
+    problems = validate_dataset(out)
+    assert any(f"label.fault_ids at k = {row} is {shown}" in p for p in problems), problems
+
+
 def test_list_faults_and_channels(repo, capsys):
     from r2rsim.cli import main
     from r2rsim.schema.faults import CATALOGUE

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pyarrow as pa
 
 from ..compile.faults import from_record
 
@@ -33,10 +34,21 @@ def mode_at(modes: list, t: np.ndarray) -> np.ndarray:
     return out
 
 
+def _id_lists(ids: np.ndarray, present: np.ndarray) -> pa.ListArray:
+    """Per sample, the ids of the present faults in fault order, as an Arrow list array
+    (built from offsets: a Python list per sample costs more than the simulation)."""
+    counts = present.sum(axis=0)
+    offsets = np.zeros(present.shape[1] + 1, dtype=np.int32)
+    np.cumsum(counts, out=offsets[1:])
+    values = np.broadcast_to(ids[:, None], present.shape).T[present.T]
+    return pa.ListArray.from_arrays(pa.array(offsets), pa.array(values, type=pa.string()))
+
+
 def derive_labels(fault_rows: list[dict], k: np.ndarray, t: np.ndarray, *, warmup: float,
                   modes: list, terminated_k: int | None, sensor_channels: dict[str, str]
-                  ) -> dict[str, np.ndarray]:
-    """The ``label.*`` columns of a chunk of samples.
+                  ) -> dict[str, np.ndarray | pa.Array]:
+    """The ``label.*`` columns of a chunk of samples (``label.fault_ids`` as an Arrow list
+    array, the others as numpy arrays).
 
     Parameters
     ----------
@@ -68,7 +80,7 @@ def derive_labels(fault_rows: list[dict], k: np.ndarray, t: np.ndarray, *, warmu
     primary_type = np.where(any_on, types[np.where(any_on, primary, len(faults))], "normal")
     severity = np.where(any_on, prof[primary, np.arange(n)] if len(faults) else 0.0, 0.0)
     ids = np.array([f.id for f in faults], dtype=object)
-    fault_ids = [list(ids[present[:, i]]) for i in range(n)] if len(faults) else [[]] * n
+    fault_ids = _id_lists(ids, present)
     phase = np.where(t < warmup, "warmup", np.where(any_on, "faulty", "normal")).astype(object)
     if terminated_k is not None:
         phase[np.asarray(k) == terminated_k] = "terminated"

@@ -111,12 +111,12 @@ def _unreadable(exc: Exception) -> str:
 
 
 def _column(batch: pa.RecordBatch, name: str) -> np.ndarray | list:
-    """A column of a batch as numpy (strings decoded; lists as Python lists)."""
+    """A column of a batch as numpy (strings decoded; lists stay Arrow arrays)."""
     col = batch.column(name)
     if pa.types.is_dictionary(col.type):
         col = col.dictionary_decode()
     if pa.types.is_list(col.type) or pa.types.is_large_list(col.type):
-        return col.to_pylist()
+        return col
     return col.to_numpy(zero_copy_only=False)
 
 
@@ -206,14 +206,31 @@ def _check_samples(part: Path, run: dict, rows: list[dict], channels: list[str],
 
 
 def _item(v):
+    if isinstance(v, pa.Scalar):
+        return v.as_py()
     return v.item() if isinstance(v, np.generic) else v
+
+
+def _first_list_difference(got: pa.Array, expected: pa.Array) -> int | None:
+    """Index of the first row where two Arrow list arrays differ (null lists differ)."""
+    if not (pa.types.is_list(got.type) or pa.types.is_large_list(got.type)):
+        return 0
+    n_got = got.value_lengths().fill_null(-1).to_numpy()
+    n_exp = expected.value_lengths().fill_null(-1).to_numpy()
+    diff = n_got != n_exp
+    if not diff.any():  # same lengths: compare the values, mapped back to their rows
+        v_got = got.flatten().to_numpy(zero_copy_only=False)
+        v_exp = expected.flatten().to_numpy(zero_copy_only=False)
+        row = np.repeat(np.arange(len(n_got)), np.maximum(n_got, 0))
+        diff = np.zeros(len(n_got), dtype=bool)
+        diff[row[v_got != v_exp]] = True
+    return int(np.argmax(diff)) if diff.any() else None
 
 
 def _first_difference(name: str, got, expected) -> int | None:
     """Index of the first row where a label column differs from its derivation."""
-    if isinstance(expected, list):  # label.fault_ids: lists of ids
-        return next((i for i, (a, b) in enumerate(zip(got, expected, strict=True))
-                     if list(a) != list(b)), None)
+    if isinstance(expected, pa.Array):  # label.fault_ids: lists of ids
+        return _first_list_difference(got, expected) if isinstance(got, pa.Array) else 0
     exp = np.asarray(expected)
     got = np.asarray(got)
     if name == "label.severity":

@@ -128,6 +128,21 @@ def _signals_deferred():
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
+def _converter(arrow_type: pa.DataType, example):
+    """A function turning one chunk's column (like ``example``) into an Arrow array of
+    ``arrow_type``; chosen once per file, since it runs for every column of every chunk."""
+    if pa.types.is_dictionary(arrow_type):
+        return lambda a: pa.array(a, type=pa.string()).dictionary_encode().cast(arrow_type)
+    if isinstance(example, pa.Array):
+        return lambda a: a
+    if arrow_type == pa.float32():
+        # numpy's cast is several times faster than Arrow's checked one
+        return lambda a: pa.array(np.asarray(a).astype(np.float32, copy=False))
+    if pa.types.is_list(arrow_type):
+        return lambda a: pa.array(a, type=arrow_type)
+    return lambda a: pa.array(a, type=arrow_type, from_pandas=False)
+
+
 class DatasetWriter:
     """Streams one run's samples into a temporary dataset directory, then commits it.
 
@@ -167,6 +182,7 @@ class DatasetWriter:
         self.tmp = self.output.parent / f".{self.output.name}.tmp-{os.getpid()}"
         self._writer = None
         self._schema = None
+        self._converters: list = []
         self._pending: list[pa.Table] = []  # chunks of the row group being collected
         self._pending_bytes = 0
         self._trash: Path | None = None  # the dataset being replaced, during the swap
@@ -190,8 +206,9 @@ class DatasetWriter:
         self._samples = inside(self.tmp, f"samples/run_id={run_id}/part-0.parquet")
         self._samples.parent.mkdir(parents=True)
 
-    def write_chunk(self, columns: dict[str, np.ndarray]) -> None:
-        """Append one chunk of samples (same columns in the same order every time)."""
+    def write_chunk(self, columns: dict[str, np.ndarray | pa.Array]) -> None:
+        """Append one chunk of samples (same columns in the same order every time; a column
+        given as an Arrow array keeps its type)."""
         if self._writer is None:
             fields = []
             for name, arr in columns.items():
@@ -199,6 +216,8 @@ class DatasetWriter:
                     fields.append(pa.field(name, pa.int64()))
                 elif name == "t_s":
                     fields.append(pa.field(name, pa.float64()))
+                elif isinstance(arr, pa.Array):
+                    fields.append(pa.field(name, arr.type))
                 elif isinstance(arr, list):
                     fields.append(pa.field(name, pa.list_(pa.string())))
                 elif arr.dtype.kind in "iu":
@@ -212,20 +231,14 @@ class DatasetWriter:
             meta = {k.encode(): v.encode() for k, v in self.metadata.items()}
             self._schema = pa.schema(fields, metadata=meta)
             float_cols = [f.name for f in fields if f.type in (pa.float32(), pa.float64())]
+            self._converters = [(f.name, _converter(f.type, columns[f.name])) for f in fields]
             self._writer = pq.ParquetWriter(
                 self._samples, self._schema, compression="zstd", compression_level=3,
                 use_dictionary=[f.name for f in fields if pa.types.is_dictionary(f.type)],
                 use_byte_stream_split=float_cols, write_statistics=True,
             )
-        arrays = []
-        for f in self._schema:
-            arr = columns[f.name]
-            if pa.types.is_dictionary(f.type):
-                arrays.append(pa.array(arr.astype(str)).dictionary_encode().cast(f.type))
-            elif pa.types.is_list(f.type):
-                arrays.append(pa.array(arr, type=f.type))
-            else:
-                arrays.append(pa.array(arr, type=f.type, from_pandas=False))
+        with np.errstate(over="ignore"):  # beyond float32's range is inf, as Arrow casts
+            arrays = [convert(columns[name]) for name, convert in self._converters]
         table = pa.Table.from_arrays(arrays, schema=self._schema)
         self._pending.append(table)
         self._pending_bytes += table.nbytes
