@@ -25,10 +25,11 @@ from ._version import __version__
 from .compile import Programme, compile_line
 from .compile.disturbances import realise_disturbances
 from .compile.faults import realise_faults
+from .compile.variability import joint_slots_needed, realise_variability
 from .dataset import DatasetWriter, true_state_columns
 from .dataset.labels import derive_labels
 from .dataset.validate import validate_dataset
-from .dataset.writer import EVENTS_SCHEMA, FAULTS_SCHEMA, check_output
+from .dataset.writer import EVENTS_SCHEMA, FAULTS_SCHEMA, VARIABILITY_SCHEMA, check_output
 from .errors import InputError, R2RError
 from .limits import MAX_SEED, run_size_problem
 from .measure import MeasurementModel
@@ -321,8 +322,10 @@ def execute(plan: RunPlan, out: str | Path, *, run_id: str | None = None, progre
     prog = Programme.from_steps(line, scenario.programme, file=plan.source)
     root = np.random.SeedSequence(scenario.seed)
     ss_process, ss_meas, ss_faults = root.spawn(3)
+    line, rolls, variability_rows = realise_variability(scenario, line, ss_process)
     disturbances = realise_disturbances(scenario, line, ss_process)
-    cl = compile_line(line, prog, scenario.faults, disturbances)
+    cl = compile_line(line, prog, scenario.faults, disturbances,
+                      joint_slots_needed(scenario, line))
     init = scenario.initial
     y_nom = nominal_state(cl, init.tension, init.span_tension)
     for d in disturbances:  # an out-of-round roller starts at a random angle
@@ -398,7 +401,8 @@ def execute(plan: RunPlan, out: str | Path, *, run_id: str | None = None, progre
         res = simulate(cl, scenario.duration, rate, y0,
                        scenario.solver, on_chunk=on_chunk,
                        progress=(lambda t: progress(t, scenario.duration)) if progress else None,
-                       initial_state_mode=init_mode, events=scenario.events, faults=faults)
+                       initial_state_mode=init_mode, events=scenario.events, faults=faults,
+                       rolls=rolls)
         if held:
             flush(res.terminated)
         # the wall time and real-time factor without numba compiling (reported apart)
@@ -462,6 +466,9 @@ def execute(plan: RunPlan, out: str | Path, *, run_id: str | None = None, progre
             "kind": [e.kind for e in events], "component": [e.component for e in events],
             "state": [e.state for e in events], "message": [e.message for e in events],
             "values_json": [json.dumps(e.values) for e in events]}, schema=EVENTS_SCHEMA))
+        variability_rows += rolls.rows if rolls is not None else []
+        writer.write_table("variability", pa.Table.from_pylist(
+            [{"run_id": run_id, **r} for r in variability_rows], schema=VARIABILITY_SCHEMA))
         seeds = {"process": int(ss_process.generate_state(1, np.uint64)[0]),
                  "measurement": int(ss_meas.generate_state(1, np.uint64)[0]),
                  "fault_sampling": int(ss_faults.generate_state(1, np.uint64)[0])}

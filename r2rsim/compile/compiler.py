@@ -286,7 +286,7 @@ class CompiledLine:
 
 
 def compile_line(line: Line, programme: Programme | None = None, faults=(),
-                 disturbances=()) -> CompiledLine:
+                 disturbances=(), extra_joint_slots: int = 0) -> CompiledLine:
     """Compile a validated line.
 
     Parameters
@@ -301,6 +301,9 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
     disturbances : sequence of DisturbanceInstance, optional
         The run's realised process disturbances
         (:func:`r2rsim.compile.disturbances.realise_disturbances`).
+    extra_joint_slots : int
+        Splice-joint slots for the web of varied rolls
+        (:func:`r2rsim.compile.variability.joint_slots_needed`).
 
     Returns
     -------
@@ -354,7 +357,7 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
     mover_q0 = [0.0] * nM
     splice_nodes = [k for k, e in enumerate(els) if getattr(e, "splicer", None) is not None]
     n_modulus = sum(f.type == "process.modulus_change" for f in faults)
-    nJ = (N_JOINT_SLOTS if splice_nodes else 0) + n_modulus
+    nJ = (N_JOINT_SLOTS if splice_nodes else 0) + n_modulus + extra_joint_slots
     nFS = len(faults)
     eccentric = {f.target for f in faults if f.type == "process.eccentricity"} | {
         d.element for d in disturbances if d.type == "out_of_round"}

@@ -24,7 +24,10 @@ import pyarrow.parquet as pq
 
 from .labels import derive_labels
 from .paths import SWEEP_MARKER, dataset_problems, inside, safe_component
-from .writer import sha256_file  # noqa: F401 - kept importable from here
+from .writer import (
+    VARIABILITY_SCHEMA,
+    sha256_file,  # noqa: F401 - kept importable from here
+)
 
 #: rows per batch read back from a samples file
 BATCH_ROWS = 1 << 13
@@ -101,7 +104,25 @@ def validate_dataset(path: str | Path, labels: bool = True) -> list[str]:
         except Exception as exc:  # noqa: BLE001 - pyarrow raises several types on bad files
             problems.append(f"run {rid}: samples/run_id={rid}/part-0.parquet: "
                             f"{_unreadable(exc)}")
-    return problems
+    return problems + _variability_problems(root, {r["run_id"] for r in runs})
+
+
+def _variability_problems(root: Path, run_ids: set[str]) -> list[str]:
+    """variability.parquet (newer than some datasets, so it may be absent): its columns,
+    and rows of the dataset's runs only."""
+    path = root / "variability.parquet"
+    if not path.is_file():
+        return []
+    try:
+        table = pq.read_table(path)
+    except Exception as exc:  # noqa: BLE001 - pyarrow raises several types on bad files
+        return [f"variability.parquet: {_unreadable(exc)}"]
+    missing = [n for n in VARIABILITY_SCHEMA.names if n not in table.column_names]
+    if missing:
+        return [f"variability.parquet: no column {', '.join(missing)}"]
+    strays = sorted(set(table.column("run_id").to_pylist()) - run_ids, key=str)
+    return [f"variability.parquet: rows of run {strays[0]!r}, which is not in runs.parquet"
+            ] if strays else []
 
 
 def _unreadable(exc: Exception) -> str:

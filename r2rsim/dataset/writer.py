@@ -58,6 +58,15 @@ EVENTS_SCHEMA = pa.schema([
     ("values_json", pa.string()),
 ])
 
+#: variability.parquet: the values a run's ``variability:`` drew (ground truth; plug-ins
+#: never see it). ``source`` is ``run`` (friction, sensor calibration) or ``roll``; ``roll``
+#: counts an unwind's rolls from 0 (the one at t = 0); ``loaded_t_s`` is when it was loaded.
+VARIABILITY_SCHEMA = pa.schema([
+    ("run_id", pa.string()), ("source", pa.string()), ("component", pa.string()),
+    ("roll", pa.int32()), ("parameter", pa.string()), ("unit", pa.string()),
+    ("nominal", pa.float64()), ("value", pa.float64()), ("loaded_t_s", pa.float64()),
+])
+
 
 #: raw column data collected before it is written as one row group. The solver's chunks
 #: can be a few rows long (they end at every event); one row group each would make the
@@ -65,7 +74,7 @@ EVENTS_SCHEMA = pa.schema([
 ROW_GROUP_BYTES = 16 << 20
 
 __all__ = ["DatasetWriter", "EVENTS_SCHEMA", "FAULTS_SCHEMA", "SCHEMA_VERSION",
-           "check_output", "sha256_file"]
+           "VARIABILITY_SCHEMA", "check_output", "sha256_file"]
 
 
 def check_output(output: str | Path, overwrite: bool = False, *, hashes: bool = True) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import codecs
 import json
+import math
 import os
 import re
 import stat
@@ -21,6 +22,7 @@ from . import plausibility
 from .faults import check_faults, target_problem
 from .line import Line, draw_problem, torque_problem
 from .scenario import Scenario
+from .variability import sensor_dimension
 
 _CROSS = re.compile(r"^(?:Value error, )?@(?P<path>[^@]*)@ (?P<msg>.*)$", re.S)
 
@@ -542,6 +544,7 @@ def check_scenario_against_line(scenario: Scenario, line: Line, file: str) -> No
                              f" s)", file=file, path=f"events[{i}].at")
     check_faults(scenario, line, file)
     check_disturbances(scenario, line, file)
+    check_variability(scenario, line, file)
     span_ids = {s.id for s in line.spans}
     for sid in scenario.initial.span_tension:
         if sid not in span_ids:
@@ -595,6 +598,67 @@ def check_disturbances(scenario, line, file: str) -> None:
             raise InputError(str(exc), file=file, path=f"{where}.std") from None
         if not std >= 0:
             raise InputError("std must be >= 0", file=file, path=f"{where}.std")
+
+
+def check_variability(scenario, line, file: str) -> None:
+    """Targets and spreads of the scenario's ``variability``: each drawn value stays in its
+    physical range even at the cut of a normal draw (four standard deviations)."""
+    var = scenario.variability
+    if var is None:
+        return
+
+    def width(spread, nominal, dim, where):
+        try:
+            w = spread.reach(nominal, dim)
+        except QuantityError as exc:
+            raise InputError(str(exc), file=file, path=where) from None
+        if not (math.isfinite(w) and w >= 0):
+            raise InputError("the spread must be a finite number >= 0", file=file, path=where)
+        return w
+
+    unwinds = [e.id for e in line.elements if e.type == "unwind"]
+    material = [uid for uid, r in var.rolls.items() if r.modulus or r.thickness]
+    for uid, r in var.rolls.items():
+        where = f"variability.rolls.{uid}"
+        if uid not in unwinds:
+            raise InputError(f"no unwind '{uid}' in the line (unwinds: "
+                             f"{', '.join(unwinds) or 'none'})", file=file, path=where)
+        if len(material) > 1 and uid == material[1]:
+            raise InputError("the web's modulus and thickness vary with the rolls of one "
+                             f"unwind only (already '{material[0]}')", file=file, path=where)
+        e = line.element(uid)
+        rolls = [e.roll] + ([e.spare_roll] if e.spare_roll is not None else [])
+        checks = [("modulus", line.web.modulus, "pressure", 0.0, "0"),
+                  ("thickness", line.web.thickness, "length", 0.0, "0")]
+        checks += [("outer_radius", roll.outer_radius, "length", roll.core_radius,
+                    f"the core radius {roll.core_radius:g} m") for roll in rolls]
+        for name, nominal, dim, low, what in checks:
+            spread = getattr(r, name)
+            if spread is None:
+                continue
+            path = f"{where}.{name}.{spread.key}"
+            if nominal - width(spread, nominal, dim, path) <= low:
+                raise InputError(f"{name} {nominal:g} could be drawn down to {what} or "
+                                 "below (a normal draw reaches 4 standard deviations)",
+                                 file=file, path=path)
+        if r.wound_in_strain is not None:
+            width(r.wound_in_strain, 0.0, "dimensionless",
+                  f"{where}.wound_in_strain.{r.wound_in_strain.key}")
+    sensors = {s.id: s for s in line.sensors}
+    for sid, cal in var.sensors.items():
+        where = f"variability.sensors.{sid}"
+        if sid not in sensors:
+            raise InputError(f"no sensor '{sid}' in the line (known: "
+                             f"{', '.join(sensors) or 'none'})", file=file, path=where)
+        s = sensors[sid]
+        if cal.gain is not None:
+            path = f"{where}.gain.{cal.gain.key}"
+            if s.gain - width(cal.gain, s.gain, "dimensionless", path) <= 0:
+                raise InputError(f"gain {s.gain:g} could be drawn down to 0 or below",
+                                 file=file, path=path)
+        if cal.offset is not None:
+            width(cal.offset, s.offset, sensor_dimension(line, s)[0],
+                  f"{where}.offset.{cal.offset.key}")
 
 
 def json_schema(kind: str) -> str:

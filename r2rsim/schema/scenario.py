@@ -26,6 +26,7 @@ from .quantities import (
     Time,
     Torque,
 )
+from .variability import Variability
 
 
 class ProgrammeStep(Strict):
@@ -238,6 +239,10 @@ class Scenario(Strict):
         default_factory=list)
     disturbances: Annotated[list[Disturbance], Field(max_length=limits.MAX_DISTURBANCES)] = \
         Field(default_factory=list)
+    variability: Variability | None = Field(
+        None, description="unlabelled spread between rolls (modulus, thickness, starting "
+        "radius, wound-in strain) and runs (bearing friction, sensor calibration), drawn "
+        "from the run's process stream and recorded in variability.parquet")
     split: Literal["train", "val", "test"] | SplitBySeed | None = Field(
         None, description="data split of the run: fixed, or {by: seed, train:, val:, test:}")
     expect: Expect = Field(default_factory=Expect,

@@ -174,8 +174,10 @@ class DiscreteLogic:
         Length of the run [s] (bounds the breakpoints of an intermittent fault).
     """
 
-    def __init__(self, cl: CompiledLine, events=(), faults=(), duration: float = math.inf):
+    def __init__(self, cl: CompiledLine, events=(), faults=(), duration: float = math.inf,
+                 rolls=None):
         self.cl = cl
+        self.rolls = rolls  # RollDraws: the varied rolls a splice loads (None: the spare)
         self.line = cl.line
         self._queue: list[_Action] = []
         self._seq = 0
@@ -537,20 +539,9 @@ class DiscreteLogic:
         if f.p(np.array([t]))[0] <= 0.0:
             return y
         k = self.cl.node_ids.index(f.target)
-        slot = self._free_joint_slot()
-        if slot is None:
-            raise ValueError(f"fault '{f.id}': no splice-joint slot for the new material; "
-                             "compile the line with its faults (compile_line(..., faults=...))")
-        P = self.cl.P
-        bj = self.cl.I[H_OFF_JP] + slot * NJP
-        P[bj + JP_ACTIVE] = 1.0
-        P[bj + JP_U0] = y[self._ni(k, NI_U)]
-        P[bj + JP_LEN] = OPEN_JOINT
-        P[bj + JP_RATIO] = 1.0 + f.magnitude
-        P[bj + JP_TBRK] = 1e30  # no joint to break: the web's own break applies
-        P[bj + JP_SPAN] = float(k)
-        P[bj + JP_TSPAN] = float(k) - 1.0
-        P[bj + JP_NODE] = float(k)
+        self._open_material(k, y[self._ni(k, NI_U)], 1.0 + f.magnitude,
+                            f"fault '{f.id}': no splice-joint slot for the new material; "
+                            "compile the line with its faults (compile_line(..., faults=...))")
         return y
 
     def _do_weak_splice(self, t, y, a, log):
@@ -559,6 +550,24 @@ class DiscreteLogic:
         if f.p(np.array([t]))[0] > 0.0:
             self._weak_splice[self.cl.node_ids.index(f.target)] = f.magnitude
         return y
+
+    def _open_material(self, k: int, u_now: float, ea_ratio: float, no_slot: str) -> None:
+        """From ``u_now`` the unwind at node k pays out web of E·A x ``ea_ratio`` (a modulus
+        change, or a new roll's web): an open-ended joint, closed by the next roll change.
+        Raises ValueError(``no_slot``) when every joint slot is taken."""
+        slot = self._free_joint_slot()
+        if slot is None:
+            raise ValueError(no_slot)
+        P = self.cl.P
+        bj = self.cl.I[H_OFF_JP] + slot * NJP
+        P[bj + JP_ACTIVE] = 1.0
+        P[bj + JP_U0] = u_now
+        P[bj + JP_LEN] = OPEN_JOINT
+        P[bj + JP_RATIO] = ea_ratio
+        P[bj + JP_TBRK] = 1e30  # no joint to break: the web's own break applies
+        P[bj + JP_SPAN] = float(k)
+        P[bj + JP_TSPAN] = float(k) - 1.0
+        P[bj + JP_NODE] = float(k)
 
     def _free_joint_slot(self) -> int | None:
         P, I = self.cl.P, self.cl.I
@@ -697,6 +706,11 @@ class DiscreteLogic:
         """Replace the expiring roll by a fresh spare roll; inject the splice joint."""
         e = self.line.elements[k]
         sp, new = e.splicer, e.spare_roll
+        ea_ratio, drawn = None, {}
+        if self.rolls is not None:
+            n_rows = len(self.rolls.rows)
+            new, ea_ratio = self.rolls.next_roll(e.id, new, t)
+            drawn = {r["parameter"]: r["value"] for r in self.rolls.rows[n_rows:]}
         I, P = self.cl.I, self.cl.P
         web = self.line.web
         R_old = float(self.cl.outputs(t, y[None, :])[0][self.cl.aux_index(f"{e.id}.radius_m")])
@@ -755,12 +769,17 @@ class DiscreteLogic:
             P[bj + JP_SPAN] = float(k)
             P[bj + JP_TSPAN] = float(k) - 1.0
             P[bj + JP_NODE] = float(k)
+        if ea_ratio is not None:
+            self._open_material(k, u_now, ea_ratio, (
+                f"no splice-joint slot for the web of the roll loaded on '{e.id}'; compile "
+                "the line with extra_joint_slots=joint_slots_needed(scenario, line)"))
         log.append(Event(t, "splice", e.id, "swap",
                             f"roll change: radius {R_old:.4g} m -> {new.outer_radius:.4g} m"
                             + (f", speed-match error {sp.speed_match_error:+.2%}" if flying
                                else ""),
                             {"radius_old_m": R_old, "radius_new_m": new.outer_radius,
-                             "joint_slot": slot}))
+                             "joint_slot": slot,
+                             **({"roll_drawn": drawn} if drawn else {})}))
         if slot is not None:
             # a joint weaker than the tension it is made under breaks at once (its break
             # event can only see a crossing, not a joint born past its limit)

@@ -389,7 +389,7 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
              on_chunk: ChunkCallback | None = None,
              progress: Callable[[float], None] | None = None,
              initial_state_mode: str = "given", outputs: bool = True,
-             events=(), faults=()) -> SimulationResult:
+             events=(), faults=(), rolls=None) -> SimulationResult:
     """Integrate a compiled line over ``[0, duration]`` and sample it at ``record_rate``.
 
     Parameters
@@ -416,6 +416,9 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
     faults : list of FaultInstance
         The run's faults (:func:`r2rsim.compile.faults.realise_faults`); those acting inside
         the loop change the sensor readings the controllers see.
+    rolls : RollDraws, optional
+        The run's roll variability (:func:`r2rsim.compile.variability.realise_variability`):
+        the rolls splices load.
 
     Returns
     -------
@@ -443,15 +446,15 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
              [list(v) for v in cl.programme.values])
     try:
         return _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mode,
-                    outputs, events, faults, backend, sample_t, wall0)
+                    outputs, events, faults, backend, sample_t, wall0, rolls)
     finally:
         cl.I[:], cl.P[:] = saved[0], saved[1]
         cl.programme.times, cl.programme.values = saved[2], saved[3]
 
 
 def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mode, outputs,
-         events, faults, backend, sample_t, wall0):
-    logic = DiscreteLogic(cl, events, faults, duration)
+         events, faults, backend, sample_t, wall0, rolls=None):
+    logic = DiscreteLogic(cl, events, faults, duration, rolls)
     step_budget = s.max_steps_per_s * max(duration, 1.0)
     compile0 = compile_seconds()
     prog_breaks = sorted(b for b in cl.programme.breakpoints if 0.0 < b < duration)

@@ -38,12 +38,12 @@ from ..dataset.paths import (
     remove_dataset,
     sha256_file,
 )
-from ..dataset.writer import EVENTS_SCHEMA, FAULTS_SCHEMA, SCHEMA_VERSION
+from ..dataset.writer import EVENTS_SCHEMA, FAULTS_SCHEMA, SCHEMA_VERSION, VARIABILITY_SCHEMA
 from ..errors import InputError, R2RError
 
 MARKER = SWEEP_MARKER
 WORK = ".work"
-TABLES = ("runs", "faults", "events")
+TABLES = ("runs", "faults", "events", "variability")
 #: what a sweep writes at the top of its directory, besides samples/, scenario/, sweep/
 _TOP_FILES = {f"{t}.parquet" for t in (*TABLES, "channels", "failures")} | {MANIFEST}
 #: the temporaries of the marker and the manifest (written, then renamed)
@@ -377,7 +377,8 @@ class SweepStore:
         tmp.mkdir()
         old = _OldTables(self.out) if self.final is not None else None
         writers: dict[str, _TableWriter] = {}
-        schemas = {"faults": FAULTS_SCHEMA, "events": EVENTS_SCHEMA}
+        schemas = {"faults": FAULTS_SCHEMA, "events": EVENTS_SCHEMA,
+                   "variability": VARIABILITY_SCHEMA}
         meta = {b"r2rsim.schema_version": SCHEMA_VERSION.encode(),
                 b"r2rsim.version": __version__.encode(),
                 b"r2rsim.sweep": plan.sweep.name.encode()}
@@ -582,7 +583,10 @@ class _OldTables:
     """The tables of the finished dataset being reopened, by run."""
 
     def __init__(self, root: Path):
-        self.tables = {n: pq.read_table(root / f"{n}.parquet") for n in TABLES}
+        # variability.parquet is newer than some datasets: none is no variability
+        self.tables = {n: pq.read_table(root / f"{n}.parquet") if n != "variability" or (
+            root / f"{n}.parquet").is_file() else VARIABILITY_SCHEMA.empty_table()
+            for n in TABLES}
         self.index = {}
         for n, t in self.tables.items():
             ids = t.column("run_id").to_pylist()
