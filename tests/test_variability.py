@@ -194,3 +194,30 @@ def test_bad_variability_is_refused(tmp_path, repo, variability, path, message):
         load_scenario(scenario)
     text = str(exc.value)
     assert path in text and message in text and scenario.name in text, text
+
+
+def test_a_sweep_gathers_every_runs_variability(tmp_path, repo):
+    """A sweep over the spread itself: variability.parquet of the sweep has each run's
+    rows, with its run id, and the sweep's dataset validates."""
+    from r2rsim.sweep import run_sweep
+
+    base = write_scenario(tmp_path, repo, VARIABILITY, duration=8.0)
+    sweep = tmp_path / "var_sweep.yaml"
+    sweep.write_text(yaml.safe_dump({
+        "name": "var_sweep", "scenario": base.name,
+        "axes": [{"name": "radius_std", "path": "variability.rolls.unwind.outer_radius.std",
+                  "values": ["5 mm", "10 mm"]}],
+        "seeds": [1, 2]}))
+    summary = run_sweep(sweep, tmp_path / "out", workers=0)
+    assert summary.done == 4
+    out = tmp_path / "out"
+    v = pq.read_table(out / "variability.parquet").to_pandas()
+    runs = pq.read_table(out / "runs.parquet").to_pandas()
+    assert set(v.run_id) == set(runs.run_id) and len(runs) == 4
+    radius = v[v.parameter == "outer_radius"].merge(runs[["run_id", "axis.radius_std", "seed"]])
+    # same seed: the same normal draw, scaled by the swept std
+    z = {(r.seed, r["axis.radius_std"]): (r.value - r.nominal) / r["axis.radius_std"]
+         for _, r in radius.iterrows()}
+    for seed in (1, 2):
+        assert z[(seed, 0.005)] == pytest.approx(z[(seed, 0.01)], rel=1e-9)
+    assert validate_dataset(out) == []
