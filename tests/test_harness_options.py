@@ -7,13 +7,12 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
+from test_harness import Passthrough, healthy, make_run, value
 
 from r2rsim.diagnostics.baselines import ResidualThreshold
 from r2rsim.errors import InputError
 from r2rsim.evaluate import metrics as M
 from r2rsim.evaluate.harness import evaluate, run_data
-
-from test_harness import Passthrough, healthy, make_run, value
 
 
 def with_labels(run, **cols):

@@ -56,7 +56,7 @@ def reference_vus(score, y, max_buffer, groups):
         area = prev = 0.0
         for th in sorted(set(score), reverse=True):
             pred = [x >= th for x in score]
-            tp = sum(wk for wk, p in zip(w, pred) if p)
+            tp = sum(wk for wk, p in zip(w, pred, strict=True) if p)
             exist = sum(any(pred[j] and groups[j] == groups[a]
                             for j in range(max(0, a - ell), min(n, b + ell + 1)))
                         for a, b in ranges)
