@@ -19,7 +19,7 @@ import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import pandas as pd
 from pydantic import Field, model_validator
@@ -91,6 +91,12 @@ class EvaluationSettings(Strict):
     n_boot: Annotated[int, Field(ge=0)] = 200
     seed: int = 0
     drive_data: bool = Field(False, description="also show plug-ins cmd.*, act.*, ctrl.*")
+    mode_strata: bool = Field(False, description="also report per-regime (label.mode) strata")
+    window: Literal["fault", "steady"] = Field(
+        "fault", description="steady: also report dr/pd/dd over severity-1 samples")
+    isolation: bool = Field(False, description="score rank_channels against label.ch.*")
+    vus_buffer: Annotated[Time, Field(ge=0)] | None = Field(
+        None, description="report vus_pr with buffers up to this duration")
 
 
 class Compare(Strict):
@@ -286,7 +292,9 @@ def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
                 ev = evaluate(est, roles["train"], roles["test"], roles["val"],
                               alpha=ev_set.alpha, m=ev_set.persistence, h=ev_set.grace,
                               n_boot=ev_set.n_boot, seed=ev_set.seed, split=study.name,
-                              drive_data=ev_set.drive_data)
+                              drive_data=ev_set.drive_data, mode_strata=ev_set.mode_strata,
+                              window=ev_set.window, isolation=ev_set.isolation,
+                              vus_buffer=ev_set.vus_buffer)
                 evaluations[(study.name, m.key)] = ev
                 log(ev.format())
                 frames.append(ev.metrics.assign(study=study.name, label=m.key))

@@ -259,7 +259,9 @@ def _cmd_diagnose(args) -> int:
         print("no validation runs: metrics at the plug-in's own threshold only (no *_cal)")
     ev = evaluate(est, split.train, split.test, split.val, alpha=args.alpha,
                   m=args.persistence, h=args.grace, n_boot=args.n_boot, seed=args.seed,
-                  split=split.name, drive_data=args.drive_data)
+                  split=split.name, drive_data=args.drive_data,
+                  mode_strata=args.mode_strata, window=args.window, isolation=args.isolation,
+                  vus_buffer=args.vus_buffer)
     out = ev.write(args.output or Path("results") / args.method)
     print(ev.format())
     print(f"written: {out}/predictions.parquet, metrics.parquet, metrics.csv")
@@ -515,6 +517,14 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("-m", "--persistence", type=int, default=1,
                    help="consecutive alarms that confirm a detection")
     d.add_argument("--grace", type=float, default=0.0, help="grace period after a fault [s]")
+    d.add_argument("--mode-strata", action="store_true",
+                   help="also report per-regime strata from label.mode (mode:<name>)")
+    d.add_argument("--window", choices=("fault", "steady"), default="fault",
+                   help="steady: also report dr/pd/dd over severity-1 samples")
+    d.add_argument("--isolation", action="store_true",
+                   help="score rank_channels against label.ch.* (hit1)")
+    d.add_argument("--vus-buffer", type=float, default=None, metavar="SECONDS",
+                   help="report vus_pr with buffers from 0 to SECONDS")
     d.add_argument("--n-boot", type=int, default=1000, help="bootstrap replicates over runs")
     d.add_argument("--seed", type=int, default=0, help="seed of the bootstrap")
     d.add_argument("-o", "--output", help="output directory (default: results/METHOD)")

@@ -120,6 +120,7 @@ def test_a_missing_result_is_a_regression(bench, capsys):
     ("oc1_nominal.yaml, seeds: [4]", "nosuch.yaml, seeds: [4]", "studies[0].test[0].scenario",
      "not found"),
     ("base.csv", "missing.csv", "compare.baseline", "--update"),
+    ("n_boot: 20", "n_boot: 20, window: ramp", "evaluation.window", "'fault' or 'steady'"),
 ])
 def test_bad_specs_are_refused(tmp_path, capsys, old, new, path, message):
     spec = write_spec(tmp_path, **{old: new})
@@ -127,6 +128,26 @@ def test_bad_specs_are_refused(tmp_path, capsys, old, new, path, message):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith(f"error: {spec}: {path}: ")
     assert message in err
+
+
+def test_thesis_options_add_metrics_and_keep_the_baseline(bench, capsys):
+    # per-regime strata, steady window, isolation and VUS-PR on: the guarded metrics are
+    # unchanged (the baseline still passes) and the new ones are in the results
+    d, _ = bench
+    spec = write_spec(d, name="options.yaml", **{
+        "n_boot: 20": "n_boot: 20, mode_strata: true, window: steady, isolation: true, "
+                      "vus_buffer: 0.1 s"})
+    ev = load_spec(spec).evaluation
+    assert (ev.mode_strata, ev.window, ev.isolation, ev.vus_buffer) == (True, "steady", True,
+                                                                        0.1)
+    code = main(["bench", str(spec), "--workdir", str(d / "work"), "-o", str(d / "opt")])
+    assert code == 0, capsys.readouterr().err
+    res = pd.read_csv(d / "opt" / "results.csv")
+    fault = res[res.fault == "sensor.offset:sensor_A"]
+    assert {"dr_steady", "pd_steady", "hit1", "hit1_samples", "vus_pr"} <= set(fault.metric)
+    assert "mode:OC1" in set(res.condition)
+    # the residual baseline ranks the offset sensor first at detection
+    assert fault.loc[(fault.metric == "hit1") & (fault.condition == "OC1"), "value"].item() == 1
 
 
 def test_shipped_spec_and_baseline_agree():

@@ -9,8 +9,9 @@ A plug-in is a :class:`Diagnostic` subclass:
 * ``score(run)`` returns per-sample statistics aligned to the run's samples (same index),
   with at least the column ``statistic`` (larger = more anomalous);
 * ``decide(scores)`` turns them into boolean alarms (default ``statistic > threshold_``);
-* optionally ``diagnose(scores)`` names the fault type per sample (``normal`` when none) and
-  ``rank_channels(scores)`` orders the channels most likely at fault.
+* optionally ``diagnose(scores)`` names the fault type per sample (``normal`` when none);
+* ``rank_channels(scores)`` orders the measured channels most likely at fault, per sample
+  (default: ``None``, no ranking; the harness then reports no hit@1).
 
 The harness hands a plug-in only the visible columns of each run, as a DataFrame indexed
 like the run's samples (:data:`r2rsim.dataset.read.VISIBLE`; never labels, faults or true
@@ -58,6 +59,25 @@ class Diagnostic(BaseEstimator):
     def decide(self, scores: pd.DataFrame) -> pd.Series:
         """Boolean alarms per sample: ``statistic > threshold_``."""
         return scores["statistic"] > self.threshold_
+
+    def rank_channels(self, scores: pd.DataFrame) -> pd.DataFrame | None:
+        """The measured channels ordered from most to least likely at fault, per sample.
+
+        Parameters
+        ----------
+        scores : pandas.DataFrame
+            The output of :meth:`score` for one run.
+
+        Returns
+        -------
+        pandas.DataFrame or None
+            Indexed like ``scores``; column 0 holds the name of the channel most likely at
+            fault at that sample, column 1 the next, and so on. Names are the ``meas.``
+            columns (e.g. ``meas.lc_A.tension_N``); None or NaN where the plug-in cannot
+            rank. The default returns None: the plug-in does not isolate by channel, and
+            the harness reports no ``hit1``.
+        """
+        return None
 
     # ---- helpers for subclasses ------------------------------------------------------------
     def required_columns(self, frame: pd.DataFrame) -> list[str]:

@@ -46,7 +46,13 @@ from .metrics import (
     false_alarm_events,
     far,
     isolation_counts,
+    localization_counts,
+    restrict_to_mode,
     roc_auc,
+    run_hit,
+    steady_counts,
+    steady_detection,
+    vus_pr,
     window_counts,
 )
 
@@ -70,6 +76,7 @@ METRICS: dict[str, Metric] = {
     "far_pre": Metric("M1 sample false-alarm rate over pre-onset samples of faulty runs", False),
     "fa_per_h": Metric("M2 false-alarm events per hour of fault-free time", False, "1/h"),
     "dr": Metric("M3 sample detection rate over the fault windows", True),
+    "dr_steady": Metric("M3 over the steady-state samples (severity 1)", True),
     "pd": Metric("M4 run-level detection probability (strict)", True),
     "pd_lenient": Metric("M4 run-level detection probability (lenient)", True),
     "dd_median_s": Metric("M5 median detection delay over detected runs", False, "s"),
@@ -77,9 +84,15 @@ METRICS: dict[str, Metric] = {
     "dd_p90_s": Metric("M5 90th percentile of the detection delay", False, "s"),
     "dd_censored_mean_s": Metric("M5 mean delay, a miss counting its horizon", False, "s"),
     "n_missed": Metric("M5 faulty runs not detected", False),
+    "pd_steady": Metric("M4 detection of the fully developed fault (lenient)", True),
+    "dd_steady_median_s": Metric("M5 median delay from the first severity-1 sample", False,
+                                 "s"),
     "roc_auc": Metric("M7 area under the ROC curve of the statistic", True),
     "pr_auc": Metric("M7 average precision of the statistic", True),
+    "vus_pr": Metric("M7 volume under the range-based PR surface of the statistic", True),
     "ia": Metric("M9 isolation accuracy over alarmed fault samples", True),
+    "hit1": Metric("M13 channel hit@1 at the first detection onset", True),
+    "hit1_samples": Metric("M13 channel hit@1 over alarmed sensor-fault samples", True),
     "mdm90": Metric("M15 smallest |magnitude| with P_D >= 0.9 (plug-in alarms)", False),
     "mdm90_cal": Metric("M15 smallest |magnitude| with P_D >= 0.9 at theta (M6)", False),
     "theta": Metric("M6 threshold calibrated on the validation runs", None),
@@ -88,12 +101,26 @@ METRICS: dict[str, Metric] = {
     "dr_cal": Metric("M3 detection rate at theta (M6)", True),
     "pd_cal": Metric("M4 detection probability at theta (M6)", True),
     "dd_median_cal_s": Metric("M5 median delay at theta (M6)", False, "s"),
+    "dr_steady_cal": Metric("M3 over the steady-state samples at theta (M6)", True),
+    "hit1_cal": Metric("M13 channel hit@1 at the first detection onset at theta (M6)", True),
     "fit_s": Metric("wall time of fit", False, "s"),
     "exec_s_per_sim_h": Metric("wall time of score per simulated hour", False, "s/h"),
 }
 
 #: metrics about the run of the method, not a stratum (left out of the wide table)
 _META = ("fit_s", "exec_s_per_sim_h", "theta")
+
+#: metrics computed per run (not per sample): left out of the per-regime strata
+_RUN_LEVEL = frozenset({"pd", "pd_lenient", "dd_median_s", "dd_mean_s", "dd_p90_s",
+                        "dd_censored_mean_s", "n_missed", "pd_steady", "dd_steady_median_s",
+                        "hit1", "mdm90"})
+#: the metrics reported at theta, by the name of the metric at the plug-in's alarms
+_CAL = {"far_ff": "far_ff_cal", "far_pre": "far_pre_cal", "dr": "dr_cal", "pd": "pd_cal",
+        "dd_median_s": "dd_median_cal_s", "dr_steady": "dr_steady_cal", "hit1": "hit1_cal"}
+#: condition label of a per-regime stratum (``label.mode`` per sample)
+MODE_PREFIX = "mode:"
+#: values of the ``window`` option
+WINDOWS = ("fault", "steady")
 
 #: stratum value meaning "pooled over every value"
 ALL = "all"
@@ -230,20 +257,49 @@ def _magnitude(run: Run) -> float:
 
 
 def run_data(run: Run, statistic: np.ndarray, alarm: np.ndarray,
-             diagnosis: np.ndarray | None = None) -> RunData:
+             diagnosis: np.ndarray | None = None, *, ranking: pd.DataFrame | None = None,
+             modes: bool = False, steady: bool = False) -> RunData:
     """The ground truth of a run (``label.*``) with a detector's output, as :class:`RunData`.
 
     Faulty samples are ``label.is_faulty``, scored samples ``label.score_mask`` (false in the
     warm-up), the true type per sample ``label.primary_type``; the magnitude is the run's
-    fault magnitude when it has exactly one fault.
+    fault magnitude when it has exactly one fault. ``modes`` adds ``label.mode``, ``steady``
+    ``label.severity``; a ``ranking`` (:meth:`Diagnostic.rank_channels`) adds the
+    ``label.ch.*`` columns as the channel truth.
     """
     s = run.samples
+    extra = {}
+    if modes:
+        extra["mode"] = _label(run, "label.mode").astype(str).to_numpy()
+    if steady:
+        extra["severity"] = _label(run, "label.severity").to_numpy(float)
+    if ranking is not None:
+        extra.update(_channel_data(run, ranking))
     return RunData(t=s["t_s"].to_numpy(float), faulty=s["label.is_faulty"].to_numpy(bool),
                    scored=s["label.score_mask"].to_numpy(bool), alarm=alarm, score=statistic,
                    diagnosis=diagnosis,
                    true_type=s["label.primary_type"].astype(str).to_numpy()
                    if diagnosis is not None else None,
-                   magnitude=_magnitude(run))
+                   magnitude=_magnitude(run), **extra)
+
+
+def _label(run: Run, column: str) -> pd.Series:
+    if column not in run.samples.columns:
+        raise InputError(f"run {run.run_id} ({run.path}) has no {column} column")
+    return run.samples[column]
+
+
+def _channel_data(run: Run, ranking: pd.DataFrame) -> dict:
+    """``channel_truth`` from ``label.ch.*`` and the top-ranked channel as an index into it
+    (-1 for a name that is not a labelled channel, or no name)."""
+    cols = [c for c in run.samples.columns if c.startswith("label.ch.")]
+    names = tuple(c[len("label.ch."):] for c in cols)
+    lookup = {n: i for i, n in enumerate(names)}
+    top = ranking.iloc[:, 0] if ranking.shape[1] else pd.Series(index=ranking.index)
+    code = top.map(lambda v: lookup.get(str(v).removeprefix("meas."), -1)
+                   if isinstance(v, str) else -1)
+    return {"channels": names, "channel_truth": run.samples[cols].to_numpy(bool),
+            "ranking": code.to_numpy(np.int64)[:, None]}
 
 
 # --------------------------------------------------------------------------- per-run counts
@@ -257,7 +313,8 @@ def _counts(r: RunData, m: int, h: float) -> dict[str, float]:
     out = {"ff_a": f.alarms_ff, "ff_n": f.n_ff, "pre_a": f.alarms_pre, "pre_n": f.n_pre,
            "fa_ev": ev.n_events, "ok_h": ev.hours,
            "dr_hit": 0, "dr_tot": 0, "elig": 0, "det": 0, "det_len": 0,
-           "delay": math.nan, "cens": math.nan, "ia_hit": 0, "ia_tot": 0}
+           "delay": math.nan, "cens": math.nan, "ia_hit": 0, "ia_tot": 0,
+           **_extra_counts(r, m, h)}
     if r.is_faulty:
         out["dr_hit"], out["dr_tot"] = window_counts(r)
         d = detect_run(r, m, h)
@@ -267,6 +324,22 @@ def _counts(r: RunData, m: int, h: float) -> dict[str, float]:
                        det_len=int(detect_run(r, m, h, lenient=True).detected))
         if r.diagnosis is not None:
             out["ia_hit"], out["ia_tot"] = isolation_counts(r)
+    return out
+
+
+def _extra_counts(r: RunData, m: int, h: float) -> dict[str, float]:
+    """The counts of the optional metrics: steady-state window (with ``severity``) and
+    channel isolation (with a ranking); zeros (nan delays) when the run has no such data."""
+    out = {"st_hit": 0, "st_tot": 0, "st_elig": 0, "st_det": 0, "st_delay": math.nan,
+           "hit_r": 0, "hit_n": 0, "loc_hit": 0, "loc_tot": 0}
+    if r.severity is not None:
+        out["st_hit"], out["st_tot"] = steady_counts(r)
+        d = steady_detection(r, m, h) if r.is_faulty else None
+        if d is not None and d.eligible:
+            out.update(st_elig=1, st_det=int(d.detected), st_delay=d.delay)
+    if r.ranking is not None:
+        out["hit_r"], out["hit_n"] = run_hit(r, 1, m, h)
+        out["loc_hit"], out["loc_tot"] = localization_counts(r)
     return out
 
 
@@ -289,6 +362,11 @@ _FROM_COUNTS = {
                                    c["delay"]),
     "dd_censored_mean_s": lambda c: _nanstat(np.nanmean, c["cens"]),
     "ia": lambda c: _ratio(c["ia_hit"].sum(-1), c["ia_tot"].sum(-1)),
+    "dr_steady": lambda c: _ratio(c["st_hit"].sum(-1), c["st_tot"].sum(-1)),
+    "pd_steady": lambda c: _ratio(c["st_det"].sum(-1), c["st_elig"].sum(-1)),
+    "dd_steady_median_s": lambda c: _nanstat(np.nanmedian, c["st_delay"]),
+    "hit1": lambda c: _ratio(c["hit_r"].sum(-1), c["hit_n"].sum(-1)),
+    "hit1_samples": lambda c: _ratio(c["loc_hit"].sum(-1), c["loc_tot"].sum(-1)),
 }
 
 
@@ -361,17 +439,19 @@ class Evaluation:
     def format(self) -> str:
         """The readable table printed by ``r2rsim diagnose``."""
         t = self.table()
-        show = [c for c in ("n_runs", "far_ff", "far_pre", "fa_per_h", "dr", "pd",
-                            "dd_median_s", "dd_p90_s", "n_missed", "roc_auc", "pr_auc", "ia",
-                            "mdm90", "far_ff_cal", "dr_cal", "pd_cal", "dd_median_cal_s",
-                            "mdm90_cal")
+        show = [c for c in ("n_runs", "far_ff", "far_pre", "fa_per_h", "dr", "dr_steady",
+                            "pd", "dd_median_s", "dd_p90_s", "n_missed", "pd_steady",
+                            "dd_steady_median_s", "roc_auc", "pr_auc", "vus_pr", "ia", "hit1",
+                            "mdm90", "far_ff_cal", "dr_cal", "dr_steady_cal", "pd_cal",
+                            "dd_median_cal_s", "mdm90_cal")
                 if c in t.columns]
         head = (f"{self.method} {json.dumps(self.params, sort_keys=True, default=str)}  "
                 f"[{self.settings.get('split', '')}; m={self.settings.get('m')}, "
                 f"h={self.settings.get('h')} s, alpha={self.settings.get('alpha')}, "
                 f"theta={self.theta:.4g}, fit {self.settings.get('fit_s', math.nan):.2g} s]")
         short = {"fa_per_h": "FA/h", "dd_median_s": "DD med s", "dd_p90_s": "DD p90 s",
-                 "n_missed": "missed", "dd_median_cal_s": "DD_cal s"}
+                 "n_missed": "missed", "dd_median_cal_s": "DD_cal s",
+                 "dd_steady_median_s": "DD_st s"}
         body = t[show].rename(columns=short).to_string(
             float_format=lambda v: f"{v:.3g}", na_rep="-")
         return head + "\n" + body
@@ -417,21 +497,54 @@ def _strata(test: list[Run]) -> list[tuple[str, str, list[int]]]:
     conds = sorted(set(cond))
     out = []
     for c in conds + ([ALL] if len(conds) > 1 else []):
-        in_c = [i for i in range(len(test)) if c in (ALL, cond[i])]
-        healthy = [i for i in in_c if ftype[i] == NONE]
-        present = sorted({ftype[i] for i in in_c} - {NONE})
-        if not present:
-            out.append((c, NONE, healthy))
-            continue
-        for t in present + ([ALL] if len(present) > 1 else []):
-            out.append((c, t, healthy + [i for i in in_c if ftype[i] != NONE
-                                         and t in (ALL, ftype[i])]))
+        out += _fault_strata(c, [i for i in range(len(test)) if c in (ALL, cond[i])], ftype)
     return out
+
+
+def _fault_strata(c: str, in_c: list[int], ftype: list[str]
+                  ) -> list[tuple[str, str, list[int]]]:
+    """The fault strata of one condition holding the test runs ``in_c``."""
+    healthy = [i for i in in_c if ftype[i] == NONE]
+    present = sorted({ftype[i] for i in in_c} - {NONE})
+    if not present:
+        return [(c, NONE, healthy)]
+    return [(c, t, healthy + [i for i in in_c if ftype[i] != NONE and t in (ALL, ftype[i])])
+            for t in present + ([ALL] if len(present) > 1 else [])]
+
+
+def _mode_strata(test: list[Run], view: list[RunData], mode: str
+                 ) -> list[tuple[str, str, list[int]]]:
+    """The strata of one regime: the test runs with a scored sample in it (``view``: the
+    runs restricted to it, :func:`restrict_to_mode`), by fault as in :func:`_strata`."""
+    in_m = [i for i, r in enumerate(view) if r.scored.any()]
+    return _fault_strata(MODE_PREFIX + mode, in_m, [fault_key(r) for r in test])
+
+
+def _modes(rd: list[RunData]) -> list[str]:
+    """The regimes (``label.mode`` values but "") of the scored samples of the runs."""
+    return sorted({m for r in rd for m in np.unique(r.mode[r.scored])} - {""})
+
+
+def _pooled(runs: list[RunData]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Scores, truth and a group label per scored sample: a new group at each run and at
+    each gap in a run's scored samples (ranges and VUS buffers do not cross them)."""
+    s, y, g = [], [], []
+    n_groups = 0
+    for r in runs:
+        k = np.flatnonzero(r.scored)
+        seg = np.cumsum(np.r_[True, np.diff(k) != 1]) if k.size else k
+        s.append(r.score[k])
+        y.append(r.faulty[k])
+        g.append(seg + n_groups)
+        n_groups += int(seg[-1]) if k.size else 0
+    return np.concatenate(s), np.concatenate(y), np.concatenate(g)
 
 
 def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence[Run] = (),
              *, alpha: float = 0.01, m: int = 1, h: float = 0.0, n_boot: int = 1000,
-             seed: int = 0, split: str = "explicit", drive_data: bool = False) -> Evaluation:
+             seed: int = 0, split: str = "explicit", drive_data: bool = False,
+             mode_strata: bool = False, window: str = "fault", isolation: bool = False,
+             vus_buffer: float | None = None) -> Evaluation:
     """Fit a plug-in on healthy runs, score the test runs and compute every metric.
 
     Parameters
@@ -460,6 +573,19 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
     drive_data : bool
         Also show the plug-in the drive data (``cmd.*``, ``act.*``, ``ctrl.*``), for a
         protocol that treats them as observable (:meth:`r2rsim.dataset.read.Run.visible`).
+    mode_strata : bool
+        Also report the per-sample metrics per operating regime (``label.mode``), as strata
+        ``mode:<name>`` × fault: a run that switches regimes contributes each sample to the
+        stratum of its regime.
+    window : {"fault", "steady"}
+        ``"steady"`` also reports ``dr_steady``, ``pd_steady`` and ``dd_steady_median_s``
+        over the samples with ``label.severity`` 1 (the fault fully developed).
+    isolation : bool
+        Score the plug-in's :meth:`~r2rsim.diagnostics.base.Diagnostic.rank_channels`
+        against ``label.ch.*`` (``hit1``, ``hit1_samples``); nothing when it returns None.
+    vus_buffer : float, optional
+        Report ``vus_pr`` with buffer lengths from 0 up to this many seconds (rounded to
+        samples of the test runs' median period); None: not reported.
 
     Returns
     -------
@@ -473,6 +599,10 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
         raise InputError(f"grace period h must be >= 0 s, got {h!r}")
     if n_boot < 0:
         raise InputError(f"n_boot must be >= 0, got {n_boot!r}")
+    if window not in WINDOWS:
+        raise InputError(f"window must be one of {', '.join(WINDOWS)}, got {window!r}")
+    if vus_buffer is not None and not vus_buffer >= 0:
+        raise InputError(f"vus_buffer must be >= 0 s, got {vus_buffer!r}")
     train, val, test = list(train), list(val), list(test)
     if not train:
         raise InputError("no training runs")
@@ -499,7 +629,7 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
     call(est, "fit", est.fit, train_frames)
     fit_s = time.perf_counter() - t0
 
-    def outputs(run: Run):
+    def outputs(run: Run, rank: bool = False):
         f = frame(run)
         where = f"run {run.run_id} of {run.path}"
         scores = call(est, f"score ({where})", est.score, f)
@@ -518,7 +648,14 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
         if len(alarm) != len(f) or (diag is not None and len(diag) != len(f)):
             raise PluginError(f"plug-in '{name}': decide/diagnose ({where}) returned "
                               f"{len(alarm)} values for {len(f)} samples")
-        return stat, alarm, diag
+        if not rank:
+            return stat, alarm, diag
+        ranking = call(est, f"rank_channels ({where})", est.rank_channels, scores)
+        if ranking is not None and (not isinstance(ranking, pd.DataFrame)
+                                    or len(ranking) != len(f)):
+            raise PluginError(f"plug-in '{name}': rank_channels ({where}) must return None "
+                              f"or a DataFrame with one row per sample")
+        return stat, alarm, diag, ranking
 
     theta = math.nan
     if val:
@@ -531,14 +668,18 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
         theta = calibrate_threshold(pool, alpha)
 
     t0 = time.perf_counter()
-    scored = [outputs(r) for r in test]
+    ranks = hasattr(est, "rank_channels") and isolation
+    scored = [outputs(r, ranks) for r in test]
     exec_s = time.perf_counter() - t0
+    rankings = [o[3] for o in scored] if ranks else [None] * len(test)
+    scored = [o[:3] for o in scored]
     sim_h = sum(float(r.samples["t_s"].iloc[-1] - r.samples["t_s"].iloc[0]) for r in test) / 3600
     # a statistic the plug-in could not compute (nan) never alarms and ranks lowest
     finite = np.concatenate([s[np.isfinite(s)] for s, _, _ in scored])
     floor = (finite.min() if finite.size else 0.0) - 1.0
-    rd = [run_data(r, np.where(np.isfinite(s), s, floor), a, d)
-          for r, (s, a, d) in zip(test, scored, strict=True)]
+    rd = [run_data(r, np.where(np.isfinite(s), s, floor), a, d, ranking=rk,
+                   modes=mode_strata, steady=window == "steady")
+          for r, (s, a, d), rk in zip(test, scored, rankings, strict=True)]
     # the same runs at theta: only the alarm differs (a nan statistic never exceeds theta)
     rd_cal = ([replace(x, alarm=s > theta) for x, (s, _, _) in zip(rd, scored, strict=True)]
               if val else None)
@@ -560,30 +701,38 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
     # per-run counts, once per run; a stratum takes its runs' rows
     per_run = pd.DataFrame([_counts(r, m, h) for r in rd])
     per_run_cal = pd.DataFrame([_counts(r, m, h) for r in rd_cal]) if rd_cal else None
+    max_buffer = (None if vus_buffer is None else
+                  int(round(vus_buffer / float(np.median([r.period for r in rd if r.n > 1]
+                                                         or [1.0])))))
 
-    def stratum(cond, ftype, mag, idx):
-        runs = [rd[i] for i in idx]
+    def stratum(cond, ftype, mag, idx, view=None):
+        """Add the rows of one stratum; ``view``: runs restricted to a regime (per-sample
+        metrics only), with their own per-run counts."""
+        runs_all, pr, prc = (rd, per_run, per_run_cal) if view is None else view
+        skip = _RUN_LEVEL if view is not None else frozenset()
+        runs = [runs_all[i] for i in idx]
         n = len(idx)
-        counts = per_run.iloc[idx]
+        counts = pr.iloc[idx]
         for metric, (est_, lo, hi) in _bootstrap(counts, n_boot, seed).items():
-            if metric == "ia" and runs[0].diagnosis is None:
+            if (metric == "ia" and runs[0].diagnosis is None) or metric in skip:
                 continue
             add(cond, ftype, mag, metric, est_, lo, hi, n)
         n_faulty = int(counts["elig"].sum())
-        if n_faulty:
+        if n_faulty and "n_missed" not in skip:
             add(cond, ftype, mag, "n_missed", float(n_faulty - counts["det"].sum()), n=n)
         y = np.concatenate([r.faulty[r.scored] for r in runs])
         if y.any() and not y.all():
             s = np.concatenate([r.score[r.scored] for r in runs])
             add(cond, ftype, mag, "roc_auc", roc_auc(s, y), n=n)
             add(cond, ftype, mag, "pr_auc", average_precision(s, y), n=n)
-        if per_run_cal is not None:
-            cc = per_run_cal.iloc[idx]
+            if max_buffer is not None:
+                ps, py, pg = _pooled(runs)
+                add(cond, ftype, mag, "vus_pr", vus_pr(ps, py, max_buffer, groups=pg), n=n)
+        if prc is not None:
+            cc = prc.iloc[idx]
             for metric, (est_, lo, hi) in _bootstrap(cc, n_boot, seed).items():
-                key = {"far_ff": "far_ff_cal", "far_pre": "far_pre_cal", "dr": "dr_cal",
-                       "pd": "pd_cal", "dd_median_s": "dd_median_cal_s"}.get(metric)
-                if key:
-                    add(cond, ftype, mag, key, est_, lo, hi, n)
+                if metric in _CAL and metric not in skip:
+                    add(cond, ftype, mag, _CAL[metric], est_, lo, hi, n)
             return counts, cc
         return counts, None
 
@@ -602,6 +751,14 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
                 elig = c["elig"].to_numpy(bool)
                 curve = detectability(mag_all[elig], c["det"].to_numpy(bool)[elig])
                 add(cond, ftype, math.nan, key, abs(curve.mdm), n=int(elig.sum()))
+    for mode in _modes(rd) if mode_strata else ():
+        view = [restrict_to_mode(r, mode) for r in rd]
+        view_cal = ([replace(r, alarm=x.alarm) for r, x in zip(view, rd_cal, strict=True)]
+                    if rd_cal else None)
+        counts_of = (view, pd.DataFrame([_counts(r, m, h) for r in view]),
+                     pd.DataFrame([_counts(r, m, h) for r in view_cal]) if view_cal else None)
+        for cond, ftype, idx in _mode_strata(test, view, mode):
+            stratum(cond, ftype, math.nan, idx, counts_of)
     add(ALL, ALL, math.nan, "fit_s", fit_s, n=len(train))
     if sim_h > 0:
         add(ALL, ALL, math.nan, "exec_s_per_sim_h", exec_s / sim_h, n=len(test))
@@ -627,4 +784,6 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
     predictions["params_sha256"] = base["params_sha256"]
     return Evaluation(name, params, predictions, metrics, theta,
                       {"alpha": alpha, "m": m, "h": h, "n_boot": n_boot, "seed": seed,
-                       "split": split, "fit_s": fit_s, "drive_data": drive_data})
+                       "split": split, "fit_s": fit_s, "drive_data": drive_data,
+                       "mode_strata": mode_strata, "window": window, "isolation": isolation,
+                       "vus_buffer": vus_buffer, "vus_max_buffer_samples": max_buffer})

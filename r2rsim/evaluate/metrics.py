@@ -51,9 +51,18 @@ __all__ = [
     "far",
     "fault_free_scores",
     "isolation_accuracy",
+    "hit_at_n",
     "isolation_counts",
+    "localization_counts",
     "pooled_scores",
+    "range_pr_auc",
+    "restrict_to_mode",
     "roc_auc",
+    "run_hit",
+    "steady_counts",
+    "steady_detection",
+    "steady_detection_rate",
+    "vus_pr",
     "window_counts",
 ]
 
@@ -128,6 +137,19 @@ class RunData:
         True fault type per sample, ``"normal"`` where not faulty. Needed by M9 only.
     magnitude : float, default nan
         The run's fault magnitude (nan for fault-free runs). Used by M15.
+    mode : array_like of str, shape (N,), optional
+        Operating mode per sample (``label.mode``). Needed by :func:`restrict_to_mode` only.
+    severity : array_like of float, shape (N,), optional
+        Fault severity p(t) of the primary fault per sample (``label.severity``, 1 = fully
+        developed). Needed by the steady-state window only (:func:`steady_counts`).
+    channel_truth : array_like of bool, shape (N, C), optional
+        ``channel_truth[k, c]``: measured channel ``channels[c]`` is corrupted by a sensor fault
+        at sample k (``label.ch.*``). Needed by M13 only.
+    ranking : array_like of int, shape (N, R), optional
+        The detector's channel ranking per sample, most likely first, as indices into
+        ``channels`` (-1: a channel outside ``channels`` or no ranking). Needed by M13 only.
+    channels : tuple of str, default ()
+        Names of the columns of ``channel_truth``.
     """
 
     t: NDArray[np.float64]
@@ -138,6 +160,11 @@ class RunData:
     diagnosis: NDArray[np.str_] | None = None
     true_type: NDArray[np.str_] | None = None
     magnitude: float = math.nan
+    mode: NDArray[np.str_] | None = None
+    severity: NDArray[np.float64] | None = None
+    channel_truth: NDArray[np.bool_] | None = None
+    ranking: NDArray[np.int64] | None = None
+    channels: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         # frozen dataclass: normalise the arrays through object.__setattr__
@@ -151,15 +178,27 @@ class RunData:
             object.__setattr__(self, name, self._aligned(name, bool))
         if self.score is not None:
             object.__setattr__(self, "score", self._aligned("score", float))
-        for name in ("diagnosis", "true_type"):
+        for name in ("diagnosis", "true_type", "mode"):
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, self._aligned(name, str))
+        if self.severity is not None:
+            object.__setattr__(self, "severity", self._aligned("severity", float))
         object.__setattr__(self, "magnitude", float(self.magnitude))
+        object.__setattr__(self, "channels", tuple(self.channels))
+        if self.channel_truth is not None:
+            object.__setattr__(self, "channel_truth", self._aligned(
+                "channel_truth", bool, (self.n, len(self.channels))))
+        if self.ranking is not None:
+            r = np.asarray(self.ranking, dtype=np.int64)
+            object.__setattr__(self, "ranking", self._aligned(
+                "ranking", np.int64, (self.n, r.shape[1] if r.ndim == 2 else -1)))
 
-    def _aligned(self, name: str, dtype: type) -> NDArray:
+    def _aligned(self, name: str, dtype: type, shape: tuple | None = None) -> NDArray:
         a = np.asarray(getattr(self, name), dtype=dtype)
-        if a.shape != self.t.shape:
-            raise ValueError(f"{name} has shape {a.shape}, expected {self.t.shape} (like t)")
+        want = self.t.shape if shape is None else shape
+        if a.shape != want:
+            raise ValueError(f"{name} has shape {a.shape}, expected {want}"
+                             + (" (like t)" if shape is None else ""))
         return a
 
     @property
@@ -218,6 +257,30 @@ class RunData:
             return eps
         tol = _TIME_RTOL * (self.period if self.n > 1 else 1.0)
         return int(np.searchsorted(self.t, self.t[eps] + h + tol, side="right") - 1)
+
+
+def restrict_to_mode(run: RunData, mode: str) -> RunData:
+    """The run seen through one operating regime: only its samples in ``mode`` stay scored.
+
+    The ground truth is unchanged (the onset tau, the fault window and whether the run is
+    faulty are those of the whole run), so a sample keeps its role (fault-free run, pre-onset,
+    fault window) and only the samples of other regimes leave every per-sample metric.
+
+    Parameters
+    ----------
+    run : RunData
+        A run with ``mode`` (``label.mode`` per sample).
+    mode : str
+        The regime to keep.
+
+    Returns
+    -------
+    RunData
+        A copy whose ``scored`` is ``scored & (mode == mode)``.
+    """
+    if run.mode is None:
+        raise ValueError("restrict_to_mode needs a run with a per-sample mode")
+    return replace(run, scored=run.scored & (run.mode == mode))
 
 
 def _faulty_runs(runs: Sequence[RunData]) -> list[RunData]:
@@ -383,6 +446,86 @@ def window_counts(run: RunData) -> tuple[int, int]:
     numerator and denominator of M3 for one run)."""
     sl = slice(run.onset, run.end + 1)
     return int(run.effective_alarm[sl].sum()), int(run.scored[sl].sum())
+
+
+# --------------------------------------------------------------------------- M3/M5, steady state
+
+#: severity at or above which a sample is in the steady state (label.severity is float32)
+STEADY_SEVERITY = 1.0 - 1e-6
+
+
+def _steady(run: RunData) -> NDArray[np.bool_]:
+    if run.severity is None:
+        raise ValueError("the steady-state window needs runs with a per-sample severity")
+    return run.faulty & (run.severity >= STEADY_SEVERITY)
+
+
+def steady_counts(run: RunData) -> tuple[int, int]:
+    """Alarmed scored samples and scored samples among a run's steady-state fault samples.
+
+    A steady-state sample is faulty with severity p(t) = 1: the fault is fully developed, so
+    the ramps of a degradation and the off-phases of an intermittent fault are left out (unlike
+    M3, which counts every sample of [tau, eps]).
+
+    Parameters
+    ----------
+    run : RunData
+        A run with ``severity``.
+
+    Returns
+    -------
+    tuple of int
+        (alarmed, total) over the scored steady-state samples; (0, 0) for a fault-free run.
+    """
+    sel = _steady(run) & run.scored
+    return int(run.effective_alarm[sel].sum()), int(sel.sum())
+
+
+def steady_detection_rate(runs: Sequence[RunData]) -> float:
+    """M3 over the steady-state window: alarmed / scored samples with severity 1, pooled.
+
+    Parameters
+    ----------
+    runs : sequence of RunData
+        Runs with ``severity``.
+
+    Returns
+    -------
+    float
+        The rate (nan when no scored sample has severity 1).
+    """
+    hits = total = 0
+    for r in runs:
+        h, n = steady_counts(r)
+        hits += h
+        total += n
+    return _ratio(hits, total)
+
+
+def steady_detection(run: RunData, m: int = 1, h: float = 0.0) -> RunDetection | None:
+    """M4/M5 from the start of the steady state: detection of a fully developed fault.
+
+    The onset is tau_s, the first faulty sample with severity 1, and the window ends h after
+    the last one. Detection is lenient (:func:`detect_run`): a confirmed alarm that began
+    during the ramp and is still on at tau_s detects with delay 0, because the question is how
+    long a fully developed fault goes unflagged, not whether the ramp was caught.
+
+    Parameters
+    ----------
+    run : RunData
+        A faulty run with ``severity``.
+    m, h
+        Persistence and grace period in seconds, as in :func:`detect_run`.
+
+    Returns
+    -------
+    RunDetection or None
+        None when the run never reaches severity 1.
+    """
+    steady = _steady(run)
+    if not steady.any():
+        return None
+    return detect_run(replace(run, faulty=steady), m, h, lenient=True)
 
 
 # --------------------------------------------------------------------------- M4, M5
@@ -728,6 +871,146 @@ def average_precision(score: ArrayLike, y: ArrayLike) -> float:
     return float(np.sum(np.diff(np.r_[0.0, recall]) * precision))
 
 
+# --------------------------------------------------------------------------- M7, VUS-PR
+
+
+def _group_bounds(n: int, groups: ArrayLike | None) -> tuple[NDArray, NDArray]:
+    """First and last index of the group of every sample (groups: labels, constant on
+    contiguous blocks; a change of label starts a new group)."""
+    if groups is None:
+        return np.zeros(n, dtype=np.int64), np.full(n, n - 1, dtype=np.int64)
+    g = np.asarray(groups).ravel()
+    if g.size != n:
+        raise ValueError(f"groups has {g.size} values for {n} samples")
+    new = np.r_[True, g[1:] != g[:-1]]
+    starts = np.flatnonzero(new)
+    ends = np.r_[starts[1:] - 1, n - 1]
+    which = np.cumsum(new) - 1
+    return starts[which], ends[which]
+
+
+def _ranges(y: NDArray[np.bool_], first: NDArray) -> tuple[NDArray, NDArray]:
+    """Start and end (inclusive) of every anomaly range: maximal runs of y within a group."""
+    joined = y[1:] & y[:-1] & (first[1:] == first[:-1])  # k and k+1 in one range
+    return (np.flatnonzero(y & ~np.r_[False, joined]),
+            np.flatnonzero(y & ~np.r_[joined, False]))
+
+
+def _buffer_weights(y: NDArray[np.bool_], first: NDArray, last: NDArray,
+                    buffer: int) -> NDArray[np.float64]:
+    """Soft labels: 1 on anomalies; sqrt(1 - d/(buffer+1)) at distance d in 1..buffer samples
+    from the nearest anomaly of the same group; 0 elsewhere."""
+    w = y.astype(float)
+    if buffer == 0 or not y.any():
+        return w
+    idx = np.arange(y.size)
+    prev = np.maximum.accumulate(np.where(y, idx, -1))
+    nxt = np.minimum.accumulate(np.where(y, idx, y.size)[::-1])[::-1]
+    d_prev = np.where(prev >= first, idx - prev, np.iinfo(np.int64).max)
+    d_next = np.where(nxt <= last, nxt - idx, np.iinfo(np.int64).max)
+    d = np.minimum(d_prev, d_next)
+    near = ~y & (d <= buffer)
+    w[near] = np.sqrt(1.0 - d[near] / (buffer + 1.0))
+    return w
+
+
+def range_pr_auc(score: ArrayLike, y: ArrayLike, buffer: int = 0,
+                 groups: ArrayLike | None = None) -> float:
+    """Range-based PR-AUC with a soft buffer of ``buffer`` samples (one slice of VUS-PR).
+
+    For the rule ``score >= theta`` at each distinct score (decreasing), with p(k) the alarm
+    and w(k) the buffered soft label (:func:`vus_pr`):
+
+    * TP = sum_k w(k) p(k);  precision = TP / sum_k p(k);
+    * recall = min(TP / P, 1) * E / |ranges|, where P is the number of anomalous samples and
+      E the number of anomaly ranges with an alarm inside the range widened by ``buffer``
+      samples on each side (existence reward);
+    * the area is sum_n (R_n - R_{n-1}) P_n with R_0 = 0 (the step form of
+      :func:`average_precision`).
+
+    Parameters
+    ----------
+    score : array_like of float
+        Scores, larger = more anomalous.
+    y : array_like of bool
+        Ground truth; a range is a maximal run of True within a group.
+    buffer : int, default 0
+        Buffer length in samples on each side of a range (>= 0).
+    groups : array_like, optional
+        Group label per sample (e.g. a run id), constant on contiguous blocks: ranges and
+        buffers never cross a change of group.
+
+    Returns
+    -------
+    float
+        The area in [0, 1]; nan without anomalous samples. With ``buffer=0`` and a single
+        range it equals :func:`average_precision`.
+    """
+    s, yy = _check_score_y(score, y)
+    if int(buffer) != buffer or buffer < 0:
+        raise ValueError(f"buffer must be an integer >= 0, got {buffer!r}")
+    if not yy.any():
+        return math.nan
+    first, last = _group_bounds(s.size, groups)
+    order = np.argsort(-s, kind="mergesort")
+    return _range_auc(s, yy, int(buffer), first, last, order)
+
+
+def _range_auc(s: NDArray, y: NDArray, buffer: int, first: NDArray, last: NDArray,
+               order: NDArray) -> float:
+    w = _buffer_weights(y, first, last, buffer)
+    blocks = np.flatnonzero(np.r_[s[order][1:] != s[order][:-1], True])  # distinct thresholds
+    tp = np.cumsum(w[order])[blocks]
+    pos = np.empty(s.size, dtype=np.int64)
+    pos[order] = np.arange(s.size)  # position of each sample in the decreasing order
+    starts, ends = _ranges(y, first)
+    lo = np.maximum(starts - buffer, first[starts])
+    hi = np.minimum(ends + buffer, last[ends])
+    found = np.sort([pos[a:b + 1].min() for a, b in zip(lo, hi, strict=True)])
+    existence = np.searchsorted(found, blocks, side="right") / starts.size
+    recall = np.minimum(tp / y.sum(), 1.0) * existence
+    precision = tp / (blocks + 1)
+    return float(np.sum(np.diff(np.r_[0.0, recall]) * precision))
+
+
+def vus_pr(score: ArrayLike, y: ArrayLike, max_buffer: int = 0,
+           groups: ArrayLike | None = None) -> float:
+    """M7: volume under the range-based PR surface (VUS-PR, after Paparrizos et al. 2022).
+
+    The mean of :func:`range_pr_auc` over the buffer lengths 0, 1, ..., ``max_buffer``
+    samples. With buffer l, a sample at distance d (1 <= d <= l) from the nearest anomaly
+    counts as sqrt(1 - d/(l+1)) of a true positive, and an alarm within l samples of a range
+    counts for its existence, so a detector that fires a little early or late is credited
+    gradually instead of all or nothing. A perfect score (every anomaly above every normal
+    sample) gives 1 at every buffer length.
+
+    Parameters
+    ----------
+    score : array_like of float
+        Scores, larger = more anomalous.
+    y : array_like of bool
+        Ground truth.
+    max_buffer : int, default 0
+        Largest buffer length in samples (one side of a range).
+    groups : array_like, optional
+        Group label per sample (runs): ranges and buffers never cross a change of group.
+
+    Returns
+    -------
+    float
+        VUS-PR in [0, 1]; nan without anomalous samples.
+    """
+    s, yy = _check_score_y(score, y)
+    if int(max_buffer) != max_buffer or max_buffer < 0:
+        raise ValueError(f"max_buffer must be an integer >= 0, got {max_buffer!r}")
+    if not yy.any():
+        return math.nan
+    first, last = _group_bounds(s.size, groups)
+    order = np.argsort(-s, kind="mergesort")
+    return float(np.mean([_range_auc(s, yy, b, first, last, order)
+                          for b in range(int(max_buffer) + 1)]))
+
+
 # --------------------------------------------------------------------------- M9
 
 
@@ -775,6 +1058,108 @@ def isolation_counts(run: RunData) -> tuple[int, int]:
     truth = run.true_type[np.maximum.accumulate(idx)]
     sel = run.effective_alarm[sl]
     return int((run.diagnosis[sl][sel] == truth[sel]).sum()), int(sel.sum())
+
+
+# --------------------------------------------------------------------------- M13
+
+
+def _top_hit(ranking: NDArray[np.int64], truth: NDArray[np.bool_], n: int) -> NDArray[np.bool_]:
+    """Per row: one of the first ``n`` ranked channel indices is true in that row of truth."""
+    rows = np.arange(ranking.shape[0])
+    hit = np.zeros(ranking.shape[0], dtype=bool)
+    for j in range(min(n, ranking.shape[1])):
+        c = ranking[:, j]
+        ok = c >= 0
+        hit |= ok & truth[rows, np.where(ok, c, 0)]
+    return hit
+
+
+def _has_channels(run: RunData) -> bool:
+    return run.channel_truth is not None and run.ranking is not None
+
+
+def run_hit(run: RunData, n: int = 1, m: int = 1, h: float = 0.0) -> tuple[int, int]:
+    """M13 for one run: is a true faulty channel in the top ``n`` of the ranking at k*?
+
+    Parameters
+    ----------
+    run : RunData
+        A run with ``channel_truth`` and ``ranking``.
+    n : int, default 1
+        List length (hit@n).
+    m, h
+        Persistence and grace period of the detection (:func:`detect_run`, strict).
+
+    Returns
+    -------
+    tuple of int
+        (hit, counted): counted is 1 for a faulty run that has a faulty measured channel
+        (``channel_truth`` true somewhere) and is detected; else (0, 0).
+    """
+    if not run.is_faulty or not _has_channels(run):
+        return 0, 0
+    truth = run.channel_truth.any(axis=0)
+    if not truth.any():
+        return 0, 0
+    d = detect_run(run, m, h)
+    if not d.detected:
+        return 0, 0
+    hit = _top_hit(run.ranking[[d.k_star]], truth[None, :], n)
+    return int(hit[0]), 1
+
+
+def hit_at_n(runs: Sequence[RunData], n: int = 1, m: int = 1, h: float = 0.0) -> float:
+    """M13: localisation hit@n at the first detection onset, over detected sensor-fault runs.
+
+    hit@n = (1/|R|) sum_r 1[c_r in top-n of the ranking at k*_r], where R holds the detected
+    faulty runs with at least one faulty measured channel and c_r is any channel whose
+    ``channel_truth`` is true somewhere in run r (several for a multi-sensor fault).
+
+    Parameters
+    ----------
+    runs : sequence of RunData
+        Runs with ``channel_truth`` and ``ranking``; other runs are ignored.
+    n : int, default 1
+        List length.
+    m, h
+        As in :func:`detect_run` (strict detection).
+
+    Returns
+    -------
+    float
+        hit@n in [0, 1]; nan when no run qualifies.
+    """
+    hits = total = 0
+    for r in runs:
+        a, b = run_hit(r, n, m, h)
+        hits += a
+        total += b
+    return _ratio(hits, total)
+
+
+def localization_counts(run: RunData, n: int = 1) -> tuple[int, int]:
+    """Sample-level M13: alarmed scored samples of [tau, eps] with a faulty measured channel,
+    and those whose top-``n`` ranking holds a channel faulty at that very sample.
+
+    Parameters
+    ----------
+    run : RunData
+        A run with ``channel_truth`` and ``ranking``.
+    n : int, default 1
+        List length.
+
+    Returns
+    -------
+    tuple of int
+        (hits, total); (0, 0) for a fault-free run or a run without channel data.
+    """
+    if not run.is_faulty or not _has_channels(run):
+        return 0, 0
+    sl = slice(run.onset, run.end + 1)
+    truth = run.channel_truth[sl]
+    sel = run.effective_alarm[sl] & truth.any(axis=1)
+    hit = _top_hit(run.ranking[sl], truth, n)
+    return int((hit & sel).sum()), int(sel.sum())
 
 
 # --------------------------------------------------------------------------- M15
