@@ -23,7 +23,7 @@ import yaml
 
 from ._version import __version__
 from .compile import Programme, compile_line
-from .compile.disturbances import realise_disturbances
+from .compile.disturbances import realise_disturbances, realise_pitch_variations
 from .compile.faults import realise_faults
 from .dataset import DatasetWriter, true_state_columns
 from .dataset.labels import derive_labels
@@ -322,7 +322,8 @@ def execute(plan: RunPlan, out: str | Path, *, run_id: str | None = None, progre
     root = np.random.SeedSequence(scenario.seed)
     ss_process, ss_meas, ss_faults = root.spawn(3)
     disturbances = realise_disturbances(scenario, line, ss_process)
-    cl = compile_line(line, prog, scenario.faults, disturbances)
+    pitch_var = realise_pitch_variations(line, ss_process)  # children after the disturbances'
+    cl = compile_line(line, prog, scenario.faults, disturbances, pitch_var)
     init = scenario.initial
     y_nom = nominal_state(cl, init.tension, init.span_tension)
     for d in disturbances:  # an out-of-round roller starts at a random angle
