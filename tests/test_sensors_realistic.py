@@ -211,8 +211,6 @@ def test_pitch_in_a_run_law_variation_and_loop(tmp_path):
     assert 3e-6 < delta[k].std() < 15e-6
     # the pitch loop holds the pitch: the variation shows up in the tension
     dT = T[k] - 130.0
-    print("pitch run:", delta[k].std(), np.corrcoef(dT, delta[k])[0, 1],
-          dT.std() / (EA * delta[k].std() / Q0))
     assert np.corrcoef(dT, delta[k])[0, 1] < -0.8
     assert abs(dT.std() / (EA * delta[k].std() / Q0) - 1) < 0.3
 
