@@ -329,3 +329,27 @@ def test_schema_output_documents_new_fields(capsys):
     for words in ("relaxed_pitch_law", "pitch_variation", "noise_per_speed", "window",
                   "counts_per_rev", "correlation length"):
         assert words in out, words
+
+
+def test_pitch_law_jacobian_in_the_loop():
+    """With the law and the variation, the analytic Jacobian of the pitch filter and of the
+    pitch loop (calibrated with L0(R)) matches central differences in the unwind's radius
+    (its length s) and unwound length u."""
+    d = _reg_line({"relaxed_pitch_law": {"q0": f"{Q0} m", "q1": f"{Q1} 1/m^2"},
+                   "pitch_variation": {"std": "8 um", "correlation_length": "2 m"}})
+    cl = compile_line(load_line(d, "line.yaml"))
+    y = nominal_state(cl, 130.0)
+    y = y + 1e-3 * np.random.default_rng(1).standard_normal(len(y)) * np.abs(y).clip(1e-3)
+    y[cl.index("unwind.unstretched_length")] = 3.7
+    J = cl.jacobian(0.3, y)
+    for col in ("unwind.length", "unwind.unstretched_length"):
+        j = cl.index(col)
+        h = 1e-4
+        yp, ym = y.copy(), y.copy()
+        yp[j] += h
+        ym[j] -= h
+        fd = (cl.rhs(0.3, yp) - cl.rhs(0.3, ym)) / (2 * h)
+        for row in ("sensor_B.filtered", "registration_loop.integral"):
+            i = cl.index(row)
+            assert J[i, j] == pytest.approx(fd[i], rel=1e-5, abs=1e-12), (row, col)
+        assert J[cl.index("sensor_B.filtered"), j] != 0.0
