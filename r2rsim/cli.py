@@ -38,10 +38,11 @@ ELEMENTS = {
 }
 SENSORS = {
     "load_cell": "bearing force of a roller -> indicated tension (wrap_angle, axis_angle)",
-    "encoder": "angular speed (counts_per_rev for quantisation)",
+    "encoder": "angular speed (counts_per_rev: unbiased edge-count difference over window)",
     "roll_diameter": "ultrasonic/laser diameter of an unwind/rewind roll",
     "dancer_position": "dancer travel [m] / arm angle [rad] or festoon carriage position [m]",
-    "pitch_length": "2-D vision pitch length on a span, (T/ES + 1)·L0 (thesis eq. 2.11)",
+    "pitch_length": "2-D vision pitch length on a span, (T/ES + 1)·L0 (thesis eq. 2.11); "
+                    "L0 = q0 + q1·R³ (relaxed_pitch_law, eq. 2.24) + pitch_variation",
 }
 CONTROLLERS = {
     "speed_pi": "speed PI on a torque drive, torque feed-forward, draw; one master node",

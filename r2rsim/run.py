@@ -23,7 +23,7 @@ import yaml
 
 from ._version import __version__
 from .compile import Programme, compile_line
-from .compile.disturbances import realise_disturbances
+from .compile.disturbances import realise_disturbances, realise_pitch_variations
 from .compile.faults import realise_faults
 from .compile.variability import joint_slots_needed, realise_variability
 from .dataset import DatasetWriter, true_state_columns
@@ -324,7 +324,8 @@ def execute(plan: RunPlan, out: str | Path, *, run_id: str | None = None, progre
     ss_process, ss_meas, ss_faults = root.spawn(3)
     line, rolls, variability_rows = realise_variability(scenario, line, ss_process)
     disturbances = realise_disturbances(scenario, line, ss_process)
-    cl = compile_line(line, prog, scenario.faults, disturbances,
+    pitch_var = realise_pitch_variations(line, ss_process)  # children after the disturbances'
+    cl = compile_line(line, prog, scenario.faults, disturbances, pitch_var,
                       joint_slots_needed(scenario, line))
     init = scenario.initial
     y_nom = nominal_state(cl, init.tension, init.span_tension)

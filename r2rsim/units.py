@@ -57,6 +57,7 @@ DIMENSIONS: dict[str, tuple[str, str, str]] = {
     "angle": ("", "rad", "90 deg"),
     "angular_speed": ("1 / [time]", "rad/s", "100 rpm"),
     "dimensionless": ("", "1", "0.001"),
+    "inverse_area": ("1 / [length] ** 2", "1/m^2", "0.02 1/m^2"),
 }
 
 MAX_CHARS = 100  # longest quantity string accepted

@@ -14,8 +14,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError
-from ..schema.line import DANCERS, Line, draw_problem, torque_problem
+from ..schema.line import DANCERS, Line, draw_problem, pitch_unwind, torque_problem
 from . import kernels
+from .disturbances import realise_pitch_variations
 from .layout import *  # noqa: F403 - the record field names
 
 MAXD = 16  # gradient slots per intermediate quantity
@@ -286,7 +287,8 @@ class CompiledLine:
 
 
 def compile_line(line: Line, programme: Programme | None = None, faults=(),
-                 disturbances=(), extra_joint_slots: int = 0) -> CompiledLine:
+                 disturbances=(), pitch_variations=None,
+                 extra_joint_slots: int = 0) -> CompiledLine:
     """Compile a validated line.
 
     Parameters
@@ -301,6 +303,10 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
     disturbances : sequence of DisturbanceInstance, optional
         The run's realised process disturbances
         (:func:`r2rsim.compile.disturbances.realise_disturbances`).
+    pitch_variations : dict, optional
+        The run's realised relaxed-pitch variations
+        (:func:`r2rsim.compile.disturbances.realise_pitch_variations`); a sensor declaring
+        one that is missing here gets the realisation of seed 0 (for analysis and tests).
     extra_joint_slots : int
         Splice-joint slots for the web of varied rolls
         (:func:`r2rsim.compile.variability.joint_slots_needed`).
@@ -362,6 +368,7 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
     eccentric = {f.target for f in faults if f.type == "process.eccentricity"} | {
         d.element for d in disturbances if d.type == "out_of_round"}
     pitch_filters: list = []
+    pitch_var_terms: list = []  # (sensor index, sensor) with a relaxed-pitch variation
 
     def add_mover(mid, kind, k_node, span_u, span_d, mp, q0, unit):
         m = mover_idx[mid]
@@ -552,7 +559,17 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
                     sens_I[j, SEI_TYPE], sens_I[j, SEI_NODE] = SE_PITCH, k
                     sens_P[j, SEP_GAIN], sens_P[j, SEP_OFF], sens_P[j, SEP_TAU] = (
                         sn.gain, sn.offset, sn.filter)
-                    sens_P[j, SEP_CIN], sens_P[j, SEP_COUT] = sn.relaxed_pitch, EA
+                    sens_P[j, SEP_COUT] = EA
+                    law = sn.relaxed_pitch_law
+                    if law is None and sn.pitch_variation is None:
+                        sens_P[j, SEP_CIN] = sn.relaxed_pitch
+                    else:  # L0 = q0 + q1·R³ (+ variation) of an unwind's radius
+                        sens_P[j, SEP_CIN] = sn.relaxed_pitch if law is None else law.q0
+                        sens_P[j, SEP_Q1] = 0.0 if law is None else law.q1
+                        sens_I[j, SEI_RNODE] = node_idx[pitch_unwind(line, sn)]
+                        sens_I[j, SEI_VN] = 0
+                        if sn.pitch_variation is not None:
+                            pitch_var_terms.append((j, sn))
                     pitch_filters.append((j, sn))
             span_P[k, SP_EA] = EA
             span_P[k, SP_TBRK] = web.break_tension
@@ -683,9 +700,18 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
     for b in blocks_I:
         offs_I.append(pos)
         pos += b.size
+    if pitch_var_terms and pitch_variations is None:
+        pitch_variations = {}
+    var_P = []
+    for j, sn in pitch_var_terms:
+        terms = pitch_variations.get(sn.id)
+        if terms is None:
+            terms = realise_pitch_variations(line, np.random.SeedSequence(0))[sn.id]
+        sens_I[j, SEI_VN] = len(terms)
+        var_P.append(np.ascontiguousarray(terms, float).ravel())
     blocks_P = [node_P.ravel(), span_P.ravel(), sens_P.ravel(), ctrl_P.ravel(), sch_t.ravel(),
                 sch_v.ravel(), np.zeros(4), mov_P.ravel(), np.zeros(nJ * NJP), np.array([EA]),
-                np.zeros(nFS * NFS), *tab_P]
+                np.zeros(nFS * NFS), *tab_P, *var_P]
     offs_P, ppos = [], 0
     for b in blocks_P:
         offs_P.append(ppos)
@@ -706,6 +732,9 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
     for m in range(len(tables)):  # each table's values follow the fault slots in P
         tab_I[m, TI_OFFP] = offs_P[11 + m]
     blocks_I[7] = tab_I.ravel()
+    for m, (j, _) in enumerate(pitch_var_terms):  # the variations' terms follow the tables
+        sens_I[j, SEI_VOFF] = offs_P[11 + len(tables) + m]
+    blocks_I[2] = sens_I.ravel()
     header[H_MODEL] = 1 if line.span_model == "linear" else 0
     header[H_NCH], header[H_MAXPTS] = nch, maxpts
     header[H_NQ], header[H_MAXD] = nq, MAXD

@@ -78,3 +78,51 @@ def realise_disturbances(scenario, line, seed_sequence) -> list[DisturbanceInsta
             out.append(DisturbanceInstance(d.type, d.element, 0.0, dx,
                                            _ar1(rng, n, math.exp(-0.1), d.std_si())))
     return out
+
+
+#: cosines of a realised relaxed-pitch variation (pitch_length ``pitch_variation``)
+PITCH_VARIATION_TERMS = 64
+
+
+def realise_pitch_variations(line, seed_sequence) -> dict[str, np.ndarray]:
+    """Draw the relaxed-pitch (printing) variation of every pitch_length sensor that declares
+    one.
+
+    The variation of the relaxed pitch along the web is the band-limited sum
+    ``sum_m a·cos(kappa_m·u + phi_m)`` of :data:`PITCH_VARIATION_TERMS` cosines in the
+    unwound length u [m], with ``a = std·sqrt(2/M)`` (its variance over a long record is
+    exactly ``std²``), uniform phases and wavenumbers kappa_m = sqrt(2)·z_m/ℓ, z_m drawn
+    stratified from the half-normal distribution (one per probability stratum), so that its
+    correlation ``mean_m cos(kappa_m·Δ)`` follows ``exp(-(Δ/ℓ)²)`` closely. It is smooth (no
+    knots for the stiff solver to resolve).
+
+    Parameters
+    ----------
+    line : Line
+    seed_sequence : numpy.random.SeedSequence
+        The run's process-noise stream; spawned once more (one child per such sensor, after
+        the disturbances' children), so the disturbances stay as they were.
+
+    Returns
+    -------
+    dict
+        Sensor id -> array (M, 3) of (amplitude [m], wavenumber [rad/m], phase [rad]).
+    """
+    from statistics import NormalDist
+
+    sensors = [s for s in line.sensors
+               if s.type == "pitch_length" and s.pitch_variation is not None]
+    children = seed_sequence.spawn(len(sensors))
+    inv = NormalDist().inv_cdf
+    m_terms = PITCH_VARIATION_TERMS
+    out = {}
+    for s, child in zip(sensors, children, strict=True):
+        rng = np.random.default_rng(child)
+        pv = s.pitch_variation
+        strata = (np.arange(m_terms) + rng.random(m_terms)) / m_terms
+        z = np.array([inv(0.5 + 0.5 * min(p, 1.0 - 1e-12)) for p in strata])
+        kappa = math.sqrt(2.0) * z / pv.correlation_length
+        phase = rng.uniform(0.0, 2.0 * math.pi, m_terms)
+        amp = np.full(m_terms, pv.std * math.sqrt(2.0 / m_terms))
+        out[s.id] = np.column_stack([amp, kappa, phase])
+    return out

@@ -516,10 +516,21 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             if jac:
                 _g_add(GI, GC, GV, maxd, qRAW + j, iq, g)
         elif typ == SE_PITCH:  # node holds the span index; pitch = (T/ES + 1)·L0
-            L0 = P[b + SEP_CIN]
-            W[oRAW + j] = g * (W[oT + node] / EAweb + 1.0) * L0 + P[b + SEP_OFF]
-            if jac:
-                _g_axpy(GI, GC, GV, maxd, qRAW + j, g * L0 / EAweb, qT + node)
+            rn = I[oSEI + j * NSEI + SEI_RNODE]
+            if rn < 0:
+                L0 = P[b + SEP_CIN]
+                W[oRAW + j] = g * (W[oT + node] / EAweb + 1.0) * L0 + P[b + SEP_OFF]
+                if jac:
+                    _g_axpy(GI, GC, GV, maxd, qRAW + j, g * L0 / EAweb, qT + node)
+            else:  # L0 = q0 + q1·R³ of the unwind's radius + the printing variation in u
+                L0, dL0dR, dL0du, iU = _pitch_l0(j, rn, P, b, I, oSEI, oNI, W, oR, y)
+                h = g * (W[oT + node] / EAweb + 1.0)
+                W[oRAW + j] = h * L0 + P[b + SEP_OFF]
+                if jac:
+                    _g_axpy(GI, GC, GV, maxd, qRAW + j, g * L0 / EAweb, qT + node)
+                    _g_axpy(GI, GC, GV, maxd, qRAW + j, h * dL0dR, qR + rn)
+                    if I[oSEI + j * NSEI + SEI_VN] > 0:
+                        _g_add(GI, GC, GV, maxd, qRAW + j, iU, h * dL0du)
         else:
             _sensor_raw(j, typ, node, g, P[b + SEP_OFF], P[b + SEP_WIN], P[b + SEP_WOUT], I,
                         oNI, W, oT, oR, oOM, oRAW, jac, GI, GC, GV, maxd, qT, qR, qOM, qRAW)
@@ -545,6 +556,8 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         kp = P[b + CP_KP]
         ki = P[b + CP_KI]
         lim = P[b + CP_LIM]
+        rn = -1  # unwind node of a pitch sensor's relaxed-pitch law (-1: constant L0)
+        wr = 0.0
         # the measurement enters with weight -1 through the quantity qmeas (or a state)
         if typ == C_DANCER:
             imq = I[oMI + I[oCI + c * NCI + CI_MOVER] * NMI + MI_Q]
@@ -554,8 +567,18 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             # a pitch-length sensor is read as tension through the calibrated Hooke's law
             if I[oSEI + sens * NSEI + SEI_TYPE] == SE_PITCH:
                 bs = oSEP + sens * NSEP
-                wy = P[bs + SEP_COUT] / P[bs + SEP_CIN]
-                e = Tref - (W[oYS + sens] / P[bs + SEP_CIN] - 1.0) * P[bs + SEP_COUT]
+                rn = I[oSEI + sens * NSEI + SEI_RNODE]
+                if rn < 0:
+                    wy = P[bs + SEP_COUT] / P[bs + SEP_CIN]
+                    e = Tref - (W[oYS + sens] / P[bs + SEP_CIN] - 1.0) * P[bs + SEP_COUT]
+                else:  # calibrated with the law L0(R), not the (unknown) variation
+                    Rn = W[oR + rn]
+                    L0c = P[bs + SEP_CIN] + P[bs + SEP_Q1] * Rn * Rn * Rn
+                    wy = P[bs + SEP_COUT] / L0c
+                    e = Tref - (W[oYS + sens] / L0c - 1.0) * P[bs + SEP_COUT]
+                    # de/dR through L0c
+                    wr = W[oYS + sens] * P[bs + SEP_COUT] / (L0c * L0c) * (
+                        3.0 * P[bs + SEP_Q1] * Rn * Rn)
             else:
                 wy = 1.0
                 e = Tref - W[oYS + sens]
@@ -572,6 +595,8 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         if jac:
             if sens >= 0:
                 _g_axpy(GI, GC, GV, maxd, qU + c, -gate * kp * act * wy, qY + sens)
+                if rn >= 0:
+                    _g_axpy(GI, GC, GV, maxd, qU + c, gate * kp * act * wr, qR + rn)
             else:
                 _g_add(GI, GC, GV, maxd, qU + c, imq, -gate * kp * act)
             if ix >= 0:
@@ -584,6 +609,8 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
                 wm = gate * (-1.0 + kaw * (act - 1.0) * (-kp))
                 if sens >= 0:
                     _j_axpy(JJ, mode, ix, wm * wy, GI, GC, GV, maxd, qY + sens)
+                    if rn >= 0:
+                        _j_axpy(JJ, mode, ix, -wm * wr, GI, GC, GV, maxd, qR + rn)
                 else:
                     _j_add(JJ, mode, ix, imq, wm)
                 _j_add(JJ, mode, ix, ix, gate * kaw * (act - 1.0) * ki)
@@ -995,6 +1022,29 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         for ch in range(1, I[H_NCH]):
             aux[m], _ = setpoint(I, P, ch, t)
             m += 1
+
+
+@njit(cache=True)
+def _pitch_l0(j, rn, P, b, I, oSEI, oNI, W, oR, y):
+    """Relaxed pitch of pitch sensor j with a law/variation: L0 = q0 + q1·R³ + the sum of
+    cosines in the unwound length u of unwind rn; returns (L0, dL0/dR, dL0/du, state of u)."""
+    R = W[oR + rn]
+    q1 = P[b + SEP_Q1]
+    L0 = P[b + SEP_CIN] + q1 * R * R * R
+    dL0dR = 3.0 * q1 * R * R
+    dL0du = 0.0
+    iU = I[oNI + rn * NI + NI_U]
+    nv = I[oSEI + j * NSEI + SEI_VN]
+    if nv > 0:
+        u = y[iU]
+        ov = I[oSEI + j * NSEI + SEI_VOFF]
+        for m in range(nv):
+            a = P[ov + 3 * m]
+            kap = P[ov + 3 * m + 1]
+            ph = kap * u + P[ov + 3 * m + 2]
+            L0 += a * math.cos(ph)
+            dL0du -= a * kap * math.sin(ph)
+    return L0, dL0dR, dL0du, iU
 
 
 @njit(cache=True)

@@ -59,15 +59,18 @@ NSP = 3
 
 # ---- sensor records ----
 SE_LOADCELL, SE_ENCODER, SE_DIAMETER, SE_DANCER, SE_PITCH = 1, 2, 3, 4, 5
-# SE_PITCH: SEI_NODE is the span; SEP_CIN holds L0, SEP_COUT the calibration E·S
-SEI_TYPE, SEI_NODE, SEI_F = 0, 1, 2
-NSEI = 3
+# SE_PITCH: SEI_NODE is the span; SEP_CIN holds L0 (q0 of a law), SEP_COUT the calibration
+# E·S. With a relaxed-pitch law or variation (else -1/0): SEI_RNODE is the unwind node,
+# L0 = SEP_CIN + SEP_Q1·R³ + sum_m a_m·cos(kappa_m·u + phi_m), u the unwind's unwound length,
+# the SEI_VN triples (a, kappa, phi) at P[SEI_VOFF:]
+SEI_TYPE, SEI_NODE, SEI_F, SEI_RNODE, SEI_VN, SEI_VOFF = 0, 1, 2, 3, 4, 5
+NSEI = 6
 # sensor faults acting in the loop (set by the solver's fault actions): with dt = t - FT0,
 #   reading = (1 + GA + GB·dt + GC·exp(-dt/GTAU))·raw + BA + BB·dt + BC·exp(-dt/BTAU),
 # or the held value SV while STUCK; FON = 0 skips all of it
 (SEP_WIN, SEP_WOUT, SEP_GAIN, SEP_OFF, SEP_TAU, SEP_CIN, SEP_COUT, SEP_FON, SEP_FT0, SEP_BA,
- SEP_BB, SEP_BC, SEP_BTAU, SEP_GA, SEP_GB, SEP_GC, SEP_GTAU, SEP_STUCK, SEP_SV) = range(19)
-NSEP = 19
+ SEP_BB, SEP_BC, SEP_BTAU, SEP_GA, SEP_GB, SEP_GC, SEP_GTAU, SEP_STUCK, SEP_SV, SEP_Q1) = range(20)
+NSEP = 20
 
 # ---- controller records ----
 C_SPEED, C_TENSION_TORQUE, C_TENSION_TRIM, C_DANCER = 1, 2, 3, 4

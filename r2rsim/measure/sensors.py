@@ -6,9 +6,14 @@ dropout-hold) of the sensors they read. A sensor no controller reads gets those 
 on its record, so the process is bit-for-bit untouched by them. The recorded measured channel
 takes the reading on the sensor's own sample clock and adds, in this order: delay
 (nominal + ``sensor.delay`` faults), Gaussian noise (nominal + ``sensor.noise`` faults),
-``sensor.spike`` faults, quantisation (nominal, encoder counts, ``sensor.quantization``
-faults), clipping to the sensor's range, and NaN where a
-``sensor.dropout`` fault acts. Every random draw comes from the run's measurement stream
+speed-dependent noise (``noise_per_speed``·|v|, v the web speed at the sensor),
+``sensor.spike`` faults, quantisation (nominal, ``sensor.quantization`` faults), clipping to
+the sensor's range, and NaN where a ``sensor.dropout`` fault acts. An encoder with
+``counts_per_rev`` first turns the speed it sees into an edge count: the roller angle (the
+trapezoid integral of that speed over the record samples, from a random initial angle) is
+counted as ``floor(angle·cpr/2π)``, and the reading is the count difference over its
+``window`` (default one sample period) times 2π/(cpr·window); the counts telescope, so the
+quantisation is zero-mean. Every random draw comes from the run's measurement stream
 (one child per sensor, one per fault), only at the sensor's sample instants, so it depends
 neither on solver steps nor on how the run was chunked.
 """
@@ -27,6 +32,15 @@ _QUANTITY = {"load_cell": ("tension", "N"), "encoder": ("speed", "rad_s"),
              "dancer_position": ("position", None)}
 _RECORD_FAULTS = ("sensor.noise", "sensor.spike", "sensor.quantization", "sensor.delay",
                   "sensor.dropout")
+
+
+def _speed_node(cl: CompiledLine, sensor) -> str:
+    """The element whose surface speed is the web speed at a sensor (a span's or festoon's:
+    its downstream element)."""
+    where = getattr(sensor, "element", None) or sensor.span
+    if where in cl.node_ids:
+        return where
+    return cl.node_ids[cl.span_ids.index(where) + 1]
 
 
 def channel_names(cl: CompiledLine, sensor) -> tuple[str, str, str]:
@@ -48,7 +62,8 @@ class MeasurementModel:
     record_rate : float
         Rate of the recorded samples [Hz].
     seed_sequence : numpy.random.SeedSequence
-        The run's measurement-noise stream; one child per sensor, then one per fault.
+        The run's measurement-noise stream; one child per sensor, then one per fault, then a
+        second one per sensor (an encoder's initial angle, then speed-dependent noise).
     faults : list of FaultInstance
         The run's faults; those on sensors shape the record (see the module docstring).
     """
@@ -59,8 +74,10 @@ class MeasurementModel:
         in_loop = loop_sensor_ids(cl.line)
         children = seed_sequence.spawn(len(cl.sensors))
         fault_children = seed_sequence.spawn(len(faults))
+        # spawned after the existing children: their streams (and old data) stay as they were
+        extra_children = seed_sequence.spawn(len(cl.sensors))
         self.channels = []
-        for s, child in zip(cl.sensors, children, strict=True):
+        for s, child, extra in zip(cl.sensors, children, extra_children, strict=True):
             q, _ = _QUANTITY[s.type]
             name, true, u = channel_names(cl, s)
             rate = min(s.rate or record_rate, record_rate)
@@ -77,10 +94,32 @@ class MeasurementModel:
                 "record_loop_faults": [f for f, _ in mine if f.kind.acts == "loop"
                                        and s.id not in in_loop],
                 "stuck_at": {},
+                "speed_col": (cl.aux_index(f"{_speed_node(cl, s)}.surface_speed_m_s")
+                              if s.noise_per_speed > 0 else None),
+                "rng_extra": np.random.default_rng(extra),
             })
+            ch = self.channels[-1]
+            if s.type == "encoder" and s.counts_per_rev:
+                # random initial roller angle: the quantisation phase of the count
+                ch["enc"] = {"theta0": float(ch["rng_extra"].uniform(0.0, 2.0 * math.pi)),
+                             "window": float(s.window or 1.0 / rate),
+                             "t0": None, "om0": 0.0, "ht": np.zeros(0), "hth": np.zeros(0)}
 
     def measure(self, t: np.ndarray, aux: np.ndarray) -> dict[str, np.ndarray]:
-        """Measured and true channels (and clip flags) for one chunk of samples."""
+        """Measured and true channels (and clip flags) for one chunk of samples.
+
+        Parameters
+        ----------
+        t : numpy.ndarray
+            Record times of the chunk [s], increasing, continuing the previous chunk.
+        aux : numpy.ndarray
+            Algebraic outputs at those times (rows; columns ``cl.aux_names``).
+
+        Returns
+        -------
+        dict
+            Column name -> values; the same whatever the chunking of the run.
+        """
         out = {}
         for ch in self.channels:
             s = ch["sensor"]
@@ -91,11 +130,17 @@ class MeasurementModel:
             fresh = ticks != prev
             nf = int(fresh.sum())
             tt = t[fresh]
-            vals = seen[fresh].copy()
+            if "enc" in ch:
+                vals = self._encoder_counts(ch, t, seen, fresh, tt)
+            else:
+                vals = seen[fresh].copy()
             vals = self._loop_faults_on_record(ch, tt, vals)
             vals = self._delay(ch, tt, vals)
             if s.noise > 0:
                 vals += s.noise * ch["rng"].standard_normal(nf)
+            if ch["speed_col"] is not None:  # vibration: std proportional to the web speed
+                v = np.abs(aux[fresh, ch["speed_col"]])
+                vals += s.noise_per_speed * v * ch["rng_extra"].standard_normal(nf)
             quant = np.full(nf, s.quantization)
             dropped = np.zeros(nf, bool)
             for f, rng in ch["faults"]:
@@ -111,9 +156,6 @@ class MeasurementModel:
                     quant = np.where(on, np.maximum(quant, eff), quant)
                 elif f.type == "sensor.dropout":
                     dropped |= on
-            if s.type == "encoder" and s.counts_per_rev:
-                q = 2 * math.pi * ch["rate"] / s.counts_per_rev  # one count per sample period
-                vals = np.round(vals / q) * q
             vals = np.where(quant > 0, np.round(vals / np.where(quant > 0, quant, 1.0))
                             * quant, vals)
             clipped = np.zeros(nf, bool)
@@ -137,6 +179,44 @@ class MeasurementModel:
             if s.range is not None:
                 out[f"flag.{s.id}.clipped"] = held_clip.astype(bool)
         return out
+
+    @staticmethod
+    def _encoder_counts(ch, t, seen, fresh, tt):
+        """Speed of an edge-counting encoder at the sensor sample instants ``tt``.
+
+        The roller angle is the trapezoid integral of the speed the sensor sees over the
+        record samples ``t`` (carried across chunks), plus a random initial angle; the count is
+        ``floor(angle·cpr/2π)``; the reading is the count difference over the window divided
+        by the window, times 2π/cpr. The counts telescope, so the mean reading is unbiased
+        (error below one count over the whole record).
+        """
+        enc = ch["enc"]
+        s = ch["sensor"]
+        if len(t) == 0:
+            return np.zeros(0)
+        if enc["t0"] is None:  # first chunk: the angle starts at the random offset
+            enc["t0"], enc["om0"] = float(t[0]), float(seen[0])
+            inc = 0.5 * (seen[1:] + seen[:-1]) * np.diff(t)
+            th = np.add.accumulate(np.concatenate([[enc["theta0"]], inc]))
+        else:  # the same sequential sums as in one chunk: the result does not depend on chunks
+            tp = np.concatenate([[enc["last"][0]], t])
+            op = np.concatenate([[enc["last"][1]], seen])
+            inc = 0.5 * (op[1:] + op[:-1]) * np.diff(tp)
+            th = np.add.accumulate(np.concatenate([[enc["last"][2]], inc]))[1:]
+        enc["last"] = (float(t[-1]), float(seen[-1]), float(th[-1]))
+        ht = np.concatenate([enc["ht"], t])
+        hth = np.concatenate([enc["hth"], th])
+        w = enc["window"]
+        th_now = th[fresh]
+        tq = tt - w
+        th_then = np.interp(tq, ht, hth)
+        before = tq < enc["t0"]  # before the record: the speed of its first sample
+        th_then = np.where(before, enc["theta0"] + enc["om0"] * (tq - enc["t0"]), th_then)
+        k = s.counts_per_rev / (2.0 * math.pi)
+        counts = np.floor(th_now * k) - np.floor(th_then * k)
+        keep = ht >= ht[-1] - w - 1.0
+        enc["ht"], enc["hth"] = ht[keep], hth[keep]
+        return counts / (k * w)
 
     @staticmethod
     def _loop_faults_on_record(ch, tt, vals):

@@ -25,6 +25,7 @@ from .quantities import (
     Force,
     Frequency,
     Inertia,
+    InverseArea,
     Length,
     Mass,
     Pressure,
@@ -406,6 +407,13 @@ class Span(Strict):
     festoon: Festoon | None = None
 
 
+NOISE_PER_SPEED_DOC = (
+    "speed-dependent noise (vibration): a zero-mean Gaussian term of std noise_per_speed·|v| "
+    "added to each recorded sample, v the web speed at the sensor [m/s] (the element's surface "
+    "speed; for a span or festoon, that of its downstream element); in the reading's SI unit "
+    "per m/s (N·s/m for a load cell, s for a pitch or diameter). Not a labelled fault")
+
+
 class _Sensor(Strict):
     id: Id
     element: Id
@@ -420,6 +428,8 @@ class _Sensor(Strict):
     quantization: Annotated[float, Field(ge=0)] = Field(
         0.0, description="resolution of the recorded reading (SI unit of the reading)")
     delay: NonNegTime = Field(0.0, description="transport/processing delay of the record [s]")
+    noise_per_speed: Annotated[float, Field(ge=0)] = Field(
+        0.0, description=NOISE_PER_SPEED_DOC)
 
     @model_validator(mode="after")
     def _check_range(self):
@@ -447,9 +457,21 @@ class Encoder(_Sensor):
     """Encoder on a rotating element: angular speed."""
 
     type: Literal["encoder"]
-    counts_per_rev: Annotated[int, Field(gt=0)] | None = None
+    counts_per_rev: Annotated[int, Field(gt=0)] | None = Field(
+        None, description="edges per revolution: the recorded speed is the difference of the "
+        "accumulated edge count over the counting window, times 2π/(counts_per_rev·window) "
+        "(unbiased; resolution one count per window). Default: an ideal (analogue) speed")
+    window: Annotated[Time, Field(gt=0)] | None = Field(
+        None, description="counting window of an encoder with counts_per_rev [s]; default: "
+        "one sensor sample period")
     noise: Annotated[AngularSpeed, Field(ge=0)] = 0.0
     offset: AngularSpeed = 0.0
+
+    @model_validator(mode="after")
+    def _check_window(self):
+        if self.window is not None and self.counts_per_rev is None:
+            raise ValueError("window applies to an encoder with counts_per_rev")
+        return self
 
 
 class RollDiameter(_Sensor):
@@ -469,15 +491,48 @@ class DancerPosition(_Sensor):
     offset: float = 0.0
 
 
+class RelaxedPitchLaw(Strict):
+    """Relaxed pitch as a function of the unwind roll's radius R (thesis eq. 2.24):
+    L0(R) = q0 + q1·R³."""
+
+    q0: PosLength = Field(description="relaxed pitch at R = 0 [m]")
+    q1: InverseArea = Field(description="coefficient of R³ [1/m²] (may be negative)")
+    unwind: Id | None = Field(
+        None, description="the unwind whose roll radius R is used; default: the line's unwind "
+        "(the first element)")
+
+
+class PitchVariation(Strict):
+    """Relaxed-pitch (printing) repeatability: a zero-mean, smooth random variation of L0 along
+    the web, of standard deviation ``std`` and Gaussian correlation exp(-(Δs/ℓ)²) over the
+    unwound web length Δs (ℓ = ``correlation_length``: the lag at which the correlation falls
+    to 1/e). Realised per run from the run's process stream as a sum of 64 cosines of the
+    unwound length of the relaxed_pitch_law's unwind (default: the line's unwind)."""
+
+    std: Annotated[Length, Field(gt=0)] = Field(description="standard deviation of L0 [m]")
+    correlation_length: Annotated[Length, Field(ge=1e-3)] = Field(
+        description="correlation length ℓ along the web [m] (correlation 1/e at lag ℓ); at "
+        "least 1 mm")
+
+
 class PitchLength(Strict):
     """2-D vision pitch-length measurement on a span (thesis eq. 2.11, Hooke's law):
-    pitch = (T/(E·S) + 1)·L0. A tension_pi reading it converts the pitch back to tension with
-    the web's nominal E·S."""
+    pitch = (T/(E·S) + 1)·L0, with L0 constant (``relaxed_pitch``) or L0(R) = q0 + q1·R³
+    (``relaxed_pitch_law``, thesis eq. 2.20/2.24), plus an optional printing variation
+    (``pitch_variation``). The variation is physical: it is in the true pitch and, if a
+    controller reads the sensor, in the loop. A tension_pi reading it converts the pitch back to
+    tension with the web's nominal E·S and the nominal L0 (the law, without the variation)."""
 
     id: Id
     type: Literal["pitch_length"]
     span: Id
-    relaxed_pitch: PosLength = Field(description="pitch length L0 of the relaxed web [m]")
+    relaxed_pitch: PosLength | None = Field(
+        None, description="constant pitch length L0 of the relaxed web [m]; give this or "
+        "relaxed_pitch_law")
+    relaxed_pitch_law: RelaxedPitchLaw | None = Field(
+        None, description="L0(R) = q0 + q1·R³ of the unwind roll's radius R (thesis eq. 2.24)")
+    pitch_variation: PitchVariation | None = Field(
+        None, description="zero-mean printing variation of L0, correlated along the web")
     rate: Annotated[Frequency, Field(gt=0)] | None = None
     filter: NonNegTime = 0.0
     gain: float = 1.0
@@ -486,6 +541,21 @@ class PitchLength(Strict):
     range: pair(float) | None = Field(None, description="[low, high] in m")
     quantization: Annotated[float, Field(ge=0)] = Field(0.0, description="resolution [m]")
     delay: NonNegTime = Field(0.0, description="processing delay of the record [s]")
+    noise_per_speed: Annotated[float, Field(ge=0)] = Field(
+        0.0, description=NOISE_PER_SPEED_DOC)
+
+    @model_validator(mode="after")
+    def _check_pitch(self):
+        if (self.relaxed_pitch is None) == (self.relaxed_pitch_law is None):
+            raise ValueError("give either relaxed_pitch (a constant L0) or relaxed_pitch_law "
+                             "(L0(R) = q0 + q1·R³), exactly one of them")
+        L0 = self.relaxed_pitch if self.relaxed_pitch is not None else self.relaxed_pitch_law.q0
+        if self.pitch_variation is not None and not 10 * self.pitch_variation.std < L0:
+            raise ValueError(f"pitch_variation.std {self.pitch_variation.std:g} m must be below "
+                             f"a tenth of the relaxed pitch {L0:g} m")
+        if self.range is not None and not self.range[0] < self.range[1]:
+            raise ValueError("range must be [low, high] with low < high")
+        return self
 
 
 Sensor = Annotated[LoadCell | Encoder | RollDiameter | DancerPosition | PitchLength,
@@ -689,6 +759,7 @@ def check_line(line: Line) -> list[tuple[str, str]]:
         if s.type == "pitch_length":
             if s.span not in span_names:
                 out.append((f"sensors[{j}].span", _missing("span", s.span, span_names)))
+            out += _check_pitch_law(j, s, by_id)
             continue
         if s.type == "dancer_position":
             if s.element not in movers:
@@ -901,6 +972,39 @@ def torque_problem(line: Line, element_id: str) -> str | None:
         return (f"the torque of '{element_id}' is commanded by {c.type} '{c.id}' "
                 f"(controllers[{j}]); a torque command is for a drive without a controller")
     return None
+
+
+def pitch_unwind(line: Line, sensor) -> str:
+    """Id of the unwind whose radius and unwound length a pitch_length sensor's relaxed pitch
+    follows (its law's ``unwind``, else the line's first element)."""
+    law = sensor.relaxed_pitch_law
+    return law.unwind if law is not None and law.unwind is not None else line.elements[0].id
+
+
+def _check_pitch_law(j: int, s, by_id) -> list[tuple[str, str]]:
+    """The relaxed-pitch law of a pitch_length sensor names an unwind and stays positive."""
+    law = s.relaxed_pitch_law
+    if law is None:
+        return []
+    p = f"sensors[{j}].relaxed_pitch_law"
+    if law.unwind is not None:
+        if law.unwind not in by_id:
+            return [(f"{p}.unwind", _missing("element", law.unwind, by_id))]
+        e = by_id[law.unwind][1]
+        if e.type != "unwind":
+            return [(f"{p}.unwind", f"'{e.id}' is a {e.type}, not an unwind")]
+    else:
+        e = next(iter(by_id.values()))[1]
+        if e.type != "unwind":
+            return []  # reported for elements[0]
+    rolls = [e.roll] + ([e.spare_roll] if e.spare_roll is not None else [])
+    for r in rolls:
+        for R in (r.core_radius, r.outer_radius):
+            L0 = law.q0 + law.q1 * R ** 3
+            if not L0 > 0:
+                return [(f"{p}.q1", f"L0 = q0 + q1·R³ = {L0:g} m at R = {R:g} m of '{e.id}'; "
+                                    "the relaxed pitch must stay positive over the roll")]
+    return []
 
 
 def _check_geometry(line: Line) -> list[tuple[str, str]]:

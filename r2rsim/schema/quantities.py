@@ -42,6 +42,7 @@ Dimensionless = _quantity("dimensionless")
 Stiffness = _quantity("stiffness")
 Damping = _quantity("damping")
 Acceleration = _quantity("acceleration")
+InverseArea = _quantity("inverse_area")
 
 
 def number_or_text(value):
