@@ -99,9 +99,10 @@ def run_size_problem(duration: float, record_rate: float) -> tuple[str, str] | N
 
 
 def wound_in_strain_points(v_max: float, duration: float, correlation_length: float) -> float:
-    """Size of a wound-in-strain disturbance's table: ten points per correlation length over
-    1.5 times the web that can pass in the run (:mod:`r2rsim.compile.disturbances`). It is
-    held in memory, so it is bounded like the samples (:data:`MAX_SAMPLES`)."""
+    """Size of a wound-in-strain disturbance's table (``shape: table``): ten points per
+    correlation length over 1.5 times the web that can pass in the run
+    (:mod:`r2rsim.compile.disturbances`). It is held in memory, so it is bounded like the
+    samples (:data:`MAX_SAMPLES`)."""
     dx = correlation_length / 10.0
     return (1.5 * v_max * duration + 10.0 * correlation_length) / dx + 2
 

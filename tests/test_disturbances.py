@@ -1,5 +1,7 @@
-"""Process disturbances: drawn from the process stream on fixed grids, acting in the
-simulation exactly as drawn, independent of the measurement noise, and reproducible."""
+"""Process disturbances: drawn from the process stream, acting in the simulation exactly as
+drawn, independent of the measurement noise, and reproducible. The random ones are smooth sums
+of sinusoids whose realised std and spectrum match the declared ones (``shape: table``, the
+earlier interpolated tables, is still available)."""
 
 from __future__ import annotations
 
@@ -7,11 +9,19 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
+from test_jacobian import FULL, _assert_jacobian_matches_fd, _state
 
 import r2rsim
-from r2rsim.compile.disturbances import realise_disturbances
+from r2rsim.compile.disturbances import (
+    CUTOFF,
+    N_SINES,
+    DisturbanceInstance,
+    autocorrelation,
+    realise_disturbances,
+)
 from r2rsim.errors import InputError
 from r2rsim.schema.loader import load_scenario
+from r2rsim.schema.scenario import ProgrammeStep
 
 from conftest import REPO, write
 
@@ -37,27 +47,139 @@ DRAG = {"type": "bearing_drag", "element": "idler1", "std": "0.02 N*m", "bandwid
 
 
 def test_bearing_drag_acts_exactly_as_drawn(tmp_path):
-    # idler torque balance: J·dw/dt = R·(T2 - T1) - b·w - drag(t), with drag(t) the table
-    # drawn on the sample grid from the process stream (sampled at 2 kHz so that dw/dt of
-    # the idler's 29 Hz mode can be taken from the samples)
+    # idler torque balance: J·dw/dt = R·(T2 - T1) - b·w - drag(t), with drag(t) the sum of
+    # sinusoids drawn from the process stream (sampled at 2 kHz so that dw/dt of the idler's
+    # 29 Hz mode can be taken from the samples)
     s, path = run(tmp_path, [DRAG], rate=2000.0, duration=8.0)
     scenario, line, _ = load_scenario(path)
     root = np.random.SeedSequence(scenario.seed)
     (drag,) = realise_disturbances(scenario, line, root.spawn(3)[0])
+    assert drag.shape == "sines"
     t = s.t_s.to_numpy()
     w = s["state.idler1.speed_rad_s"].to_numpy().astype(float)
     dT = (s["state.span2.tension_N"] - s["state.span1.tension_N"]).to_numpy().astype(float)
     implied = 0.05 * dT - 5e-4 * w - 0.011 * np.gradient(w, t)
-    table = drag.values[: len(t)]
+    drawn = drag.value(t)
     m = t > 1.0
-    assert np.std(table) == pytest.approx(0.02, rel=0.3)  # the drawn sequence itself
-    err = implied[m] - table[m]
-    # (what is left is mostly the finite-difference dw/dt across the table's kinks)
-    assert np.sqrt(np.mean(err**2)) < 0.1 * np.std(table[m])
-    assert np.corrcoef(implied[m], table[m])[0, 1] > 0.995
+    assert np.std(drawn) == pytest.approx(0.02, rel=0.5)  # 8 s of a 2 Hz process
+    err = implied[m] - drawn[m]
+    # what is left is the finite-difference dw/dt and float32 samples (no kinks any more)
+    assert np.sqrt(np.mean(err**2)) < 0.02 * np.std(drawn[m])
+    assert np.corrcoef(implied[m], drawn[m])[0, 1] > 0.9998
+
+
+def test_table_shape_still_acts_as_drawn(tmp_path):
+    # the earlier form, kept to reproduce old data: an AR(1) table on the sample grid
+    s, path = run(tmp_path, [{**DRAG, "shape": "table"}], rate=2000.0, duration=4.0)
+    scenario, line, _ = load_scenario(path)
+    (drag,) = realise_disturbances(scenario, line, np.random.SeedSequence(1).spawn(3)[0])
+    assert drag.shape == "table" and len(drag.values) == 4 * 2000 + 2
+    t = s.t_s.to_numpy()
+    w = s["state.idler1.speed_rad_s"].to_numpy().astype(float)
+    dT = (s["state.span2.tension_N"] - s["state.span1.tension_N"]).to_numpy().astype(float)
+    implied = 0.05 * dT - 5e-4 * w - 0.011 * np.gradient(w, t)
+    m = t > 1.0
+    assert np.corrcoef(implied[m], drag.value(t)[m])[0, 1] > 0.995
     # a first-order spectrum at 2 Hz: lag-one correlation exp(-2*pi*2/2000) on the grid
-    c = np.corrcoef(table[:-1], table[1:])[0, 1]
+    c = np.corrcoef(drag.values[:-1], drag.values[1:])[0, 1]
     assert c == pytest.approx(np.exp(-2 * np.pi * 2 / 2000.0), abs=1e-3)
+
+
+def _realise(tmp_path, dist, seeds, speed=1.0):
+    """The realisations of one disturbance for each seed (no simulation)."""
+    path = write(tmp_path / "sc.yaml", yaml.safe_dump({
+        "name": "sc", "line": str(REPO / "lines" / "pet_film_line.yaml"), "duration": 120.0,
+        "record_rate": 100.0, "programme": [{"at": 0, "line_speed": speed}],
+        "disturbances": [dist]}))
+    scenario, line, _ = load_scenario(path)
+    return [realise_disturbances(scenario, line, np.random.SeedSequence(seed).spawn(3)[0])[0]
+            for seed in seeds]
+
+
+@pytest.mark.parametrize("dist, std, corner, unit", [
+    (DRAG, 0.02, 2.0, "s"),
+    ({"type": "wound_in_strain", "element": "unwind", "std": 3e-5,
+      "correlation_length": "5 m"}, 3e-5, 1.0 / (2 * np.pi * 5.0), "m"),
+])
+def test_sines_have_the_declared_std_and_spectrum(tmp_path, dist, std, corner, unit):
+    ds = _realise(tmp_path, dist, range(300))
+    d = ds[0]
+    assert d.shape == "sines" and len(d.amplitudes) == N_SINES
+    # the variance is exact: every term carries std²/N, so the mean square of each
+    # realisation over a long record is std²
+    for x in ds:
+        assert np.sum(x.amplitudes**2) / 2 == pytest.approx(std**2, rel=1e-12)
+        assert x.omegas.min() > 0 and x.omegas.max() <= 2 * np.pi * CUTOFF * corner * 1.000001
+    # the spectrum: the ensemble autocorrelation at lags of 1/2, 1 and 2 time constants
+    # (correlation lengths) against the truncated first-order spectrum's. Each seed gives
+    # the mean over 200 points 20 time constants apart; the tolerance is four standard
+    # errors of the mean over the 300 independent seeds (a 6e-5 chance of a false failure
+    # for a Gaussian estimate; the seeds are fixed, so the test is deterministic anyway)
+    tc = 1.0 / (2 * np.pi * corner)
+    s0 = 20 * tc * np.arange(200)
+    ms = np.array([np.mean(x.value(s0) ** 2) for x in ds]) / std**2
+    assert abs(ms.mean() - 1.0) < 4 * ms.std(ddof=1) / np.sqrt(len(ms)) + 1e-3
+    for lag in (0.5 * tc, tc, 2 * tc):
+        r = np.array([np.mean(x.value(s0) * x.value(s0 + lag)) for x in ds]) / std**2
+        expect = autocorrelation(lag, corner)
+        assert abs(r.mean() - expect) < 4 * r.std(ddof=1) / np.sqrt(len(r)), (unit, lag)
+    # the cut-off at 10 corners changes the first-order correlation exp(-lag/tc) by little
+    assert autocorrelation(tc, corner) == pytest.approx(np.exp(-1), abs=0.025)
+    assert autocorrelation(2 * tc, corner) == pytest.approx(np.exp(-2), abs=0.02)
+
+
+def test_sines_are_seeded(tmp_path):
+    a, b = _realise(tmp_path, DRAG, [7, 7])
+    (c,) = _realise(tmp_path, DRAG, [8])
+    t = np.linspace(0.0, 20.0, 2001)
+    np.testing.assert_array_equal(a.value(t), b.value(t))  # same seed: identical
+    assert np.max(np.abs(a.value(t) - c.value(t))) > 0.01  # another seed: another trace
+    assert not np.any(np.isin(a.phases, c.phases))
+
+
+def test_sines_are_smooth_and_tables_are_not(tmp_path):
+    # a kink makes the largest second difference shrink like h (a jump of the slope), a
+    # smooth signal like h²: halving the step divides it by 2 and by 4 respectively
+    (sines,) = _realise(tmp_path, DRAG, [3])
+    (table,) = _realise(tmp_path, {**DRAG, "shape": "table"}, [3])
+
+    def second_difference(d, h):
+        x = d.value(np.arange(0.0, 10.0, h) + 0.3e-3)
+        return np.max(np.abs(np.diff(x, 2)))
+
+    h = 1e-3
+    smooth = second_difference(sines, h) / second_difference(sines, h / 2)
+    kinked = second_difference(table, h) / second_difference(table, h / 2)
+    assert smooth == pytest.approx(4.0, rel=0.05)
+    assert kinked == pytest.approx(2.0, rel=0.25)
+    # and bounded by the analytic curvature sum a·omega²
+    bound = np.sum(sines.amplitudes * sines.omegas**2)
+    assert second_difference(sines, h) <= bound * h * h
+
+
+@pytest.mark.parametrize("model", ["exact", "linear"])
+def test_jacobian_with_disturbances(tmp_path, model):
+    # the wound-in strain depends on the unwound length (a state): d/du enters the rows of
+    # the unwind's length and of the first span; a bearing drag depends on time only
+    path = write(tmp_path / "full.yaml", FULL.format(model=model, limit=200))
+    line = r2rsim.load_line(path)
+    prog = r2rsim.Programme.from_steps(line, [ProgrammeStep(at=0, line_speed=2.0)])
+    rng = np.random.default_rng(5)
+    n = N_SINES
+    wound = DisturbanceInstance("wound_in_strain", "unwind", "sines",
+                                amplitudes=np.full(n, 1e-3), omegas=rng.uniform(1, 30, n),
+                                phases=rng.uniform(0, 6, n))
+    drag = DisturbanceInstance("bearing_drag", "idler1", "sines", amplitudes=np.full(n, 0.01),
+                               omegas=rng.uniform(1, 60, n), phases=rng.uniform(0, 6, n))
+    cl = r2rsim.compile_line(line, prog, (), [wound, drag])
+    plain = r2rsim.compile_line(line, prog)
+    y = _state(cl, np.random.default_rng(3))
+    _assert_jacobian_matches_fd(cl, 1.7, y, floor=1e-7)
+    iu, ie = cl.index("unwind.unstretched_length"), cl.index("span1.strain")
+    J = cl.jacobian(1.7, y)
+    assert J[iu, iu] != 0.0 and J[ie, iu] != 0.0
+    assert plain.jacobian(1.7, y)[ie, iu] == 0.0
+    assert (cl.lband, cl.uband) == (plain.lband, plain.uband)  # the band does not grow
 
 
 def test_disturbances_are_seeded_and_apart_from_measurement_noise(tmp_path):

@@ -145,9 +145,13 @@ CASES = [
     ("too many events", S(["events"], [{"at": 0.1, "type": "dancer_seize", "element": "x"}]
                           * 1001), "scen.yaml", "events", "at most 1000"),
     ("a disturbance table too fine", S(["disturbances"], [
-        {"type": "wound_in_strain", "element": "unwind", "std": 1e-5,
+        {"type": "wound_in_strain", "element": "unwind", "std": 1e-5, "shape": "table",
          "correlation_length": "1 nm"}]), "scen.yaml", "disturbances[0].correlation_length",
      "more than 1e+08 points"),
+    ("a disturbance too fast", S(["disturbances"], [
+        {"type": "wound_in_strain", "element": "unwind", "std": 1e-5,
+         "correlation_length": "1 nm"}]), "scen.yaml", "disturbances[0].correlation_length",
+     "above half the record rate"),
     # 6. physically impossible: refused before a run that would hang or mislead
     ("web 1 m thick", L(["web", "thickness"], "1 m"), "line.yaml", "web.thickness",
      "cannot wrap a roller of radius 0.05 m"),

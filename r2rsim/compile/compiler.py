@@ -686,13 +686,17 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
         sch_t[ch, sch_n[ch]:] = math.inf
 
     # ---- pack I and P
-    tables = [d for d in disturbances if d.values is not None]
+    tables = [d for d in disturbances if d.type in ("bearing_drag", "wound_in_strain")]
     tab_I = np.zeros((len(tables), NTI), np.int64)
     tab_P = []
     for m, d in enumerate(tables):
-        tab_I[m] = ({"bearing_drag": TB_DRAG, "wound_in_strain": TB_WOUND}[d.type],
-                    node_idx[d.element], len(d.values), 0)
-        tab_P.append(np.concatenate([[d.x0, d.dx], d.values]))
+        kind = {"bearing_drag": TB_DRAG, "wound_in_strain": TB_WOUND}[d.type]
+        if d.shape == "sines":
+            tab_I[m] = (kind, node_idx[d.element], len(d.amplitudes), 0, SH_SINES)
+            tab_P.append(np.concatenate([d.amplitudes, d.omegas, d.phases]))
+        else:
+            tab_I[m] = (kind, node_idx[d.element], len(d.values), 0, SH_TABLE)
+            tab_P.append(np.concatenate([[d.x0, d.dx], d.values]))
     blocks_I = [node_I.ravel(), span_I.ravel(), sens_I.ravel(), ctrl_I.ravel(), sch_n,
                 np.array(ev_I, np.int64).reshape(-1, NEVI).ravel(), mov_I.ravel(),
                 tab_I.ravel()]

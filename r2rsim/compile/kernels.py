@@ -205,8 +205,9 @@ def _mover_load(P, bm, kind, q):
 
 @njit(cache=True)
 def table_value(I, P, kind, node, x):
-    """Sum of the disturbance tables of ``kind`` on ``node`` at x (linear interpolation,
-    held constant outside the grid)."""
+    """Sum of the process disturbances of ``kind`` on ``node`` at x: a sum of sinusoids
+    (``SH_SINES``), or a table interpolated linearly and held constant outside its grid
+    (``SH_TABLE``)."""
     out = 0.0
     for m in range(I[H_NTB]):
         bt = I[H_OFF_TB] + m * NTI
@@ -214,6 +215,10 @@ def table_value(I, P, kind, node, x):
             continue
         o = I[bt + TI_OFFP]
         n = I[bt + TI_N]
+        if I[bt + TI_SHAPE] == SH_SINES:
+            for j in range(n):
+                out += P[o + j] * math.sin(P[o + n + j] * x + P[o + 2 * n + j])
+            continue
         s = (x - P[o]) / P[o + 1]
         if s <= 0.0:
             out += P[o + 2]
@@ -224,6 +229,37 @@ def table_value(I, P, kind, node, x):
             f = s - i
             out += (1.0 - f) * P[o + 2 + i] + f * P[o + 3 + i]
     return out
+
+
+@njit(cache=True)
+def sines_slope(I, P, kind, node, x):
+    """d/dx of the sum-of-sinusoids disturbances of ``kind`` on ``node`` at x (the
+    Jacobian's share; tables keep their earlier zero slope, so that they reproduce old data
+    exactly)."""
+    out = 0.0
+    for m in range(I[H_NTB]):
+        bt = I[H_OFF_TB] + m * NTI
+        if I[bt + TI_KIND] != kind or I[bt + TI_NODE] != node or \
+                I[bt + TI_SHAPE] != SH_SINES:
+            continue
+        o = I[bt + TI_OFFP]
+        n = I[bt + TI_N]
+        for j in range(n):
+            w = P[o + n + j]
+            out += P[o + j] * w * math.cos(w * x + P[o + 2 * n + j])
+    return out
+
+
+@njit(cache=True)
+def has_sines(I, kind, node):
+    """Whether ``node`` has a sum-of-sinusoids disturbance of ``kind`` (a structural
+    property: it decides the Jacobian pattern)."""
+    for m in range(I[H_NTB]):
+        bt = I[H_OFF_TB] + m * NTI
+        if I[bt + TI_KIND] == kind and I[bt + TI_NODE] == node and \
+                I[bt + TI_SHAPE] == SH_SINES:
+            return True
+    return False
 
 
 @njit(cache=True)
@@ -865,7 +901,7 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             sp = I[oNI + k * NI + NI_SPAN_DN]
             esrc_fwd, desrc = roll_wound_in_strain(P, oNP + k * NP, W[oR + k])
             if ntb > 0:
-                esrc_fwd += table_value(I, P, TB_WOUND, k, y[I[oNI + k * NI + NI_U]])
+                esrc_fwd += table_value(I, P, TB_WOUND, k, y[iU])
             q = _flux(v, xk * esrc_fwd, xk * W[oEM + sp], linear)
         else:
             sp = I[oNI + k * NI + NI_SPAN_UP]
@@ -878,6 +914,10 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
                         P, GI, GC, GV, maxd, qV + k, qT, oSP)
                 dq = v * _df(xk * esrc_fwd, linear) * xk * desrc if v >= 0.0 else 0.0
                 _j_axpy(JJ, mode, iU, dq, GI, GC, GV, maxd, qR + k)
+                if ntb > 0 and has_sines(I, TB_WOUND, k):  # the strain along u = y[iU]
+                    dq = v * _df(xk * esrc_fwd, linear) * xk * sines_slope(
+                        I, P, TB_WOUND, k, y[iU]) if v >= 0.0 else 0.0
+                    _j_add(JJ, mode, iU, iU, dq)
             else:
                 _j_flux(JJ, mode, iU, 1.0, v, W[oEM + sp], W[oEM + sp], sp, sp, xk, linear,
                         I, P, GI, GC, GV, maxd, qV + k, qT, oSP)
@@ -925,6 +965,11 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             if sp_before < 0:
                 dqa = W[oV + a] * _df(xa * ef, linear) * xa * dwa if W[oV + a] >= 0.0 else 0.0
                 _j_axpy(JJ, mode, ie, -fac * dqa, GI, GC, GV, maxd, qR + a)
+                if ntb > 0 and has_sines(I, TB_WOUND, a):
+                    iua = I[oNI + a * NI + NI_U]
+                    dqa = W[oV + a] * _df(xa * ef, linear) * xa * sines_slope(
+                        I, P, TB_WOUND, a, y[iua]) if W[oV + a] >= 0.0 else 0.0
+                    _j_add(JJ, mode, ie, iua, -fac * dqa)
             _j_flux(JJ, mode, ie, fac, W[oV + bnode], W[oEM + i], er, i,
                     sp_after if sp_after >= 0 else i, xb, linear, I, P, GI, GC, GV, maxd,
                     qV + bnode, qT, oSP)

@@ -109,11 +109,13 @@ NJP = 8
 (FS_IDX, FS_BASE, FS_ON, FS_T0, FS_A, FS_B, FS_C, FS_TAU) = range(8)
 NFS = 8
 
-# ---- process-disturbance tables: I record (kind, node, n, offset in P of [x0, dx, v0..]);
-# the kernel interpolates linearly (held constant outside the grid)
+# ---- process disturbances: I record (kind, node, n, offset in P, shape).
+# SH_TABLE: P holds [x0, dx, v0 .. v(n-1)], interpolated linearly (held outside the grid);
+# SH_SINES: P holds n amplitudes, n angular frequencies, n phases: sum a·sin(w·x + phase)
 TB_DRAG, TB_WOUND = 1, 2   # drag torque on node vs time; wound-in strain of an unwind vs u
-TI_KIND, TI_NODE, TI_N, TI_OFFP = range(4)
-NTI = 4
+TI_KIND, TI_NODE, TI_N, TI_OFFP, TI_SHAPE = range(5)
+NTI = 5
+SH_TABLE, SH_SINES = 0, 1
 
 # ---- event records (I block, 3 ints each: kind, index, sign convention) ----
 EV_SLACK, EV_BREAK, EV_CAPSTAN, EV_EMPTY = 1, 2, 3, 4

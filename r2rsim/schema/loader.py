@@ -552,6 +552,15 @@ def check_scenario_against_line(scenario: Scenario, line: Line, file: str) -> No
                              path=f"initial.span_tension.{sid}")
 
 
+def _sines_top(d, v_max: float) -> float:
+    """Highest frequency [Hz] of a sum-of-sinusoids disturbance
+    (:data:`r2rsim.compile.disturbances.CUTOFF` corner frequencies)."""
+    from ..compile.disturbances import CUTOFF
+    if d.type == "bearing_drag":
+        return CUTOFF * d.bandwidth
+    return CUTOFF * v_max / (2.0 * math.pi * d.correlation_length)
+
+
 def check_disturbances(scenario, line, file: str) -> None:
     """Targets and values of the scenario's process disturbances."""
     eccentric_faults = {f.target for f in scenario.faults if f.type == "process.eccentricity"}
@@ -573,13 +582,26 @@ def check_disturbances(scenario, line, file: str) -> None:
                            "process.eccentricity fault; give it one or the other")
         elif d.type == "wound_in_strain" and e.type != "unwind":
             problem = f"wound_in_strain applies to an unwind; '{d.element}' is a {e.type}"
-        elif d.type == "wound_in_strain" and limits.wound_in_strain_points(
+        elif d.type == "wound_in_strain" and d.shape == "table" and \
+                limits.wound_in_strain_points(
                 v_max, scenario.duration, d.correlation_length) > limits.MAX_SAMPLES:
             raise InputError(f"a correlation length of {d.correlation_length:g} m needs a table "
                              f"of more than {limits.MAX_SAMPLES:.0e} points (ten per "
                              f"correlation length over the {v_max:g} m/s x "
                              f"{scenario.duration:g} s of web of this run; docs/security.md)",
                              file=file, path=f"{where}.correlation_length")
+        elif d.type != "out_of_round" and d.shape != "table" and _sines_top(d, v_max) > \
+                0.5 * scenario.record_rate:
+            what = "bandwidth" if d.type == "bearing_drag" else "correlation_length"
+            raise InputError(f"its highest frequency, {_sines_top(d, v_max):.3g} Hz (ten times "
+                             "the corner of its spectrum"
+                             + ("" if d.type == "bearing_drag" else f" at {v_max:g} m/s")
+                             + "), is above half the record rate "
+                             f"({0.5 * scenario.record_rate:g} Hz): the solver would have to "
+                             "follow a disturbance the samples cannot show; give a "
+                             + ("lower bandwidth" if d.type == "bearing_drag" else
+                                "longer correlation length") + " or a higher record rate",
+                             file=file, path=f"{where}.{what}")
         elif d.type == "bearing_drag" and drive is not None and drive.type == "ideal_speed":
             problem = (f"'{d.element}' turns at an imposed speed (ideal_speed drive): a drag "
                        "torque would have no effect")

@@ -169,26 +169,48 @@ class SplitBySeed(Strict):
 
 
 class Disturbance(Strict):
-    """A process disturbance: always present, drawn from the run's process-noise stream on
-    a fixed grid (so it does not depend on the solver's steps) and independent of the
-    measurement noise. Not a fault: it carries no label.
+    """A process disturbance: always present, drawn from the run's process-noise stream
+    (one child stream per disturbance, so it depends neither on the solver's steps nor on
+    the measurement noise). Not a fault: it carries no label.
 
-    ``bearing_drag``: a random drag torque on a roller, first-order filtered white noise of
-    standard deviation ``std`` [N m] and ``bandwidth`` [Hz], drawn on the sample grid.
+    ``bearing_drag``: a random drag torque on a roller, a stationary random signal of
+    standard deviation ``std`` [N m] with the first-order spectrum of corner ``bandwidth``
+    [Hz] (that of white noise through a first-order filter).
     ``wound_in_strain``: the strain wound into an unwind's roll varies along the web, with
-    standard deviation ``std`` and ``correlation_length`` [m] (tension and thickness history
-    of the roll); it enters the first span as the web leaves the roll.
+    standard deviation ``std`` and an exponential autocorrelation of ``correlation_length``
+    [m] (tension and thickness history of the roll); it enters the first span as the web
+    leaves the roll.
     ``out_of_round``: a roller turns about an axis ``eccentricity`` off its centre from
     t = 0, at a random initial angle (see the process.eccentricity fault).
+
+    The random ones are smooth sums of 32 sinusoids by default (``shape``; docs/model.md,
+    :mod:`r2rsim.compile.disturbances`).
     """
 
     type: Literal["bearing_drag", "wound_in_strain", "out_of_round"]
     element: Id
     std: NumberOrText | None = Field(
-        None, description="bearing_drag: torque [N m]; wound_in_strain: strain [1]")
-    bandwidth: Annotated[Frequency, Field(gt=0)] | None = None
-    correlation_length: Annotated[Length, Field(gt=0)] | None = None
+        None, description="bearing_drag: torque [N m]; wound_in_strain: strain [1]. The "
+        "standard deviation: with shape sines, the mean square of every realisation over a "
+        "long record is exactly std^2 (32 terms of equal power)")
+    bandwidth: Annotated[Frequency, Field(gt=0)] | None = Field(
+        None, description="bearing_drag: corner frequency f_c [Hz] of the first-order "
+        "spectrum S(f) ~ 1/(1 + (f/f_c)^2), autocorrelation exp(-2 pi f_c |lag|); with shape "
+        "sines the spectrum is cut off at 10 f_c")
+    correlation_length: Annotated[Length, Field(gt=0)] | None = Field(
+        None, description="wound_in_strain: correlation length l_c [m] along the unwound web, "
+        "autocorrelation exp(-|lag|/l_c) (a first-order spectrum of corner 1/(2 pi l_c) per "
+        "metre); with shape sines the spectrum is cut off at 10/(2 pi l_c) per metre, "
+        "wavelengths down to 0.63 l_c")
     eccentricity: Annotated[Length, Field(gt=0)] | None = None
+    shape: Literal["sines", "table"] | None = Field(
+        None, description="bearing_drag and wound_in_strain: 'sines' (default), a smooth sum "
+        "of 32 sinusoids with random phases and frequencies drawn from the declared spectrum "
+        "cut off at 10 times its corner; 'table', the earlier first-order autoregressive "
+        "table interpolated linearly (on the sample grid for a bearing drag, ten points per "
+        "correlation length for a wound-in strain), to reproduce data made before r2rsim "
+        "issue 16. A table has a kink at every grid point, which the stiff solver must "
+        "resolve: about ten times the RHS evaluations")
 
     @model_validator(mode="after")
     def _check(self):
@@ -199,6 +221,8 @@ class Disturbance(Strict):
             if (getattr(self, k) is None) == (k in need):
                 raise ValueError(f"a {self.type} disturbance "
                                  + (f"needs '{k}'" if k in need else f"takes no '{k}'"))
+        if self.type == "out_of_round" and self.shape is not None:
+            raise ValueError("an out_of_round disturbance takes no 'shape'")
         return self
 
     def std_si(self) -> float:

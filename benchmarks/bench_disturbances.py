@@ -1,0 +1,120 @@
+"""Cost of the process disturbances (issue 16, item 3): the registration line
+(lines/registration.yaml) at 0.5 m/s and 1.0 m/s for 120 s, with the disturbances of the
+"harder design" (thesis-methods.md §4.3: out_of_round on in_idler 0.05 mm and reg_drive
+0.02 mm, bearing_drag 0.02 N·m at 2 Hz on both idlers, wound_in_strain std 3e-5 with a 5 m
+correlation length) and without them, side by side in one process. Prints, for each, the
+solver alone (``simulate`` with every algebraic output, median of ``--repeat``: wall time,
+real-time factor, RHS evaluations, steps) and the whole ``r2rsim run`` (Parquet writing and
+checks included: wall time and RTF), and the RTF ratio with / without (the bar: at least
+0.5). Not a timed test.
+
+    python benchmarks/bench_disturbances.py
+    python benchmarks/bench_disturbances.py --duration 60 --repeat 1
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+import time
+from pathlib import Path
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+import numpy as np  # noqa: E402
+import yaml  # noqa: E402
+
+import r2rsim  # noqa: E402
+from r2rsim.compile.compiler import Programme  # noqa: E402
+from r2rsim.compile.disturbances import realise_disturbances  # noqa: E402
+from r2rsim.schema.loader import load_scenario  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+
+HARDER = [
+    {"type": "out_of_round", "element": "in_idler", "eccentricity": "0.05 mm"},
+    {"type": "out_of_round", "element": "reg_drive", "eccentricity": "0.02 mm"},
+    {"type": "bearing_drag", "element": "in_idler", "std": "0.02 N*m", "bandwidth": "2 Hz"},
+    {"type": "bearing_drag", "element": "reg_idler", "std": "0.02 N*m", "bandwidth": "2 Hz"},
+    {"type": "wound_in_strain", "element": "unwind", "std": 3e-5,
+     "correlation_length": "5 m"},
+]
+
+
+def prepare(tmp: Path, speed: float, duration: float, disturbances: list, name: str):
+    """Compile the scenario as ``r2rsim run`` does; return (compiled line, y0, scenario,
+    path of the scenario file)."""
+    sc = {"name": name, "line": str(ROOT / "lines" / "registration.yaml"),
+          "duration": duration, "record_rate": 100.0, "seed": 100, "warmup": 5.0,
+          "initial": {"state": "steady"},
+          "programme": [{"at": 0, "line_speed": speed}], "disturbances": disturbances}
+    path = tmp / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(sc))
+    scenario, line, _ = load_scenario(path)
+    prog = Programme.from_steps(line, scenario.programme)
+    ss_process = np.random.SeedSequence(scenario.seed).spawn(3)[0]
+    dist = realise_disturbances(scenario, line, ss_process)
+    cl = r2rsim.compile_line(line, prog, scenario.faults, dist)
+    y0 = r2rsim.nominal_state(cl)
+    for d in dist:
+        if d.type == "out_of_round":
+            y0[cl.index(f"{d.element}.angle")] = d.phase
+    y1 = r2rsim.steady_state(cl, y0)
+    return cl, (y0 if y1 is None else y1), scenario, path
+
+
+def measure(cl, y0, scenario, repeat: int):
+    """Median wall time of ``repeat`` runs, with every algebraic output computed and
+    delivered chunk by chunk (as ``r2rsim run`` does, without the Parquet writing)."""
+    walls, res = [], None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        res = r2rsim.simulate(cl, scenario.duration, scenario.record_rate, y0,
+                              scenario.solver, on_chunk=lambda t, Y, A: None)
+        walls.append(time.perf_counter() - t0)
+    walls.sort()
+    return walls[len(walls) // 2], res.stats["nfev"], res.stats["steps"], res.terminated
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--duration", type=float, default=120.0)
+    ap.add_argument("--repeat", type=int, default=1)
+    ap.add_argument("--speeds", type=float, nargs="+", default=[0.5, 1.0])
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as td:
+        tmp = Path(td)
+        cl, y0, sc, _ = prepare(tmp, 0.5, 1.0, HARDER, "warm")
+        r2rsim.simulate(cl, 1.0, 100.0, y0, sc.solver)  # compile the kernels, not timed
+        print(f"registration line, {args.duration:g} s, 100 Hz; solver: median of "
+              f"{args.repeat}")
+        print(f"{'speed':>7} {'disturbances':>12} {'wall s':>8} {'RTF':>7} {'RHS':>8} "
+              f"{'steps':>7} {'run wall s':>10} {'run RTF':>8}")
+        ratios = {"solver": [], "run": []}
+        for v in args.speeds:
+            rows = {}
+            for label, dist in (("without", []), ("with", HARDER)):
+                name = f"{label}_{int(round(v * 1000))}"
+                cl, y0, sc, path = prepare(tmp, v, args.duration, dist, name)
+                wall, nfev, steps, term = measure(cl, y0, sc, args.repeat)
+                t0 = time.perf_counter()
+                r2rsim.run_scenario(path, output=tmp / f"out_{name}")
+                run_wall = time.perf_counter() - t0
+                rows[label] = (wall, nfev, steps, run_wall)
+                print(f"{v:>3g} m/s {label:>12} {wall:8.3f} {args.duration / wall:7.0f} "
+                      f"{nfev:8d} {steps:7d} {run_wall:10.3f} {args.duration / run_wall:8.0f}"
+                      + ("  (terminated)" if term else ""))
+            (w0, f0, s0, r0), (w1, f1, s1, r1) = rows["without"], rows["with"]
+            ratios["solver"].append(w0 / w1)
+            ratios["run"].append(r0 / r1)
+            print(f"{'':>7} with/without: solver RTF x{w0 / w1:.2f} (RHS x{f1 / f0:.0f}, "
+                  f"steps x{s1 / s0:.0f}), run RTF x{r0 / r1:.2f}")
+        for what, r in ratios.items():
+            print(f"bar ({what}): RTF with disturbances >= 50 % of without: "
+                  f"{'PASS' if min(r) >= 0.5 else 'FAIL'} (worst {min(r) * 100:.0f} %)")
+
+
+if __name__ == "__main__":
+    main()
