@@ -97,15 +97,15 @@ def test_drawn_values_are_recorded_and_act_on_the_plant(varied_runs):
     assert validate_dataset(varied_runs["a"]) == []
 
 
-def test_without_variability_the_data_is_unchanged(varied_runs, tmp_path, repo):
-    """No ``variability:`` is the old behaviour: an empty variability.parquet and the
-    same samples as a scenario that never heard of it."""
+def test_an_empty_variability_changes_nothing(varied_runs, tmp_path, repo):
+    """Without ``variability:`` variability.parquet is empty, and ``variability: {}`` (the
+    machinery run with nothing to draw) gives the same samples as none."""
     v = pq.read_table(varied_runs["plain"] / "variability.parquet")
     assert v.num_rows == 0
-    a = samples(varied_runs["plain"])
-    ref = run_scenario(write_scenario(tmp_path, repo, None, seed=3, name="run_plain"),
-                       tmp_path / "ref").output
-    assert a.equals(samples(ref))
+    empty = run_scenario(write_scenario(tmp_path, repo, {}, seed=3, name="run_plain"),
+                         tmp_path / "empty").output
+    assert pq.read_table(empty / "variability.parquet").num_rows == 0
+    assert samples(varied_runs["plain"]).equals(samples(empty))
 
 
 def test_plugins_never_see_the_drawn_values(varied_runs):
