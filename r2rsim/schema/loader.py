@@ -155,9 +155,25 @@ def _where(data, offset: int) -> str:
 def _check_nesting(text: str) -> None:
     """Refuse nesting deeper than :data:`r2rsim.limits.MAX_NESTING` from the parser's event
     stream, before the composer (which recurses once per level, and crashes libyaml when
-    deep enough) builds anything."""
+    deep enough) builds anything.
+
+    The libyaml of newer PyYAML wheels (6.0.4) refuses 1000 levels itself, in its scanner,
+    which reads a flow collection ahead before the first event: the nesting is then
+    located again with the pure-Python parser (no such limit, not recursive), so the
+    message and place do not depend on the PyYAML release."""
+    try:
+        _nesting_events(text, _Loader)
+    except yaml.YAMLError as exc:
+        if _Loader is yaml.SafeLoader or "nesting depth" not in str(
+                getattr(exc, "problem", None) or exc):
+            raise
+        _nesting_events(text, yaml.SafeLoader)
+        raise
+
+
+def _nesting_events(text: str, loader) -> None:
     depth = 0
-    for ev in yaml.parse(text, Loader=_Loader):
+    for ev in yaml.parse(text, Loader=loader):
         if isinstance(ev, (yaml.SequenceStartEvent, yaml.MappingStartEvent)):
             depth += 1
             if depth > limits.MAX_NESTING:
