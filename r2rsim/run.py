@@ -324,7 +324,7 @@ def execute(plan: RunPlan, out: str | Path, *, run_id: str | None = None, progre
     ss_process, ss_meas, ss_faults = root.spawn(3)
     line, rolls, variability_rows = realise_variability(scenario, line, ss_process)
     disturbances = realise_disturbances(scenario, line, ss_process)
-    pitch_var = realise_pitch_variations(line, ss_process)  # children after the disturbances'
+    pitch_var = realise_pitch_variations(line, ss_process)
     cl = compile_line(line, prog, scenario.faults, disturbances, pitch_var,
                       joint_slots_needed(scenario, line))
     init = scenario.initial

@@ -163,6 +163,11 @@ def test_pitch_variation_statistics(seed):
     var = realise_pitch_variations(line, np.random.SeedSequence(seed))
     again = realise_pitch_variations(line, np.random.SeedSequence(seed))
     np.testing.assert_array_equal(var["sensor_B"], again["sensor_B"])
+    # its stream is at a fixed key: streams spawned before (the disturbances') do not move it
+    spawned = np.random.SeedSequence(seed)
+    spawned.spawn(3)
+    np.testing.assert_array_equal(var["sensor_B"],
+                                  realise_pitch_variations(line, spawned)["sensor_B"])
     cl = compile_line(line, pitch_variations=var)
     du = 0.05
     u = np.arange(0.0, 4000 * ELL, du)

@@ -4,6 +4,7 @@ stream, recorded as ground truth that plug-ins never see."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -17,22 +18,18 @@ from r2rsim.errors import InputError
 from r2rsim.evaluate.harness import read_datasets
 from r2rsim.schema import load_scenario
 
-VARIABILITY = {
-    "rolls": {"unwind": {"modulus": {"rel_std": "3 %"}, "thickness": {"rel_std": "1 %"},
-                         "outer_radius": {"std": "10 mm"},
-                         "wound_in_strain": {"std": 1e-4}}},
-    "friction": {"rel_std": "10 %"},
-    "sensors": {"lc_press": {"gain": {"rel_tolerance": "0.5 %"},
-                             "offset": {"tolerance": "0.5 N"}}},
-}
+#: the shipped example's variability (scenarios/roll_variability.yaml)
+VARIABILITY = yaml.safe_load(
+    (Path(__file__).parents[1] / "scenarios" / "roll_variability.yaml").read_text())["variability"]
 
 
 def write_scenario(tmp_path, repo, variability=VARIABILITY, duration=30.0, seed=3,
                    name="varied"):
-    """The newsprint splice scenario (a roll change at 5 s) with ``variability``."""
-    data = yaml.safe_load((repo / "scenarios" / "newsprint_splice.yaml").read_text())
+    """The example scenario (Line B, a roll change at 5 s) with ``variability``."""
+    data = yaml.safe_load((repo / "scenarios" / "roll_variability.yaml").read_text())
     data["line"] = str(repo / "lines" / "newsprint_line.yaml")
     data.update(name=name, duration=duration, seed=seed)
+    data.pop("variability")
     if variability is not None:
         data["variability"] = variability
     path = tmp_path / f"{name}_{seed}.yaml"

@@ -194,6 +194,9 @@ def realise_disturbances(scenario, line, seed_sequence) -> list[DisturbanceInsta
 
 #: cosines of a realised relaxed-pitch variation (pitch_length ``pitch_variation``)
 PITCH_VARIATION_TERMS = 64
+#: spawn key (under the run's process stream) of the pitch variations; far above the
+#: disturbances' children, next to the variability stream's (r2rsim.compile.variability)
+PITCH_VARIATION_KEY = (1 << 20) + 1
 
 
 def realise_pitch_variations(line, seed_sequence) -> dict[str, np.ndarray]:
@@ -212,8 +215,9 @@ def realise_pitch_variations(line, seed_sequence) -> dict[str, np.ndarray]:
     ----------
     line : Line
     seed_sequence : numpy.random.SeedSequence
-        The run's process-noise stream; spawned once more (one child per such sensor, after
-        the disturbances' children), so the disturbances stay as they were.
+        The run's process-noise stream; each such sensor draws from its own child at the
+        fixed key (:data:`PITCH_VARIATION_KEY`, sensor index), never spawned, so neither the
+        disturbances nor other sensors move it.
 
     Returns
     -------
@@ -222,13 +226,18 @@ def realise_pitch_variations(line, seed_sequence) -> dict[str, np.ndarray]:
     """
     from statistics import NormalDist
 
-    sensors = [s for s in line.sensors
+    sensors = [(j, s) for j, s in enumerate(line.sensors)
                if s.type == "pitch_length" and s.pitch_variation is not None]
-    children = seed_sequence.spawn(len(sensors))
+    # a fixed spawn key per sensor (not the next spawn() after the disturbances'), so adding
+    # a disturbance or another sensor does not change a sensor's variation
+    ss = seed_sequence
+    children = [np.random.SeedSequence(ss.entropy, spawn_key=(*ss.spawn_key,
+                                                              PITCH_VARIATION_KEY, j))
+                for j, _ in sensors]
     inv = NormalDist().inv_cdf
     m_terms = PITCH_VARIATION_TERMS
     out = {}
-    for s, child in zip(sensors, children, strict=True):
+    for (_, s), child in zip(sensors, children, strict=True):
         rng = np.random.default_rng(child)
         pv = s.pitch_variation
         strata = (np.arange(m_terms) + rng.random(m_terms)) / m_terms

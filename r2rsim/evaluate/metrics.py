@@ -946,14 +946,20 @@ def range_pr_auc(score: ArrayLike, y: ArrayLike, buffer: int = 0,
         The area in [0, 1]; nan without anomalous samples. With ``buffer=0`` and a single
         range it equals :func:`average_precision`.
     """
+    prep = _range_inputs(score, y, buffer, groups, "buffer")
+    return math.nan if prep is None else _range_auc(*prep[:2], int(buffer), *prep[2:])
+
+
+def _range_inputs(score, y, buffer, groups, name: str):
+    """Checked ``(score, y, first, last, order)`` for the range-based AUCs, or None when
+    no sample is anomalous."""
     s, yy = _check_score_y(score, y)
     if int(buffer) != buffer or buffer < 0:
-        raise ValueError(f"buffer must be an integer >= 0, got {buffer!r}")
+        raise ValueError(f"{name} must be an integer >= 0, got {buffer!r}")
     if not yy.any():
-        return math.nan
+        return None
     first, last = _group_bounds(s.size, groups)
-    order = np.argsort(-s, kind="mergesort")
-    return _range_auc(s, yy, int(buffer), first, last, order)
+    return s, yy, first, last, np.argsort(-s, kind="mergesort")
 
 
 def _range_auc(s: NDArray, y: NDArray, buffer: int, first: NDArray, last: NDArray,
@@ -1000,14 +1006,10 @@ def vus_pr(score: ArrayLike, y: ArrayLike, max_buffer: int = 0,
     float
         VUS-PR in [0, 1]; nan without anomalous samples.
     """
-    s, yy = _check_score_y(score, y)
-    if int(max_buffer) != max_buffer or max_buffer < 0:
-        raise ValueError(f"max_buffer must be an integer >= 0, got {max_buffer!r}")
-    if not yy.any():
+    prep = _range_inputs(score, y, max_buffer, groups, "max_buffer")
+    if prep is None:
         return math.nan
-    first, last = _group_bounds(s.size, groups)
-    order = np.argsort(-s, kind="mergesort")
-    return float(np.mean([_range_auc(s, yy, b, first, last, order)
+    return float(np.mean([_range_auc(*prep[:2], b, *prep[2:])
                           for b in range(int(max_buffer) + 1)]))
 
 
