@@ -373,7 +373,8 @@ def _cmd_list(args) -> int:
     if args.what == "faults":
         from .schema.faults import CATALOGUE
 
-        acts = {"loop": "inside the loop if a controller reads the sensor, else on the record",
+        acts = {"loop": "inside the loop if a controller reads the sensor and the fault "
+                "is not record_only, else on the record",
                 "record": "on the recorded measurement", "model": "on the line's equations"}
         print(f"{'type':<31} {'target':<10} {'magnitude':<10} description")
         for ft in CATALOGUE.values():

@@ -322,11 +322,13 @@ def execute(plan: RunPlan, out: str | Path, *, run_id: str | None = None, progre
     prog = Programme.from_steps(line, scenario.programme, file=plan.source)
     root = np.random.SeedSequence(scenario.seed)
     ss_process, ss_meas, ss_faults = root.spawn(3)
+    declared_web = line.web
     line, rolls, variability_rows = realise_variability(scenario, line, ss_process)
     disturbances = realise_disturbances(scenario, line, ss_process)
     pitch_var = realise_pitch_variations(line, ss_process)
     cl = compile_line(line, prog, scenario.faults, disturbances, pitch_var,
-                      joint_slots_needed(scenario, line))
+                      joint_slots_needed(scenario, line), nominal_web=declared_web,
+                      pitch_offsets=rolls.sensor_pitch_offsets if rolls else None)
     init = scenario.initial
     y_nom = nominal_state(cl, init.tension, init.span_tension)
     for d in disturbances:  # an out-of-round roller starts at a random angle

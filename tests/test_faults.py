@@ -80,6 +80,27 @@ def test_monitoring_sensor_fault_leaves_the_process_alone(tmp_path):
     assert np.allclose(dm[after], 50.0, atol=1e-3) and np.allclose(dm[~after], 0.0, atol=1e-3)
 
 
+def test_record_only_fault_on_a_loop_sensor_leaves_the_process_alone(tmp_path):
+    """record_only: the same offset that V21 shows acting in the loop now shifts only the
+    recorded reading of the loop's sensor; the plant is bit-identical to the clean run and
+    faults.parquet keeps the option."""
+    fault = {"id": "b", "type": "sensor.offset", "target": "lc_rewind", "onset": 2.0,
+             "magnitude": "20 N"}
+    s0, _, _ = run(tmp_path, [], name="clean")
+    s1, f1, out = run(tmp_path, [{**fault, "record_only": True}], name="rec")
+    s2, _, _ = run(tmp_path, [fault], name="loop")
+    state = [c for c in s0.columns if c.startswith(("state.", "true."))]
+    pd.testing.assert_frame_equal(s0[state], s1[state])
+    assert not np.allclose(s0["state.span5.tension_N"], s2["state.span5.tension_N"])
+    dm = s1["meas.lc_rewind.tension_N"] - s0["meas.lc_rewind.tension_N"]
+    after = s1.t_s >= 2.0
+    assert np.allclose(dm[after], 20.0, atol=1e-4) and np.allclose(dm[~after], 0.0, atol=1e-4)
+    assert '"record_only": true' in f1.params_json.iloc[0]
+    assert s1["label.ch.lc_rewind.tension_N"][after].all()
+    from r2rsim.dataset.validate import validate_dataset
+    assert validate_dataset(out) == []
+
+
 def _err(s):
     return (s["meas.lc_mon.tension_N"] - s["true.lc_mon.tension_N"]).to_numpy(), s.t_s.to_numpy()
 
@@ -212,6 +233,9 @@ def test_same_seed_same_data_and_noise_seed_only_touches_measurements(tmp_path):
        "magnitude": "3 m"}], "expected a force"),
     ([{"id": "a", "type": "sensor.stuck", "target": "lc_mon", "onset": 2.0,
        "magnitude": 1.0}], "takes no magnitude"),
+    ([{"id": "a", "type": "sensor.noise", "target": "lc_mon", "onset": 2.0,
+       "magnitude": 1.0, "record_only": True}], "record_only applies to sensor faults that "
+     "act in the loop; sensor.noise acts on the record"),
     ([{"id": "a", "type": "sensor.offset", "target": "lc_mon", "onset": {"uniform": [2, 30]},
        "magnitude": 1.0}], "after the end of the run"),
 ])

@@ -166,6 +166,45 @@ def test_streams_do_not_shift(repo, tmp_path):
     assert rows1 == rows3
 
 
+def test_pitch_sensor_reads_the_web_of_the_roll_at_it(tmp_path, repo):
+    """Per roll, modulus and relaxed pitch: the pitch sensor reads (T/(E·S) + 1)·(L0 + ΔL0)
+    of the roll whose web is at the sensor, switching when that web's front passes the
+    span's downstream roller; the vision loop, calibrated with the declared E·S and L0,
+    holds the tension its reading implies (closed form)."""
+    data = {"name": "pitch_rolls", "line": str(repo / "lines" / "thesis_testbed.yaml"),
+            "duration": "100 s", "record_rate": "50 Hz", "seed": 1, "warmup": "2 s",
+            "programme": [{"at": "0 s", "line_speed": "0.5 m/s"}],
+            "variability": {"rolls": {"unwind": {"modulus": {"rel_std": "5 %"},
+                                                 "relaxed_pitch": {"std": "20 um"}}}}}
+    path = tmp_path / "pitch_rolls.yaml"
+    path.write_text(yaml.safe_dump(data))
+    out = run_scenario(path, tmp_path / "out").output
+    v = pq.read_table(out / "variability.parquet").to_pandas().set_index(
+        ["roll", "parameter"]).value
+    ev = pq.read_table(out / "events.parquet").to_pandas()
+    # the spliced roll's web front passes the roller at the end of the registration span
+    t_arrive = ev[(ev.kind == "splice_joint") & (ev.state == "span8")].t_s.min()
+    s = samples(out)
+    t, T = s.t_s.to_numpy(), s["state.registration.tension_N"].to_numpy()
+    pitch = s["true.pitch4.pitch_m"].to_numpy()
+    S, L0, ES_declared, T_set = 125e-6 * 0.5, 0.25, 4.5e9 * 125e-6 * 0.5, 300.0
+    for roll, window in ((0, (t > 10) & (t < t_arrive - 0.1)), (1, t > t_arrive + 0.1)):
+        ES, dl0 = v[(roll, "modulus")] * S, v[(roll, "relaxed_pitch")]
+        # to the float32 record: 2 ulp of 0.25 m is 6e-8 m
+        assert np.abs(pitch[window] - (T[window] / ES + 1.0) * (L0 + dl0)).max() < 6e-8
+        # the other roll's relation is off by the drawn differences (tens of um here)
+        other = 1 - roll
+        ES_o, dl0_o = v[(other, "modulus")] * S, v[(other, "relaxed_pitch")]
+        assert np.abs(pitch[window] - (T[window] / ES_o + 1.0) * (L0 + dl0_o)).min() > 1e-6
+    # steady vision loop on the first roll: the reading (T/ES + 1)(L0 + dl0), read as
+    # tension through the declared E·S and L0, equals the set-point
+    ES, dl0 = v[(0, "modulus")] * S, v[(0, "relaxed_pitch")]
+    T_loop = ES * ((1.0 + T_set / ES_declared) / (1.0 + dl0 / L0) - 1.0)
+    steady = (t > 30) & (t < 60)
+    assert abs(T[steady].mean() - T_loop) < 0.05, (T[steady].mean(), T_loop)
+    assert abs(T_loop - T_set) > 5.0  # the draws move it: the check is not trivial
+
+
 @pytest.mark.parametrize("variability, path, message", [
     ({"rolls": {"rewind": {"outer_radius": {"std": "1 mm"}}}}, "variability.rolls.rewind",
      "no unwind 'rewind'"),
@@ -175,6 +214,10 @@ def test_streams_do_not_shift(repo, tmp_path):
      "variability.rolls.unwind.modulus.std", "pressure"),
     ({"rolls": {"unwind": {"wound_in_strain": {"rel_std": "1 %"}}}},
      "variability.rolls.unwind.wound_in_strain", "give std or tolerance"),
+    ({"rolls": {"unwind": {"relaxed_pitch": {"std": "1 um"}}}},
+     "variability.rolls.unwind.relaxed_pitch.std", "no pitch_length sensor reads"),
+    ({"rolls": {"unwind": {"relaxed_pitch": {"rel_std": "1 %"}}}},
+     "variability.rolls.unwind.relaxed_pitch", "give std or tolerance"),
     ({"friction": {"std": 0.01}}, "variability.friction", "relative"),
     ({"friction": {"rel_std": "1 %", "rel_tolerance": "1 %"}}, "variability.friction",
      "exactly one of"),

@@ -288,7 +288,8 @@ class CompiledLine:
 
 def compile_line(line: Line, programme: Programme | None = None, faults=(),
                  disturbances=(), pitch_variations=None,
-                 extra_joint_slots: int = 0) -> CompiledLine:
+                 extra_joint_slots: int = 0, nominal_web=None,
+                 pitch_offsets=None) -> CompiledLine:
     """Compile a validated line.
 
     Parameters
@@ -310,6 +311,13 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
     extra_joint_slots : int
         Splice-joint slots for the web of varied rolls
         (:func:`r2rsim.compile.variability.joint_slots_needed`).
+    nominal_web : Web, optional
+        The web the line's controllers are calibrated for (a tension_pi reading a pitch
+        sensor converts pitch to tension with its E·S); default ``line.web``. With process
+        variability, ``line.web`` is the first roll's drawn web and this the declared one.
+    pitch_offsets : dict, optional
+        Sensor id -> relaxed-pitch offset [m] of the first roll's web (process variability,
+        :class:`r2rsim.compile.variability.RollDraws`); the rolls spliced later bring theirs.
 
     Returns
     -------
@@ -559,9 +567,12 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
                     sens_I[j, SEI_TYPE], sens_I[j, SEI_NODE] = SE_PITCH, k
                     sens_P[j, SEP_GAIN], sens_P[j, SEP_OFF], sens_P[j, SEP_TAU] = (
                         sn.gain, sn.offset, sn.filter)
-                    sens_P[j, SEP_COUT] = EA
+                    # the loop's Hooke calibration: the declared web, not a drawn roll's
+                    sens_P[j, SEP_COUT] = EA if nominal_web is None else nominal_web.EA
                     law = sn.relaxed_pitch_law
-                    if law is None and sn.pitch_variation is None:
+                    dl0 = (pitch_offsets or {}).get(sn.id)
+                    sens_P[j, SEP_DL0] = dl0 or 0.0
+                    if law is None and sn.pitch_variation is None and dl0 is None:
                         sens_P[j, SEP_CIN] = sn.relaxed_pitch
                     else:  # L0 = q0 + q1·R³ (+ variation) of an unwind's radius
                         sens_P[j, SEP_CIN] = sn.relaxed_pitch if law is None else law.q0

@@ -42,6 +42,7 @@ class FaultInstance:
     unit: str
     rate: float | None = None
     compose: str | None = None
+    record_only: bool = False
     composed_with: list[str] = field(default_factory=list)
     sampled_from: str | None = None
     expected_channels: list[str] = field(default_factory=list)
@@ -120,7 +121,8 @@ class FaultInstance:
             "magnitude_rel": self.magnitude_rel,
             "params_json": json.dumps({k: v for k, v in (
                 ("period_s", self.period), ("duty", self.duty), ("rate_hz", self.rate),
-                ("compose", self.compose)) if v is not None}),
+                ("compose", self.compose), ("record_only", self.record_only or None))
+                if v is not None}),
             "expected_channels": list(self.expected_channels),
             "composed_with": list(self.composed_with), "sampled_from": self.sampled_from,
         }
@@ -151,6 +153,7 @@ def from_record(row: dict) -> FaultInstance:
         ramp=num(row["ramp_s"]), period=params.get("period_s"), duty=params.get("duty"),
         magnitude=float(row["magnitude"]), unit=row["magnitude_unit"],
         rate=params.get("rate_hz"), compose=params.get("compose"),
+        record_only=bool(params.get("record_only", False)),
         composed_with=list(row["composed_with"] or []), sampled_from=row["sampled_from"],
         expected_channels=list(row["expected_channels"] or []),
         magnitude_rel=float(row["magnitude_rel"]) if row["magnitude_rel"] is not None
@@ -232,6 +235,7 @@ def realise_faults(scenario, line, seed_sequence, file: str = "<scenario>",
             id=f.id, type=f.type, target=f.target, onset=onset, end=f.end,
             shape=f.profile.shape, ramp=f.profile.ramp, period=f.profile.period,
             duty=f.profile.duty, magnitude=mag, unit=unit, rate=f.rate, compose=f.compose,
+            record_only=f.record_only,
             sampled_from=json.dumps({k: json.loads(v) for k, v in spec.items()}) if spec
             else None,
             expected_channels=[channel_of(f.target)] if channel_of and s is not None else [],

@@ -553,17 +553,21 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
                 _g_add(GI, GC, GV, maxd, qRAW + j, iq, g)
         elif typ == SE_PITCH:  # node holds the span index; pitch = (T/ES + 1)·L0
             rn = I[oSEI + j * NSEI + SEI_RNODE]
+            # E·S and L0 offset of the roll whose web is at the sensor
+            ratio, dl0 = _pitch_material(node, rn, P, b, I)
+            ES = EAweb * ratio
             if rn < 0:
-                L0 = P[b + SEP_CIN]
-                W[oRAW + j] = g * (W[oT + node] / EAweb + 1.0) * L0 + P[b + SEP_OFF]
+                L0 = P[b + SEP_CIN] + dl0
+                W[oRAW + j] = g * (W[oT + node] / ES + 1.0) * L0 + P[b + SEP_OFF]
                 if jac:
-                    _g_axpy(GI, GC, GV, maxd, qRAW + j, g * L0 / EAweb, qT + node)
+                    _g_axpy(GI, GC, GV, maxd, qRAW + j, g * L0 / ES, qT + node)
             else:  # L0 = q0 + q1·R³ of the unwind's radius + the printing variation in u
                 L0, dL0dR, dL0du, iU = _pitch_l0(j, rn, P, b, I, oSEI, oNI, W, oR, y)
-                h = g * (W[oT + node] / EAweb + 1.0)
+                L0 += dl0
+                h = g * (W[oT + node] / ES + 1.0)
                 W[oRAW + j] = h * L0 + P[b + SEP_OFF]
                 if jac:
-                    _g_axpy(GI, GC, GV, maxd, qRAW + j, g * L0 / EAweb, qT + node)
+                    _g_axpy(GI, GC, GV, maxd, qRAW + j, g * L0 / ES, qT + node)
                     _g_axpy(GI, GC, GV, maxd, qRAW + j, h * dL0dR, qR + rn)
                     if I[oSEI + j * NSEI + SEI_VN] > 0:
                         _g_add(GI, GC, GV, maxd, qRAW + j, iU, h * dL0du)
@@ -1067,6 +1071,29 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         for ch in range(1, I[H_NCH]):
             aux[m], _ = setpoint(I, P, ch, t)
             m += 1
+
+
+@njit(cache=True)
+def _pitch_material(span, rn, P, b, I):
+    """(E·A over the first roll's, relaxed-pitch offset [m]) of the web at the downstream end
+    of pitch span ``span``: those of the newest material joint whose lead has passed that node
+    and whose trail has not (both latched by the joint-pass events, so this is constant
+    between events), else the first roll's (1, SEP_DL0). An offset belongs to the rolls of
+    the sensor's unwind ``rn`` only."""
+    ratio = 1.0
+    dl0 = P[b + SEP_DL0]
+    u0 = -math.inf
+    oJP = I[H_OFF_JP]
+    for js in range(I[H_NJ]):
+        bj = oJP + js * NJP
+        if P[bj + JP_ACTIVE] == 0.0 or P[bj + JP_MAT] == 0.0:
+            continue
+        if int(P[bj + JP_SPAN]) > span and int(P[bj + JP_TSPAN]) <= span \
+                and P[bj + JP_U0] > u0:
+            u0 = P[bj + JP_U0]
+            ratio = P[bj + JP_RATIO]
+            dl0 = P[bj + JP_DL0] if int(P[bj + JP_NODE]) == rn else P[b + SEP_DL0]
+    return ratio, dl0
 
 
 @njit(cache=True)

@@ -68,9 +68,12 @@ NSEI = 6
 # sensor faults acting in the loop (set by the solver's fault actions): with dt = t - FT0,
 #   reading = (1 + GA + GB·dt + GC·exp(-dt/GTAU))·raw + BA + BB·dt + BC·exp(-dt/BTAU),
 # or the held value SV while STUCK; FON = 0 skips all of it
+# SEP_DL0 (pitch): relaxed-pitch offset of the web at the sensor while no material joint
+# (below) covers it, i.e. that of the roll on the unwind at t = 0
 (SEP_WIN, SEP_WOUT, SEP_GAIN, SEP_OFF, SEP_TAU, SEP_CIN, SEP_COUT, SEP_FON, SEP_FT0, SEP_BA,
- SEP_BB, SEP_BC, SEP_BTAU, SEP_GA, SEP_GB, SEP_GC, SEP_GTAU, SEP_STUCK, SEP_SV, SEP_Q1) = range(20)
-NSEP = 20
+ SEP_BB, SEP_BC, SEP_BTAU, SEP_GA, SEP_GB, SEP_GC, SEP_GTAU, SEP_STUCK, SEP_SV, SEP_Q1,
+ SEP_DL0) = range(21)
+NSEP = 21
 
 # ---- controller records ----
 C_SPEED, C_TENSION_TORQUE, C_TENSION_TRIM, C_DANCER = 1, 2, 3, 4
@@ -98,9 +101,12 @@ NMP = 37
 
 # ---- splice-joint slots (P only) ----
 # JP_SPAN: span holding the joint's lead (front); JP_TSPAN: span holding its trail (-1 while
-# the trail is still on the roll)
-(JP_ACTIVE, JP_U0, JP_LEN, JP_RATIO, JP_TBRK, JP_SPAN, JP_NODE, JP_TSPAN) = range(8)
-NJP = 8
+# the trail is still on the roll). JP_MAT: 1 for a material joint (the web of another roll,
+# or a modulus change: JP_RATIO is its E·A over the first roll's and JP_DL0 its relaxed-pitch
+# offset), 0 for a splice overlap
+(JP_ACTIVE, JP_U0, JP_LEN, JP_RATIO, JP_TBRK, JP_SPAN, JP_NODE, JP_TSPAN, JP_MAT,
+ JP_DL0) = range(10)
+NJP = 10
 
 # ---- fault parameter slots (P only): while FS_ON, the kernel sets, at every evaluation,
 #   P[FS_IDX] = FS_BASE + FS_A + FS_B·dt + FS_C·exp(-dt/FS_TAU),  dt = t - FS_T0

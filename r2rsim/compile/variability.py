@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..schema.line import pitch_unwind
 from ..schema.variability import CUT_SIGMAS, Spread, sensor_dimension
 
 #: spawn key (under the run's process stream) of the variability stream: far above the
@@ -30,8 +31,11 @@ from ..schema.variability import CUT_SIGMAS, Spread, sensor_dimension
 #: scenario does not change its variability draws
 VARIABILITY_KEY = 1 << 20
 
+#: drawn in this order, one draw each if varied (append only: an insertion would shift the
+#: draws of every run with the later parameters)
 _ROLL_PARAMETERS = (("modulus", "pressure", "Pa"), ("thickness", "length", "m"),
-                    ("outer_radius", "length", "m"), ("wound_in_strain", "dimensionless", ""))
+                    ("outer_radius", "length", "m"), ("wound_in_strain", "dimensionless", ""),
+                    ("relaxed_pitch", "length", "m"))
 
 #: the columns of variability.parquet, in order (run_id, then these)
 VARIABILITY_COLUMNS = ("source", "component", "roll", "parameter", "unit", "nominal", "value",
@@ -68,6 +72,10 @@ class RollDraws:
     web_thickness: float  # nominal thickness [m]
     web_width: float      # [m]
     rows: list = field(default_factory=list)
+    #: unwind id -> relaxed-pitch offset [m] of its roll at t = 0 (varied unwinds only)
+    pitch_offset0: dict = field(default_factory=dict)
+    #: pitch_length sensor id -> the offset of the web it reads at t = 0
+    sensor_pitch_offsets: dict = field(default_factory=dict)
     _count: dict = field(default_factory=dict)
 
     def roll_values(self, unwind: str, roll, t: float) -> dict[str, float]:
@@ -79,7 +87,8 @@ class RollDraws:
         spec = self.spec[unwind]
         e0 = roll.wound_in_coefficients()[0]
         nominal = {"modulus": self.web_modulus, "thickness": self.web_thickness,
-                   "outer_radius": roll.outer_radius, "wound_in_strain": e0}
+                   "outer_radius": roll.outer_radius, "wound_in_strain": e0,
+                   "relaxed_pitch": 0.0}
         out = {}
         for name, dim, unit in _ROLL_PARAMETERS:  # fixed order: one draw each, if varied
             spread = getattr(spec, name)
@@ -92,17 +101,18 @@ class RollDraws:
         return out
 
     def next_roll(self, unwind: str, roll, t: float):
-        """The roll a splice loads on ``unwind`` at ``t``: ``(roll, EA_ratio)``, the varied
-        copy of the nominal spare ``roll`` and its web's E·A over the first roll's (None when
-        the unwind's rolls do not vary)."""
+        """The roll a splice loads on ``unwind`` at ``t``: ``(roll, EA_ratio, pitch_offset)``,
+        the varied copy of the nominal spare ``roll``, its web's E·A over the first roll's
+        and its relaxed-pitch offset [m] (both None when its web does not vary: the web is the
+        first roll's)."""
         if unwind not in self.spec:
-            return roll, None
+            return roll, None, None
         v = self.roll_values(unwind, roll, t)
-        if "modulus" not in v and "thickness" not in v:
-            return apply_roll(roll, v), None
+        if not {"modulus", "thickness", "relaxed_pitch"} & v.keys():
+            return apply_roll(roll, v), None, None
         ea = (v.get("modulus", self.web_modulus) * v.get("thickness", self.web_thickness)
               * self.web_width)
-        return apply_roll(roll, v), ea / self.web_EA
+        return apply_roll(roll, v), ea / self.web_EA, v.get("relaxed_pitch")
 
 
 def apply_roll(roll, values: dict[str, float]):
@@ -188,21 +198,27 @@ def realise_variability(scenario, line, seed_sequence):
         if "modulus" in v or "thickness" in v:  # the first roll's web is the line's
             web = web.model_copy(update={"modulus": v.get("modulus", web.modulus),
                                          "thickness": v.get("thickness", web.thickness)})
+        if "relaxed_pitch" in v:
+            rolls.pitch_offset0[uid] = v["relaxed_pitch"]
+            for s in sensors:
+                if s.type == "pitch_length" and pitch_unwind(line, s) == uid:
+                    rolls.sensor_pitch_offsets[s.id] = v["relaxed_pitch"]
     rolls.web_EA = web.EA
     varied = line.model_copy(update={"web": web, "elements": elements, "sensors": sensors})
     return varied, rolls, rows
 
 
 def joint_slots_needed(scenario, line) -> int:
-    """Splice-joint slots the varied E·A of spliced rolls needs: two per unwind with a
-    splicer whose modulus or thickness varies (the material being paid out, and the one
-    before it while its web is still on the line)."""
+    """Splice-joint slots the varied web of spliced rolls needs: two per unwind with a
+    splicer whose modulus, thickness or relaxed pitch varies (the material being paid out,
+    and the one before it while its web is still on the line)."""
     var = scenario.variability
     if var is None:
         return 0
     n = 0
     for uid, r in var.rolls.items():
         e = line.element(uid)
-        if getattr(e, "splicer", None) is not None and (r.modulus or r.thickness):
+        if getattr(e, "splicer", None) is not None and (r.modulus or r.thickness
+                                                         or r.relaxed_pitch):
             n += 2
     return n

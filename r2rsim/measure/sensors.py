@@ -92,7 +92,7 @@ class MeasurementModel:
                 "rng": np.random.default_rng(child), "faults": mine,
                 "hist_t": np.zeros(0), "hist_v": np.zeros(0),
                 "record_loop_faults": [f for f, _ in mine if f.kind.acts == "loop"
-                                       and s.id not in in_loop],
+                                       and (s.id not in in_loop or f.record_only)],
                 "stuck_at": {},
                 "speed_col": (cl.aux_index(f"{_speed_node(cl, s)}.surface_speed_m_s")
                               if s.noise_per_speed > 0 else None),

@@ -193,6 +193,10 @@ class Fault(Strict):
         "is SI, a string may carry units ('5 N')")
     rate: Annotated[Frequency, Field(gt=0)] | None = Field(
         None, description="sensor.spike: mean number of spikes per second")
+    record_only: bool = Field(
+        False, description="a sensor fault that acts in the loop acts on the recorded "
+        "measurement only: a controller reading the sensor does not see it, and the process "
+        "is untouched (as when faults are injected into recorded data, thesis §3.5)")
     compose: Literal["superpose"] | None = Field(
         None, description="allow overlap with other faults on the same target that also "
         "declare it: offsets and drifts add, gain changes add, noise variances add")
@@ -211,6 +215,9 @@ class Fault(Strict):
                              f"{self.profile.shape}")
         if not ft.end and self.end is not None:
             raise ValueError(f"{self.type} lasts to the end of the run: leave out 'end'")
+        if self.record_only and not (ft.target == "sensor" and ft.acts == "loop"):
+            raise ValueError(f"record_only applies to sensor faults that act in the loop; "
+                             f"{self.type} acts on the {ft.acts}")
         if self.type == "sensor.drift" and self.profile.shape != "step":
             raise ValueError("a drift grows by itself: use a step profile")
         if self.end is not None and isinstance(self.onset, float) and self.end <= self.onset:

@@ -20,7 +20,7 @@ from ..errors import InputError, PlausibilityWarning
 from ..units import QuantityError
 from . import plausibility
 from .faults import check_faults, target_problem
-from .line import Line, draw_problem, torque_problem
+from .line import Line, draw_problem, pitch_unwind, torque_problem
 from .scenario import Scenario
 from .variability import sensor_dimension
 
@@ -655,15 +655,17 @@ def check_variability(scenario, line, file: str) -> None:
         return w
 
     unwinds = [e.id for e in line.elements if e.type == "unwind"]
-    material = [uid for uid, r in var.rolls.items() if r.modulus or r.thickness]
+    material = [uid for uid, r in var.rolls.items()
+                if r.modulus or r.thickness or r.relaxed_pitch]
     for uid, r in var.rolls.items():
         where = f"variability.rolls.{uid}"
         if uid not in unwinds:
             raise InputError(f"no unwind '{uid}' in the line (unwinds: "
                              f"{', '.join(unwinds) or 'none'})", file=file, path=where)
         if len(material) > 1 and uid == material[1]:
-            raise InputError("the web's modulus and thickness vary with the rolls of one "
-                             f"unwind only (already '{material[0]}')", file=file, path=where)
+            raise InputError("the web's modulus, thickness and relaxed pitch vary with the "
+                             f"rolls of one unwind only (already '{material[0]}')", file=file,
+                             path=where)
         e = line.element(uid)
         rolls = [e.roll] + ([e.spare_roll] if e.spare_roll is not None else [])
         checks = [("modulus", line.web.modulus, "pressure", 0.0, "0"),
@@ -682,6 +684,9 @@ def check_variability(scenario, line, file: str) -> None:
         if r.wound_in_strain is not None:
             width(r.wound_in_strain, 0.0, "dimensionless",
                   f"{where}.wound_in_strain.{r.wound_in_strain.key}")
+        if r.relaxed_pitch is not None:
+            _check_pitch_offset(line, uid, r.relaxed_pitch, width, file,
+                                f"{where}.relaxed_pitch.{r.relaxed_pitch.key}")
     sensors = {s.id: s for s in line.sensors}
     for sid, cal in var.sensors.items():
         where = f"variability.sensors.{sid}"
@@ -697,6 +702,22 @@ def check_variability(scenario, line, file: str) -> None:
         if cal.offset is not None:
             width(cal.offset, s.offset, sensor_dimension(line, s)[0],
                   f"{where}.offset.{cal.offset.key}")
+
+
+def _check_pitch_offset(line, uid, spread, width, file, path) -> None:
+    """A roll's relaxed-pitch offset needs a pitch_length sensor on the unwind's web, and
+    keeps every such sensor's L0 positive at the cut of a draw."""
+    readers = [s for s in line.sensors if s.type == "pitch_length" and pitch_unwind(line, s) == uid]
+    if not readers:
+        raise InputError(f"no pitch_length sensor reads the web of '{uid}' (a sensor reads "
+                         "the unwind of its relaxed_pitch_law, default the line's first "
+                         "element)", file=file, path=path)
+    w = width(spread, 0.0, "length", path)
+    for s in readers:
+        L0 = s.relaxed_pitch if s.relaxed_pitch is not None else s.relaxed_pitch_law.q0
+        if w >= 0.1 * L0:
+            raise InputError(f"the offset could reach {w:g} m, a tenth or more of sensor "
+                             f"'{s.id}''s relaxed pitch {L0:g} m", file=file, path=path)
 
 
 def json_schema(kind: str) -> str:

@@ -90,6 +90,10 @@ class RollVariability(Strict):
     wound_in_strain: Spread | None = Field(
         None, description="an offset on the roll's wound-in strain (the e0 of the roll's "
         "law; std or tolerance, since the nominal may be 0)")
+    relaxed_pitch: Spread | None = Field(
+        None, description="an offset [m] on the relaxed pitch L0 of the roll's printed web, "
+        "read by the pitch_length sensors on this unwind's web (std or tolerance); it "
+        "reaches a sensor with the roll's web")
 
 
 class SensorCalibration(Strict):
@@ -123,6 +127,10 @@ class Variability(Strict):
             if w is not None and w.relative:
                 raise ValueError(f"@variability.rolls.{eid}.wound_in_strain@ give std or "
                                  "tolerance (the nominal wound-in strain may be 0)")
+            p = r.relaxed_pitch
+            if p is not None and p.relative:
+                raise ValueError(f"@variability.rolls.{eid}.relaxed_pitch@ give std or "
+                                 "tolerance: the value is an offset on the sensors' L0 [m]")
         return self
 
 

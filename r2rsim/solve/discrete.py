@@ -64,7 +64,9 @@ from ..compile.layout import (
     H_OFF_SEI,
     H_OFF_SEP,
     JP_ACTIVE,
+    JP_DL0,
     JP_LEN,
+    JP_MAT,
     JP_NODE,
     JP_RATIO,
     JP_SPAN,
@@ -179,6 +181,9 @@ class DiscreteLogic:
         self.cl = cl
         self.rolls = rolls  # RollDraws: the varied rolls a splice loads (None: the spare)
         self.line = cl.line
+        # unwind node -> (E·A ratio, relaxed-pitch offset or None) of the material it pays
+        # out, while that differs from the first roll's (a material joint is open)
+        self._material: dict[int, tuple[float, float | None]] = {}
         self._queue: list[_Action] = []
         self._seq = 0
         self.splicing: dict[int, str] = {}   # unwind node -> phase
@@ -191,7 +196,8 @@ class DiscreteLogic:
         in_loop = loop_sensor_ids(cl.line)
         self._sensor_faults: dict[int, list] = {}
         for f in faults:
-            if f.kind.acts != "loop" or f.kind.target != "sensor" or f.target not in in_loop:
+            if f.kind.acts != "loop" or f.kind.target != "sensor" or f.target not in in_loop \
+                    or f.record_only:
                 continue
             j = sensor_idx[f.target]
             self._sensor_faults.setdefault(j, []).append(f)
@@ -539,9 +545,11 @@ class DiscreteLogic:
         if f.p(np.array([t]))[0] <= 0.0:
             return y
         k = self.cl.node_ids.index(f.target)
-        self._open_material(k, y[self._ni(k, NI_U)], 1.0 + f.magnitude,
+        ratio, dl0 = self._material.get(k, (1.0, None))
+        self._open_material(k, y[self._ni(k, NI_U)], ratio * (1.0 + f.magnitude),
                             f"fault '{f.id}': no splice-joint slot for the new material; "
-                            "compile the line with its faults (compile_line(..., faults=...))")
+                            "compile the line with its faults (compile_line(..., faults=...))",
+                            dl0)
         return y
 
     def _do_weak_splice(self, t, y, a, log):
@@ -551,16 +559,21 @@ class DiscreteLogic:
             self._weak_splice[self.cl.node_ids.index(f.target)] = f.magnitude
         return y
 
-    def _open_material(self, k: int, u_now: float, ea_ratio: float, no_slot: str) -> None:
-        """From ``u_now`` the unwind at node k pays out web of E·A x ``ea_ratio`` (a modulus
-        change, or a new roll's web): an open-ended joint, closed by the next roll change.
-        Raises ValueError(``no_slot``) when every joint slot is taken."""
+    def _open_material(self, k: int, u_now: float, ea_ratio: float, no_slot: str,
+                       dl0: float | None = None) -> None:
+        """From ``u_now`` the unwind at node k pays out web of E·A x ``ea_ratio`` (over the
+        first roll's; a modulus change, or a new roll's web) and relaxed-pitch offset ``dl0``
+        [m] (None: that of the first roll): an open-ended joint, closed by the next roll
+        change. Raises ValueError(``no_slot``) when every joint slot is taken."""
         slot = self._free_joint_slot()
         if slot is None:
             raise ValueError(no_slot)
+        self._material[k] = (ea_ratio, dl0)
         P = self.cl.P
         bj = self.cl.I[H_OFF_JP] + slot * NJP
         P[bj + JP_ACTIVE] = 1.0
+        P[bj + JP_MAT] = 1.0
+        P[bj + JP_DL0] = self._first_dl0(k) if dl0 is None else dl0
         P[bj + JP_U0] = u_now
         P[bj + JP_LEN] = OPEN_JOINT
         P[bj + JP_RATIO] = ea_ratio
@@ -568,6 +581,12 @@ class DiscreteLogic:
         P[bj + JP_SPAN] = float(k)
         P[bj + JP_TSPAN] = float(k) - 1.0
         P[bj + JP_NODE] = float(k)
+
+    def _first_dl0(self, k: int) -> float:
+        """Relaxed-pitch offset of the first roll of the unwind at node k (0: not drawn)."""
+        if self.rolls is None:
+            return 0.0
+        return self.rolls.pitch_offset0.get(self.cl.node_ids[k], 0.0)
 
     def _free_joint_slot(self) -> int | None:
         P, I = self.cl.P, self.cl.I
@@ -706,10 +725,10 @@ class DiscreteLogic:
         """Replace the expiring roll by a fresh spare roll; inject the splice joint."""
         e = self.line.elements[k]
         sp, new = e.splicer, e.spare_roll
-        ea_ratio, drawn = None, {}
+        ea_ratio, dl0, drawn = None, None, {}
         if self.rolls is not None:
             n_rows = len(self.rolls.rows)
-            new, ea_ratio = self.rolls.next_roll(e.id, new, t)
+            new, ea_ratio, dl0 = self.rolls.next_roll(e.id, new, t)
             drawn = {r["parameter"]: r["value"] for r in self.rolls.rows[n_rows:]}
         I, P = self.cl.I, self.cl.P
         web = self.line.web
@@ -759,6 +778,8 @@ class DiscreteLogic:
         if slot is not None:
             bj = I[H_OFF_JP] + slot * NJP
             P[bj + JP_ACTIVE] = 1.0
+            P[bj + JP_MAT] = 0.0
+            P[bj + JP_DL0] = 0.0
             P[bj + JP_U0] = u_now
             P[bj + JP_LEN] = sp.joint.length
             P[bj + JP_RATIO] = sp.joint.stiffness_ratio
@@ -769,8 +790,9 @@ class DiscreteLogic:
             P[bj + JP_SPAN] = float(k)
             P[bj + JP_TSPAN] = float(k) - 1.0
             P[bj + JP_NODE] = float(k)
+        self._material.pop(k, None)  # the new roll's web is the line's again, unless:
         if ea_ratio is not None:
-            self._open_material(k, u_now, ea_ratio, (
+            self._open_material(k, u_now, ea_ratio, dl0=dl0, no_slot=(
                 f"no splice-joint slot for the web of the roll loaded on '{e.id}'; compile "
                 "the line with extra_joint_slots=joint_slots_needed(scenario, line)"))
         log.append(Event(t, "splice", e.id, "swap",
