@@ -1,0 +1,73 @@
+"""The calibrated thesis set (issue 16 item 4; scenarios/thesis_realistic/, docs/dataset.md
+§9): its files are valid, its noise sits where the calibration put it, the test bed changes
+rolls often enough, and the regimes switch inside a run."""
+
+from __future__ import annotations
+
+import importlib.util
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from r2rsim import run_scenario
+from r2rsim.sweep import plan_sweep
+
+from conftest import REPO
+
+SET = REPO / "scenarios" / "thesis_realistic"
+
+
+def _calibration():
+    spec = importlib.util.spec_from_file_location(
+        "calibrate_thesis_realistic", REPO / "benchmarks" / "calibrate_thesis_realistic.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("sweep, n_runs", [("healthy.yaml", 80), ("faults.yaml", 210),
+                                           ("switching.yaml", 10), ("testbed_cycles.yaml", 6)])
+def test_the_sweeps_plan(sweep, n_runs):
+    plan = plan_sweep(SET / sweep)
+    assert len(plan.runs) == n_runs
+
+
+def test_local_residual_noise_is_calibrated_reduced():
+    """CI's reduced calibration: 3 + 3 seeds of 120 s in OC1. The full study (10 seeds of
+    300 s per condition, benchmarks/calibrate_thesis_realistic.py) measured σ = 4.46 N, i.e.
+    P05 = 1.46σ and P20 = 5.83σ; with six short runs the estimate is looser, so the band is
+    wider than the target's (1-1.5σ), but a sensor or disturbance change that halves or
+    doubles σ fails it."""
+    cal = _calibration()
+    m = cal.calibrate(fit_seeds=[2001, 2002, 2003], test_seeds=[2004, 2005, 2006],
+                      duration="120 s", workers=0, modes=["OC1"])["OC1"]
+    assert 0.9 < m["P05_sigmas"] < 2.5, m
+    assert 3.6 < m["P20_sigmas"] < 10.0, m
+
+
+@pytest.mark.slow
+def test_local_residual_noise_is_calibrated_full():
+    """The calibration target on fresh seeds (not those of the calibration): a 5 % fault
+    1-1.5σ (to 1.8σ in OC2, the noisier regime only by little) and a 20 % fault 4-7σ."""
+    cal = _calibration()
+    for mode, m in cal.calibrate(fit_seeds=range(3001, 3006), test_seeds=range(3006, 3011),
+                                 workers=2).items():
+        assert 1.0 < m["P05_sigmas"] < 1.8, (mode, m)
+        assert 4.0 < m["P20_sigmas"] < 7.2, (mode, m)
+
+
+def test_testbed_changes_rolls_that_differ(tmp_path):
+    out = run_scenario(SET / "testbed.yaml", tmp_path / "tb").output
+    events = pq.read_table(out / "events.parquet").to_pandas()
+    swaps = events[(events.kind == "splice") & (events.state == "swap")]
+    assert len(swaps) >= 7
+    v = pq.read_table(out / "variability.parquet").to_pandas()
+    strain = v[v.parameter == "wound_in_strain"].set_index("roll").value
+    assert len(strain) == len(swaps) + 1 and strain.nunique() == len(strain)
+    s = pq.read_table(next((out / "samples").glob("*/part-0.parquet")),
+                      columns=["meas.speed_unwind.speed_rad_s",
+                               "meas.speed_drive4.speed_rad_s"]).to_pandas()
+    # the inputs of the Ch. 2 model are measured: the driven roller at 0.5 m/s / 0.1 m
+    assert abs(np.nanmedian(s["meas.speed_drive4.speed_rad_s"]) - 5.0) < 0.05
+    assert np.nanmax(s["meas.speed_unwind.speed_rad_s"]) > 5.0
