@@ -325,6 +325,16 @@ def _ratio(num: float, den: float) -> float:
     return num / den if den > 0 else math.nan
 
 
+def _pooled(counts) -> float:
+    """Summed hits over summed totals of (hits, total) pairs, pooled over runs (nan if
+    the totals are 0)."""
+    hits = total = 0
+    for h, n in counts:
+        hits += h
+        total += n
+    return _ratio(hits, total)
+
+
 def far(runs: Sequence[RunData]) -> FarResult:
     """M1: sample false-alarm rate, in the strata FAR_ff and FAR_pre.
 
@@ -433,12 +443,7 @@ def detection_rate(runs: Sequence[RunData]) -> float:
         runs (nan if there is none). Samples inside the window where an intermittent fault is
         momentarily inactive count, as in the §5.2 formula.
     """
-    hits = total = 0
-    for r in _faulty_runs(runs):
-        h, n = window_counts(r)
-        hits += h
-        total += n
-    return _ratio(hits, total)
+    return _pooled(window_counts(r) for r in _faulty_runs(runs))
 
 
 def window_counts(run: RunData) -> tuple[int, int]:
@@ -494,12 +499,7 @@ def steady_detection_rate(runs: Sequence[RunData]) -> float:
     float
         The rate (nan when no scored sample has severity 1).
     """
-    hits = total = 0
-    for r in runs:
-        h, n = steady_counts(r)
-        hits += h
-        total += n
-    return _ratio(hits, total)
+    return _pooled(steady_counts(r) for r in runs)
 
 
 def steady_detection(run: RunData, m: int = 1, h: float = 0.0) -> RunDetection | None:
@@ -1041,12 +1041,7 @@ def isolation_accuracy(runs: Sequence[RunData]) -> float:
         return math.nan
     if not all(has):
         raise ValueError("some faulty runs have a diagnosis and some do not")
-    hits = total = 0
-    for r in faulty:
-        h, n = isolation_counts(r)
-        hits += h
-        total += n
-    return _ratio(hits, total)
+    return _pooled(isolation_counts(r) for r in faulty)
 
 
 def isolation_counts(run: RunData) -> tuple[int, int]:
@@ -1131,12 +1126,7 @@ def hit_at_n(runs: Sequence[RunData], n: int = 1, m: int = 1, h: float = 0.0) ->
     float
         hit@n in [0, 1]; nan when no run qualifies.
     """
-    hits = total = 0
-    for r in runs:
-        a, b = run_hit(r, n, m, h)
-        hits += a
-        total += b
-    return _ratio(hits, total)
+    return _pooled(run_hit(r, n, m, h) for r in runs)
 
 
 def localization_counts(run: RunData, n: int = 1) -> tuple[int, int]:

@@ -716,8 +716,8 @@ def _check_pitch_offset(line, uid, spread, width, file, path) -> None:
     for s in readers:
         L0 = s.relaxed_pitch if s.relaxed_pitch is not None else s.relaxed_pitch_law.q0
         if w >= 0.1 * L0:
-            raise InputError(f"the offset could reach {w:g} m, a tenth or more of sensor "
-                             f"'{s.id}''s relaxed pitch {L0:g} m", file=file, path=path)
+            raise InputError(f"the offset could reach {w:g} m, a tenth or more of the "
+                             f"relaxed pitch {L0:g} m of sensor '{s.id}'", file=file, path=path)
 
 
 def json_schema(kind: str) -> str:
