@@ -330,7 +330,8 @@ def execute(plan: RunPlan, out: str | Path, *, run_id: str | None = None, progre
                       joint_slots_needed(scenario, line), nominal_web=declared_web,
                       pitch_offsets=rolls.sensor_pitch_offsets if rolls else None)
     init = scenario.initial
-    y_nom = nominal_state(cl, init.tension, init.span_tension)
+    y_nom = nominal_state(cl, init.tension, init.span_tension, init.slack, init.position,
+                          file=plan.source)
     for d in disturbances:  # an out-of-round roller starts at a random angle
         if d.type == "out_of_round":
             y_nom[cl.index(f"{d.element}.angle")] = d.phase

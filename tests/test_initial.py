@@ -82,3 +82,56 @@ def test_run_says_when_no_steady_state_is_found(tmp_path, repo, capsys):
                  str(tmp_path / "qs"), "-q", "--duration", "0.5"]) == 0
     cap = capsys.readouterr()
     assert "warning" not in cap.err.lower() and "WARNING" not in cap.out
+
+
+STARTUP = "scenarios/thesis_realistic/testbed_startup.yaml"
+
+
+def _startup_variant(tmp_path, repo, initial: str, name="s.yaml"):
+    """The test-bed start-up scenario with another ``initial`` block (flow style)."""
+    text = (repo / STARTUP).read_text()
+    head, rest = text.split("initial:\n", 1)
+    rest = rest.split("programme:\n", 1)[1]
+    text = head.replace("../../lines/", str(repo / "lines") + "/") + \
+        f"initial: {initial}\nprogramme:\n" + rest
+    return write(tmp_path / name, text)
+
+
+def test_slack_start_closed_form(repo):
+    """initial.slack: a span's strain starts at -slack/L (0 N); initial.position puts the
+    dancer there, at rest; spans without slack keep the nominal tension."""
+    scen, line, _ = r2rsim.load_scenario(repo / STARTUP)
+    cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(line, scen.programme))
+    init = scen.initial
+    assert init.position["dancer"] == pytest.approx(np.radians(-44.0), rel=1e-12)
+    y = r2rsim.nominal_state(cl, init.tension, init.span_tension, init.slack, init.position)
+    aux = cl.outputs(0.0, y[None, :])[0]
+    for sid, extra in init.slack.items():
+        length = aux[cl.aux_index(f"{sid}.length_m")]
+        assert y[cl.index(f"{sid}.strain")] == pytest.approx(-extra / length, rel=1e-12)
+        assert aux[cl.aux_index(f"{sid}.tension_N")] == 0.0
+    assert y[cl.index("dancer.position")] == init.position["dancer"]
+    assert y[cl.index("dancer.velocity")] == 0.0
+    assert y[cl.index("span8.strain")] == 0.0  # not slack: at the nominal 0 N
+
+
+@pytest.mark.parametrize("initial, path, words", [
+    ("{state: steady, slack: {span1: 5 cm}}", "initial", "state: nominal"),
+    ("{state: nominal, slack: {nope: 5 cm}}", "initial.slack.nope", "no span 'nope'"),
+    ("{state: nominal, slack: {span1: -5 cm}}", "initial.slack.span1", "must be > 0"),
+    ("{state: nominal, slack: {span1: 5 N}}", "initial.slack.span1", "length"),
+    ("{state: nominal, slack: {span1: 0.6 m}}", "initial.slack.span1", "half the span"),
+    ("{state: nominal, position: {s2a: 0.1}}", "initial.position.s2a", "no dancer or festoon"),
+    ("{state: nominal, position: {dancer: -45 deg}}", "initial.position.dancer",
+     "strictly inside"),
+    ("{state: nominal, position: {dancer: 5 cm}}", "initial.position.dancer", "angle"),
+    ("{state: nominal, position: {dancer: .nan}}", "initial.position.dancer", "finite"),
+])
+def test_bad_slack_or_position(tmp_path, repo, capsys, initial, path, words):
+    scen = _startup_variant(tmp_path, repo, initial)
+    out = tmp_path / "out"
+    assert main(["run", str(scen), "-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("error") == 1, err
+    assert str(scen) in err and path in err and words in err, err
+    assert not out.exists()

@@ -71,3 +71,24 @@ def test_testbed_changes_rolls_that_differ(tmp_path):
     # the inputs of the Ch. 2 model are measured: the driven roller at 0.5 m/s / 0.1 m
     assert abs(np.nanmedian(s["meas.speed_drive4.speed_rad_s"]) - 5.0) < 0.05
     assert np.nanmax(s["meas.speed_unwind.speed_rad_s"]) > 5.0
+
+
+def test_testbed_startup_gives_censored_load_cell_readings(tmp_path):
+    """The start-up from a slack-threaded web (issue 16 item 4): the stage-2 load cell,
+    ranged at 0 N, reads exactly 0 N with its clipped flag while the slack is taken up, and
+    never once production runs."""
+    from r2rsim.dataset.validate import validate_dataset
+    out = run_scenario(SET / "testbed_startup.yaml", tmp_path / "su").output
+    assert validate_dataset(out) == []
+    s = pq.read_table(next((out / "samples").glob("*/part-0.parquet")),
+                      columns=["t_s", "meas.lc_stage2.tension_N", "flag.lc_stage2.clipped",
+                               "state.span3.tension_N", "label.mode"]).to_pandas()
+    clipped = s["flag.lc_stage2.clipped"].to_numpy()
+    assert clipped.sum() >= 20  # measured 46-50 over seeds 1-4
+    assert np.all(s["meas.lc_stage2.tension_N"][clipped] == 0.0)
+    assert np.all(s["meas.lc_stage2.tension_N"][~clipped].dropna() > 0.0)
+    # the censored samples are the start-up's, while the web was slack
+    assert s.t_s[clipped].max() < 5.0
+    assert s["state.span3.tension_N"].iloc[0] == 0.0
+    production = (s["label.mode"] == "production").to_numpy()
+    assert production.any() and not clipped[production].any()

@@ -17,10 +17,10 @@ from pydantic import ValidationError
 
 from .. import limits
 from ..errors import InputError, PlausibilityWarning
-from ..units import QuantityError
+from ..units import QuantityError, parse_quantity
 from . import plausibility
 from .faults import check_faults, target_problem
-from .line import Line, draw_problem, pitch_unwind, torque_problem
+from .line import DANCERS, Line, draw_problem, pitch_unwind, torque_problem
 from .scenario import Scenario
 from .variability import sensor_dimension
 
@@ -562,10 +562,41 @@ def check_scenario_against_line(scenario: Scenario, line: Line, file: str) -> No
     check_disturbances(scenario, line, file)
     check_variability(scenario, line, file)
     span_ids = {s.id for s in line.spans}
-    for sid in scenario.initial.span_tension:
-        if sid not in span_ids:
-            raise InputError(f"no span '{sid}' in the line", file=file,
-                             path=f"initial.span_tension.{sid}")
+    for key in ("span_tension", "slack"):
+        for sid in getattr(scenario.initial, key):
+            if sid not in span_ids:
+                raise InputError(f"no span '{sid}' in the line", file=file,
+                                 path=f"initial.{key}.{sid}")
+    _check_initial_positions(scenario, line, file)
+
+
+def _check_initial_positions(scenario, line, file: str) -> None:
+    """``initial.position``: a dancer or festoon, in its unit, strictly inside its stops (a
+    mover started on a stop would not latch there). Converts the values to SI in place."""
+    for mid, value in scenario.initial.position.items():
+        path = f"initial.position.{mid}"
+        el = next((e for e in line.elements if e.id == mid and e.type in DANCERS), None)
+        sp = next((s for s in line.spans if s.id == mid and s.festoon is not None), None)
+        if el is None and sp is None:
+            movers = [e.id for e in line.elements if e.type in DANCERS] + [
+                s.id for s in line.spans if s.festoon is not None]
+            raise InputError(f"no dancer or festoon named '{mid}' (known: "
+                             f"{', '.join(movers) or 'none'})", file=file, path=path)
+        if el is not None and el.type == "pivot_dancer":
+            dim, (lo, hi), what = "angle", el.angle_range, "angle_range"
+        elif el is not None:
+            dim, (lo, hi), what = "length", el.travel_range, "travel_range"
+        else:
+            dim, (lo, hi), what = "length", sp.festoon.stroke, "stroke"
+        try:
+            q = parse_quantity(value, dim)
+        except QuantityError as exc:
+            raise InputError(str(exc), file=file, path=path) from None
+        if not lo < q < hi:
+            raise InputError(f"{q:g} is not strictly inside the end stops [{lo:g}, {hi:g}] "
+                             f"({what}, SI units); a start on a stop would not latch there",
+                             file=file, path=path)
+        scenario.initial.position[mid] = q
 
 
 def _sines_top(d, v_max: float) -> float:

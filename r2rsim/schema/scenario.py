@@ -102,6 +102,21 @@ class Initial(Strict):
         "tension set-point, else 0"
     )
     span_tension: dict[Id, Annotated[Force, Field(ge=0)]] = Field(default_factory=dict)
+    slack: dict[Id, Annotated[Length, Field(gt=0)]] = Field(
+        default_factory=dict, description="nominal mode: web [m] a span holds beyond its taut "
+        "length, by span id (less than half the span): the span starts slack, at 0 N, as a "
+        "web threaded slack before a start-up")
+    position: dict[Id, NumberOrText] = Field(
+        default_factory=dict, description="nominal mode: position at t = 0 of a dancer or "
+        "festoon carriage, by id (arm angle for a pivot dancer, travel [m] otherwise), strictly "
+        "inside its end stops; default the line's initial position")
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.state == "steady" and (self.slack or self.position):
+            raise ValueError("slack and position set a nominal start; give state: nominal "
+                             "(a steady state has no slack and fixes the dancer positions)")
+        return self
 
 
 class SolverOptions(Strict):

@@ -19,14 +19,38 @@ from ..compile.layout import (
     NCI,
     NCP,
 )
+from ..errors import InputError
 
 
 def nominal_state(cl: CompiledLine, tension: float | None = None,
-                  span_tension: dict[str, float] | None = None) -> np.ndarray:
+                  span_tension: dict[str, float] | None = None,
+                  slack: dict[str, float] | None = None,
+                  position: dict[str, float] | None = None,
+                  file: str | None = None) -> np.ndarray:
     """All nodes at the t = 0 line speed (times their draw), every span at ``tension``.
 
     Drive torques and speed-loop integrators are set so that every roller is in torque
     balance; tension-loop integrators so that their torque matches.
+
+    Parameters
+    ----------
+    cl : CompiledLine
+    tension : float, optional
+        Tension of every span [N]; default the first tension set-point, else 0.
+    span_tension : dict, optional
+        Tension [N] by span id, overriding ``tension``.
+    slack : dict, optional
+        Web [m] a span holds beyond its taut length, by span id: its strain starts at
+        ``-slack/L`` (0 N). At most half the span's length at the t = 0 positions.
+    position : dict, optional
+        Position [rad or m, SI] of a dancer or festoon carriage at t = 0, by id.
+    file : str, optional
+        The scenario file, named in the message of a slack that does not fit.
+
+    Raises
+    ------
+    InputError
+        When a slack is not below half its span's length.
     """
     line = cl.line
     y = np.zeros(cl.n_states)
@@ -80,7 +104,16 @@ def nominal_state(cl: CompiledLine, tension: float | None = None,
             y[ix] = u / ki
     # dancers and festoon carriages at their initial positions, at rest
     for mid, q0 in zip(cl.mover_ids, cl.mover_q0, strict=True):
-        y[cl.index(f"{mid}.position")] = q0
+        y[cl.index(f"{mid}.position")] = (position or {}).get(mid, q0)
+    if slack:
+        aux = cl.outputs(0.0, y[None, :])[0]
+        for sid, extra in slack.items():
+            length = aux[cl.aux_index(f"{sid}.length_m")]
+            if not extra < 0.5 * length:
+                raise InputError(f"{extra:g} m of slack is not below half the span's length "
+                                 f"({length:g} m at t = 0)", file=file,
+                                 path=f"initial.slack.{sid}")
+            y[cl.index(f"{sid}.strain")] = -extra / length
     # sensor filters start at their input
     for _ in range(2):
         aux = cl.outputs(0.0, y[None, :])[0]
