@@ -27,7 +27,8 @@ def _calibration():
 
 
 @pytest.mark.parametrize("sweep, n_runs", [("healthy.yaml", 80), ("faults.yaml", 210),
-                                           ("switching.yaml", 10), ("testbed_cycles.yaml", 6)])
+                                           ("switching.yaml", 10), ("testbed_cycles.yaml", 6),
+                                           ("faults_p2.yaml", 105)])
 def test_the_sweeps_plan(sweep, n_runs):
     plan = plan_sweep(SET / sweep)
     assert len(plan.runs) == n_runs

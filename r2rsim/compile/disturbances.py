@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from statistics import NormalDist
 
 import numpy as np
 
@@ -109,10 +110,29 @@ def _ar1(rng, n: int, a: float, std: float) -> np.ndarray:
 def _sines(rng, std: float, f_c: float):
     """Amplitudes, angular frequencies and phases of a sum of :data:`N_SINES` sinusoids with
     the first-order spectrum of corner ``f_c`` cut off at ``CUTOFF·f_c`` (module docstring)."""
-    n = N_SINES
-    top = math.atan(CUTOFF)
-    theta = (np.arange(n) + rng.uniform(0.0, 1.0, n)) * (top / n)
-    omegas = 2.0 * math.pi * f_c * np.tan(theta)
+    return _spectral_terms(rng, N_SINES, std, "first_order", f_c)
+
+
+def _spectral_terms(rng, n: int, std: float, spectrum: str, scale: float):
+    """The ``n`` terms (amplitudes, angular frequencies, phases) of a random sum of
+    sinusoids of standard deviation ``std``: equal amplitudes ``std·sqrt(2/n)`` (so the mean
+    square of every realisation is std²), frequencies stratified over the spectrum's
+    probability (one per stratum), uniform phases. The one representation behind the
+    process disturbances and the pitch_length printing variation.
+
+    ``spectrum``: ``"first_order"`` (the Lorentzian of corner ``scale`` = f_c, cut off at
+    :data:`CUTOFF`·f_c: correlation close to exp(-2·pi·f_c·|lag|)), or ``"gaussian"``
+    (``scale`` = ℓ: correlation exp(-(lag/ℓ)²), the angular frequency sqrt(2)·z/ℓ with z
+    half-normal).
+    """
+    strata = np.arange(n) + rng.uniform(0.0, 1.0, n)
+    if spectrum == "first_order":
+        top = math.atan(CUTOFF)
+        omegas = 2.0 * math.pi * scale * np.tan(strata * (top / n))
+    else:
+        inv = NormalDist().inv_cdf
+        z = np.array([inv(0.5 + 0.5 * min(p, 1.0 - 1e-12)) for p in strata / n])
+        omegas = math.sqrt(2.0) * z / scale
     phases = rng.uniform(0.0, 2.0 * math.pi, n)
     return np.full(n, std * math.sqrt(2.0 / n)), omegas, phases
 
@@ -205,11 +225,11 @@ def realise_pitch_variations(line, seed_sequence) -> dict[str, np.ndarray]:
 
     The variation of the relaxed pitch along the web is the band-limited sum
     ``sum_m a·cos(kappa_m·u + phi_m)`` of :data:`PITCH_VARIATION_TERMS` cosines in the
-    unwound length u [m], with ``a = std·sqrt(2/M)`` (its variance over a long record is
-    exactly ``std²``), uniform phases and wavenumbers kappa_m = sqrt(2)·z_m/ℓ, z_m drawn
-    stratified from the half-normal distribution (one per probability stratum), so that its
-    correlation ``mean_m cos(kappa_m·Δ)`` follows ``exp(-(Δ/ℓ)²)`` closely. It is smooth (no
-    knots for the stiff solver to resolve).
+    unwound length u [m], drawn as the disturbances' sums are (:func:`_spectral_terms`) with
+    a Gaussian spectrum: ``a = std·sqrt(2/M)`` (its variance over a long record is exactly
+    ``std²``), uniform phases and wavenumbers kappa_m = sqrt(2)·z_m/ℓ, z_m stratified from the
+    half-normal distribution, so that its correlation ``mean_m cos(kappa_m·Δ)`` follows
+    ``exp(-(Δ/ℓ)²)`` closely. It is smooth (no knots for the stiff solver to resolve).
 
     Parameters
     ----------
@@ -224,8 +244,6 @@ def realise_pitch_variations(line, seed_sequence) -> dict[str, np.ndarray]:
     dict
         Sensor id -> array (M, 3) of (amplitude [m], wavenumber [rad/m], phase [rad]).
     """
-    from statistics import NormalDist
-
     sensors = [(j, s) for j, s in enumerate(line.sensors)
                if s.type == "pitch_length" and s.pitch_variation is not None]
     # a fixed spawn key per sensor (not the next spawn() after the disturbances'), so adding
@@ -234,16 +252,11 @@ def realise_pitch_variations(line, seed_sequence) -> dict[str, np.ndarray]:
     children = [np.random.SeedSequence(ss.entropy, spawn_key=(*ss.spawn_key,
                                                               PITCH_VARIATION_KEY, j))
                 for j, _ in sensors]
-    inv = NormalDist().inv_cdf
-    m_terms = PITCH_VARIATION_TERMS
     out = {}
     for (_, s), child in zip(sensors, children, strict=True):
-        rng = np.random.default_rng(child)
         pv = s.pitch_variation
-        strata = (np.arange(m_terms) + rng.random(m_terms)) / m_terms
-        z = np.array([inv(0.5 + 0.5 * min(p, 1.0 - 1e-12)) for p in strata])
-        kappa = math.sqrt(2.0) * z / pv.correlation_length
-        phase = rng.uniform(0.0, 2.0 * math.pi, m_terms)
-        amp = np.full(m_terms, pv.std * math.sqrt(2.0 / m_terms))
+        amp, kappa, phase = _spectral_terms(np.random.default_rng(child),
+                                            PITCH_VARIATION_TERMS, pv.std, "gaussian",
+                                            pv.correlation_length)
         out[s.id] = np.column_stack([amp, kappa, phase])
     return out

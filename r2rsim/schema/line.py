@@ -511,8 +511,9 @@ class PitchVariation(Strict):
 
     std: Annotated[Length, Field(gt=0)] = Field(description="standard deviation of L0 [m]")
     correlation_length: Annotated[Length, Field(ge=1e-3)] = Field(
-        description="correlation length ℓ along the web [m] (correlation 1/e at lag ℓ); at "
-        "least 1 mm")
+        description="correlation length ℓ along the web [m] (correlation 1/e at lag ℓ, as "
+        "for a wound_in_strain disturbance, whose correlation is exponential where this one "
+        "is Gaussian); at least 1 mm")
 
 
 class PitchLength(Strict):
