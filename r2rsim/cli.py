@@ -296,6 +296,27 @@ def _cmd_bench(args) -> int:
     return 0
 
 
+def _cmd_report(args) -> int:
+    from .report import write_report
+
+    out = write_report(args.results, output=args.output, datasets=args.data)
+    print(f"report written: {out}")
+    return 0
+
+
+def _add_report_parser(sub) -> None:
+    rp = sub.add_parser("report", help="write a self-contained HTML report (tables and "
+                        "figures) of a diagnose or bench results directory")
+    rp.add_argument("results", metavar="RESULTS_DIR",
+                    help="written by `r2rsim diagnose -o` or `r2rsim bench -o`")
+    rp.add_argument("-o", "--output", help="HTML file (default: RESULTS_DIR/report.html); "
+                    "an existing file is replaced only if it is an r2rsim report")
+    rp.add_argument("--data", nargs="+", metavar="DATASET",
+                    help="the test datasets a diagnose result was scored on: adds ROC/PR "
+                    "curves and the statistic of a few runs")
+    rp.set_defaults(func=_cmd_report)
+
+
 def _cmd_validate(args) -> int:
     from .schema import load_line, load_scenario, read_yaml
 
@@ -543,6 +564,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--no-verify", action="store_true",
                    help="reuse --workdir datasets without checking their checksums")
     b.set_defaults(func=_cmd_bench)
+
+    _add_report_parser(sub)
 
     ls = sub.add_parser("list", help="list element, sensor, controller or fault types, "
                         "diagnostic plug-ins, or the channels of a line")

@@ -10,3 +10,9 @@ plot`` and ``r2rsim report`` commands save them.
 from ._mpl import require_matplotlib
 
 __all__ = ["require_matplotlib"]
+
+# -- diagnostics results (r2rsim diagnose / bench): figures and the HTML report --------------
+from ._diagnostics import plot_mdm, plot_metric, plot_roc_pr, plot_statistic  # noqa: E402
+from ._html import write_report  # noqa: E402
+
+__all__ += ["plot_mdm", "plot_metric", "plot_roc_pr", "plot_statistic", "write_report"]
