@@ -10,3 +10,11 @@ plot`` and ``r2rsim report`` commands save them.
 from ._mpl import require_matplotlib
 
 __all__ = ["require_matplotlib"]
+
+# ---- run and sweep figures (r2rsim plot) ----
+from ._data import decimate_minmax  # noqa: E402
+from ._run import plot_run  # noqa: E402
+from ._sweep import plot_sweep  # noqa: E402
+
+__all__ += ["decimate_minmax", "plot_run", "plot_sweep"]
+# ---- end of run and sweep figures ----
