@@ -17,9 +17,6 @@ import pyarrow.parquet as pq
 from ..dataset.read import is_dataset_dir
 from ..errors import InputError
 
-#: rows per streamed batch: a few MB per column, whatever the run length
-BATCH_ROWS = 1 << 17
-
 
 def decimate_minmax(t, y, n_buckets: int, t_range: tuple[float, float] | None = None):
     """Thin a time series for display, keeping each bucket's smallest and largest sample.
@@ -101,6 +98,7 @@ class RunData:
     root: Path
     run_id: str
     files: list[Path]
+    metas: list[pq.FileMetaData]  # the files' footers
     columns: list[str]  # numeric sample columns, in file order
     t_start: float
     t_end: float
@@ -142,32 +140,39 @@ def resolve_run(root: Path, run_id: str | None) -> str:
 
 
 def open_run(root: Path, run_id: str) -> RunData:
-    """Locate the run's samples and read their schema and time span (metadata only)."""
+    """Locate the run's samples and read their footers: schema, row-group statistics."""
     files = sample_files(root, run_id)
     if not files:
         raise InputError(f"dataset {root}: run {run_id} has no samples (samples/run_id="
                          f"{run_id}/part-*.parquet)")
-    schema = pq.read_schema(files[0])
-    numeric = [f.name for f in schema if f.name not in ("k", "t_s") and (
-        pa.types.is_floating(f.type) or pa.types.is_integer(f.type)
-        or pa.types.is_boolean(f.type))]
-    t_lo, t_hi = _column_range(files, "t_s")
-    return RunData(root, run_id, files, numeric, t_lo, t_hi)
+    metas = [pq.read_metadata(f) for f in files]
+    numeric = [f.name for f in metas[0].schema.to_arrow_schema()
+               if f.name not in ("k", "t_s") and (pa.types.is_floating(f.type)
+                                                  or pa.types.is_integer(f.type)
+                                                  or pa.types.is_boolean(f.type))]
+    run = RunData(root, run_id, files, metas, numeric, np.nan, np.nan)
+    run.t_start, run.t_end = _column_range(run, "t_s")
+    return run
 
 
-def _column_range(files: list[Path], column: str) -> tuple[float, float]:
-    """Smallest and largest value of a column over the files, from the row-group statistics
+def _stats(meta: pq.FileMetaData, column: str) -> list:
+    """The statistics of a top-level column in each row group (None where missing)."""
+    # leaf columns, not Arrow fields: a list column (label.fault_ids) has its own paths
+    leaf = next(i for i in range(meta.num_columns) if meta.schema.column(i).path == column)
+    out = []
+    for g in range(meta.num_row_groups):
+        st = meta.row_group(g).column(leaf).statistics
+        out.append(st if st is not None and st.has_min_max else None)
+    return out
+
+
+def _column_range(run: RunData, column: str) -> tuple[float, float]:
+    """Smallest and largest value of a column in the run, from the row-group statistics
     (NaN, NaN when a row group has none)."""
-    lo, hi = np.inf, -np.inf
-    for f in files:
-        meta = pq.ParquetFile(f).metadata
-        j = meta.schema.to_arrow_schema().get_field_index(column)
-        for g in range(meta.num_row_groups):
-            st = meta.row_group(g).column(j).statistics
-            if st is None or not st.has_min_max:
-                return np.nan, np.nan
-            lo, hi = min(lo, float(st.min)), max(hi, float(st.max))
-    return lo, hi
+    stats = [st for meta in run.metas for st in _stats(meta, column)]
+    if not stats or any(st is None for st in stats):
+        return np.nan, np.nan
+    return min(float(st.min) for st in stats), max(float(st.max) for st in stats)
 
 
 def constant_columns(run: RunData, columns: list[str]) -> set[str]:
@@ -175,7 +180,7 @@ def constant_columns(run: RunData, columns: list[str]) -> set[str]:
     row-group statistics without reading the data."""
     out = set()
     for c in columns:
-        lo, hi = _column_range(run.files, c)
+        lo, hi = _column_range(run, c)
         if lo == hi:
             out.add(c)
     return out
@@ -219,36 +224,29 @@ def run_rows(root: Path, name: str, run_id: str) -> pd.DataFrame:
     return df.reset_index(drop=True)
 
 
-def _row_groups_in(f: pq.ParquetFile, t0: float, t1: float) -> list[int]:
+def _row_groups_in(meta: pq.FileMetaData, t0: float, t1: float) -> list[int]:
     """Row groups of a file that may hold samples with t0 <= t_s <= t1."""
-    j = f.schema_arrow.get_field_index("t_s")
-    out = []
-    for g in range(f.metadata.num_row_groups):
-        st = f.metadata.row_group(g).column(j).statistics
-        if st is None or not st.has_min_max or (st.max >= t0 and st.min <= t1):
-            out.append(g)
-    return out
+    return [g for g, st in enumerate(_stats(meta, "t_s"))
+            if st is None or (st.max >= t0 and st.min <= t1)]
 
 
 def iter_window(run: RunData, columns: list[str], t0: float, t1: float):
-    """Yield ``(t, {column: values})`` chunks of the samples with t0 <= t_s <= t1, reading
-    only these columns and only the row groups that overlap the window."""
-    for path in run.files:
-        f = pq.ParquetFile(path)
-        groups = _row_groups_in(f, t0, t1)
-        if not groups:
-            continue
-        for batch in f.iter_batches(batch_size=BATCH_ROWS, row_groups=groups,
-                                    columns=["t_s", *columns]):
-            t = batch.column(0).to_numpy(zero_copy_only=False)
+    """Yield ``(t, {column: values})`` per row group of the samples with t0 <= t_s <= t1,
+    reading only these columns and only the row groups that overlap the window (a row
+    group is about 16 MB of all columns, so a chunk is a few MB)."""
+    for path, meta in zip(run.files, run.metas, strict=True):
+        f = pq.ParquetFile(path, metadata=meta)
+        for g in _row_groups_in(meta, t0, t1):
+            table = f.read_row_group(g, columns=["t_s", *columns])
+            pa.default_memory_pool().release_unused()  # keep the process small on long runs
+            t = table.column(0).to_numpy()
             inside = (t >= t0) & (t <= t1)
-            if not inside.any():
-                continue
-            yield t[inside], {c: _floats(batch.column(i + 1))[inside]
-                              for i, c in enumerate(columns)}
+            if inside.any():
+                yield t[inside], {c: _floats(table.column(i + 1))[inside]
+                                  for i, c in enumerate(columns)}
 
 
-def _floats(arr: pa.Array) -> np.ndarray:
+def _floats(arr: pa.ChunkedArray) -> np.ndarray:
     """A numeric Arrow column as float64 (nulls as NaN)."""
     return arr.cast(pa.float64()).to_numpy(zero_copy_only=False)
 
