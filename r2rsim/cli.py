@@ -459,7 +459,8 @@ def _add_plot_parser(sub) -> None:
         "axes per quantity, fault windows shaded, events marked. With --sweep CHANNEL: the "
         "statistic of CHANNEL per run against a sweep axis. Without -o the figure goes to "
         "plot.png in the current directory (an existing file there is replaced).")
-    pl.add_argument("dataset")
+    pl.add_argument("dataset", metavar="DATASET", help="dataset directory (r2rsim run or "
+                    "sweep)")
     pl.add_argument("--run", metavar="ID", help="run id (default: the first run)")
     pl.add_argument("--channels", nargs="+", metavar="GLOB",
                     help="column globs, e.g. 'state.span*.tension_N' 'meas.*' (default: "
@@ -469,8 +470,8 @@ def _add_plot_parser(sub) -> None:
     pl.add_argument("--t1", type=_duration_arg, metavar="T", help="window end")
     pl.add_argument("--sweep", metavar="CHANNEL",
                     help="plot a statistic of CHANNEL per run against a sweep axis")
-    pl.add_argument("--statistic", default="mean", choices=["mean", "std", "min", "max",
-                                                            "rms"], help="with --sweep")
+    pl.add_argument("--statistic", default="mean", choices=["mean", "std", "min", "max", "rms"],
+                    help="with --sweep: per run, over --t0..--t1 (default: mean)")
     pl.add_argument("--axis", metavar="NAME", help="with --sweep: the x axis (default: the "
                     "first sweep axis)")
     pl.add_argument("--group", metavar="NAME", help="with --sweep: colour by this axis")
