@@ -432,6 +432,75 @@ def _list_channels(line_path: str) -> int:
     return 0
 
 
+PLOT_FORMATS = (".png", ".svg", ".pdf")
+
+
+def _plot_output(output: str, dataset: str) -> Path:
+    """The file ``r2rsim plot`` writes, checked before any work: a known extension, an
+    existing directory to put it in, and not inside the dataset (whose manifest lists every
+    file it holds)."""
+    out = Path(output)
+    if out.suffix.lower() not in PLOT_FORMATS:
+        raise InputError(f"-o {output}: unknown figure format '{out.suffix}' (use "
+                         f"{', '.join(PLOT_FORMATS)})")
+    if out.is_dir():
+        raise InputError(f"-o {output}: is a directory; name the file to write")
+    if not out.parent.resolve().is_dir():
+        raise InputError(f"-o {output}: no directory {out.parent} to write into")
+    if out.resolve().is_relative_to(Path(dataset).resolve()):
+        raise InputError(f"-o {output}: inside the dataset {dataset}; write the figure "
+                         f"elsewhere (a dataset holds only its own files)")
+    return out
+
+
+def _cmd_plot(args) -> int:
+    """``r2rsim plot``: a run figure, or with --sweep a sweep figure, saved to one file."""
+    from .report import plot_run, plot_sweep
+
+    out = _plot_output(args.output, args.dataset)
+    if args.sweep is not None:
+        if args.run is not None or args.channels is not None:
+            raise InputError("--sweep plots every run: drop --run and --channels")
+        fig = plot_sweep(args.dataset, args.sweep, args.statistic, args.axis,
+                         group=args.group, t0=args.t0, t1=args.t1)
+    else:
+        if (args.axis, args.group) != (None, None):
+            raise InputError("--axis and --group go with --sweep CHANNEL")
+        fig = plot_run(args.dataset, args.run, args.channels, args.t0, args.t1)
+    fig.savefig(out, format=out.suffix.lower()[1:])
+    print(f"wrote {out}")
+    return 0
+
+
+def _add_plot_parser(sub) -> None:
+    pl = sub.add_parser(
+        "plot", help="plot a run's channels, faults and events, or a sweep statistic, to "
+        "a PNG/SVG/PDF file (needs r2rsim[plot])",
+        description="Plot one run of DATASET: the chosen channels on shared time axes, one "
+        "axes per quantity, fault windows shaded, events marked. With --sweep CHANNEL: the "
+        "statistic of CHANNEL per run against a sweep axis. Without -o the figure goes to "
+        "plot.png in the current directory (an existing file there is replaced).")
+    pl.add_argument("dataset", metavar="DATASET", help="dataset directory (r2rsim run or "
+                    "sweep)")
+    pl.add_argument("--run", metavar="ID", help="run id (default: the first run)")
+    pl.add_argument("--channels", nargs="+", metavar="GLOB",
+                    help="column globs, e.g. 'state.span*.tension_N' 'meas.*' (default: "
+                    "span tensions, readings, set-points, speeds, positions, radii, torques)")
+    pl.add_argument("--t0", type=_duration_arg, metavar="T", help="window start (s or "
+                    "with units)")
+    pl.add_argument("--t1", type=_duration_arg, metavar="T", help="window end")
+    pl.add_argument("--sweep", metavar="CHANNEL",
+                    help="plot a statistic of CHANNEL per run against a sweep axis")
+    pl.add_argument("--statistic", default="mean", choices=["mean", "std", "min", "max", "rms"],
+                    help="with --sweep: per run, over --t0..--t1 (default: mean)")
+    pl.add_argument("--axis", metavar="NAME", help="with --sweep: the x axis (default: the "
+                    "first sweep axis)")
+    pl.add_argument("--group", metavar="NAME", help="with --sweep: colour by this axis")
+    pl.add_argument("-o", "--output", default="plot.png",
+                    help="figure file, .png, .svg or .pdf (default: plot.png)")
+    pl.set_defaults(func=_cmd_plot)
+
+
 def _duration_arg(text: str) -> float:
     """``--duration``: a time like the files take (``90``, ``"90 s"``, ``"2 min"``)."""
     from .units import QuantityError, parse_quantity
@@ -573,6 +642,8 @@ def build_parser() -> argparse.ArgumentParser:
                                      "plugins", "channels"])
     ls.add_argument("line", nargs="?", help="line file (for 'channels')")
     ls.set_defaults(func=_cmd_list)
+
+    _add_plot_parser(sub)
     for sp in sub.choices.values():  # `r2rsim run X --debug` as well as `r2rsim --debug run X`
         sp.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                         help="show tracebacks on errors")

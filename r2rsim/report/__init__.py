@@ -7,12 +7,17 @@ return :class:`matplotlib.figure.Figure` objects, so they work in a notebook; th
 plot`` and ``r2rsim report`` commands save them.
 """
 
+from ._data import decimate_minmax
+from ._diagnostics import plot_mdm, plot_metric, plot_roc_pr, plot_statistic
+from ._html import write_report
 from ._mpl import require_matplotlib
+from ._run import plot_run
+from ._sweep import plot_sweep
 
-__all__ = ["require_matplotlib"]
-
-# -- diagnostics results (r2rsim diagnose / bench): figures and the HTML report --------------
-from ._diagnostics import plot_mdm, plot_metric, plot_roc_pr, plot_statistic  # noqa: E402
-from ._html import write_report  # noqa: E402
-
-__all__ += ["plot_mdm", "plot_metric", "plot_roc_pr", "plot_statistic", "write_report"]
+__all__ = [
+    # runs and sweeps (r2rsim plot)
+    "plot_run", "plot_sweep", "decimate_minmax",
+    # diagnostics results (r2rsim diagnose / bench) and the HTML report (r2rsim report)
+    "plot_statistic", "plot_roc_pr", "plot_metric", "plot_mdm", "write_report",
+    "require_matplotlib",
+]

@@ -1,0 +1,270 @@
+"""Reading what a figure needs from a dataset, and no more: the requested columns of one
+run, streamed row group by row group and reduced to min/max envelopes, so a long run plots
+in a memory far below the size of its samples."""
+
+from __future__ import annotations
+
+import difflib
+import fnmatch
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from ..dataset.read import is_dataset_dir
+from ..errors import InputError
+
+
+def decimate_minmax(t, y, n_buckets: int, t_range: tuple[float, float] | None = None):
+    """Thin a time series for display, keeping each bucket's smallest and largest sample.
+
+    The time span is cut into ``n_buckets`` equal buckets (one per pixel column, say); each
+    bucket keeps the samples holding its minimum and its maximum, in time order, so a
+    single-sample spike survives at any zoom. NaN samples (a sensor dropout) are ignored;
+    a bucket holding only NaN keeps one NaN sample, so the drawn line breaks there.
+
+    Parameters
+    ----------
+    t : array_like
+        Sample times, non-decreasing.
+    y : array_like
+        Values, same length as ``t``.
+    n_buckets : int
+        Number of buckets (at least 1). Series of at most ``2 * n_buckets`` samples are
+        returned whole.
+    t_range : (float, float), optional
+        Time span the buckets divide (default ``t[0]`` to ``t[-1]``). Give the whole span
+        when decimating a long series chunk by chunk, so the chunks share bucket edges.
+
+    Returns
+    -------
+    t_out, y_out : numpy.ndarray
+        The kept samples (at most ``2 * n_buckets``), in time order.
+
+    Examples
+    --------
+    >>> t = np.arange(10_000) * 1e-3
+    >>> y = np.zeros_like(t); y[4321] = 5.0
+    >>> td, yd = decimate_minmax(t, y, 100)
+    >>> len(td) <= 200, yd.max()
+    (True, 5.0)
+    """
+    t = np.asarray(t, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if n_buckets < 1:
+        raise ValueError(f"n_buckets must be at least 1, got {n_buckets}")
+    if t.shape != y.shape or t.ndim != 1:
+        raise ValueError(f"t and y must be 1-D of the same length, got {t.shape} and {y.shape}")
+    if t.size <= 2 * n_buckets:
+        return t.copy(), y.copy()
+    idx = _minmax_indices(y, _bucket_starts(t, n_buckets, t_range))
+    return t[idx], y[idx]
+
+
+def _bucket_starts(t: np.ndarray, n_buckets: int, t_range) -> np.ndarray:
+    """Index of the first sample of each non-empty bucket (``t`` sorted: buckets are runs)."""
+    lo, hi = t_range if t_range is not None else (t[0], t[-1])
+    width = (hi - lo) / n_buckets if hi > lo else 1.0
+    bucket = np.clip(((t - lo) / width).astype(np.int64), 0, n_buckets - 1)
+    return np.flatnonzero(np.diff(bucket, prepend=-1))
+
+
+def _minmax_indices(y: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """Sorted indices of each bucket's first minimum and first maximum (NaN ignored); the
+    first index of an all-NaN bucket."""
+    counts = np.diff(np.append(starts, y.size))
+    bucket = np.repeat(np.arange(starts.size), counts)
+    with np.errstate(invalid="ignore"):
+        lo = np.fmin.reduceat(y, starts)  # fmin/fmax skip NaN; all-NaN buckets give NaN
+        hi = np.fmax.reduceat(y, starts)
+    keep = [starts[np.isnan(lo)]]
+    for extreme in (lo, hi):
+        hit = np.flatnonzero(y == extreme[bucket])
+        first = np.diff(bucket[hit], prepend=-1) != 0  # the first hit of each bucket
+        keep.append(hit[first])
+    return np.unique(np.concatenate(keep))
+
+
+# ---- the dataset --------------------------------------------------------------------------
+
+
+@dataclass
+class RunData:
+    """Where one run's samples are, and what they hold."""
+
+    root: Path
+    run_id: str
+    files: list[Path]
+    metas: list[pq.FileMetaData]  # the files' footers
+    columns: list[str]  # numeric sample columns, in file order
+    t_start: float
+    t_end: float
+
+
+def open_dataset(path) -> Path:
+    """The dataset directory, checked to be one (runs.parquet and samples/)."""
+    root = Path(path)
+    if not root.is_dir():
+        raise InputError(f"{root}: no such dataset directory")
+    if not is_dataset_dir(root) or not (root / "runs.parquet").is_file() \
+            or not (root / "samples").is_dir():
+        raise InputError(f"{root}: not an r2rsim dataset (no runs.parquet and samples/)")
+    return root
+
+
+def runs_table(root: Path) -> pd.DataFrame:
+    """runs.parquet of the dataset."""
+    return pd.read_parquet(root / "runs.parquet")
+
+
+def sample_files(root: Path, run_id: str) -> list[Path]:
+    """The run's samples files, in part order (empty when the run wrote none)."""
+    folder = root / "samples" / f"run_id={run_id}"
+    return sorted(folder.glob("part-*.parquet"), key=lambda p: int(p.stem.split("-")[-1]))
+
+
+def resolve_run(root: Path, run_id: str | None) -> str:
+    """The run to plot: ``run_id``, checked to be in runs.parquet, or the first run."""
+    known = runs_table(root)["run_id"].tolist()
+    if not known:
+        raise InputError(f"dataset {root}: runs.parquet lists no runs")
+    if run_id is None:
+        return known[0]
+    if run_id not in known:
+        few = ", ".join(known[:5]) + (f", ... ({len(known)} runs)" if len(known) > 5 else "")
+        raise InputError(f"dataset {root}: no run '{run_id}' (runs: {few})")
+    return run_id
+
+
+def open_run(root: Path, run_id: str) -> RunData:
+    """Locate the run's samples and read their footers: schema, row-group statistics."""
+    files = sample_files(root, run_id)
+    if not files:
+        raise InputError(f"dataset {root}: run {run_id} has no samples (samples/run_id="
+                         f"{run_id}/part-*.parquet)")
+    metas = [pq.read_metadata(f) for f in files]
+    numeric = [f.name for f in metas[0].schema.to_arrow_schema()
+               if f.name not in ("k", "t_s") and (pa.types.is_floating(f.type)
+                                                  or pa.types.is_integer(f.type)
+                                                  or pa.types.is_boolean(f.type))]
+    run = RunData(root, run_id, files, metas, numeric, np.nan, np.nan)
+    run.t_start, run.t_end = _column_range(run, "t_s")
+    return run
+
+
+def _stats(meta: pq.FileMetaData, column: str) -> list:
+    """The statistics of a top-level column in each row group (None where missing)."""
+    # leaf columns, not Arrow fields: a list column (label.fault_ids) has its own paths
+    leaf = next(i for i in range(meta.num_columns) if meta.schema.column(i).path == column)
+    out = []
+    for g in range(meta.num_row_groups):
+        st = meta.row_group(g).column(leaf).statistics
+        out.append(st if st is not None and st.has_min_max else None)
+    return out
+
+
+def _column_range(run: RunData, column: str) -> tuple[float, float]:
+    """Smallest and largest value of a column in the run, from the row-group statistics
+    (NaN, NaN when a row group has none)."""
+    stats = [st for meta in run.metas for st in _stats(meta, column)]
+    if not stats or any(st is None for st in stats):
+        return np.nan, np.nan
+    return min(float(st.min) for st in stats), max(float(st.max) for st in stats)
+
+
+def constant_columns(run: RunData, columns: list[str]) -> set[str]:
+    """The columns whose value never changes in the run (an idler's radius), known from the
+    row-group statistics without reading the data."""
+    out = set()
+    for c in columns:
+        lo, hi = _column_range(run, c)
+        if lo == hi:
+            out.add(c)
+    return out
+
+
+def select_channels(run: RunData, globs) -> list[str]:
+    """The numeric columns matching the globs (fnmatch), in glob order, each once.
+
+    Raises
+    ------
+    InputError
+        Naming the first glob that matches no column, with a few columns like it.
+    """
+    picked: dict[str, None] = {}
+    for g in globs:
+        hits = [c for c in run.columns if fnmatch.fnmatchcase(c, g)]
+        if not hits:
+            like = difflib.get_close_matches(g, run.columns, n=4, cutoff=0.3) \
+                or run.columns[:4]
+            raise InputError(f"dataset {run.root}: run {run.run_id}: channel glob '{g}' "
+                             f"matches no numeric column (e.g. {', '.join(like)})")
+        picked.update(dict.fromkeys(hits))
+    return list(picked)
+
+
+def channel_units(root: Path) -> dict[str, str]:
+    """Unit of each column from channels.parquet (empty when the file is missing)."""
+    f = root / "channels.parquet"
+    if not f.is_file():
+        return {}
+    ch = pd.read_parquet(f, columns=["channel", "unit"])
+    return dict(zip(ch["channel"], ch["unit"].fillna(""), strict=True))
+
+
+def run_rows(root: Path, name: str, run_id: str) -> pd.DataFrame:
+    """The run's rows of faults.parquet or events.parquet (empty when the file is missing)."""
+    f = root / name
+    if not f.is_file():
+        return pd.DataFrame()
+    df = pd.read_parquet(f, filters=[("run_id", "=", run_id)])
+    return df.reset_index(drop=True)
+
+
+def _row_groups_in(meta: pq.FileMetaData, t0: float, t1: float) -> list[int]:
+    """Row groups of a file that may hold samples with t0 <= t_s <= t1."""
+    return [g for g, st in enumerate(_stats(meta, "t_s"))
+            if st is None or (st.max >= t0 and st.min <= t1)]
+
+
+def iter_window(run: RunData, columns: list[str], t0: float, t1: float):
+    """Yield ``(t, {column: values})`` per row group of the samples with t0 <= t_s <= t1,
+    reading only these columns and only the row groups that overlap the window (a row
+    group is about 16 MB of all columns, so a chunk is a few MB)."""
+    for path, meta in zip(run.files, run.metas, strict=True):
+        f = pq.ParquetFile(path, metadata=meta)
+        for g in _row_groups_in(meta, t0, t1):
+            table = f.read_row_group(g, columns=["t_s", *columns])
+            pa.default_memory_pool().release_unused()  # keep the process small on long runs
+            t = table.column(0).to_numpy()
+            inside = (t >= t0) & (t <= t1)
+            if inside.any():
+                yield t[inside], {c: _floats(table.column(i + 1))[inside]
+                                  for i, c in enumerate(columns)}
+
+
+def _floats(arr: pa.ChunkedArray) -> np.ndarray:
+    """A numeric Arrow column as float64 (nulls as NaN)."""
+    return arr.cast(pa.float64()).to_numpy(zero_copy_only=False)
+
+
+def read_envelopes(run: RunData, columns: list[str], t0: float, t1: float,
+                   n_buckets: int) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Each column's min/max envelope (:func:`decimate_minmax`) over [t0, t1], streamed: the
+    chunks share bucket edges, so the result is the envelope of the whole window."""
+    parts: dict[str, list] = {c: [] for c in columns}
+    for t, values in iter_window(run, columns, t0, t1):
+        if t.size > 2 * n_buckets:
+            starts = _bucket_starts(t, n_buckets, (t0, t1))  # shared by the columns
+            for c, y in values.items():
+                idx = _minmax_indices(y, starts)
+                parts[c].append((t[idx], y[idx]))
+        else:
+            for c, y in values.items():
+                parts[c].append((t, y))
+    return {c: (np.concatenate([p[0] for p in ps]) if ps else np.empty(0),
+                np.concatenate([p[1] for p in ps]) if ps else np.empty(0))
+            for c, ps in parts.items()}
