@@ -15,11 +15,6 @@ import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")
 
-# matplotlib 3.7 (the oldest supported) calls pyparsing's pre-3.0 names, which pyparsing
-# 3.3 deprecates with a warning at every use; not r2rsim's to fix
-pytestmark = pytest.mark.filterwarnings(
-    r"ignore:'\w+' deprecated - use '\w+':DeprecationWarning")
-
 import r2rsim  # noqa: E402
 from r2rsim.cli import main  # noqa: E402
 from r2rsim.errors import InputError  # noqa: E402
