@@ -30,7 +30,7 @@ def figure(name: str, tmp: Path) -> None:
     rc = main(["run", str(ROOT / "scenarios" / f"{name}.yaml"), "-o", str(out), "-q"])
     if rc != 0:
         sys.exit(f"r2rsim run {name}: exit {rc}")
-    rc = main(["plot", str(out), "--channels", *CHANNELS, "-o",
+    rc = main(["plot", str(out), "--overwrite", "--channels", *CHANNELS, "-o",
                str(ROOT / "docs" / f"{name}.png")])
     if rc != 0:
         sys.exit(f"r2rsim plot {name}: exit {rc}")

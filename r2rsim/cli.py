@@ -435,10 +435,10 @@ def _list_channels(line_path: str) -> int:
 PLOT_FORMATS = (".png", ".svg", ".pdf")
 
 
-def _plot_output(output: str, dataset: str) -> Path:
+def _plot_output(output: str, dataset: str, overwrite: bool = False) -> Path:
     """The file ``r2rsim plot`` writes, checked before any work: a known extension, an
-    existing directory to put it in, and not inside the dataset (whose manifest lists every
-    file it holds)."""
+    existing directory to put it in, not inside the dataset (whose manifest lists every
+    file it holds), and no existing file unless ``--overwrite``."""
     out = Path(output)
     if out.suffix.lower() not in PLOT_FORMATS:
         raise InputError(f"-o {output}: unknown figure format '{out.suffix}' (use "
@@ -450,6 +450,8 @@ def _plot_output(output: str, dataset: str) -> Path:
     if out.resolve().is_relative_to(Path(dataset).resolve()):
         raise InputError(f"-o {output}: inside the dataset {dataset}; write the figure "
                          f"elsewhere (a dataset holds only its own files)")
+    if out.exists() and not overwrite:
+        raise InputError(f"-o {output}: the file exists; pass --overwrite to replace it")
     return out
 
 
@@ -457,7 +459,7 @@ def _cmd_plot(args) -> int:
     """``r2rsim plot``: a run figure, or with --sweep a sweep figure, saved to one file."""
     from .report import plot_run, plot_sweep
 
-    out = _plot_output(args.output, args.dataset)
+    out = _plot_output(args.output, args.dataset, args.overwrite)
     if args.sweep is not None:
         if args.run is not None or args.channels is not None:
             raise InputError("--sweep plots every run: drop --run and --channels")
@@ -479,7 +481,7 @@ def _add_plot_parser(sub) -> None:
         description="Plot one run of DATASET: the chosen channels on shared time axes, one "
         "axes per quantity, fault windows shaded, events marked. With --sweep CHANNEL: the "
         "statistic of CHANNEL per run against a sweep axis. Without -o the figure goes to "
-        "plot.png in the current directory (an existing file there is replaced).")
+        "plot.png in the current directory; an existing file is kept unless --overwrite.")
     pl.add_argument("dataset", metavar="DATASET", help="dataset directory (r2rsim run or "
                     "sweep)")
     pl.add_argument("--run", metavar="ID", help="run id (default: the first run)")
@@ -498,6 +500,8 @@ def _add_plot_parser(sub) -> None:
     pl.add_argument("--group", metavar="NAME", help="with --sweep: colour by this axis")
     pl.add_argument("-o", "--output", default="plot.png",
                     help="figure file, .png, .svg or .pdf (default: plot.png)")
+    pl.add_argument("--overwrite", action="store_true",
+                    help="replace the figure file if it exists")
     pl.set_defaults(func=_cmd_plot)
 
 

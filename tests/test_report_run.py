@@ -314,6 +314,19 @@ def test_cli_default_output_is_plot_png_here(faults_ds, tmp_path, monkeypatch):
     assert (tmp_path / "plot.png").is_file()
 
 
+def test_cli_keeps_an_existing_file_unless_overwrite(faults_ds, tmp_path, capsys):
+    """A file r2rsim did not write is never replaced without being asked."""
+    mine = tmp_path / "mine.png"
+    mine.write_bytes(b"not r2rsim's")
+    assert main(["plot", str(faults_ds), "--channels", "sp.*", "-o", str(mine)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("error") == 1 and "pass --overwrite" in err
+    assert mine.read_bytes() == b"not r2rsim's"
+    assert main(["plot", str(faults_ds), "--channels", "sp.*", "-o", str(mine),
+                 "--overwrite"]) == 0
+    assert mine.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
 def files(*dirs) -> set:
     return {p for d in dirs for p in d.rglob("*")}
 
