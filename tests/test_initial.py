@@ -135,3 +135,30 @@ def test_bad_slack_or_position(tmp_path, repo, capsys, initial, path, words):
     assert err.count("error") == 1, err
     assert str(scen) in err and path in err and words in err, err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("line, mover, value, si, bad", [
+    ("newsprint_line.yaml", "festoon", "2.5 m", 2.5, "4 m"),          # festoon stroke [0, 4] m
+    ("pet_film_line_dancer.yaml", "dancer", "-5 cm", -0.05, "0.15 m"),  # travel ±0.15 m
+])
+def test_position_of_a_festoon_and_a_linear_dancer(tmp_path, repo, capsys, line, mover, value,
+                                                   si, bad):
+    def scenario(pos):
+        return write(tmp_path / "p.yaml", f"""\
+            name: p
+            line: {repo / "lines" / line}
+            duration: 0.1 s
+            record_rate: 100 Hz
+            initial: {{state: nominal, position: {{{mover}: {pos}}}}}
+            programme:
+              - {{at: 0 s, line_speed: 1 m/s}}
+            """)
+    scen, ln, _ = r2rsim.load_scenario(scenario(value))
+    assert scen.initial.position[mover] == pytest.approx(si, rel=1e-12)
+    cl = r2rsim.compile_line(ln, r2rsim.Programme.from_steps(ln, scen.programme))
+    y = r2rsim.nominal_state(cl, position=scen.initial.position)
+    assert y[cl.index(f"{mover}.position")] == pytest.approx(si, rel=1e-12)
+    assert main(["run", str(scenario(bad)), "-o", str(tmp_path / "out"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert f"initial.position.{mover}" in err and "strictly inside" in err
+    assert not (tmp_path / "out").exists()

@@ -539,8 +539,7 @@ def check_scenario_against_line(scenario: Scenario, line: Line, file: str) -> No
             raise InputError("rate applies to a line_speed change", file=file,
                              path=f"programme[{i}].rate")
     splicers = [e.id for e in line.elements if getattr(e, "splicer", None) is not None]
-    movers = {e.id for e in line.elements if e.type in ("dancer", "pivot_dancer")} | {
-        s.id for s in line.spans if s.festoon is not None}
+    movers = _mover_ids(line)
     for i, ev in enumerate(scenario.events):
         if ev.type == "splice":
             if ev.element is None and len(splicers) != 1:
@@ -553,7 +552,7 @@ def check_scenario_against_line(scenario: Scenario, line: Line, file: str) -> No
                                  path=f"events[{i}].element")
         if ev.type == "dancer_seize" and ev.element not in movers:
             raise InputError(f"no dancer or festoon named '{ev.element}' (known: "
-                             f"{', '.join(sorted(movers)) or 'none'})", file=file,
+                             f"{', '.join(movers) or 'none'})", file=file,
                              path=f"events[{i}].element")
         if ev.at > scenario.duration:
             raise InputError(f"at {ev.at:g} s is after the end of the run ({scenario.duration:g}"
@@ -570,18 +569,23 @@ def check_scenario_against_line(scenario: Scenario, line: Line, file: str) -> No
     _check_initial_positions(scenario, line, file)
 
 
+def _mover_ids(line) -> list[str]:
+    """Ids of the line's dancers and festoon carriages, in line order."""
+    return [e.id for e in line.elements if e.type in DANCERS] + [
+        s.id for s in line.spans if s.festoon is not None]
+
+
 def _check_initial_positions(scenario, line, file: str) -> None:
     """``initial.position``: a dancer or festoon, in its unit, strictly inside its stops (a
     mover started on a stop would not latch there). Converts the values to SI in place."""
+    movers = _mover_ids(line)
     for mid, value in scenario.initial.position.items():
         path = f"initial.position.{mid}"
-        el = next((e for e in line.elements if e.id == mid and e.type in DANCERS), None)
-        sp = next((s for s in line.spans if s.id == mid and s.festoon is not None), None)
-        if el is None and sp is None:
-            movers = [e.id for e in line.elements if e.type in DANCERS] + [
-                s.id for s in line.spans if s.festoon is not None]
+        if mid not in movers:
             raise InputError(f"no dancer or festoon named '{mid}' (known: "
                              f"{', '.join(movers) or 'none'})", file=file, path=path)
+        el = next((e for e in line.elements if e.id == mid and e.type in DANCERS), None)
+        sp = next((s for s in line.spans if s.id == mid and s.festoon is not None), None)
         if el is not None and el.type == "pivot_dancer":
             dim, (lo, hi), what = "angle", el.angle_range, "angle_range"
         elif el is not None:
