@@ -313,7 +313,8 @@ def _add_report_parser(sub) -> None:
                     "an existing file is replaced only if it is an r2rsim report")
     rp.add_argument("--data", nargs="+", metavar="DATASET",
                     help="the test datasets a diagnose result was scored on: adds ROC/PR "
-                    "curves and the statistic of a few runs")
+                    "curves and the statistic of a few runs (default: those r2rsim "
+                    "diagnose recorded in RESULTS_DIR/datasets.json)")
     rp.set_defaults(func=_cmd_report)
 
 

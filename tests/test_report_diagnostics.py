@@ -5,16 +5,20 @@ the faults of the datasets), the report for being readable offline and holding e
 from __future__ import annotations
 
 import base64
+import json
 import math
+import shutil
 import sys
 import textwrap
 from html.parser import HTMLParser
+from pathlib import Path
 
 import matplotlib
 import numpy as np
 import pandas as pd
 import pytest
 from matplotlib.container import BarContainer
+from sklearn.metrics import roc_auc_score
 
 import r2rsim
 from r2rsim.cli import main
@@ -143,6 +147,46 @@ def test_statistic_shows_threshold_fault_windows_and_alarms(data, diagnosed, run
     for span, f in zip(spans, faults.itertuples(), strict=True):
         assert span.get_gid() == f"fault:{f.fault_id}" and math.isnan(f.end_t_s)
         assert x_span(span) == pytest.approx((f.onset_t_s, DURATION), abs=1e-12)
+
+
+def test_statistic_shades_a_fault_that_ends(data, tmp_path):
+    """A fault with an end is shaded from its onset to its end, not to the end of the run."""
+    scen = tmp_path / "ends.yaml"
+    text = (THESIS / "sensor_a_offset_P05.yaml").read_text(encoding="utf-8")
+    scen.write_text(text.replace("line: ../../", f"line: {REPO}/").replace(
+        "magnitude: 6.5 N}", "magnitude: 6.5 N, end: 16 s}").replace("onset: 20 s",
+                                                                    "onset: 12 s"))
+    r2rsim.run_scenario(scen, output=tmp_path / "ends", seed=7, duration=DURATION)
+    assert main(["diagnose", "--method", "residual", "--train", str(data / "h1"), "--test",
+                 str(tmp_path / "ends"), "--n-boot", "0", "-o", str(tmp_path / "res")]) == 0
+    faults = pd.read_parquet(tmp_path / "ends" / "faults.parquet")
+    assert faults[["onset_t_s", "end_t_s"]].to_numpy().tolist() == [[12.0, 16.0]]
+    ax = plot_statistic(tmp_path / "res", tmp_path / "ends").axes[0]
+    spans = [a for a in ax.patches if str(a.get_gid()).startswith("fault:")]
+    assert len(spans) == 1 and x_span(spans[0]) == pytest.approx((12.0, 16.0), abs=1e-12)
+
+
+def test_roc_pr_ranks_nan_statistics_lowest(data, diagnosed, tmp_path):
+    """A plug-in that cannot score some samples (nan) still gets curves: those samples rank
+    below every finite statistic, as in the harness."""
+    preds = pd.read_parquet(diagnosed["residual"] / "predictions.parquet")
+    preds.loc[preds.index[::7], "statistic"] = np.nan
+    fig = plot_roc_pr(preds, scored_sets(data))
+    roc = by_gid(fig.axes[0], "roc:residual")
+    # the same area, computed independently from the labels of the scored samples
+    truth = []
+    for ds in scored_sets(data):
+        s = pd.read_parquet(next((Path(ds) / "samples").rglob("*.parquet")),
+                            columns=["k", "label.is_faulty", "label.score_mask"])
+        rid = pd.read_parquet(Path(ds) / "runs.parquet")["run_id"].iloc[0]
+        truth.append(s.assign(run_id=rid))
+    merged = preds.merge(pd.concat(truth), on=["run_id", "k"])
+    merged = merged[merged["label.score_mask"]]
+    stat = merged["statistic"].to_numpy()
+    stat = np.where(np.isnan(stat), np.nanmin(stat) - 1.0, stat)
+    expected = roc_auc_score(merged["label.is_faulty"].to_numpy(bool), stat)
+    assert np.isnan(merged["statistic"]).sum() > 100
+    assert trapezoid(roc.get_xdata(), roc.get_ydata()) == pytest.approx(expected, abs=1e-9)
 
 
 def test_statistic_defaults_to_a_faulty_run_and_refuses_unknown_runs(data, diagnosed):
@@ -340,11 +384,35 @@ def test_report_of_a_diagnose_result(data, diagnosed, tmp_path):
     assert list(tmp_path.iterdir()) == [out]  # no temporary file left
 
 
+def test_report_finds_the_recorded_datasets(data, diagnosed, tmp_path):
+    """r2rsim diagnose records its test datasets; the report reads them back without --data,
+    and says so when they are gone or were never recorded."""
+    src = diagnosed["residual"]
+    recorded = json.loads((src / "datasets.json").read_text())["test"]
+    assert recorded == [str((data / n).resolve()) for n, _, _ in TEST]
+    text, page = parse(write_report(src, tmp_path / "r.html"))
+    assert_offline(text, page)
+    assert "need the test datasets" not in text and len(page.imgs) == 8 + 1 + 1 + 3
+    # results written before datasets.json existed
+    old = tmp_path / "old"
+    shutil.copytree(src, old)
+    (old / "datasets.json").unlink()
+    text, page = parse(write_report(old, tmp_path / "r.html"))
+    assert "need the test datasets" in text and len(page.imgs) == 8 + 1
+    # datasets moved away since: the figures that need them are left out, with a note
+    (old / "datasets.json").write_text(json.dumps({"test": [str(tmp_path / "gone")]}))
+    text, page = parse(write_report(old, tmp_path / "r.html"))
+    assert len(page.imgs) == 8 + 1 and "not found" in text and "gone" in text
+    (old / "datasets.json").write_text("[1, 2]")
+    with pytest.raises(InputError, match="not a datasets file"):
+        write_report(old, tmp_path / "r.html")
+
+
 def test_report_without_datasets_and_of_a_bench(diagnosed, benched, tmp_path):
-    out = write_report(diagnosed["residual"], tmp_path / "r.html")
+    out = write_report(diagnosed["residual"], tmp_path / "r.html", datasets=None)
     text, page = parse(out)
     assert_offline(text, page)
-    assert "need the test datasets" in text and len(page.imgs) == 8 + 1
+    assert len(page.imgs) == 8 + 1 + 1 + 3  # the recorded test datasets
     out = write_report(benched)
     assert out == benched / "report.html"
     text, page = parse(out)

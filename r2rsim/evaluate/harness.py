@@ -396,6 +396,10 @@ def _bootstrap(counts: pd.DataFrame, n_boot: int, seed: int, level: float = 0.95
 # --------------------------------------------------------------------------- evaluation
 
 
+#: the file of a diagnose results directory that names the test datasets
+DATASETS_FILE = "datasets.json"
+
+
 @dataclass
 class Evaluation:
     """What :func:`evaluate` measured.
@@ -414,6 +418,11 @@ class Evaluation:
         condition, fault, magnitude, metric, value, ci_low, ci_high, n_runs``.
     theta : float
         The calibrated threshold (nan without validation runs).
+    settings : dict
+        The harness settings (alpha, persistence, split, ...).
+    test_datasets : list of str
+        The dataset directories of the test runs (absolute), so that the report stage finds
+        their labels again (``r2rsim report`` without ``--data``).
     """
 
     method: str
@@ -422,6 +431,7 @@ class Evaluation:
     metrics: pd.DataFrame
     theta: float
     settings: dict = field(default_factory=dict)
+    test_datasets: list[str] = field(default_factory=list)
 
     def table(self) -> pd.DataFrame:
         """The results as a wide table: one row per stratum (magnitude rows left out), one
@@ -457,12 +467,15 @@ class Evaluation:
         return head + "\n" + body
 
     def write(self, outdir: str | Path) -> Path:
-        """Write ``predictions.parquet``, ``metrics.parquet`` and ``metrics.csv``."""
+        """Write ``predictions.parquet``, ``metrics.parquet``, ``metrics.csv`` and
+        ``datasets.json`` (the test dataset directories, :data:`DATASETS_FILE`)."""
         out = Path(outdir)
         out.mkdir(parents=True, exist_ok=True)
         self.predictions.to_parquet(out / "predictions.parquet", index=False)
         self.metrics.to_parquet(out / "metrics.parquet", index=False)
         self.metrics.to_csv(out / "metrics.csv", index=False)
+        (out / DATASETS_FILE).write_text(json.dumps({"test": self.test_datasets}, indent=1)
+                                         + "\n")
         return out
 
 
@@ -786,4 +799,5 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
                       {"alpha": alpha, "m": m, "h": h, "n_boot": n_boot, "seed": seed,
                        "split": split, "fit_s": fit_s, "drive_data": drive_data,
                        "mode_strata": mode_strata, "window": window, "isolation": isolation,
-                       "vus_buffer": vus_buffer, "vus_max_buffer_samples": max_buffer})
+                       "vus_buffer": vus_buffer, "vus_max_buffer_samples": max_buffer},
+                      list(dict.fromkeys(str(Path(r.path).resolve()) for r in test)))

@@ -7,6 +7,7 @@ from __future__ import annotations
 import base64
 import html
 import io
+import json
 import os
 import tempfile
 from pathlib import Path
@@ -15,7 +16,7 @@ import pandas as pd
 
 from .._version import __version__
 from ..errors import InputError
-from ..evaluate.harness import METRICS, fault_key
+from ..evaluate.harness import DATASETS_FILE, METRICS, fault_key
 from ._diagnostics import (
     _metric_rows,
     _predictions,
@@ -71,7 +72,8 @@ def write_report(results: str | Path, output: str | Path | None = None,
         existing file is replaced only if it is a report r2rsim wrote.
     datasets : path, sequence of paths or of Run, optional
         The test datasets a diagnose result was scored on: adds the ROC/PR curves and the
-        statistic of a few test runs (the results directory holds no labels).
+        statistic of a few test runs (the results directory holds no labels). Default: the
+        datasets ``r2rsim diagnose`` recorded in ``datasets.json``, when they still exist.
 
     Returns
     -------
@@ -90,9 +92,14 @@ def write_report(results: str | Path, output: str | Path | None = None,
     out = Path(output) if output is not None else src / "report.html"
     _check_output(out)
     table = results_table(src)
+    missing_note = None
+    if datasets is None and kind == "diagnose":
+        datasets, missing_note = _recorded_datasets(src)
     if datasets is not None and kind == "diagnose":  # read once for every figure
         datasets = list(_test_runs(datasets, _predictions(src)["run_id"]).values())
     figures = _figures(src, kind, table, datasets)
+    if missing_note:
+        figures.append(f"<p class='note'>{html.escape(missing_note)}</p>")
     body = [f"<h1>r2rsim {kind} report</h1>", _header(src, kind, table),
             "<h2>Summary</h2>", _summary(table), "<h2>Figures</h2>", *figures,
             "<h2>All results</h2>",
@@ -100,6 +107,23 @@ def write_report(results: str | Path, output: str | Path | None = None,
             _table(_full(table), table_id="results")]
     _write_atomic(out, _page(f"r2rsim {kind} report: {src.name}", body))
     return out
+
+
+def _recorded_datasets(src: Path) -> tuple[list[str] | None, str | None]:
+    """The test datasets recorded by ``r2rsim diagnose`` (``datasets.json``), or None and a
+    note saying which of them are gone (results written before the file existed have none)."""
+    f = src / DATASETS_FILE
+    if not f.is_file():
+        return None, None
+    try:
+        paths = json.loads(f.read_text())["test"]
+    except (ValueError, KeyError, TypeError) as exc:
+        raise InputError(f"{f}: not a datasets file written by r2rsim diagnose ({exc})") from exc
+    gone = [p for p in paths if not Path(p).is_dir()]
+    if gone or not paths:
+        return None, (f"the test datasets recorded in {DATASETS_FILE} are not found "
+                      f"({', '.join(gone)}): name them with --data")
+    return paths, None
 
 
 # --------------------------------------------------------------------------- content
