@@ -265,7 +265,7 @@ def _cmd_diagnose(args) -> int:
                   vus_buffer=args.vus_buffer)
     out = ev.write(args.output or Path("results") / args.method)
     print(ev.format())
-    print(f"written: {out}/predictions.parquet, metrics.parquet, metrics.csv")
+    print(f"written: {out}/predictions.parquet, metrics.parquet, metrics.csv, datasets.json")
     return 0
 
 
