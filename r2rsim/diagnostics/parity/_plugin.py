@@ -358,7 +358,7 @@ class ParitySpaceDetector(Diagnostic):
         EA, L0 = float(self.physical_["web_EA_N"]), float(self.physical_["relaxed_pitch_m"])
         t = s["t"]
         P = np.vstack([self._xhat(s, EA, L0)[None], s["u"]])
-        edges = np.arange(t[0], t[-1] + self.schedule_step_s, self.schedule_step_s)
+        edges = np.arange(t[0], max(t[-1], t[0] + 1e-9), self.schedule_step_s)
         idx = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, len(edges) - 1)
         tk, pk = [], []
         for k in np.unique(idx):
