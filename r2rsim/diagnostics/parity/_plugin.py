@@ -103,6 +103,21 @@ class ParitySpaceDetector(Diagnostic):
         |r_j|/σ_j above which relation j counts as fired in :meth:`rank_channels`.
     alpha : float
         Fraction of healthy training samples above the threshold.
+
+    Attributes
+    ----------
+    omega_ : ndarray (3, 4)
+        The relations r1-r3 on the scaled stack (sensor B rows ÷ L0/EA, derivative rows per
+        web travel at the design speed with ``time_base="travel"``).
+    design_point_ : ndarray (4,)
+        p0 = [x, ω_d, ω_o, T_up], the training mean.
+    S_ : ndarray (5, 4, 4)
+        Mean-square model errors of the design scenarios (nominal and four corners).
+    signature_ : DataFrame
+        Which relation uses which sensor.
+    center_, sigma_ : ndarray (3,)
+        Training mean and standard deviation of each relation.
+    threshold_ : float
     """
 
     name = "parity"
@@ -353,12 +368,13 @@ class ParitySpaceDetector(Diagnostic):
         R[:, s["bad"]] = np.nan
         return R
 
-    def _knots(self, s) -> tuple[np.ndarray, np.ndarray]:
-        """Knot times and the operating point p = [x̂, u] averaged around each."""
+    def _knots(self, s, step_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Knot times every ``step_s`` and the operating point p = [x̂, u] averaged over
+        each interval."""
         EA, L0 = float(self.physical_["web_EA_N"]), float(self.physical_["relaxed_pitch_m"])
         t = s["t"]
         P = np.vstack([self._xhat(s, EA, L0)[None], s["u"]])
-        edges = np.arange(t[0], max(t[-1], t[0] + 1e-9), self.schedule_step_s)
+        edges = np.arange(t[0], max(t[-1], t[0] + 1e-9), step_s)
         idx = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, len(edges) - 1)
         tk, pk = [], []
         for k in np.unique(idx):
@@ -370,7 +386,7 @@ class ParitySpaceDetector(Diagnostic):
 
     def _schedule(self, s) -> np.ndarray:
         """Ω re-solved at the knots and interpolated linearly in time: (T, 3, 4)."""
-        tk, pk = self._knots(s)
+        tk, pk = self._knots(s, self.schedule_step_s)
         Ws, prev = [], self.omega_
         for p in pk:
             prev = self._relations(p, start=prev[0], previous=prev)
@@ -436,12 +452,7 @@ class ParitySpaceDetector(Diagnostic):
         """
         self._check_fitted()
         s = self._signals(self._frames(run)[0])
-        step = self.schedule_step_s if step_s is None else step_s
-        old, self.schedule_step_s = self.schedule_step_s, step
-        try:
-            tk, pk = self._knots(s)
-        finally:
-            self.schedule_step_s = old
+        tk, pk = self._knots(s, self.schedule_step_s if step_s is None else step_s)
         names = ["x", "omega_d", "omega_o", "T_up"]
         rows, start = [], self.omega_[0]
         for t, p in zip(tk, pk, strict=False):
