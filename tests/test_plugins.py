@@ -31,12 +31,44 @@ def data(tmp_path_factory):
     return out
 
 
+@pytest.fixture(scope="module")
+def realistic_data(tmp_path_factory):
+    """The same three runs on the calibrated registration line (encoders on the inputs),
+    for plug-ins whose model needs them."""
+    import yaml
+
+    d = tmp_path_factory.mktemp("plugin_data_realistic")
+    base = yaml.safe_load((REPO / "scenarios" / "thesis_realistic" / "registration.yaml")
+                          .read_text(encoding="utf-8"))
+    base.update(line=str(REPO / "lines" / "registration_realistic.yaml"), duration="30 s")
+    out = {}
+    for name, seed, faults in (("h1", 1, []), ("h2", 2, []),
+                               ("f", 3, [{"id": "a", "type": "sensor.offset",
+                                          "target": "sensor_A", "onset": "20 s",
+                                          "magnitude": "19.5 N"}])):
+        (d / f"{name}.yaml").write_text(yaml.safe_dump({**base, "faults": faults}),
+                                        encoding="utf-8")
+        r2rsim.run_scenario(d / f"{name}.yaml", output=d / name, seed=seed)
+        out[name] = read_runs(d / name)[0]
+    return out
+
+
+# plug-ins that need other data than the default fixture's (the fixture named here replaces
+# `data` in the conformance checks)
+DATA_FOR = {"parity": "realistic_data"}
+
+
+def _data_for(name, request):
+    return request.getfixturevalue(DATA_FOR.get(name, "data"))
+
+
 def test_baselines_are_registered():
-    assert {"residual", "pca", "dpca", "iforest"} <= set(PLUGINS)
+    assert {"residual", "pca", "dpca", "iforest", "parity"} <= set(PLUGINS)
 
 
 @pytest.mark.parametrize("name", PLUGINS)
-def test_plugin_conformance(name, data):
+def test_plugin_conformance(name, request):
+    data = _data_for(name, request)
     cls = get(name)
     params = {"random_state": 0} if "random_state" in cls().get_params() else {}
     est = cls(**params)
@@ -61,7 +93,8 @@ def test_plugin_conformance(name, data):
 
 
 @pytest.mark.parametrize("name", PLUGINS)
-def test_plugin_checks_its_required_channels(name, data):
+def test_plugin_checks_its_required_channels(name, request):
+    data = _data_for(name, request)
     cls = get(name)
     frame = data["h1"].visible()[["t_s"]]
     with pytest.raises(InputError, match="no column matching"):

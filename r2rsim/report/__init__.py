@@ -11,6 +11,7 @@ from ._data import decimate_minmax
 from ._diagnostics import plot_mdm, plot_metric, plot_roc_pr, plot_statistic
 from ._html import write_report
 from ._mpl import require_matplotlib
+from ._parity import plot_residuals, plot_sensitivity, plot_signature
 from ._run import plot_run
 from ._sweep import plot_sweep
 
@@ -20,4 +21,6 @@ __all__ = [
     # diagnostics results (r2rsim diagnose / bench) and the HTML report (r2rsim report)
     "plot_statistic", "plot_roc_pr", "plot_metric", "plot_mdm", "write_report",
     "require_matplotlib",
+    # residual-based diagnostics (the parity study, thesis Ch. 3)
+    "plot_residuals", "plot_signature", "plot_sensitivity",
 ]

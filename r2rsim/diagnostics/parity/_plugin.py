@@ -1,0 +1,470 @@
+"""The ``parity`` plug-in: nonlinear parity-space sensor validation of the registration span
+(thesis Ch. 3) under the contract of :mod:`r2rsim.diagnostics.base`."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+import pandas as pd
+
+from ...errors import InputError
+from ..base import Diagnostic
+from ._design import KINDS, design_relation, sensitivity
+from ._model import NonlinearModel, registration_model
+from ._signal import savgol_derivatives, savgol_window_samples
+
+MODES = ("literal", "model", "scheduled")
+TIME_BASES = ("travel", "time")
+
+
+@lru_cache(maxsize=32)
+def _cached_model(EA, L, L0, Rd, Ro) -> NonlinearModel:
+    return registration_model(EA, L, L0, Rd, Ro)
+
+
+def registration_parameters(line, span: str = "registration", drive: str = "reg_drive",
+                            downstream: str = "reg_idler", pitch_sensor: str = "sensor_B"):
+    """EA [N], span length [m], relaxed pitch [m] and the two roller radii [m] of the
+    reduced registration model, read from a line file (or a loaded ``Line``).
+
+    The relaxed pitch is the pitch sensor's ``relaxed_pitch`` or its law's q0 (the roll-radius
+    term q1·R³ is unknown to a monitor; the plug-in can calibrate L0 on healthy data).
+    """
+    from ...schema.loader import load_line
+
+    ln = load_line(line) if not hasattr(line, "elements") else line
+    els = {e.id: e for e in ln.elements}
+    spans = {s.id: s for s in ln.spans}
+    sens = {s.id: s for s in ln.sensors}
+    for what, key, table in (("span", span, spans), ("element", drive, els),
+                             ("element", downstream, els), ("sensor", pitch_sensor, sens)):
+        if key not in table:
+            raise InputError(f"parity: the line has no {what} '{key}'")
+    b = sens[pitch_sensor]
+    L0 = b.relaxed_pitch if b.relaxed_pitch is not None else b.relaxed_pitch_law.q0
+    return {"web_EA_N": ln.web.modulus * ln.web.thickness * ln.web.width,
+            "span_length_m": spans[span].length, "relaxed_pitch_m": L0,
+            "drive_radius_m": els[drive].radius, "downstream_radius_m": els[downstream].radius}
+
+
+class ParitySpaceDetector(Diagnostic):
+    """Nonlinear parity-space validation of sensors A (load cell) and B (pitch length).
+
+    The reduced model (:func:`registration_model`) has one state, the registration-span
+    tension, and the inputs [driven-roller speed, downstream idler speed, upstream tension]
+    from the encoders and the upstream load cell. Its Lie-derivative stack
+    Y = [y_A, ẏ_A, y_B, ẏ_B] has n − N = 3 parity relations: r1 mixes A and B (designed by
+    the robust min-max), r2 uses B only and r3 A only (fixed by the null space; thesis Table
+    3-2). Residuals are in newton-equivalents; ``statistic`` = max_j |r_j|/σ_j with σ_j from
+    the healthy training runs.
+
+    Parameters
+    ----------
+    line : str, optional
+        A line file to read EA, the span length, the relaxed pitch and the radii from
+        (overrides the five numbers below).
+    web_EA_N : float
+        Web axial stiffness EA [N] (default: PET 50 µm × 0.5 m, 112.5 kN).
+    span_length_m : float
+        Registration span length L [m].
+    relaxed_pitch_m : float, optional
+        Relaxed pitch L0 [m]; None calibrates it on the healthy training runs (Hooke's law
+        between sensors A and B).
+    drive_radius_m, downstream_radius_m : float
+        Radii of the driven roller and the downstream idler [m].
+    sensor_a, sensor_b, drive_speed, downstream_speed, upstream_tension : str
+        The channels of y_A [N], y_B [m], ω_d [rad/s], ω_o [rad/s] and T_up [N].
+    design : {"fault_normalised", "unit_norm"}
+        Normalisation of the min-max relation: ω F = 1 for unit faults on A and on B (the
+        default), or the thesis's ‖ω‖ = 1, which can be blind to a sensor's faults.
+    mode : {"model", "literal", "scheduled"}
+        ``literal``: Ω(Y − E·U) centred on the training data (the thesis's linearised
+        residual; it fails away from the design point); ``model``: Ω(Y − O(x̂, u));
+        ``scheduled``: as ``model`` with Ω re-solved at the current operating point every
+        ``schedule_step_s``.
+    savgol_window_s : float
+        Savitzky-Golay window [s], the same on every channel.
+    savgol_order : int
+        Savitzky-Golay polynomial order (≥ 2).
+    causal : bool
+        Use past samples only (the statistic then lags by half the window).
+    time_base : {"travel", "time"}
+        ``travel``: derivative rows per metre of web, scaled to the design speed (ẏ·v0/v):
+        the span's dynamics scale with L/v, so the relations hold at every speed;
+        ``time``: per second, as in the thesis.
+    modulus_spread : float
+        Relative spread of EA in the design corners (EA·(1 ± spread)).
+    pitch_spread_m : float
+        Spread of L0 in the design corners [m].
+    schedule_step_s : float
+        Re-design interval of ``mode="scheduled"`` [s].
+    signature_z : float
+        |r_j|/σ_j above which relation j counts as fired in :meth:`rank_channels`.
+    alpha : float
+        Fraction of healthy training samples above the threshold.
+
+    Attributes
+    ----------
+    omega_ : ndarray (3, 4)
+        The relations r1-r3 on the scaled stack (sensor B rows ÷ L0/EA, derivative rows per
+        web travel at the design speed with ``time_base="travel"``).
+    design_point_ : ndarray (4,)
+        p0 = [x, ω_d, ω_o, T_up], the training mean.
+    S_ : ndarray (5, 4, 4)
+        Mean-square model errors of the design scenarios (nominal and four corners).
+    signature_ : DataFrame
+        Which relation uses which sensor.
+    center_, sigma_ : ndarray (3,)
+        Training mean and standard deviation of each relation.
+    threshold_ : float
+    """
+
+    name = "parity"
+    requires = ("meas.*",)
+
+    def __init__(self, line: str | None = None, web_EA_N: float = 112.5e3,
+                 span_length_m: float = 1.5, relaxed_pitch_m: float | None = None,
+                 drive_radius_m: float = 0.10, downstream_radius_m: float = 0.05,
+                 sensor_a: str = "meas.sensor_A.tension_N",
+                 sensor_b: str = "meas.sensor_B.pitch_m",
+                 drive_speed: str = "meas.u_drive.speed_rad_s",
+                 downstream_speed: str = "meas.u_out.speed_rad_s",
+                 upstream_tension: str = "meas.lc_unwind.tension_N",
+                 design: str = "fault_normalised", mode: str = "model",
+                 savgol_window_s: float = 3.0, savgol_order: int = 2, causal: bool = False,
+                 time_base: str = "travel",
+                 modulus_spread: float = 0.02, pitch_spread_m: float = 5e-6,
+                 schedule_step_s: float = 1.0, signature_z: float = 3.0,
+                 alpha: float = 0.01):
+        self.line = line
+        self.web_EA_N = web_EA_N
+        self.span_length_m = span_length_m
+        self.relaxed_pitch_m = relaxed_pitch_m
+        self.drive_radius_m = drive_radius_m
+        self.downstream_radius_m = downstream_radius_m
+        self.sensor_a = sensor_a
+        self.sensor_b = sensor_b
+        self.drive_speed = drive_speed
+        self.downstream_speed = downstream_speed
+        self.upstream_tension = upstream_tension
+        self.design = design
+        self.mode = mode
+        self.savgol_window_s = savgol_window_s
+        self.savgol_order = savgol_order
+        self.causal = causal
+        self.time_base = time_base
+        self.modulus_spread = modulus_spread
+        self.pitch_spread_m = pitch_spread_m
+        self.schedule_step_s = schedule_step_s
+        self.signature_z = signature_z
+        self.alpha = alpha
+
+    # ---- parameters and channels -------------------------------------------------------------
+    @property
+    def channels(self) -> list[str]:
+        """y_A, y_B, ω_d, ω_o, T_up columns, in that order."""
+        return [self.sensor_a, self.sensor_b, self.drive_speed, self.downstream_speed,
+                self.upstream_tension]
+
+    def _validate(self):
+        if self.design not in KINDS:
+            raise InputError(f"parity: design must be one of {', '.join(KINDS)}, "
+                             f"got {self.design!r}")
+        if self.time_base not in TIME_BASES:
+            raise InputError(f"parity: time_base must be one of {', '.join(TIME_BASES)}, "
+                             f"got {self.time_base!r}")
+        if self.mode not in MODES:
+            raise InputError(f"parity: mode must be one of {', '.join(MODES)}, got {self.mode!r}")
+        for key in ("web_EA_N", "span_length_m", "drive_radius_m", "downstream_radius_m",
+                    "savgol_window_s", "schedule_step_s", "signature_z"):
+            v = getattr(self, key)
+            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
+                raise InputError(f"parity: {key} must be a positive number, got {v!r}")
+        if self.relaxed_pitch_m is not None and not self.relaxed_pitch_m > 0:
+            raise InputError(f"parity: relaxed_pitch_m must be > 0 m or null, "
+                             f"got {self.relaxed_pitch_m!r}")
+        for key in ("modulus_spread", "pitch_spread_m"):
+            if not getattr(self, key) >= 0:
+                raise InputError(f"parity: {key} must be >= 0, got {getattr(self, key)!r}")
+        if not (isinstance(self.savgol_order, int) and self.savgol_order >= 2):
+            raise InputError(f"parity: savgol_order must be an integer >= 2, "
+                             f"got {self.savgol_order!r}")
+        if not 0 < self.alpha < 1:
+            raise InputError(f"parity: alpha must be in (0, 1), got {self.alpha!r}")
+
+    def required_columns(self, frame: pd.DataFrame) -> list[str]:
+        super().required_columns(frame)
+        missing = [c for c in self.channels if c not in frame.columns]
+        if missing:
+            raise InputError(f"parity: the data has no column matching {', '.join(missing)} "
+                             f"(set sensor_a, sensor_b, drive_speed, downstream_speed, "
+                             f"upstream_tension)")
+        return list(self.channels)
+
+    def _physical(self) -> dict:
+        p = {"web_EA_N": self.web_EA_N, "span_length_m": self.span_length_m,
+             "relaxed_pitch_m": self.relaxed_pitch_m, "drive_radius_m": self.drive_radius_m,
+             "downstream_radius_m": self.downstream_radius_m}
+        if self.line is not None:
+            p.update(registration_parameters(self.line))
+            if self.relaxed_pitch_m is None:
+                p["relaxed_pitch_m"] = None
+        return p
+
+    def _model(self, EA=None, L0=None) -> NonlinearModel:
+        ph = self.physical_
+        return _cached_model(float(EA or ph["web_EA_N"]), float(ph["span_length_m"]),
+                             float(L0 or ph["relaxed_pitch_m"]), float(ph["drive_radius_m"]),
+                             float(ph["downstream_radius_m"]))
+
+    # ---- signals -----------------------------------------------------------------------------
+    def _signals(self, frame: pd.DataFrame) -> dict:
+        """Smoothed stack Y (4, T), inputs u (3, T), u̇ (3, T), the state estimate x̂ (T,)."""
+        t = frame["t_s"].to_numpy(float) if "t_s" in frame else np.arange(len(frame)) * 0.01
+        dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.01
+        X = frame[self.channels].to_numpy(float)
+        w = savgol_window_samples(self.savgol_window_s, dt, self.savgol_order)
+        D, delay = savgol_derivatives(X, dt, w, self.savgol_order, 1, self.causal)
+        (yA, yB, wd, wo, tu), (dA, dB, dwd, dwo, dtu) = D[0].T, D[1].T
+        bad = ~np.all(np.isfinite(X), axis=1) | ~np.isfinite(yA)
+        return {"t": t, "Y": np.vstack([yA, dA, yB, dB]), "u": np.vstack([wd, wo, tu]),
+                "du": np.vstack([dwd, dwo, dtu]), "bad": bad, "delay": delay}
+
+    def _xhat(self, s: dict, EA: float, L0: float) -> np.ndarray:
+        """The state from both static rows (their mean): any estimate near x will do, since
+        Ω annihilates ∇_x O to first order."""
+        return 0.5 * (s["Y"][0] + EA * (s["Y"][2] / L0 - 1.0))
+
+    def _errors(self, s, model: NonlinearModel, EA, L0) -> np.ndarray:
+        """Y − O(x̂, u, u̇) (4, T)."""
+        x = self._xhat(s, EA, L0)[None]
+        return s["Y"] - model.observation(x, s["u"], [s["du"]])
+
+    # ---- fit -----------------------------------------------------------------------------------
+    def fit(self, runs):
+        """Design the relations on healthy runs and set the threshold (see the class doc)."""
+        self._validate()
+        frames = self._frames(runs)
+        for f in frames:
+            self.required_columns(f)
+        self.physical_ = self._physical()
+        sigs = [self._signals(f) for f in frames]
+        EA = float(self.physical_["web_EA_N"])
+        if self.physical_["relaxed_pitch_m"] is None:
+            # Hooke's law between the sensors: y_B = (y_A/EA + 1)·L0
+            ratio = np.concatenate([f[self.sensor_b].to_numpy(float)
+                                    / (1 + f[self.sensor_a].to_numpy(float) / EA)
+                                    for f in frames])
+            self.physical_["relaxed_pitch_m"] = float(np.nanmedian(ratio))
+        L0 = float(self.physical_["relaxed_pitch_m"])
+        model = self._model()
+        self.model_ = model
+        # rows in newton-equivalents (sensor B through ∂h_B/∂x = L0/EA)
+        self.scale_ = np.array([1.0, 1.0, L0 / EA, L0 / EA])
+        self.row_order_ = np.array([k for _, k in model.rows])
+        P = np.hstack([np.vstack([self._xhat(s, EA, L0)[None], s["u"]])[:, ~s["bad"]]
+                       for s in sigs])
+        self.design_point_ = P.mean(axis=1)
+        self.design_speed_m_s_ = float(self._speed(self.design_point_[2]))
+        self.S_ = self._scenario_matrices(sigs, EA, L0)
+        if hasattr(self, "fault_signs_"):  # a re-fit chooses the signs again
+            del self.fault_signs_
+        self.omega_ = self._relations(self.design_point_)
+        self.signature_ = self._signature_table()
+        R = np.hstack([self._residuals(s, center=False)[:, ~s["bad"]] for s in sigs])
+        self.center_ = R.mean(axis=1)
+        self.sigma_ = R.std(axis=1)
+        self.sigma_[self.sigma_ <= 0] = 1.0
+        stat = np.max(np.abs(R - self.center_[:, None]) / self.sigma_[:, None], axis=0)
+        self.threshold_ = float(np.quantile(stat, 1.0 - self.alpha))
+        return self
+
+    def _scenario_matrices(self, sigs, EA, L0) -> np.ndarray:
+        """Mean-square model errors (scaled) per design scenario: EA·(1 ± spread) ×
+        L0 ± spread, and the nominal model."""
+        corners = [(EA, L0)] + [(EA * (1 + a * self.modulus_spread), L0 + b * self.pitch_spread_m)
+                                for a in (-1, 1) for b in (-1, 1)]
+        S = []
+        for ea, l0 in corners:
+            m = self._model(ea, l0)
+            E = np.hstack([(self._errors(s, m, ea, l0) / self._rowscale(s))[:, ~s["bad"]]
+                           for s in sigs])
+            S.append(E @ E.T / E.shape[1])
+        return np.array(S)
+
+    def _faults(self) -> np.ndarray:
+        """Unit offsets of sensors A and B (1 N-equivalent) in the scaled stack."""
+        F = np.zeros((4, 2))
+        F[0, 0] = F[2, 1] = 1.0
+        return F
+
+    def _speed(self, omega_o):
+        return self.physical_["downstream_radius_m"] * omega_o
+
+    def _rowscale_at(self, p) -> np.ndarray:
+        """Scale of each stack row at the point p (divide Y − O by it): newton-equivalents,
+        and with ``time_base="travel"`` derivatives per web travel (× v0/v)."""
+        if self.time_base == "time":
+            return self.scale_.copy()
+        return self.scale_ * (self._speed(p[2]) / self.design_speed_m_s_) ** self.row_order_
+
+    def _rowscale(self, s) -> np.ndarray:
+        """The row scales along a run's samples (4, T)."""
+        if self.time_base == "time":
+            return np.broadcast_to(self.scale_[:, None], s["Y"].shape)
+        v = self._speed(s["u"][1]) / self.design_speed_m_s_
+        return self.scale_[:, None] * v[None, :] ** self.row_order_[:, None]
+
+    def _N(self, p):
+        """∇_x O_NL at p in scaled rows, and its derivatives ∂/∂p (4 params, 4, 1)."""
+        sc = self._rowscale_at(p)
+        G = self.model_.grad_x(p[:1], p[1:])
+        dG = self.model_.grad_xp(p[:1], p[1:]) / sc[None, :, None]
+        if self.time_base == "travel":  # the scale depends on ω_o (p[2])
+            dsc = sc * self.row_order_ / p[2]
+            dG[2] -= G * (dsc / sc**2)[:, None]
+        return G / sc[:, None], dG
+
+    def _relations(self, p, start=None, previous=None) -> np.ndarray:
+        """Ω (3 x 4, on the scaled stack) at the point p = [x, u]: the min-max mixed
+        relation, then the single-sensor ones in the thesis's order (B only, A only)."""
+        model = self.model_
+        N, _ = self._N(p)
+        single = model.sensor_relations(p[:1], p[1:], scale=self._rowscale_at(p))[::-1]
+        d = design_relation(self.S_, N, self._faults(), self.design, start=start,
+                            signs=getattr(self, "fault_signs_", None))
+        if not hasattr(self, "fault_signs_"):
+            self.fault_signs_ = d.signs  # the design point's; kept when re-solving along data
+        W = np.vstack([d.omega, *single])
+        if previous is not None:  # keep signs continuous along data
+            W *= np.sign(np.sum(W * previous, axis=1))[:, None]
+        return W
+
+    def _signature_table(self) -> pd.DataFrame:
+        """Which relation uses which sensor (True: a fault on that sensor moves it)."""
+        sensor_of_row = self.model_.sensor_of_row()
+        W = np.abs(self.omega_)
+        tab = np.array([[W[k, sensor_of_row == j].max() > 1e-9 * W[k].max()
+                         for k in range(len(W))] for j in range(2)])
+        return pd.DataFrame(tab, index=[self.sensor_a, self.sensor_b],
+                            columns=[f"r{k + 1}" for k in range(len(W))])
+
+    # ---- residuals -----------------------------------------------------------------------------
+    def _residuals(self, s, center: bool = True) -> np.ndarray:
+        EA, L0 = float(self.physical_["web_EA_N"]), float(self.physical_["relaxed_pitch_m"])
+        if self.mode == "literal":
+            x = self._xhat(s, EA, L0)
+            # E(x̂, u)·u̇: the input part of the stack (eq. 3.13); zero for this model's h
+            EU = self.model_.input_part(x[None], s["u"], [s["du"]])
+            R = self.omega_ @ ((s["Y"] - EU) / self._rowscale(s))
+        elif self.mode == "model":
+            R = self.omega_ @ (self._errors(s, self.model_, EA, L0) / self._rowscale(s))
+        else:
+            E = self._errors(s, self.model_, EA, L0) / self._rowscale(s)
+            R = np.einsum("tkn,nt->kt", self._schedule(s), E)
+        if center:
+            R = R - self.center_[:, None]
+        R[:, s["bad"]] = np.nan
+        return R
+
+    def _knots(self, s, step_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Knot times every ``step_s`` and the operating point p = [x̂, u] averaged over
+        each interval."""
+        EA, L0 = float(self.physical_["web_EA_N"]), float(self.physical_["relaxed_pitch_m"])
+        t = s["t"]
+        P = np.vstack([self._xhat(s, EA, L0)[None], s["u"]])
+        edges = np.arange(t[0], max(t[-1], t[0] + 1e-9), step_s)
+        idx = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, len(edges) - 1)
+        tk, pk = [], []
+        for k in np.unique(idx):
+            sel = (idx == k) & np.all(np.isfinite(P), axis=0)
+            if sel.any():
+                tk.append(t[sel].mean())
+                pk.append(P[:, sel].mean(axis=1))
+        return np.array(tk), np.array(pk)
+
+    def _schedule(self, s) -> np.ndarray:
+        """Ω re-solved at the knots and interpolated linearly in time: (T, 3, 4)."""
+        tk, pk = self._knots(s, self.schedule_step_s)
+        Ws, prev = [], self.omega_
+        for p in pk:
+            prev = self._relations(p, start=prev[0], previous=prev)
+            Ws.append(prev)
+        Ws = np.array(Ws)
+        flat = Ws.reshape(len(Ws), -1)
+        out = np.column_stack([np.interp(s["t"], tk, flat[:, j]) for j in range(flat.shape[1])])
+        return out.reshape(len(s["t"]), *Ws.shape[1:])
+
+    # ---- the contract --------------------------------------------------------------------------
+    def score(self, run):
+        """Residuals r1..r3 (newton-equivalents, centred on the healthy training data) and
+        ``statistic`` = max_j |r_j|/σ_j, indexed like the run's samples."""
+        self._check_fitted()
+        f = self._frames(run)[0]
+        self.required_columns(f)
+        R = self._residuals(self._signals(f))
+        out = pd.DataFrame(R.T, index=f.index, columns=[f"r{k + 1}" for k in range(len(R))])
+        with np.errstate(invalid="ignore"):
+            z = np.abs(R) / self.sigma_[:, None]
+        stat = np.where(np.all(np.isfinite(z), axis=0), np.max(np.nan_to_num(z), axis=0),
+                        np.nan)
+        out.insert(0, "statistic", stat)
+        return out
+
+    def calibrate_threshold(self, runs) -> ParitySpaceDetector:
+        """Set ``threshold_`` to the (1 − alpha) quantile of the statistic on held-out healthy
+        runs (the calibration seeds), instead of the training runs."""
+        self._check_fitted()
+        stat = np.concatenate([self.score(r)["statistic"].to_numpy() for r in
+                               (runs if isinstance(runs, (list, tuple)) else [runs])])
+        self.threshold_ = float(np.nanquantile(stat, 1.0 - self.alpha))
+        return self
+
+    def rank_channels(self, scores: pd.DataFrame) -> pd.DataFrame:
+        """Sensors A and B ordered by how well their signature explains the residuals.
+
+        A sensor's evidence is Σ z_k over the relations that use it minus Σ z_k over those
+        that do not (z_k = |r_k|/σ_k, capped at 3·``signature_z`` so one huge residual does
+        not decide alone): a fault on A moves r1 and r3 and leaves r2, a fault on B the
+        mirror image (thesis Fig. 3-4). NaN where the statistic is NaN.
+        """
+        cols = list(self.signature_.columns)
+        z = np.minimum(np.abs(scores[cols].to_numpy(float)) / self.sigma_,
+                       3 * self.signature_z)
+        sig = self.signature_.to_numpy(float)
+        evidence = z @ sig.T - z @ (1 - sig).T  # (T, sensors)
+        order = np.argsort(-evidence, axis=1)
+        names = np.array(self.signature_.index, dtype=object)[order]
+        names[~np.isfinite(scores["statistic"].to_numpy(float))] = np.nan
+        return pd.DataFrame(names, index=scores.index)
+
+    def sensitivity(self, run, step_s: float | None = None) -> pd.DataFrame:
+        """Post-optimal sensitivity of the mixed relation along a run (thesis Figs. 3-6,
+        3-7): at knots every ``step_s`` (default ``schedule_step_s``) the min-max design is
+        re-solved at the operating point p = [x̂, ω_d, ω_o, T_up] and dJ/dp and dω/dp come
+        from its KKT system (eqs. 3.20-3.22).
+
+        Returns
+        -------
+        pandas.DataFrame
+            ``t_s``, the point ``p.*``, ``J``, ``dJ/d<p>`` and ``domega<i>/d<p>``.
+        """
+        self._check_fitted()
+        s = self._signals(self._frames(run)[0])
+        tk, pk = self._knots(s, self.schedule_step_s if step_s is None else step_s)
+        names = ["x", "omega_d", "omega_o", "T_up"]
+        rows, start = [], self.omega_[0]
+        for t, p in zip(tk, pk, strict=False):
+            N, dN = self._N(p)
+            d = design_relation(self.S_, N, self._faults(), self.design, start=start,
+                                signs=self.fault_signs_)
+            start = d.omega
+            dJ, dom, _ = sensitivity(d, self.S_, N, self._faults(), dN, self.design)
+            row = {"t_s": t, **{f"p.{n}": v for n, v in zip(names, p, strict=False)}, "J": d.J}
+            row.update({f"dJ/d{n}": v for n, v in zip(names, dJ, strict=False)})
+            for i in range(dom.shape[1]):
+                row.update({f"domega{i + 1}/d{n}": dom[k, i] for k, n in enumerate(names)})
+            rows.append(row)
+        return pd.DataFrame(rows)
+

@@ -1,0 +1,83 @@
+"""The machinery of benchmarks/reproduction/ch3_parity.py, cheaply: its sweep subsets, its
+assertion table and its argument handling (CI runs the --quick study itself)."""
+
+from __future__ import annotations
+
+import importlib.util
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from conftest import REPO
+
+PATH = REPO / "benchmarks" / "reproduction" / "ch3_parity.py"
+
+
+@pytest.fixture(scope="module")
+def study():
+    spec = importlib.util.spec_from_file_location("ch3_parity", PATH)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_sweep_subsets_are_valid_sweeps(study, tmp_path):
+    from r2rsim.sweep import plan_sweep
+
+    plan = study.Plan(quick=True)
+    cases = {f"{c} OC1" for c in plan.cases}
+    path = study._subset_sweep(study.SET / "faults.yaml", tmp_path / "f.yaml",
+                               lambda v: v["case"] in cases, [101, 102], 60.0, 30.0)
+    # r2rsim makes and validates every run of the subset
+    assert len(plan_sweep(path).runs) == len(plan.cases) * 2
+    text = path.read_text(encoding="utf-8")
+    assert "onset: 30.0 s" in text and "duration: 60.0 s" in text
+    h = study._subset_sweep(study.SET / "healthy.yaml", tmp_path / "h.yaml",
+                            lambda v: v["mode"] in ("OC1", "OC2"), [1, 16], 60.0)
+    assert len(plan_sweep(h).runs) == 4
+
+
+def _result(**over):
+    far = pd.DataFrame({"OC1": {"model": 0.01, "literal": 0.01, "scheduled": 0.01},
+                        "OC2": {"model": 0.02, "literal": 0.95, "scheduled": 0.02}})
+    sig = pd.DataFrame(
+        {"r1": [-4, -1, 1, 4, 4, 1, -1, -4], "r2": [0, 0, 0, 0, -4, -1, 1, 4],
+         "r3": [-5, -2, 2, 5, 0, 0, 0, 0]},
+        index=study_cases(), dtype=float)
+    iso = pd.DataFrame({"hit@1 (alarmed samples)": [0.95] * 8}, index=study_cases())
+    res = {"far": far, "signature": sig, "isolation": iso,
+           "sens_spread": {"OC1": 1.0, "OC2": 2.5}}
+    res.update(over)
+    return res
+
+
+def study_cases():
+    return ["A offset -15 %", "A offset -5 %", "A offset +5 %", "A offset +15 %",
+            "B gain -15 % record-only", "B gain -5 % record-only", "B gain +5 % record-only",
+            "B gain +15 % record-only"]
+
+
+def test_assertions_pass_and_fail_on_the_numbers(study):
+    ok = study.check_all(_result())
+    assert ok.ok and len(ok.rows) == 10
+    bad = _result(sens_spread={"OC1": 1.0, "OC2": 1.9})
+    bad["far"].loc["literal", "OC2"] = 0.4
+    bad["signature"].loc["B gain +15 % record-only", "r2"] = 2.7
+    c = study.check_all(bad)
+    failed = [r["assertion"] for r in c.rows if r["result"] == "FAIL"]
+    assert len(failed) == 3 and not c.ok
+    assert any("literal" in f for f in failed) and any("sensitivity" in f for f in failed)
+    md = study.md(c.table(), index=False)
+    assert md.count("\n") == len(c.rows) + 1 and "\\|z\\|" in md
+
+
+def test_arguments(study, tmp_path, capsys):
+    with pytest.raises(SystemExit) as e:
+        study.main(["-o", str(tmp_path / "o"), "--data", str(tmp_path), str(tmp_path)])
+    assert e.value.code == 2 and "not an r2rsim sweep dataset" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:
+        study.main(["--quick"])
+    assert e.value.code == 2
+    assert study.ASSERTION_FAILED not in (0, 1, 2)
+    assert np.isfinite(study.THESIS_TABLE_3_2).all()
