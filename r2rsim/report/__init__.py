@@ -9,6 +9,7 @@ plot`` and ``r2rsim report`` commands save them.
 
 from ._data import decimate_minmax
 from ._diagnostics import plot_mdm, plot_metric, plot_roc_pr, plot_statistic
+from ._gsmms import plot_gsmms_map, plot_gsmms_residuals, plot_severity
 from ._html import write_report
 from ._mpl import require_matplotlib
 from ._run import plot_run
@@ -20,4 +21,6 @@ __all__ = [
     # diagnostics results (r2rsim diagnose / bench) and the HTML report (r2rsim report)
     "plot_statistic", "plot_roc_pr", "plot_metric", "plot_mdm", "write_report",
     "require_matplotlib",
+    # GSMMS (thesis Ch. 4)
+    "plot_gsmms_map", "plot_gsmms_residuals", "plot_severity",
 ]

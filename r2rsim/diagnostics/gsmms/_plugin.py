@@ -291,8 +291,9 @@ class GSMMS(Diagnostic):
 
     def score(self, run) -> pd.DataFrame:
         """Per sample: ``statistic`` = max over relations of |P − μ_node|/σ_node, ``bmu``
-        (the node index; −1 where a feature is missing) and each relation's raw residual
-        ``residual.k`` (standardised units)."""
+        (the node index; −1 where a feature is missing), each relation's raw residual
+        ``residual.k`` (standardised units) and its signed node-standardised value
+        ``z.k`` = (P − μ_node)/σ_node."""
         self._check_fitted()
         f = _frame(run)
         S, Z = self._standardised(f)
@@ -300,15 +301,19 @@ class GSMMS(Diagnostic):
         k = self.node_mean_.shape[1]
         bmu = np.full(len(f), -1)
         R = np.full((len(f), k), np.nan)
-        stat = np.full(len(f), np.nan)
+        zs = np.full((len(f), k), np.nan)
         if ok.any():
             b = self.graph_.bmu(S[ok])
             r = self.models_.residuals(Z[ok], b)
             bmu[ok], R[ok] = b, r
-            stat[ok] = np.max(np.abs(r - self.node_mean_[b]) / self.node_std_[b], axis=1)
+            zs[ok] = (r - self.node_mean_[b]) / self.node_std_[b]
+        stat = np.full(len(f), np.nan)
+        stat[ok] = np.max(np.abs(zs[ok]), axis=1)
         out = pd.DataFrame({"statistic": stat, "bmu": bmu}, index=f.index)
         for j in range(k):
             out[f"residual.{j}"] = R[:, j]
+        for j in range(k):
+            out[f"z.{j}"] = zs[:, j]
         return out
 
 
