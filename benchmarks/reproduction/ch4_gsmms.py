@@ -391,7 +391,12 @@ def study(root: Path, out: Path, plan: Plan) -> list[Check]:
     md += ["## Detection per condition, global vs GSMMS (thesis Table 4-2)", "",
            md_table(det, ".4f"), "", "Thesis Table 4-2 in the same terms "
            "(FAR = 1 − accuracy on N1/N2, dr = power on N1_f1/N2_f1):", "",
-           md_table(thesis, ".4f"), ""]
+           md_table(thesis, ".4f"), "",
+           "The thesis-literal rows use one unit-norm minimum-variance relation per node "
+           "(eq. 4.21). Within a regime the registration loop holds sensor B still, so "
+           "that relation is essentially 'B = const' and hardly sees a fault on A (its "
+           "detection rate above); the fault-normalised design "
+           "(thesis-methods.md §3.2) is the study's model.", ""]
     for m in ("OC1", "OC2"):
         checks.append(Check(f"FAR at 2σ, {m}", "≤ 0.07", f"{s[f'far_{m}']:.4f}",
                             s[f"far_{m}"] <= 0.07))
@@ -494,6 +499,14 @@ def study(root: Path, out: Path, plan: Plan) -> list[Check]:
     checks.append(Check("OC3 FAR after adaptation", "≤ 2 × OC1 FAR",
                         f"{after3['far_OC3']:.4f} vs 2 × {after3['far_OC1']:.4f}",
                         after3["far_OC3"] <= 2 * after3["far_OC1"]))
+    if after3["nodes"] == after2["nodes"]:
+        md += ["**Why OC3 adds no node.** Growth is driven by how badly the local relations "
+               "fit (the loss share ζ and the loss improvement), not by distance in the "
+               "partition space. OC3 (0.75 m/s, 145 N) lies between OC1 and OC2 and has the "
+               "same A-B relation; its samples join an existing node, whose relation and "
+               "statistics, re-fitted on the pooled data, fit it "
+               f"(OC3 FAR {after2['far_OC3']:.3f} → {after3['far_OC3']:.3f}). The check "
+               "'node added' fails as stated; the FAR check passes.", ""]
 
     # ---- masking by a partition on the faulty sensor --------------------------------------
     mask_est = fitted(GSMMS, {**STUDY, "partition_features": [A]}, data)
