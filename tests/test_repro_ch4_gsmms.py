@@ -45,8 +45,8 @@ def test_quick_sweeps_are_valid_and_hold_what_the_study_reads(ch4, tmp_path):
 def test_md_table(ch4):
     df = pd.DataFrame({"x": [0.12345, np.nan], "n": [1, 2]}, index=pd.Index(["a", "b"],
                                                                           name="row"))
-    assert ch4.md_table(df, ".2f").splitlines() == [
-        "| row | x | n |", "|---|---|---|", "| a | 0.12 | 1 |", "| b | – | 2 |"]
+    assert ch4.md_table(df).splitlines() == [  # the default format: 4 decimals
+        "| row | x | n |", "|---|---|---|", "| a | 0.1235 | 1 |", "| b | – | 2 |"]
 
 
 def test_four_cell_and_check_results(ch4):
