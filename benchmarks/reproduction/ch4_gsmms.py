@@ -463,10 +463,8 @@ def study(root: Path, out: Path, plan: Plan) -> list[Check]:
                "its residual spread is nearly the same. The thesis's global failure (27 % "
                "power in OC1) appears here only when the partition sits on the faulty "
                "sensor (see *Masking* below: the same 20 % fault in OC1 then reads like "
-               "OC2). A data set where the relation itself changes by regime (a second "
-               "product, `P2` in the healthy sweep, with faults; it shares OC1's set-points, "
-               "so the partition would need a product identifier among the visible "
-               "columns) would be needed to show an advantage of the local models.", ""]
+               "OC2), or when the relation itself changes between regimes (see *A second "
+               "product in training* below, when the data has product P2's runs).", ""]
     runs = {}
     for m in ("OC1", "OC2"):
         runs[f"{m} healthy (test seed)"] = data.healthy[m, "test"][0]
