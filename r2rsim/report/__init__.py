@@ -9,6 +9,7 @@ plot`` and ``r2rsim report`` commands save them.
 
 from ._data import decimate_minmax
 from ._diagnostics import plot_mdm, plot_metric, plot_roc_pr, plot_statistic
+from ._gsmms import plot_gsmms_map, plot_gsmms_residuals, plot_severity
 from ._html import write_report
 from ._mpl import require_matplotlib
 from ._parity import plot_residuals, plot_sensitivity, plot_signature
@@ -23,4 +24,6 @@ __all__ = [
     "require_matplotlib",
     # residual-based diagnostics (the parity study, thesis Ch. 3)
     "plot_residuals", "plot_signature", "plot_sensitivity",
+    # GSMMS (thesis Ch. 4)
+    "plot_gsmms_map", "plot_gsmms_residuals", "plot_severity",
 ]

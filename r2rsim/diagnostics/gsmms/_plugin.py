@@ -1,0 +1,344 @@
+"""The ``gsmms`` and ``gsmms_global`` plug-ins: column handling, smoothing, standardisation
+and the per-node residual statistics around :mod:`._model`."""
+
+from __future__ import annotations
+
+import fnmatch
+
+import numpy as np
+import pandas as pd
+
+from ...errors import InputError
+from ..base import Diagnostic, _frame
+from . import _local
+from ._model import GrowthRecord, GrowthSettings, grow, initial_map
+
+_CHOICES = {"solver": _local.SOLVERS, "step": _local.STEPS, "weighting": ("soft", "hard")}
+
+
+class GSMMS(Diagnostic):
+    """Growing self-organising multi-model scheme (thesis Ch. 4): a growing map partitions
+    the operating space into regimes, each node carries local parity relations fitted by
+    mini-batch SGD, and each node's residual is standardised by its own healthy statistics,
+    so one threshold is regime-aware.
+
+    Parameters
+    ----------
+    partition_features : str or list of str
+        Glob patterns of the columns the map partitions on (standardised). Default the
+        set-points ``sp.*``: they say which regime the line is in and cannot be faulty. The
+        thesis partitions on a state estimated from sensor A, which lets an A fault move the
+        best-matching unit (``docs/diagnostics.md`` shows the masking).
+    model_features : str or list of str
+        Glob patterns of the channels the local parity relations combine (standardised).
+    derivatives : bool
+        Also give the relations each model channel's time derivative [unit/s] (eq. 4.23).
+    smooth_s : float
+        Causal moving-average window [s] applied to every feature (0: none).
+    n_relations : int
+        Unit-norm relations per node (the smallest eigen-directions, fitted one after the
+        other, as eq. 4.21); used when ``fault_channels`` is None.
+    fault_channels : str, list of str or None
+        Fault-normalised design instead (thesis-methods.md §2.2, §3.2): one relation per
+        model channel matching these patterns, the minimum-variance one with unit response
+        to a fault on that channel. The thesis's unit-norm minimum-variance relation can be
+        blind to a sensor's fault (on the registration line it picks sensor B, which the
+        loop holds still); this one cannot.
+    solver : {"minibatch", "sgd", "batch", "eigh"}
+        Mini-batch SGD (thesis), single-sample SGD, full-batch gradient descent, or the exact
+        eigenvector oracle.
+    batch_size : int
+        Samples per mini-batch (thesis: 128) and per codebook update.
+    step : {"inv_sqrt", "inv_sq"}
+        Step size η0/√idx, or η0/idx² as eq. 4.15 prints it (stalls; kept for comparison).
+    eta0 : float
+        Initial step size.
+    n_epochs : float
+        Passes' worth of samples per SGD fit.
+    lambda1 : float
+        Weight of the unit-norm penalty (eq. 4.21).
+    initial_nodes, max_nodes : int
+        Map size at the start (farthest-point seeds) and the most growth may reach.
+    zeta_threshold : float
+        Share criterion: growth stops when every node's loss share ζ_m is at most this.
+    min_improvement : float or None
+        Absolute criterion: an insertion that lowers the global loss by less than this
+        fraction is undone and growth stops (None: off).
+    k_max : int
+        Codebook updates (mini-batches) per growth step.
+    sigma0, sigma_final : float
+        Neighbourhood width [hops] at the start and end of each training phase; the local
+        models' neighbour weights use ``sigma_final``.
+    weighting : {"hard", "soft"}
+        Local models use only the samples each node wins, or weight all samples by
+        topological distance (eq. 4.11). Hard by default: a relation's residual variance is
+        tiny beside the difference between regimes, so even a 0.4 % weight of a neighbouring
+        regime's samples (one hop at σ = 0.3) distorts it.
+    k_sigma : float
+        The threshold on |P − μ_node|/σ_node (thesis: 2σ).
+    max_samples : int
+        At most this many training samples (an evenly spaced subset) are used to fit.
+    random_state : int or None
+        Seed of every random choice (initial node, mini-batches, initial relations).
+    """
+
+    name = "gsmms"
+    requires = ()
+
+    def __init__(self, partition_features: str | list | tuple = ("sp.*",),
+                 model_features: str | list | tuple = ("meas.*",), derivatives: bool = False,
+                 smooth_s: float = 1.0, n_relations: int = 1,
+                 fault_channels: str | list | tuple | None = None, solver: str = "minibatch",
+                 batch_size: int = 128, step: str = "inv_sqrt", eta0: float = 1.0,
+                 n_epochs: float = 1.0, lambda1: float = 1.0, initial_nodes: int = 2,
+                 max_nodes: int = 6, zeta_threshold: float = 0.6,
+                 min_improvement: float | None = 0.05, k_max: int = 200, sigma0: float = 1.0,
+                 sigma_final: float = 0.3, weighting: str = "hard", k_sigma: float = 2.0,
+                 max_samples: int = 200_000, random_state: int | None = None):
+        self.partition_features = partition_features
+        self.model_features = model_features
+        self.derivatives = derivatives
+        self.smooth_s = smooth_s
+        self.n_relations = n_relations
+        self.fault_channels = fault_channels
+        self.solver = solver
+        self.batch_size = batch_size
+        self.step = step
+        self.eta0 = eta0
+        self.n_epochs = n_epochs
+        self.lambda1 = lambda1
+        self.initial_nodes = initial_nodes
+        self.max_nodes = max_nodes
+        self.zeta_threshold = zeta_threshold
+        self.min_improvement = min_improvement
+        self.k_max = k_max
+        self.sigma0 = sigma0
+        self.sigma_final = sigma_final
+        self.weighting = weighting
+        self.k_sigma = k_sigma
+        self.max_samples = max_samples
+        self.random_state = random_state
+
+    # ---- parameters and columns --------------------------------------------------------
+    def _settings(self) -> GrowthSettings:
+        for key, allowed in _CHOICES.items():
+            if getattr(self, key) not in allowed:
+                raise InputError(f"{self.name}: {key} must be one of {', '.join(allowed)}, "
+                                 f"got {getattr(self, key)!r}")
+        positive = {"batch_size": 1, "n_relations": 1, "initial_nodes": 1, "max_nodes": 1,
+                    "k_max": 1, "max_samples": 2}
+        for key, low in positive.items():
+            if int(getattr(self, key)) < low:
+                raise InputError(f"{self.name}: {key} must be at least {low}, "
+                                 f"got {getattr(self, key)!r}")
+        for key in ("eta0", "n_epochs", "lambda1", "sigma0", "sigma_final", "k_sigma"):
+            if not float(getattr(self, key)) > 0:
+                raise InputError(f"{self.name}: {key} must be positive, "
+                                 f"got {getattr(self, key)!r}")
+        if self.smooth_s < 0:
+            raise InputError(f"{self.name}: smooth_s must be >= 0 s, got {self.smooth_s!r}")
+        if self.initial_nodes > self.max_nodes:
+            raise InputError(f"{self.name}: initial_nodes ({self.initial_nodes}) exceeds "
+                             f"max_nodes ({self.max_nodes})")
+        return GrowthSettings(
+            initial_nodes=int(self.initial_nodes), max_nodes=int(self.max_nodes),
+            zeta_threshold=float(self.zeta_threshold),
+            min_improvement=None if self.min_improvement is None
+            else float(self.min_improvement),
+            k_max=int(self.k_max), sigma0=float(self.sigma0),
+            sigma_final=float(self.sigma_final), weighting=self.weighting,
+            n_relations=int(self.n_relations), solver=self.solver,
+            batch_size=int(self.batch_size), step=self.step, eta0=float(self.eta0),
+            n_epochs=float(self.n_epochs), lambda1=float(self.lambda1))
+
+    def _match(self, frame: pd.DataFrame, patterns, what: str) -> list[str]:
+        patterns = [patterns] if isinstance(patterns, str) else list(patterns)
+        if not patterns:
+            raise InputError(f"{self.name}: {what} is empty")
+        cols = [c for c in frame.columns if c != "t_s"
+                and any(fnmatch.fnmatch(c, p) for p in patterns)]
+        missing = [p for p in patterns if not any(fnmatch.fnmatch(c, p) for c in frame.columns)]
+        if missing:
+            raise InputError(f"{self.name}: the data has no column matching "
+                             f"{', '.join(missing)} ({what})")
+        return cols
+
+    def _fault_directions(self) -> np.ndarray | None:
+        """Unit columns of the standardised model features for each fault channel."""
+        if self.fault_channels is None:
+            return None
+        pats = [self.fault_channels] if isinstance(self.fault_channels, str) \
+            else list(self.fault_channels)
+        idx = [j for j, c in enumerate(self.model_columns_)
+               if any(fnmatch.fnmatch(c, p) for p in pats)]
+        if not idx:
+            raise InputError(f"{self.name}: fault_channels {pats} match none of the model "
+                             f"channels ({', '.join(self.model_columns_)})")
+        n_features = len(self.z_mean_)
+        return np.eye(n_features)[:, idx]
+
+    def _features(self, f: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+        """Smoothed partition and model features (raw units) of one run."""
+        dt = float(np.median(np.diff(f["t_s"].to_numpy()))) if "t_s" in f and len(f) > 1 \
+            else 0.01
+        win = max(1, int(round(self.smooth_s / dt))) if self.smooth_s > 0 else 1
+        part = f[self.partition_columns_].astype(float)
+        model = f[self.model_columns_].astype(float)
+        if win > 1:
+            part = part.rolling(win, min_periods=1).mean()
+            model = model.rolling(win, min_periods=1).mean()
+        Z = model.to_numpy()
+        if self.derivatives:
+            Z = np.hstack([Z, np.vstack([np.full((1, Z.shape[1]), np.nan),
+                                         np.diff(Z, axis=0) / dt])])
+        return part.to_numpy(), Z
+
+    def _standardised(self, f: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+        S, Z = self._features(f)
+        return (S - self.s_mean_) / self.s_scale_, (Z - self.z_mean_) / self.z_scale_
+
+    def _pooled(self, frames) -> tuple[np.ndarray, np.ndarray]:
+        """Standardised rows of all runs, without rows holding a NaN, evenly thinned to at
+        most ``max_samples``."""
+        parts = [self._standardised(f) for f in frames]
+        S = np.vstack([p[0] for p in parts])
+        Z = np.vstack([p[1] for p in parts])
+        ok = np.all(np.isfinite(S), axis=1) & np.all(np.isfinite(Z), axis=1)
+        S, Z = S[ok], Z[ok]
+        if len(S) > self.max_samples:
+            keep = np.linspace(0, len(S) - 1, int(self.max_samples)).astype(int)
+            S, Z = S[keep], Z[keep]
+        if len(S) < 2:
+            raise InputError(f"{self.name}: fewer than two complete training samples")
+        return S, Z
+
+    # ---- the contract ----------------------------------------------------------------------
+    def fit(self, runs):
+        """Standardise, grow the map on the healthy runs and learn each node's residual
+        statistics; returns ``self``."""
+        settings = self._settings()
+        frames = self._frames(runs)
+        self.partition_columns_ = self._match(frames[0], self.partition_features,
+                                              "partition_features")
+        self.model_columns_ = self._match(frames[0], self.model_features, "model_features")
+        raw = [self._features(f) for f in frames]
+        for name, i in (("s", 0), ("z", 1)):
+            X = np.vstack([r[i] for r in raw])
+            X = X[np.all(np.isfinite(X), axis=1)]
+            if len(X) == 0:
+                raise InputError(f"{self.name}: no complete training sample")
+            sd = X.std(axis=0)
+            setattr(self, f"{name}_mean_", X.mean(axis=0))
+            # a constant column (a set-point in one regime) keeps its unit as scale
+            setattr(self, f"{name}_scale_", np.where(sd > 0, sd, 1.0))
+        settings.fault_directions = self._fault_directions()
+        S, Z = self._pooled(frames)
+        self._rng = np.random.default_rng(self.random_state)
+        self.history_: list[GrowthRecord] = []
+        graph = initial_map(S, settings.initial_nodes, self._rng)
+        self._finish(*grow(graph, S, Z, settings, self._rng, self.history_), S, Z)
+        return self
+
+    def partial_fit(self, runs):
+        """Go on learning from new healthy runs: the map keeps its nodes and grows when the
+        new data is a regime it does not fit (the standardisation stays the first fit's).
+        The new runs are pooled with the samples kept from earlier fits."""
+        if not hasattr(self, "graph_"):
+            return self.fit(runs)
+        settings = self._settings()
+        settings.fault_directions = self._fault_directions()
+        S_new, Z_new = self._pooled(self._frames(runs))
+        S = np.vstack([self._kept[0], S_new])
+        Z = np.vstack([self._kept[1], Z_new])
+        self._finish(*grow(self.graph_.copy(), S, Z, settings, self._rng, self.history_),
+                     S, Z)
+        return self
+
+    def calibrate(self, runs):
+        """Re-estimate every node's residual mean and standard deviation on held-out healthy
+        runs (the map and relations stay); nodes those runs never reach keep theirs.
+        Returns ``self``."""
+        self._check_fitted()
+        S, Z = self._pooled(self._frames(runs))
+        self._node_statistics(S, Z, keep_unseen=True)
+        return self
+
+    def _node_statistics(self, S, Z, keep_unseen=False):
+        graph = self.graph_
+        bmu = graph.bmu(S)
+        R = self.models_.residuals(Z, bmu)
+        k = R.shape[1]
+        if not keep_unseen:
+            sd_all = R.std(axis=0)
+            self.node_mean_ = np.zeros((graph.n_nodes, k))
+            self.node_std_ = np.tile(np.where(sd_all > 0, sd_all, 1.0), (graph.n_nodes, 1))
+            self.node_count_ = np.zeros(graph.n_nodes, int)
+        for m in range(graph.n_nodes):
+            sel = bmu == m
+            if sel.sum() >= 2:
+                sd = R[sel].std(axis=0)
+                self.node_mean_[m] = R[sel].mean(axis=0)
+                self.node_std_[m] = np.where(sd > 0, sd, self.node_std_[m])
+                self.node_count_[m] = int(sel.sum())
+
+    def _finish(self, graph, models, S, Z):
+        self.graph_, self.models_ = graph, models
+        self.n_nodes_ = graph.n_nodes
+        self._node_statistics(S, Z)
+        self.threshold_ = float(self.k_sigma)
+        keep = np.linspace(0, len(S) - 1, min(len(S), int(self.max_samples) // 2)).astype(int)
+        self._kept = (S[keep], Z[keep])
+
+    def score(self, run) -> pd.DataFrame:
+        """Per sample: ``statistic`` = max over relations of |P − μ_node|/σ_node, ``bmu``
+        (the node index; −1 where a feature is missing), each relation's raw residual
+        ``residual.k`` (standardised units) and its signed node-standardised value
+        ``z.k`` = (P − μ_node)/σ_node."""
+        self._check_fitted()
+        f = _frame(run)
+        S, Z = self._standardised(f)
+        ok = np.all(np.isfinite(S), axis=1) & np.all(np.isfinite(Z), axis=1)
+        k = self.node_mean_.shape[1]
+        bmu = np.full(len(f), -1)
+        R = np.full((len(f), k), np.nan)
+        zs = np.full((len(f), k), np.nan)
+        if ok.any():
+            b = self.graph_.bmu(S[ok])
+            r = self.models_.residuals(Z[ok], b)
+            bmu[ok], R[ok] = b, r
+            zs[ok] = (r - self.node_mean_[b]) / self.node_std_[b]
+        stat = np.full(len(f), np.nan)
+        stat[ok] = np.max(np.abs(zs[ok]), axis=1)
+        out = pd.DataFrame({"statistic": stat, "bmu": bmu}, index=f.index)
+        for j in range(k):
+            out[f"residual.{j}"] = R[:, j]
+        for j in range(k):
+            out[f"z.{j}"] = zs[:, j]
+        return out
+
+
+class GlobalParity(GSMMS):
+    """The "global model" of thesis Table 4-2: the GSMMS pipeline with a single node (one
+    parity relation set and one residual statistic for every regime)."""
+
+    name = "gsmms_global"
+
+    def __init__(self, partition_features: str | list | tuple = ("sp.*",),
+                 model_features: str | list | tuple = ("meas.*",), derivatives: bool = False,
+                 smooth_s: float = 1.0, n_relations: int = 1,
+                 fault_channels: str | list | tuple | None = None, solver: str = "minibatch",
+                 batch_size: int = 128, step: str = "inv_sqrt", eta0: float = 1.0,
+                 n_epochs: float = 1.0, lambda1: float = 1.0, initial_nodes: int = 1,
+                 max_nodes: int = 1, zeta_threshold: float = 0.6,
+                 min_improvement: float | None = 0.05, k_max: int = 200, sigma0: float = 1.0,
+                 sigma_final: float = 0.3, weighting: str = "hard", k_sigma: float = 2.0,
+                 max_samples: int = 200_000, random_state: int | None = None):
+        super().__init__(
+            partition_features=partition_features, model_features=model_features,
+            derivatives=derivatives, smooth_s=smooth_s, n_relations=n_relations,
+            fault_channels=fault_channels, solver=solver, batch_size=batch_size, step=step,
+            eta0=eta0, n_epochs=n_epochs,
+            lambda1=lambda1, initial_nodes=initial_nodes, max_nodes=max_nodes,
+            zeta_threshold=zeta_threshold, min_improvement=min_improvement, k_max=k_max,
+            sigma0=sigma0, sigma_final=sigma_final, weighting=weighting, k_sigma=k_sigma,
+            max_samples=max_samples, random_state=random_state)
