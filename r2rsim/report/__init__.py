@@ -10,6 +10,7 @@ plot`` and ``r2rsim report`` commands save them.
 from ._data import decimate_minmax
 from ._diagnostics import plot_mdm, plot_metric, plot_roc_pr, plot_statistic
 from ._html import write_report
+from ._hsov import plot_profiles, plot_residual_qq, plot_virtual_sensor
 from ._mpl import require_matplotlib
 from ._run import plot_run
 from ._sweep import plot_sweep
@@ -20,4 +21,6 @@ __all__ = [
     # diagnostics results (r2rsim diagnose / bench) and the HTML report (r2rsim report)
     "plot_statistic", "plot_roc_pr", "plot_metric", "plot_mdm", "write_report",
     "require_matplotlib",
+    # virtual sensors and regression models (thesis Ch. 2)
+    "plot_virtual_sensor", "plot_residual_qq", "plot_profiles",
 ]

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+from scipy.ndimage import median_filter
 from scipy.signal import savgol_filter
 
 from ...errors import InputError
@@ -137,8 +138,9 @@ def signals(frame: pd.DataFrame, st: LineStages, denoise: str | None = "savgol",
     censored = raw["T2"] <= lower_limit
     if flag in frame.columns:
         censored |= frame[flag].to_numpy(float) > 0
-    # the 10 Hz diameter reading is held between updates: smooth it over a longer window
-    R = 0.5 * _smooth(x["dia"], dt, max(window_s, 2.0), denoise or "savgol")
+    # the roll radius changes slowly but jumps at a roll change: a running median over 1 s
+    # removes the reading's noise (and outliers) without smearing the jump
+    R = 0.5 * median_filter(x["dia"], size=max(1, int(round(1.0 / dt))) | 1, mode="nearest")
     return Signals(t=t, R=R, w1=sm["w1"], dw1=d["w1"], v=sm["wi"] * r_idler,
                    dv=d["wi"] * r_idler, w4=sm["w4"], dw4=d["w4"], tau1=sm["tau1"],
                    tau4=sm["tau4"], alpha=sm["alpha"], dalpha=d["alpha"], T2=x["T2"],
@@ -183,13 +185,15 @@ def physics_T1(st: LineStages, s: Signals) -> np.ndarray:
     return t["tau1/R"] + t["J1*dw1/R"] + t["b1*w1/R"]
 
 
-def raw_candidates(s: Signals, with_tension: bool) -> dict[str, np.ndarray]:
-    """The data-driven comparator's raw channels (no physics), optionally with the
-    stage-2 tension reading."""
-    raw = {"R": s.R, "w1": s.w1, "dw1": s.dw1, "tau1": s.tau1, "v": s.v, "dv": s.dv,
-           "w4": s.w4, "dw4": s.dw4, "tau4": s.tau4, "alpha": s.alpha, "dalpha": s.dalpha}
-    if with_tension:
-        raw["T2"] = s.T2s
+def raw_candidates(s: Signals, downstream: bool) -> dict[str, np.ndarray]:
+    """The data-driven comparator's raw channels (no physics): the same information the
+    hybrid model uses for the target. For the stage-2 tension, the stage-1/2 channels
+    (radius, unwind speed and torque, web speed, with derivatives); with ``downstream``
+    (for the pitch) also the stage-2 tension reading, the dancer and the driven roller."""
+    raw = {"R": s.R, "w1": s.w1, "dw1": s.dw1, "tau1": s.tau1, "v": s.v, "dv": s.dv}
+    if downstream:
+        raw.update({"T2": s.T2s, "alpha": s.alpha, "dalpha": s.dalpha, "w4": s.w4,
+                    "dw4": s.dw4, "tau4": s.tau4})
     return raw
 
 
