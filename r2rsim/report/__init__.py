@@ -9,8 +9,8 @@ plot`` and ``r2rsim report`` commands save them.
 
 from ._data import decimate_minmax
 from ._diagnostics import plot_mdm, plot_metric, plot_roc_pr, plot_statistic
-from ._html import write_report
 from ._hsov import plot_profiles, plot_residual_qq, plot_virtual_sensor
+from ._html import write_report
 from ._mpl import require_matplotlib
 from ._run import plot_run
 from ._sweep import plot_sweep
