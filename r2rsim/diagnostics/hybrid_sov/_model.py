@@ -128,14 +128,9 @@ class HybridModel:
             stage 3 and L0 against them (the oracle variant) instead of the alternating
             scheme.
         """
+        self.fit_tension(sigs)
         rows = _select_rows(sigs, self.select_period_s)
         valid = np.concatenate([s.valid for s in sigs])
-        c12 = _stack([self._cols12(s) for s in sigs])
-        self.design12_ = _Design(c12)
-        y2 = np.concatenate([s.T2 for s in sigs])
-        self.stage12_ = self._stepwise(self.design12_(c12), y2, ["const", "tau1/R",
-                                                                 "J1*dw1/R"],
-                                       list(STAGE12_CANDIDATES), rows, valid)
         c3 = _stack([self._cols3(s) for s in sigs])
         self.design3_ = _Design(c3)
         x4 = np.concatenate([F.driven_term(self.stages, s) for s in sigs])
@@ -151,6 +146,23 @@ class HybridModel:
             l0 = self._fit_l0(Y / (1.0 + T4 / self.stages.web_EA), R3, rows, valid)
             self.stage3_ = Stage3Fit(st3, l0, 0, "oracle")
         return self
+
+    def fit_tension(self, sigs: list[F.Signals]) -> HybridModel:
+        """Fit stages 1-2 only, to the stage-2 load cell (sets ``stage12_``)."""
+        rows = _select_rows(sigs, self.select_period_s)
+        valid = np.concatenate([s.valid for s in sigs])
+        c12 = _stack([self._cols12(s) for s in sigs])
+        self.design12_ = _Design(c12)
+        y2 = np.concatenate([s.T2 for s in sigs])
+        self.stage12_ = self._stepwise(self.design12_(c12), y2, ["const", "tau1/R",
+                                                                 "J1*dw1/R"],
+                                       list(STAGE12_CANDIDATES), rows, valid)
+        return self
+
+    def predict_tension(self, s: F.Signals) -> np.ndarray:
+        """T̂_s2 from stages 1-2 [N]."""
+        f12 = self.stage12_.fit
+        return f12.predict(_Design.matrix(self.design12_(self._cols12(s)), f12.names))
 
     def _stepwise(self, cols, y, forced, candidates, rows, valid, kind=None):
         kind = kind or self.kind
@@ -195,9 +207,7 @@ class HybridModel:
     # ---- prediction ---------------------------------------------------------------------
     def predict(self, s: F.Signals) -> pd.DataFrame:
         """Virtual-sensor tensions ``T_s1..T_s5`` [N] and predicted pitch ``Y_s4`` [m]."""
-        c12 = self.design12_(self._cols12(s))
-        f12 = self.stage12_.fit
-        T2 = f12.predict(_Design.matrix(c12, f12.names))
+        T2 = self.predict_tension(s)
         T1 = T2 - F.idler_sum(self.stages, 2, s)     # back through the idlers (eq. 2.16)
         c3 = self.design3_(self._cols3(s))
         f3 = self.stage3_.stage3.fit

@@ -127,8 +127,8 @@ class _Tobit:
         return float(np.sum(self.loglikeobs(theta)))
 
     def _lam(self, z):
-        # inverse Mills ratio phi(z)/Phi(z), stable in the left tail
-        return np.exp(-0.5 * z**2 - 0.5 * _LOG_2PI - special.log_ndtr(z))
+        # inverse Mills ratio phi(z)/Phi(z) = sqrt(2/pi)/erfcx(-z/sqrt(2)), stable for all z
+        return np.sqrt(2.0 / np.pi) / special.erfcx(-z / np.sqrt(2.0))
 
     def score(self, theta):
         sigma, e, z = self._parts(theta)
@@ -210,8 +210,11 @@ def fit_tobit(X, y, censor_at: float = 0.0, names=None, maxiter: int = 100) -> L
     ols = fit_ols(X, y)
     start = np.append(ols.beta, np.log(max(ols.sigma, 1e-12)))
     model = _tobit_model(X, y, float(censor_at))
-    res = model.fit(start_params=start, method="newton", maxiter=maxiter, tol=1e-10,
-                    disp=0, warn_convergence=False)
+    # a trust-region Newton method (scipy's trust-exact through statsmodels) with the
+    # analytic score and Hessian: plain Newton can overshoot to sigma -> 0 under heavy
+    # censoring
+    res = model.fit(start_params=start, method="minimize", min_method="trust-exact",
+                    maxiter=maxiter, gtol=1e-10, disp=0, warn_convergence=False)
     theta = np.asarray(res.params, float)
     # converged when the Newton decrement g'H^-1 g is negligible (robust to nearly
     # collinear regressors, along which the parameters may still creep)
