@@ -5,6 +5,7 @@ the plug-in's parameter checks."""
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pytest
 
 import r2rsim
@@ -118,3 +119,27 @@ def test_wavelet_option_without_pywavelets_names_the_extra(monkeypatch):
     monkeypatch.setitem(sys.modules, "pywt", None)     # import pywt now raises ImportError
     with pytest.raises(InputError, match=r"r2rsim\[wavelet\]"):
         F.wavelet_denoise(np.zeros(64))
+
+
+def test_plugin_detects_the_seized_dancer_at_the_roll_change(run, tmp_path):
+    # the arm seizes at 40 s; nothing observable changes until the fill (about 67 s for
+    # seed 1), when the seized dancer cannot store web and the web goes slack
+    r2rsim.run_scenario(REPO / "scenarios" / "thesis_realistic" /
+                        "testbed_dancer_failure.yaml", output=tmp_path / "df", seed=1,
+                        duration=80.0)
+    bad = read_runs(tmp_path / "df")[0]
+    est = HybridSoV(line=str(LINE)).fit([run])
+    scores = est.score(bad)
+    alarm = est.decide(scores).to_numpy()
+    t = bad.samples["t_s"].to_numpy()
+    ev = pd.read_parquet(tmp_path / "df" / "events.parquet")
+    fill = float(ev.loc[(ev["kind"] == "splice") & (ev["state"] == "fill"), "t_s"].min())
+    assert 60.0 < fill < 75.0
+    assert not alarm[(t > 5.0) & (t < fill)].any()
+    first = t[alarm].min()
+    assert fill < first < fill + 1.0
+    # the virtual sensor sees the slack web: stage-3 tension far below its healthy level
+    late = (t > fill + 2.0) & (t < fill + 5.0)
+    assert scores.loc[late, "T_s3_N"].max() < 100.0
+    healthy = est.score(run)
+    assert healthy["T_s3_N"].iloc[: 50 * 60].min() > 250.0
