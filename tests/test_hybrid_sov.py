@@ -143,3 +143,10 @@ def test_plugin_detects_the_seized_dancer_at_the_roll_change(run, tmp_path):
     assert scores.loc[late, "T_s3_N"].max() < 100.0
     healthy = est.score(run)
     assert healthy["T_s3_N"].iloc[: 50 * 60].min() > 250.0
+
+
+def test_roll_index_steps_at_roll_changes():
+    R = np.concatenate([np.linspace(0.093, 0.086, 50), np.linspace(0.0935, 0.086, 50),
+                        np.linspace(0.092, 0.09, 10)])
+    idx = F.roll_index(R)
+    assert idx[0] == 0 and idx[49] == 0 and idx[50] == 1 and idx[-1] == 2

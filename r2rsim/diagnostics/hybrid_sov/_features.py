@@ -147,6 +147,12 @@ def signals(frame: pd.DataFrame, st: LineStages, denoise: str | None = "savgol",
                    T2s=sm["T2"], censored=censored, Y=x["Y"], valid=valid)
 
 
+def roll_index(R: np.ndarray, jump: float = 1e-3) -> np.ndarray:
+    """Number of the material roll at each sample: it steps up where the (median-filtered)
+    unwind radius jumps up by more than ``jump`` [m], i.e. at a roll change."""
+    return np.concatenate([[0], np.cumsum(np.diff(R) > jump)])
+
+
 def idler_sum(st: LineStages, stage: int, s: Signals) -> np.ndarray:
     """Σ_i (J_i·ω̇_i + b_i·ω_i)/R_i over a stage's idlers, with ω_i = v/R_i (web-speed
     equality, thesis §2.6): the tension gained across them (eqs. 2.8, 2.16)."""

@@ -10,7 +10,7 @@ import pandas as pd
 
 from . import _features as F
 from ._line import LineStages
-from ._regression import StepwiseResult, forward_stepwise
+from ._regression import LinearFit, StepwiseResult, forward_stepwise
 
 #: stage-3 candidates offered to stepwise selection (thesis-methods.md §1.2: the union of
 #: §2.5.2, eq. 2.17 and eq. 2.23; the cylinder force is constant and unmeasured)
@@ -61,12 +61,14 @@ def _gauss_llf(resid: np.ndarray) -> float:
 @dataclass
 class Stage3Fit:
     """The dancer stage and the pitch observation: stage-3 stepwise fit, L0(R) fit, the
-    number of alternating iterations and the method ("alternating" or "oracle")."""
+    number of alternating iterations, the method ("alternating" or "oracle"), and the
+    L0(R) used to predict (``const``, ``R^3``; q0 averaged over the training rolls)."""
 
     stage3: StepwiseResult
     l0: StepwiseResult
     iterations: int
     method: str
+    l0_predict: LinearFit
 
 
 class HybridModel:
@@ -93,16 +95,21 @@ class HybridModel:
         make every candidate significant); the final fits use all rows.
     max_iter : int
         Alternating iterations of the stage-3 / L0 fit.
+    roll_offsets : bool
+        Fit L0 with one intercept per material roll of the training data (roll changes
+        found from the radius): rolls differ in relaxed pitch. Predictions use the mean.
     """
 
     def __init__(self, stages: LineStages, kind: str = "tobit", alpha_enter: float = 0.05,
-                 censor_at: float = 0.0, select_period_s: float = 0.5, max_iter: int = 20):
+                 censor_at: float = 0.0, select_period_s: float = 0.5, max_iter: int = 20,
+                 roll_offsets: bool = True):
         self.stages = stages
         self.kind = kind
         self.alpha_enter = alpha_enter
         self.censor_at = censor_at
         self.select_period_s = select_period_s
         self.max_iter = max_iter
+        self.roll_offsets = roll_offsets
 
     # ---- regressors -----------------------------------------------------------------------
     def _cols12(self, s: F.Signals) -> dict[str, np.ndarray]:
@@ -136,15 +143,19 @@ class HybridModel:
         x4 = np.concatenate([F.driven_term(self.stages, s) for s in sigs])
         R3 = np.concatenate([s.R**3 for s in sigs])
         Y = np.concatenate([s.Y for s in sigs])
+        roll = None
+        if self.roll_offsets:
+            roll = np.concatenate([F.roll_index(s.R) + 1000 * i for i, s in enumerate(sigs)])
         if truth is None:
-            self.stage3_ = self._alternate(self.design3_(c3), x4, R3, Y, rows, valid)
+            self.stage3_ = self._alternate(self.design3_(c3), x4, R3, Y, rows, valid, roll)
         else:
             T3 = np.concatenate([np.asarray(t["T3"], float) for t in truth])
             T4 = np.concatenate([np.asarray(t["T4"], float) for t in truth])
             st3 = self._stepwise(self.design3_(c3), T3, ["const", "T2"],
                                  list(STAGE3_CANDIDATES), rows, valid)
-            l0 = self._fit_l0(Y / (1.0 + T4 / self.stages.web_EA), R3, rows, valid)
-            self.stage3_ = Stage3Fit(st3, l0, 0, "oracle")
+            l0, _, l0_pred = self._fit_l0(Y / (1.0 + T4 / self.stages.web_EA), R3, rows,
+                                          valid, roll)
+            self.stage3_ = Stage3Fit(st3, l0, 0, "oracle", l0_pred)
         return self
 
     def fit_tension(self, sigs: list[F.Signals]) -> HybridModel:
@@ -171,12 +182,32 @@ class HybridModel:
         return forward_stepwise(cols, y[valid], forced, candidates, kind, self.alpha_enter,
                                 self.censor_at, select_rows=sel)
 
-    def _fit_l0(self, l0_obs, R3, rows, valid) -> StepwiseResult:
-        # eq. 2.24 with forward selection of the R³ term (OLS, F-test)
-        return self._stepwise({"const": np.ones_like(R3), "R^3": R3}, l0_obs, ["const"],
-                              ["R^3"], rows, valid, kind="ols")
+    def _fit_l0(self, l0_obs, R3, rows, valid, roll=None):
+        """Eq. 2.24 with forward selection of the R³ term (OLS, F-test). With ``roll`` (a
+        material-roll number per sample) every roll has its own intercept q0: rolls differ
+        in relaxed pitch, and the stage-3 target backed out of the pitch would otherwise
+        carry those offsets. Returns the selection result, L0 per training sample and the
+        prediction fit (q0 = the sample-weighted mean over rolls)."""
+        if roll is None or len(np.unique(roll[valid])) < 2:
+            res = self._stepwise({"const": np.ones_like(R3), "R^3": R3}, l0_obs, ["const"],
+                                 ["R^3"], rows, valid, kind="ols")
+            X = _Design.matrix({"const": np.ones_like(R3), "R^3": R3}, res.fit.names)
+            return res, res.fit.predict(X), res.fit
+        ids = np.unique(roll[valid])
+        cols = {f"roll{k}": (roll == k).astype(float) for k in ids}
+        cols["R^3"] = R3
+        res = self._stepwise(cols, l0_obs, list(cols)[:-1], ["R^3"], rows, valid, kind="ols")
+        l0_hat = res.fit.predict(_Design.matrix(cols, res.fit.names))
+        b = res.fit.coef()
+        share = np.array([np.sum((roll == k) & valid) for k in ids], float)
+        q0 = float(np.dot([b[f"roll{k}"] for k in ids], share / share.sum()))
+        names = ["const"] + (["R^3"] if "R^3" in b else [])
+        beta = np.array([q0] + ([b["R^3"]] if "R^3" in b else []))
+        pred = LinearFit(names, beta, np.full(len(beta), np.nan), res.fit.sigma, res.fit.llf,
+                         res.fit.n, "ols")
+        return res, l0_hat, pred
 
-    def _alternate(self, cols3, x4, R3, Y, rows, valid) -> Stage3Fit:
+    def _alternate(self, cols3, x4, R3, Y, rows, valid, roll) -> Stage3Fit:
         """thesis-methods.md §1.2: start from the physics chain (the dancer stage passes
         the tension on: T_s3 = T_s2 + idler terms), fit L0(R) from the pitch by inverting
         Hooke, back out T_s3 through eq. 2.18, refit stage 3, and iterate. The pitch cannot
@@ -188,9 +219,8 @@ class HybridModel:
         l0_prev, iterations = None, 0
         while iterations < self.max_iter:
             iterations += 1
-            l0 = self._fit_l0(Y / (1.0 + (T3_hat + x4) / EA), R3, rows, valid)
-            l0_hat = l0.fit.predict(_Design.matrix({"const": np.ones_like(R3), "R^3": R3},
-                                                   l0.fit.names))
+            l0, l0_hat, l0_pred = self._fit_l0(Y / (1.0 + (T3_hat + x4) / EA), R3, rows,
+                                               valid, roll)
             T3_obs = (Y / l0_hat - 1.0) * EA - x4
             st3 = self._stepwise(cols3, T3_obs, ["const", "T2"], list(STAGE3_CANDIDATES),
                                  rows, valid)
@@ -198,7 +228,7 @@ class HybridModel:
             if l0_prev is not None and np.max(np.abs(l0_hat - l0_prev)) < 1e-9:
                 break
             l0_prev = l0_hat
-        return Stage3Fit(st3, l0, iterations, "alternating")
+        return Stage3Fit(st3, l0, iterations, "alternating", l0_pred)
 
     @staticmethod
     def _unscaled(cols, name, design):
@@ -215,7 +245,7 @@ class HybridModel:
         T4 = T3 + F.driven_term(self.stages, s)
         T5 = T4 + F.idler_sum(self.stages, 5, s)
         R3 = s.R**3
-        fl = self.stage3_.l0.fit
+        fl = self.stage3_.l0_predict
         L0 = fl.predict(_Design.matrix({"const": np.ones_like(R3), "R^3": R3}, fl.names))
         Y = (T4 / self.stages.web_EA + 1.0) * L0
         return pd.DataFrame({"T_s1": T1, "T_s2": T2, "T_s3": T3, "T_s4": T4, "T_s5": T5,
@@ -226,7 +256,7 @@ class HybridModel:
         stage 3, L0 and sigma)."""
         resid = np.concatenate([(s.Y - self.predict(s)["Y_s4"].to_numpy())[s.valid]
                                 for s in sigs])
-        k = len(self.stage3_.stage3.fit.beta) + len(self.stage3_.l0.fit.beta) + 1
+        k = len(self.stage3_.stage3.fit.beta) + len(self.stage3_.l0_predict.beta) + 1
         return 2.0 * k - 2.0 * _gauss_llf(resid)
 
 
