@@ -10,8 +10,8 @@ present, ``DIR/switching``, made by ``r2rsim sweep scenarios/thesis_realistic/<n
 without it the script simulates what it needs into ``OUT/data`` (``--quick``: a few short
 runs). Seeds: healthy 1-10 train, 11-15 calibrate the per-node statistics, 16-20 test; fault
 seeds 101-105 are test only (the quick version scales these down). It writes
-``OUT/report.md`` with its tables and figures, prints a PASS/FAIL table and exits 1 when an
-assertion fails.
+``OUT/report.md`` with its tables and figures, prints a PASS/FAIL table and exits 3 when an
+assertion fails (1 is an error, 2 a usage error), as the other reproduction studies.
 """
 
 from __future__ import annotations
@@ -28,6 +28,8 @@ import pandas as pd
 
 REPO = Path(__file__).resolve().parents[2]
 SCENARIO = REPO / "scenarios" / "thesis_realistic" / "registration.yaml"
+#: exit status when an assertion fails (1 is left to uncaught errors)
+ASSERTION_FAILED = 3
 A = "meas.sensor_A.tension_N"
 B = "meas.sensor_B.pitch_m"
 KEEP = ("t_s", "meas.", "sp.", "label.is_faulty", "label.severity", "label.score_mask",
@@ -621,7 +623,7 @@ def main(argv=None) -> int:
     for c in checks:
         print(f"{c.result:<6}  {c.name:<{width}}  {c.measured}  (required {c.threshold})")
     print(f"report: {args.output / 'report.md'}")
-    return 0 if all(c.ok for c in checks if c.asserted) else 1
+    return 0 if all(c.ok for c in checks if c.asserted) else ASSERTION_FAILED
 
 
 if __name__ == "__main__":

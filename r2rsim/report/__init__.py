@@ -10,6 +10,7 @@ plot`` and ``r2rsim report`` commands save them.
 from ._data import decimate_minmax
 from ._diagnostics import plot_mdm, plot_metric, plot_roc_pr, plot_statistic
 from ._gsmms import plot_gsmms_map, plot_gsmms_residuals, plot_severity
+from ._hsov import plot_profiles, plot_residual_qq, plot_virtual_sensor
 from ._html import write_report
 from ._mpl import require_matplotlib
 from ._parity import plot_residuals, plot_sensitivity, plot_signature
@@ -26,4 +27,6 @@ __all__ = [
     "plot_residuals", "plot_signature", "plot_sensitivity",
     # GSMMS (thesis Ch. 4)
     "plot_gsmms_map", "plot_gsmms_residuals", "plot_severity",
+    # virtual sensors and regression models (thesis Ch. 2)
+    "plot_virtual_sensor", "plot_residual_qq", "plot_profiles",
 ]
