@@ -73,8 +73,10 @@ def test_residuals_per_run_with_thresholds_and_fault_window(fitted):
         assert sorted(ax.lines[i].get_ydata()[0] for i in (1, 2)) == [-2.0, 2.0]
     assert not fig.axes[0].patches  # no fault window in the healthy run
     span, = fig.axes[1].patches
-    x0 = span.get_x()
-    assert x0 == pytest.approx(10.0)
+    # an axvspan is a Polygon in matplotlib 3.7 and a Rectangle later: read its extent
+    ext = span.get_patch_transform().transform_path(span.get_path()).get_extents()
+    assert ext.x0 == pytest.approx(10.0)
+    assert ext.x1 == pytest.approx(float(faulty.visible()["t_s"].iloc[-1]))
 
 
 def test_severity_lines_per_condition():
