@@ -276,8 +276,12 @@ def test_fault_normalised_relation_sees_a_fault_the_unit_norm_one_misses():
     ({"step": "const"}, "step must be one of"),
     ({"max_nodes": 0}, "max_nodes must be at least 1"),
     ({"initial_nodes": 4, "max_nodes": 2}, "initial_nodes"),
-    ({"eta0": 0.0}, "eta0 must be positive"),
+    ({"eta0": 0.0}, "eta0 must be a positive finite number"),
+    ({"k_sigma": float("inf")}, "k_sigma must be a positive finite number"),
+    ({"zeta_threshold": float("nan")}, "zeta_threshold"),
     ({"smooth_s": -1.0}, "smooth_s"),
+    ({"smooth_s": float("nan")}, "smooth_s must be a finite number"),
+    ({"min_improvement": float("inf")}, "min_improvement"),
     ({"fault_channels": "meas.zzz"}, "fault_channels"),
     ({"partition_features": "sp.nothing"}, "no column matching sp.nothing"),
 ])

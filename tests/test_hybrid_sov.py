@@ -92,6 +92,8 @@ def test_models_fit_and_predict(run):
     ({"line": str(LINE), "denoise": "fft"}, "denoise"),
     ({"line": str(LINE), "alpha": 2.0}, "alpha"),
     ({"line": str(LINE), "window_s": 0}, "window_s"),
+    ({"line": str(LINE), "window_s": float("nan")}, "window_s"),
+    ({"line": str(LINE), "censor_at": float("inf")}, "censor_at must be a finite"),
 ])
 def test_plugin_parameters_are_checked(run, params, match):
     with pytest.raises(InputError, match=match):

@@ -4,6 +4,7 @@ and the per-node residual statistics around :mod:`._model`."""
 from __future__ import annotations
 
 import fnmatch
+import math
 
 import numpy as np
 import pandas as pd
@@ -131,12 +132,17 @@ class GSMMS(Diagnostic):
             if int(getattr(self, key)) < low:
                 raise InputError(f"{self.name}: {key} must be at least {low}, "
                                  f"got {getattr(self, key)!r}")
-        for key in ("eta0", "n_epochs", "lambda1", "sigma0", "sigma_final", "k_sigma"):
-            if not float(getattr(self, key)) > 0:
-                raise InputError(f"{self.name}: {key} must be positive, "
+        for key in ("eta0", "n_epochs", "lambda1", "sigma0", "sigma_final", "k_sigma",
+                    "zeta_threshold"):
+            if not 0 < float(getattr(self, key)) < math.inf:
+                raise InputError(f"{self.name}: {key} must be a positive finite number, "
                                  f"got {getattr(self, key)!r}")
-        if self.smooth_s < 0:
-            raise InputError(f"{self.name}: smooth_s must be >= 0 s, got {self.smooth_s!r}")
+        if not 0 <= float(self.smooth_s) < math.inf:
+            raise InputError(f"{self.name}: smooth_s must be a finite number >= 0 s, "
+                             f"got {self.smooth_s!r}")
+        if self.min_improvement is not None and not 0 <= float(self.min_improvement) < math.inf:
+            raise InputError(f"{self.name}: min_improvement must be a finite number >= 0 or "
+                             f"null, got {self.min_improvement!r}")
         if self.initial_nodes > self.max_nodes:
             raise InputError(f"{self.name}: initial_nodes ({self.initial_nodes}) exceeds "
                              f"max_nodes ({self.max_nodes})")
