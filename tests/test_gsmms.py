@@ -1,6 +1,7 @@
 """GSMMS (thesis Ch. 4): the growing map's stopping criteria, local relations by SGD against
-the exact oracle, per-node detection, online growth, and the plug-in's parameter checks.
-Everything runs on synthetic data with known regimes (no simulation)."""
+the exact oracle, per-node detection, online growth, and the plug-in's parameter checks,
+on synthetic data with known regimes; the physics term of eq. 4.21 also on two short runs
+of the calibrated registration line."""
 
 from __future__ import annotations
 
@@ -8,10 +9,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
+import r2rsim
+from r2rsim.dataset.read import read_runs
 from r2rsim.diagnostics.gsmms import GSMMS, GlobalParity, fit_relations, objective, oracle_relations
-from r2rsim.diagnostics.gsmms._local import fault_normalised_oracle
+from r2rsim.diagnostics.gsmms._local import fault_normalised_oracle, weighted_moments
 from r2rsim.diagnostics.gsmms._model import GrowthSettings, grow, initial_map
 from r2rsim.errors import InputError
+
+from conftest import REPO
 
 # three regimes: cluster centres in the partition space, each with its own relation
 CENTRES = np.array([[0.0, 0.0], [4.0, 0.0], [8.0, 1.0]])
@@ -297,3 +302,119 @@ def test_scores_mark_missing_rows():
     s = est.score(f)
     assert (s["bmu"].iloc[10:21] == -1).all() and s["statistic"].iloc[10:21].isna().all()
     assert not est.decide(s).iloc[10:21].any()
+
+
+# ---- the physics term of eq. 4.21 (λ2, ∇_x O_NL from the parity plug-in's model) ----------
+def test_fault_normalised_oracle_with_a_constraint_solves_the_kkt_system():
+    # minimise ΩᵀCΩ subject to f·Ω = 1 and GᵀΩ = 0: against the KKT linear system
+    Z, w = node_data(seed=8, n=5000)
+    F = np.eye(3)[:, [0]]
+    G = np.array([[1.0], [0.5], [-0.2]])
+    om = fault_normalised_oracle(Z, w, F, G=G)[:, 0]
+    assert om @ F[:, 0] == pytest.approx(1.0, abs=1e-12)
+    assert abs(om @ G[:, 0]) < 1e-12
+    mu = w @ Z / w.sum()
+    C = ((Z - mu) * w[:, None]).T @ (Z - mu) / w.sum()
+    A = np.c_[F, G]
+    K = np.block([[2 * C, A], [A.T, np.zeros((2, 2))]])
+    kkt = np.linalg.solve(K, np.r_[np.zeros(3), 1.0, 0.0])[:3]
+    np.testing.assert_allclose(om, kkt, rtol=1e-9, atol=1e-12)
+    with pytest.raises(ValueError, match="span of the constraint"):
+        fault_normalised_oracle(Z, w, F, G=F)
+
+
+@pytest.mark.parametrize("lambda2", [1.0, 5.0])
+def test_sgd_minimises_the_penalised_loss_and_the_oracle_is_its_hard_limit(lambda2):
+    # with node scaling (tr C = 1) the loss is Ωᵀ(C + λ2·GGᵀ)Ω + λ1(‖Ω‖² − 1)²: its
+    # minimiser is the smallest eigenvector of C + λ2·GGᵀ, which tends to the constrained
+    # oracle as λ2 grows
+    Z, w = node_data(seed=9)
+    G = np.array([[0.6], [0.8], [0.0]])  # unit norm, as the plug-in gives it
+    _, C = weighted_moments(Z, w)
+    soft, _ = fit_relations(Z, w, solver="minibatch", lambda2=lambda2, G=G, n_epochs=2.0,
+                            rng=np.random.default_rng(0))
+    exact = np.linalg.eigh(C + lambda2 * G @ G.T)[1][:, 0]
+    assert cosine(soft[:, 0], exact) >= 0.999
+    hard, _ = fit_relations(Z, w, solver="eigh", G=G)
+    assert abs(hard[:, 0] @ G[:, 0]) < 1e-12
+    assert cosine(np.linalg.eigh(C + 1e8 * G @ G.T)[1][:, 0], hard[:, 0]) >= 1 - 1e-9
+    free, _ = fit_relations(Z, w, solver="eigh")
+    assert cosine(free[:, 0], hard[:, 0]) < 0.99  # the constraint changes the relation
+
+
+@pytest.mark.parametrize("lambda2", [1.0, 5.0])
+def test_fault_normalised_sgd_minimises_the_penalised_loss(lambda2):
+    # min Ωᵀ(C + λ2·GGᵀ)Ω subject to f·Ω = 1: Ω = M⁻¹f / (fᵀM⁻¹f) with M = C + λ2·GGᵀ
+    Z, w = node_data(seed=5)  # the data of the unconstrained fault-normalised test
+    G = np.array([[0.6], [0.0], [0.8]])
+    f = np.eye(3)[:, 0]
+    _, C = weighted_moments(Z, w)
+    soft, _ = fit_relations(Z, w, solver="minibatch", lambda2=lambda2, G=G, F=f[:, None],
+                            n_epochs=2.0, rng=np.random.default_rng(0))
+    m = np.linalg.solve(C + lambda2 * G @ G.T, f)
+    assert soft[0, 0] == pytest.approx(1.0, abs=1e-9)
+    assert cosine(soft[:, 0], m / (f @ m)) >= 0.999
+
+
+A_COL, B_COL = "meas.sensor_A.tension_N", "meas.sensor_B.pitch_m"
+REG_LINE = str(REPO / "lines" / "registration_realistic.yaml")
+
+
+@pytest.fixture(scope="module")
+def registration_runs(tmp_path_factory):
+    """20 s of the calibrated registration line in OC1 and in OC2 (encoders on the model's
+    inputs), healthy."""
+    import yaml
+
+    d = tmp_path_factory.mktemp("gsmms_physics")
+    base = yaml.safe_load((REPO / "scenarios" / "thesis_realistic" / "registration.yaml")
+                          .read_text(encoding="utf-8"))
+    out = []
+    for mode, v, T in (("OC1", 0.5, 130), ("OC2", 1.0, 160)):
+        sc = {**base, "line": REG_LINE, "duration": "20 s", "programme": [
+            {"at": "0 s", "line_speed": f"{v} m/s", "mode": mode,
+             "tension": {"registration_loop": f"{T} N", "unwind_tension": f"{T} N"}}]}
+        (d / f"{mode}.yaml").write_text(yaml.safe_dump(sc), encoding="utf-8")
+        r2rsim.run_scenario(d / f"{mode}.yaml", output=d / mode, seed=1)
+        out.append(read_runs(d / mode)[0])
+    return out
+
+
+@pytest.mark.parametrize("derivatives", [False, True])
+def test_physics_relations_cancel_the_state_of_the_reduced_model(registration_runs,
+                                                                 derivatives):
+    est = GSMMS(model_features=[A_COL, B_COL], fault_channels=A_COL, derivatives=derivatives,
+                physics={"line": REG_LINE}, solver="eigh", random_state=0)
+    est.fit(registration_runs)
+    det = est.physics_
+    EA, L0 = det.physical_["web_EA_N"], det.physical_["relaxed_pitch_m"]
+    # L0 calibrated by Hooke's law between the sensors, independently here
+    f = registration_runs[0].samples
+    assert L0 == pytest.approx(np.nanmedian(f[B_COL] / (1 + f[A_COL] / EA)), rel=1e-3)
+    P = est._kept[2]
+    bmu = est.graph_.bmu(est._kept[0])
+    for m in range(est.n_nodes_):
+        p = np.nanmean(P[bmu == m], axis=0)
+        # ∂O_NL/∂x at the node's point by central differences of the observation itself
+        h = 1e-3 * abs(p[0])
+        dO = (det.model_.observation_nl(p[:1] + h, p[1:])
+              - det.model_.observation_nl(p[:1] - h, p[1:])) / (2 * h)
+        g = dO[[0, 2, 1, 3] if derivatives else [0, 2]]  # stack [A, Ȧ, B, Ḃ] -> features
+        omega_raw = est.models_.omega[m][:, 0] / est.z_scale_
+        assert abs(omega_raw @ g) <= 1e-6 * np.linalg.norm(omega_raw) * np.linalg.norm(g)
+        assert omega_raw[0] * est.z_scale_[0] == pytest.approx(1.0)  # unit response to A
+    assert est.decide(est.score(registration_runs[1])).mean() < 0.2
+
+
+@pytest.mark.parametrize("params, match", [
+    ({"physics": "lines/registration_realistic.yaml"}, "physics must be a mapping"),
+    ({"physics": {"line": REG_LINE, "speed": 1}}, "physics has no parameter speed"),
+    ({"physics": {"line": REG_LINE}, "model_features": [A_COL]}, "must be the reduced model"),
+    ({"physics": {"line": REG_LINE, "design": "x"}}, "design must be one of"),
+    ({"physics": {"line": REG_LINE, "drive_speed": "meas.none"}}, "meas.none"),
+    ({"lambda2": -1.0}, "lambda2 must be a finite number >= 0"),
+    ({"lambda2": float("nan")}, "lambda2"),
+])
+def test_physics_parameters_are_validated(registration_runs, params, match):
+    with pytest.raises(InputError, match=match):
+        GSMMS(**{"model_features": [A_COL, B_COL], **params}).fit(registration_runs[:1])

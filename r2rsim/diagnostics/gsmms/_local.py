@@ -19,8 +19,9 @@ to the previous ones (deflation).
 Solvers: mini-batch SGD (the thesis's, batch 128), single-sample SGD, full-batch gradient
 descent, and the exact oracle: the smallest eigenvectors of the weighted covariance within
 the null space of ``G`` (and of the previous relations), scaled to the penalised optimum
-‖Ω‖² = 1 − λ/(2 λ1). This module is self-contained; the parity machinery of issue 18 could
-later supply ``G`` (the Jacobian of the nonlinear observation stack) and the relation types.
+‖Ω‖² = 1 − λ/(2 λ1). ``G`` is the λ2 term's ∇_x O_NL (eq. 4.21): the gradient solvers
+penalise λ2‖GᵀΩ‖², the oracles impose GᵀΩ = 0 (the limit λ2 → ∞). The plug-in takes ``G``
+from the parity plug-in's reduced model (:mod:`r2rsim.diagnostics.parity`).
 """
 
 from __future__ import annotations
@@ -91,13 +92,32 @@ def oracle_relations(Z: np.ndarray, w: np.ndarray, n_relations: int = 1,
     return omega
 
 
-def fault_normalised_oracle(Z: np.ndarray, w: np.ndarray, F: np.ndarray) -> np.ndarray:
+def fault_normalised_oracle(Z: np.ndarray, w: np.ndarray, F: np.ndarray,
+                            G: np.ndarray | None = None) -> np.ndarray:
     """The exact minimum-variance relations with unit response to each fault direction:
-    Ω_j = C⁺f_j / (f_jᵀ C⁺ f_j) minimises Ωᵀ C Ω subject to f_j·Ω = 1. Returns (q, k)."""
+    Ω_j = C⁺f_j / (f_jᵀ C⁺ f_j) minimises Ωᵀ C Ω subject to f_j·Ω = 1. With ``G`` the
+    relations also satisfy GᵀΩ = 0 (Ω = N·a over a basis N of that null space, the same
+    formula for NᵀCN and Nᵀf_j). Returns (q, k).
+
+    Raises
+    ------
+    ValueError
+        When a fault direction has no component in the null space of Gᵀ: such a fault
+        looks like a change of the state, and no relation of that space can see it.
+    """
     _, C = weighted_moments(Z, w)
-    Ci = linalg.pinvh(C)
-    F = np.asarray(F, float).reshape(len(C), -1)
-    return np.column_stack([Ci @ f / (f @ Ci @ f) for f in F.T])
+    q = len(C)
+    N = np.eye(q) if G is None else linalg.null_space(np.asarray(G, float).reshape(q, -1).T)
+    M = linalg.pinvh(N.T @ C @ N)
+    F = np.asarray(F, float).reshape(q, -1)
+    out = []
+    for f in F.T:
+        g = N.T @ f
+        if g @ g <= 1e-24 * max(f @ f, 1e-300):
+            raise ValueError("a fault direction lies in the span of the constraint G: no "
+                             "relation that cancels the state can see it")
+        out.append(N @ (M @ g) / (g @ M @ g))
+    return np.column_stack(out)
 
 
 def _gradient(om, D, lambda1, lambda2, G):
@@ -190,7 +210,7 @@ def fit_relations(Z: np.ndarray, w: np.ndarray, n_relations: int = 1, *,
         F = np.asarray(F, float).reshape(Z.shape[1], -1)
     if solver == "eigh":
         omega = (oracle_relations(Z, w, n_relations, lambda1=lambda1, G=G) if F is None
-                 else fault_normalised_oracle(Z, w, F))
+                 else fault_normalised_oracle(Z, w, F, G=G))
     else:
         D = Z - mu
         k_total = n_relations if F is None else F.shape[1]

@@ -5,6 +5,7 @@ Both S and Z are already standardised; the plug-in (:mod:`._plugin`) handles col
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -33,6 +34,10 @@ class GrowthSettings:
     eta0: float = 1.0
     n_epochs: float = 1.0
     lambda1: float = 1.0
+    lambda2: float = 0.0
+    #: G of a node (q, r) from its sample weights (n,): ∇_x O_NL at the node's operating
+    #: point, in the standardised model features (eq. 4.21); None: no physics term
+    constraint: Callable[[np.ndarray], np.ndarray] | None = None
 
 
 @dataclass
@@ -97,9 +102,10 @@ def fit_nodes(graph: MapGraph, S, Z, s: GrowthSettings, rng) -> tuple[NodeModels
         w = W[m]
         if w.sum() <= 0 or not np.any(bmu == m):
             w = np.ones(len(Z))  # a node that wins nothing: any relation; it has no samples
+        G = None if s.constraint is None else s.constraint(w)
         om, _ = _local.fit_relations(
-            Z, w, s.n_relations, solver=s.solver, lambda1=s.lambda1,
-            F=s.fault_directions, rng=rng,
+            Z, w, s.n_relations, solver=s.solver, lambda1=s.lambda1, lambda2=s.lambda2,
+            G=G, F=s.fault_directions, rng=rng,
             **({} if s.solver == "eigh" else dict(batch_size=s.batch_size, step=s.step,
                                                    eta0=s.eta0, n_epochs=s.n_epochs)))
         if s.fault_directions is None:  # the loss of a unit-norm relation

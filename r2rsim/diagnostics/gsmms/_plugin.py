@@ -4,6 +4,7 @@ and the per-node residual statistics around :mod:`._model`."""
 from __future__ import annotations
 
 import fnmatch
+import inspect
 import math
 
 import numpy as np
@@ -58,6 +59,17 @@ class GSMMS(Diagnostic):
         Passes' worth of samples per SGD fit.
     lambda1 : float
         Weight of the unit-norm penalty (eq. 4.21).
+    physics : dict or None
+        The thesis's physics term of eq. 4.21, λ2‖Ω·∇_x O_NL(x, u)‖²: keyword arguments of
+        the ``parity`` plug-in (:class:`~r2rsim.diagnostics.parity.ParitySpaceDetector`:
+        ``line``, ``sensor_a``, ``sensor_b``, the speed channels...), whose reduced
+        registration model supplies ∇_x O_NL, evaluated at each node's mean operating point
+        (x̂ from both sensors, u from the encoders) and divided by the model features'
+        scales. The model features must then be that model's two sensors. None: no physics
+        term (the relations are purely data-driven).
+    lambda2 : float
+        Weight of the physics term (its ∇_x O_NL has unit norm, like Ω). The gradient
+        solvers penalise it; ``solver="eigh"`` imposes Ω·∇_x O_NL = 0 exactly (λ2 → ∞).
     initial_nodes, max_nodes : int
         Map size at the start (farthest-point seeds) and the most growth may reach.
     zeta_threshold : float
@@ -91,7 +103,8 @@ class GSMMS(Diagnostic):
                  smooth_s: float = 1.0, n_relations: int = 1,
                  fault_channels: str | list | tuple | None = None, solver: str = "minibatch",
                  batch_size: int = 128, step: str = "inv_sqrt", eta0: float = 1.0,
-                 n_epochs: float = 1.0, lambda1: float = 1.0, initial_nodes: int = 2,
+                 n_epochs: float = 1.0, lambda1: float = 1.0,
+                 physics: dict | None = None, lambda2: float = 1.0, initial_nodes: int = 2,
                  max_nodes: int = 6, zeta_threshold: float = 0.6,
                  min_improvement: float | None = 0.05, k_max: int = 200, sigma0: float = 1.0,
                  sigma_final: float = 0.3, weighting: str = "hard", k_sigma: float = 2.0,
@@ -108,6 +121,8 @@ class GSMMS(Diagnostic):
         self.eta0 = eta0
         self.n_epochs = n_epochs
         self.lambda1 = lambda1
+        self.physics = physics
+        self.lambda2 = lambda2
         self.initial_nodes = initial_nodes
         self.max_nodes = max_nodes
         self.zeta_threshold = zeta_threshold
@@ -137,6 +152,9 @@ class GSMMS(Diagnostic):
             if not 0 < float(getattr(self, key)) < math.inf:
                 raise InputError(f"{self.name}: {key} must be a positive finite number, "
                                  f"got {getattr(self, key)!r}")
+        if not 0 <= float(self.lambda2) < math.inf:
+            raise InputError(f"{self.name}: lambda2 must be a finite number >= 0, "
+                             f"got {self.lambda2!r}")
         if not 0 <= float(self.smooth_s) < math.inf:
             raise InputError(f"{self.name}: smooth_s must be a finite number >= 0 s, "
                              f"got {self.smooth_s!r}")
@@ -155,7 +173,8 @@ class GSMMS(Diagnostic):
             sigma_final=float(self.sigma_final), weighting=self.weighting,
             n_relations=int(self.n_relations), solver=self.solver,
             batch_size=int(self.batch_size), step=self.step, eta0=float(self.eta0),
-            n_epochs=float(self.n_epochs), lambda1=float(self.lambda1))
+            n_epochs=float(self.n_epochs), lambda1=float(self.lambda1),
+            lambda2=float(self.lambda2))
 
     def _match(self, frame: pd.DataFrame, patterns, what: str) -> list[str]:
         patterns = [patterns] if isinstance(patterns, str) else list(patterns)
@@ -183,6 +202,63 @@ class GSMMS(Diagnostic):
         n_features = len(self.z_mean_)
         return np.eye(n_features)[:, idx]
 
+    def _physics_model(self, frames) -> None:
+        """Set ``physics_`` (the parity plug-in holding the calibrated reduced model) and
+        ``physics_rows_`` (the stack row of each model feature), or None without physics."""
+        self.physics_ = self.physics_rows_ = None
+        if self.physics is None:
+            return
+        from ..parity import ParitySpaceDetector
+
+        if not isinstance(self.physics, dict):
+            raise InputError(f"{self.name}: physics must be a mapping of parity plug-in "
+                             f"parameters or null, got {self.physics!r}")
+        allowed = set(inspect.signature(ParitySpaceDetector).parameters)
+        unknown = sorted(set(self.physics) - allowed)
+        if unknown:
+            raise InputError(f"{self.name}: physics has no parameter {', '.join(unknown)} "
+                             f"(it takes the parity plug-in's: {', '.join(sorted(allowed))})")
+        det = ParitySpaceDetector(**self.physics)
+        det._validate()
+        sensors = {det.sensor_a: 0, det.sensor_b: 1}
+        if sorted(self.model_columns_) != sorted(sensors):
+            raise InputError(f"{self.name}: with physics the model features must be the "
+                             f"reduced model's sensors {det.sensor_a} and {det.sensor_b}, "
+                             f"got {', '.join(self.model_columns_)}")
+        for f in frames:
+            det.required_columns(f)
+        model, _, _ = det.reduced_model(frames)
+        orders = [0] * len(self.model_columns_) + ([1] * len(self.model_columns_)
+                                                  if self.derivatives else [])
+        cols = list(self.model_columns_) * (2 if self.derivatives else 1)
+        self.physics_ = det
+        self.physics_rows_ = np.array([model.rows.index((sensors[c], k))
+                                       for c, k in zip(cols, orders, strict=True)])
+
+    def _operating_points(self, frames) -> np.ndarray:
+        """The reduced model's p = [x̂, u] of every sample of ``frames`` (n, 4); (n, 0)
+        without physics."""
+        if self.physics_ is None:
+            return np.zeros((sum(len(f) for f in frames), 0))
+        return np.vstack([self.physics_.operating_points(f) for f in frames])
+
+    def _constraint(self, P: np.ndarray):
+        """G of a node from its sample weights (GrowthSettings.constraint): ∇_x O_NL at the
+        weighted mean operating point, in standardised feature units, unit norm."""
+        if self.physics_ is None:
+            return None
+        model, rows, scale = self.physics_.model_, self.physics_rows_, self.z_scale_
+        finite = np.all(np.isfinite(P), axis=1)
+
+        def node_gradient(w: np.ndarray) -> np.ndarray:
+            sel = finite & (w > 0)
+            p = np.average(P[sel], axis=0, weights=w[sel]) if sel.any() \
+                else np.mean(P[finite], axis=0)
+            G = model.grad_x(p[:1], p[1:])[rows] / scale[:, None]
+            norm = np.linalg.norm(G, axis=0)
+            return G / np.where(norm > 0, norm, 1.0)
+        return node_gradient
+
     def _features(self, f: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
         """Smoothed partition and model features (raw units) of one run."""
         dt = float(np.median(np.diff(f["t_s"].to_numpy()))) if "t_s" in f and len(f) > 1 \
@@ -203,20 +279,21 @@ class GSMMS(Diagnostic):
         S, Z = self._features(f)
         return (S - self.s_mean_) / self.s_scale_, (Z - self.z_mean_) / self.z_scale_
 
-    def _pooled(self, frames) -> tuple[np.ndarray, np.ndarray]:
+    def _pooled(self, frames) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Standardised rows of all runs, without rows holding a NaN, evenly thinned to at
-        most ``max_samples``."""
+        most ``max_samples``, and their operating points (:meth:`_operating_points`)."""
         parts = [self._standardised(f) for f in frames]
         S = np.vstack([p[0] for p in parts])
         Z = np.vstack([p[1] for p in parts])
+        P = self._operating_points(frames)
         ok = np.all(np.isfinite(S), axis=1) & np.all(np.isfinite(Z), axis=1)
-        S, Z = S[ok], Z[ok]
+        S, Z, P = S[ok], Z[ok], P[ok]
         if len(S) > self.max_samples:
             keep = np.linspace(0, len(S) - 1, int(self.max_samples)).astype(int)
-            S, Z = S[keep], Z[keep]
+            S, Z, P = S[keep], Z[keep], P[keep]
         if len(S) < 2:
             raise InputError(f"{self.name}: fewer than two complete training samples")
-        return S, Z
+        return S, Z, P
 
     # ---- the contract ----------------------------------------------------------------------
     def fit(self, runs):
@@ -238,11 +315,13 @@ class GSMMS(Diagnostic):
             # a constant column (a set-point in one regime) keeps its unit as scale
             setattr(self, f"{name}_scale_", np.where(sd > 0, sd, 1.0))
         settings.fault_directions = self._fault_directions()
-        S, Z = self._pooled(frames)
+        self._physics_model(frames)
+        S, Z, P = self._pooled(frames)
+        settings.constraint = self._constraint(P)
         self._rng = np.random.default_rng(self.random_state)
         self.history_: list[GrowthRecord] = []
         graph = initial_map(S, settings.initial_nodes, self._rng)
-        self._finish(*grow(graph, S, Z, settings, self._rng, self.history_), S, Z)
+        self._finish(*grow(graph, S, Z, settings, self._rng, self.history_), S, Z, P)
         return self
 
     def partial_fit(self, runs):
@@ -253,11 +332,12 @@ class GSMMS(Diagnostic):
             return self.fit(runs)
         settings = self._settings()
         settings.fault_directions = self._fault_directions()
-        S_new, Z_new = self._pooled(self._frames(runs))
-        S = np.vstack([self._kept[0], S_new])
-        Z = np.vstack([self._kept[1], Z_new])
+        S_new, Z_new, P_new = self._pooled(self._frames(runs))
+        S, Z, P = (np.vstack([kept, new]) for kept, new in zip(self._kept, (S_new, Z_new, P_new),
+                                                               strict=True))
+        settings.constraint = self._constraint(P)
         self._finish(*grow(self.graph_.copy(), S, Z, settings, self._rng, self.history_),
-                     S, Z)
+                     S, Z, P)
         return self
 
     def calibrate(self, runs):
@@ -265,7 +345,7 @@ class GSMMS(Diagnostic):
         runs (the map and relations stay); nodes those runs never reach keep theirs.
         Returns ``self``."""
         self._check_fitted()
-        S, Z = self._pooled(self._frames(runs))
+        S, Z, _ = self._pooled(self._frames(runs))
         self._node_statistics(S, Z, keep_unseen=True)
         return self
 
@@ -287,13 +367,13 @@ class GSMMS(Diagnostic):
                 self.node_std_[m] = np.where(sd > 0, sd, self.node_std_[m])
                 self.node_count_[m] = int(sel.sum())
 
-    def _finish(self, graph, models, S, Z):
+    def _finish(self, graph, models, S, Z, P):
         self.graph_, self.models_ = graph, models
         self.n_nodes_ = graph.n_nodes
         self._node_statistics(S, Z)
         self.threshold_ = float(self.k_sigma)
         keep = np.linspace(0, len(S) - 1, min(len(S), int(self.max_samples) // 2)).astype(int)
-        self._kept = (S[keep], Z[keep])
+        self._kept = (S[keep], Z[keep], P[keep])
 
     def score(self, run) -> pd.DataFrame:
         """Per sample: ``statistic`` = max over relations of |P − μ_node|/σ_node, ``bmu``
@@ -334,7 +414,8 @@ class GlobalParity(GSMMS):
                  smooth_s: float = 1.0, n_relations: int = 1,
                  fault_channels: str | list | tuple | None = None, solver: str = "minibatch",
                  batch_size: int = 128, step: str = "inv_sqrt", eta0: float = 1.0,
-                 n_epochs: float = 1.0, lambda1: float = 1.0, initial_nodes: int = 1,
+                 n_epochs: float = 1.0, lambda1: float = 1.0,
+                 physics: dict | None = None, lambda2: float = 1.0, initial_nodes: int = 1,
                  max_nodes: int = 1, zeta_threshold: float = 0.6,
                  min_improvement: float | None = 0.05, k_max: int = 200, sigma0: float = 1.0,
                  sigma_final: float = 0.3, weighting: str = "hard", k_sigma: float = 2.0,
@@ -344,7 +425,8 @@ class GlobalParity(GSMMS):
             derivatives=derivatives, smooth_s=smooth_s, n_relations=n_relations,
             fault_channels=fault_channels, solver=solver, batch_size=batch_size, step=step,
             eta0=eta0, n_epochs=n_epochs,
-            lambda1=lambda1, initial_nodes=initial_nodes, max_nodes=max_nodes,
+            lambda1=lambda1, physics=physics, lambda2=lambda2, initial_nodes=initial_nodes,
+            max_nodes=max_nodes,
             zeta_threshold=zeta_threshold, min_improvement=min_improvement, k_max=k_max,
             sigma0=sigma0, sigma_final=sigma_final, weighting=weighting, k_sigma=k_sigma,
             max_samples=max_samples, random_state=random_state)

@@ -218,6 +218,30 @@ class ParitySpaceDetector(Diagnostic):
                              float(L0 or ph["relaxed_pitch_m"]), float(ph["drive_radius_m"]),
                              float(ph["downstream_radius_m"]))
 
+    def reduced_model(self, frames) -> tuple[NonlinearModel, float, float]:
+        """The reduced registration model with its EA [N] and L0 [m]; sets ``physical_`` and
+        ``model_``. L0 not given (nor by the line) is calibrated on ``frames`` (healthy
+        visible frames) by Hooke's law between the sensors, y_B = (y_A/EA + 1)·L0.
+        The GSMMS plug-in's physics constraint uses it too."""
+        self.physical_ = self._physical()
+        EA = float(self.physical_["web_EA_N"])
+        if self.physical_["relaxed_pitch_m"] is None:
+            ratio = np.concatenate([f[self.sensor_b].to_numpy(float)
+                                    / (1 + f[self.sensor_a].to_numpy(float) / EA)
+                                    for f in frames])
+            self.physical_["relaxed_pitch_m"] = float(np.nanmedian(ratio))
+        self.model_ = self._model()
+        return self.model_, EA, float(self.physical_["relaxed_pitch_m"])
+
+    def operating_points(self, frame: pd.DataFrame) -> np.ndarray:
+        """p = [x̂, ω_d, ω_o, T_up] of every sample (T, 4), NaN where a channel is missing
+        (after :meth:`reduced_model`)."""
+        s = self._signals(frame)
+        EA, L0 = float(self.physical_["web_EA_N"]), float(self.physical_["relaxed_pitch_m"])
+        P = np.vstack([self._xhat(s, EA, L0)[None], s["u"]]).T
+        P[s["bad"]] = np.nan
+        return P
+
     # ---- signals -----------------------------------------------------------------------------
     def _signals(self, frame: pd.DataFrame) -> dict:
         """Smoothed stack Y (4, T), inputs u (3, T), u̇ (3, T), the state estimate x̂ (T,)."""
@@ -248,18 +272,8 @@ class ParitySpaceDetector(Diagnostic):
         frames = self._frames(runs)
         for f in frames:
             self.required_columns(f)
-        self.physical_ = self._physical()
+        model, EA, L0 = self.reduced_model(frames)
         sigs = [self._signals(f) for f in frames]
-        EA = float(self.physical_["web_EA_N"])
-        if self.physical_["relaxed_pitch_m"] is None:
-            # Hooke's law between the sensors: y_B = (y_A/EA + 1)·L0
-            ratio = np.concatenate([f[self.sensor_b].to_numpy(float)
-                                    / (1 + f[self.sensor_a].to_numpy(float) / EA)
-                                    for f in frames])
-            self.physical_["relaxed_pitch_m"] = float(np.nanmedian(ratio))
-        L0 = float(self.physical_["relaxed_pitch_m"])
-        model = self._model()
-        self.model_ = model
         # rows in newton-equivalents (sensor B through ∂h_B/∂x = L0/EA)
         self.scale_ = np.array([1.0, 1.0, L0 / EA, L0 / EA])
         self.row_order_ = np.array([k for _, k in model.rows])
