@@ -136,6 +136,11 @@ def test_parameters_and_channels_are_checked(dataset):
     for kw, msg in (({"mode": "linear"}, "mode must be one of"),
                     ({"design": "rayleigh"}, "design must be one of"),
                     ({"savgol_window_s": 0}, "savgol_window_s must be a positive"),
+                    ({"savgol_window_s": 1e300}, "savgol_window_s must be from 0 to 600 s"),
+                    ({"savgol_order": 10**6}, "savgol_order must be an integer from 2 to 10"),
+                    ({"schedule_step_s": 1e-300}, "schedule_step_s must be from 0.001"),
+                    ({"modulus_spread": 1e300}, "modulus_spread must be from 0 to 0.5"),
+                    ({"pitch_spread_m": float("nan")}, "pitch_spread_m must be from 0"),
                     ({"alpha": 1.5}, "alpha must be in"),
                     ({"time_base": "space"}, "time_base must be one of"),
                     ({"sensor_b": "meas.vision.pitch_m"}, "no column matching meas.vision")):

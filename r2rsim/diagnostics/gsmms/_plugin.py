@@ -16,6 +16,13 @@ from . import _local
 from ._model import GrowthRecord, GrowthSettings, grow, initial_map
 
 _CHOICES = {"solver": _local.SOLVERS, "step": _local.STEPS, "weighting": ("soft", "hard")}
+#: allowed ranges of the integer parameters: they bound a fit's memory and time (a mini-batch
+#: fit draws at least 3000 × batch_size samples; k_max updates per growth step)
+_INT_RANGES = {"batch_size": (1, 4096), "n_relations": (1, 64), "initial_nodes": (1, 1000),
+               "max_nodes": (1, 1000), "k_max": (1, 100_000), "max_samples": (2, 10_000_000)}
+#: upper limits of float parameters: η0 above 2 makes the normalised step diverge; n_epochs
+#: bounds the draws; a neighbourhood wider than the largest map means nothing
+_FLOAT_LIMITS = {"eta0": 2.0, "n_epochs": 100.0, "sigma0": 1000.0, "sigma_final": 1000.0}
 
 
 class GSMMS(Diagnostic):
@@ -141,16 +148,19 @@ class GSMMS(Diagnostic):
             if getattr(self, key) not in allowed:
                 raise InputError(f"{self.name}: {key} must be one of {', '.join(allowed)}, "
                                  f"got {getattr(self, key)!r}")
-        positive = {"batch_size": 1, "n_relations": 1, "initial_nodes": 1, "max_nodes": 1,
-                    "k_max": 1, "max_samples": 2}
-        for key, low in positive.items():
-            if int(getattr(self, key)) < low:
-                raise InputError(f"{self.name}: {key} must be at least {low}, "
-                                 f"got {getattr(self, key)!r}")
-        for key in ("eta0", "n_epochs", "lambda1", "sigma0", "sigma_final", "k_sigma",
-                    "zeta_threshold"):
+        for key, (low, high) in _INT_RANGES.items():
+            v = getattr(self, key)
+            if not (isinstance(v, (int, np.integer)) and not isinstance(v, bool)
+                    and low <= v <= high):
+                raise InputError(f"{self.name}: {key} must be an integer from {low} to "
+                                 f"{high}, got {v!r}")
+        for key in ("lambda1", "k_sigma", "zeta_threshold"):
             if not 0 < float(getattr(self, key)) < math.inf:
                 raise InputError(f"{self.name}: {key} must be a positive finite number, "
+                                 f"got {getattr(self, key)!r}")
+        for key, high in _FLOAT_LIMITS.items():  # beyond these a fit diverges or never ends
+            if not 0 < float(getattr(self, key)) <= high:
+                raise InputError(f"{self.name}: {key} must be > 0 and at most {high:g}, "
                                  f"got {getattr(self, key)!r}")
         if not 0 <= float(self.lambda2) < math.inf:
             raise InputError(f"{self.name}: lambda2 must be a finite number >= 0, "

@@ -91,12 +91,14 @@ class HybridSoV(Diagnostic):
             v = getattr(self, key)
             if not (isinstance(v, (int, float)) and lo < v < hi):
                 raise InputError(f"hybrid-sov: {key} must be in ({lo}, {hi}), got {v!r}")
-        if not (isinstance(self.window_s, (int, float)) and 0 < self.window_s < np.inf):
-            raise InputError(f"hybrid-sov: window_s must be a finite number > 0 s, got "
-                             f"{self.window_s!r}")
-        if not (isinstance(self.censor_at, (int, float)) and np.isfinite(self.censor_at)):
-            raise InputError(f"hybrid-sov: censor_at must be a finite number [N], got "
-                             f"{self.censor_at!r}")
+        # a window over a minute smears every roll change; a limit beyond ±1 MN overflows
+        # the Tobit likelihood and censors nothing or everything
+        if not (isinstance(self.window_s, (int, float)) and 0 < self.window_s <= 60.0):
+            raise InputError(f"hybrid-sov: window_s must be a finite number > 0 s and at "
+                             f"most 60 s, got {self.window_s!r}")
+        if not (isinstance(self.censor_at, (int, float)) and abs(self.censor_at) <= 1e6):
+            raise InputError(f"hybrid-sov: censor_at must be a finite number of newtons "
+                             f"within ±1e6 N, got {self.censor_at!r}")
 
     def _signals(self, frame):
         return F.signals(frame, self.stages_, self.denoise, self.window_s, self.censor_at)

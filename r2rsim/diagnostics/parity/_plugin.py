@@ -184,11 +184,18 @@ class ParitySpaceDetector(Diagnostic):
         if self.relaxed_pitch_m is not None and not self.relaxed_pitch_m > 0:
             raise InputError(f"parity: relaxed_pitch_m must be > 0 m or null, "
                              f"got {self.relaxed_pitch_m!r}")
-        for key in ("modulus_spread", "pitch_spread_m"):
-            if not getattr(self, key) >= 0:
-                raise InputError(f"parity: {key} must be >= 0, got {getattr(self, key)!r}")
-        if not (isinstance(self.savgol_order, int) and self.savgol_order >= 2):
-            raise InputError(f"parity: savgol_order must be an integer >= 2, "
+        # upper limits: beyond them the design corners or the windows mean nothing, and
+        # a fit would overflow or allocate without bound
+        for key, low, high, unit in (("modulus_spread", 0.0, 0.5, ""),
+                                     ("pitch_spread_m", 0.0, 1e-3, " m"),
+                                     ("savgol_window_s", 0.0, 600.0, " s"),
+                                     ("schedule_step_s", 1e-3, 1e6, " s")):
+            v = getattr(self, key)
+            if not (isinstance(v, (int, float)) and low <= v <= high):
+                raise InputError(f"parity: {key} must be from {low:g} to {high:g}{unit}, "
+                                 f"got {v!r}")
+        if not (isinstance(self.savgol_order, int) and 2 <= self.savgol_order <= 10):
+            raise InputError(f"parity: savgol_order must be an integer from 2 to 10, "
                              f"got {self.savgol_order!r}")
         if not 0 < self.alpha < 1:
             raise InputError(f"parity: alpha must be in (0, 1), got {self.alpha!r}")
