@@ -133,6 +133,23 @@ def test_baseline_detects_the_sensor_a_offset(name, data):
     assert np.isfinite(est.threshold_)
 
 
+@pytest.mark.parametrize("name, params, match", [
+    ("residual", {"alpha": float("nan")}, "alpha must be a number in"),
+    ("residual", {"alpha": 1e300}, "alpha must be a number in"),
+    ("pca", {"n_components": 1e300}, "n_components must be a fraction"),
+    ("pca", {"n_components": 2.5}, "n_components must be a fraction"),
+    ("pca", {"limits": "exact"}, "limits must be 'analytic' or 'empirical'"),
+    ("pca", {"alpha": 0.0}, "alpha must be a number in"),
+    ("dpca", {"lags": 10**12}, "lags must be an integer from 0 to 50"),  # hung before
+    ("dpca", {"lags": 1.5}, "lags must be an integer"),
+    ("iforest", {"n_estimators": 10**12}, "n_estimators must be an integer from 1"),
+    ("iforest", {"max_samples": True}, "max_samples must be an integer"),
+])
+def test_baseline_parameters_are_bounded(name, params, match, data):
+    with pytest.raises(InputError, match=match):
+        get(name)(**params).fit([data["h1"]])
+
+
 def test_list_plugins(capsys):
     from r2rsim.cli import main
 

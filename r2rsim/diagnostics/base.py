@@ -92,6 +92,21 @@ class Diagnostic(BaseEstimator):
                              f"{', '.join(missing)}")
         return cols
 
+    def _check_alpha(self):
+        """``alpha``, a false-alarm fraction, must lie in (0, 1)."""
+        a = getattr(self, "alpha", None)
+        if not (isinstance(a, (int, float)) and not isinstance(a, bool) and 0 < a < 1):
+            raise InputError(f"{self.name}: alpha must be a number in (0, 1), got {a!r}")
+
+    def _check_int(self, key: str, low: int, high: int):
+        """Parameter ``key`` must be an integer from ``low`` to ``high`` (bounds that keep a
+        fit's memory and time finite)."""
+        v = getattr(self, key)
+        if not (isinstance(v, (int, np.integer)) and not isinstance(v, bool)
+                and low <= v <= high):
+            raise InputError(f"{self.name}: {key} must be an integer from {low} to {high}, "
+                             f"got {v!r}")
+
     def _check_fitted(self):
         if not any(k.endswith("_") and not k.startswith("_") for k in vars(self)):
             raise RuntimeError(f"{self.name} is not fitted: call fit first")

@@ -8,7 +8,13 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from ..errors import InputError
 from .base import Diagnostic
+
+#: bounds of PCA's retained components and dynamic PCA's lags (the lagged design matrix
+#: has (lags + 1) × channels columns)
+MAX_COMPONENTS = 10_000
+MAX_LAGS = 50
 
 
 class ResidualThreshold(Diagnostic):
@@ -26,6 +32,7 @@ class ResidualThreshold(Diagnostic):
         self.alpha = alpha
 
     def fit(self, runs):
+        self._check_alpha()
         frames = self._frames(runs)
         self.columns_ = self.required_columns(frames[0])
         z = np.abs(self._fit_scaling(self._matrix(frames, self.columns_))).max(axis=1)
@@ -82,7 +89,15 @@ class PCAMonitor(Diagnostic):
 
     def fit(self, runs):
         if self.limits not in ("analytic", "empirical"):
-            raise ValueError("limits must be 'analytic' or 'empirical'")
+            raise InputError(f"{self.name}: limits must be 'analytic' or 'empirical', "
+                             f"got {self.limits!r}")
+        self._check_alpha()
+        nc = self.n_components
+        if not (isinstance(nc, (int, float)) and not isinstance(nc, bool)
+                and (0 < nc < 1 or (nc >= 1 and nc == int(nc) and nc <= MAX_COMPONENTS))):
+            raise InputError(f"{self.name}: n_components must be a fraction of variance in "
+                             f"(0, 1) or a whole number from 1 to {MAX_COMPONENTS}, got {nc!r}")
+        self._check_int("lags", 0, MAX_LAGS)
         frames = self._frames(runs)
         self.columns_ = self.required_columns(frames[0])
         X = np.vstack([self._design(f) for f in frames])
@@ -90,7 +105,7 @@ class PCAMonitor(Diagnostic):
         n = len(Z)
         _, s, Vt = np.linalg.svd(Z, full_matrices=False)
         lam = s**2 / (n - 1)
-        if isinstance(self.n_components, float) and 0 < self.n_components < 1:
+        if 0 < self.n_components < 1:
             a = int(np.searchsorted(np.cumsum(lam) / lam.sum(), self.n_components) + 1)
         else:
             a = int(self.n_components)
@@ -164,6 +179,10 @@ class IsolationForestDetector(Diagnostic):
 
     def fit(self, runs):
         from sklearn.ensemble import IsolationForest
+
+        self._check_alpha()
+        self._check_int("n_estimators", 1, 10_000)
+        self._check_int("max_samples", 2, 10_000_000)
 
         frames = self._frames(runs)
         self.columns_ = self.required_columns(frames[0])
