@@ -29,6 +29,7 @@ from .dataset.read import Run, read_runs
 from .diagnostics.registry import call, check_param, get, unknown_parameter
 from .errors import InputError
 from .evaluate.harness import METRICS, Evaluation, evaluate
+from .limits import MAX_BOOTSTRAP
 from .schema.line import Id, Strict
 from .schema.loader import _validate, read_yaml
 from .schema.quantities import Time
@@ -88,7 +89,7 @@ class EvaluationSettings(Strict):
     alpha: Annotated[float, Field(gt=0, lt=1)] = 0.01
     persistence: Annotated[int, Field(ge=1)] = 1
     grace: Annotated[Time, Field(ge=0)] = 0.0
-    n_boot: Annotated[int, Field(ge=0)] = 200
+    n_boot: Annotated[int, Field(ge=0, le=MAX_BOOTSTRAP)] = 200
     seed: int = 0
     drive_data: bool = Field(False, description="also show plug-ins cmd.*, act.*, ctrl.*")
     mode_strata: bool = Field(False, description="also report per-regime (label.mode) strata")

@@ -113,3 +113,8 @@ MAX_SWEEP_RUNS = 100_000
 
 #: Most values of one sweep axis (a list or a range): 10 000.
 MAX_AXIS_VALUES = 10_000
+
+#: Most bootstrap replicates of an evaluation: 100 000. The replicate index is held in
+#: memory (replicates x runs), and 10 000 already puts a 95 % interval's ends within a few
+#: tenths of a percent of their limit.
+MAX_BOOTSTRAP = 100_000

@@ -194,6 +194,16 @@ def test_param_of_the_wrong_type_names_parameter_and_type(data, tmp_path, capsys
     assert not (tmp_path / "out").exists()
 
 
+def test_unbounded_values_are_refused_before_anything_is_written(data, tmp_path, capsys):
+    # --n-boot 1e12 ran into a MemoryError traceback; lags 1e12 hung the fit
+    assert diagnose(data, data / "f5", tmp_path / "out", "--n-boot", "1000000000000") == 2
+    one_error_line(capsys, "n_boot must be from 0 to 100000")
+    assert diagnose(data, data / "f5", tmp_path / "out", "--param", "lags=1000000000000",
+                    method="dpca") == 2
+    one_error_line(capsys, "dpca", "lags must be an integer from 0 to 50")
+    assert not (tmp_path / "out").exists()
+
+
 def test_check_param_converts_numbers_given_as_text():
     pca = registry.get("pca")
     assert registry.check_param(pca, "alpha", "1e-3") == 0.001  # YAML reads 1e-3 as text

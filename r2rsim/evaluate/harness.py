@@ -36,6 +36,7 @@ from ..dataset.paths import SWEEP_MARKER
 from ..dataset.read import Run, is_dataset_dir, read_runs
 from ..diagnostics.registry import call
 from ..errors import InputError, PluginError
+from ..limits import MAX_BOOTSTRAP
 from ..schema.scenario import SplitBySeed
 from .metrics import (
     RunData,
@@ -610,8 +611,9 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
         raise InputError(f"persistence m must be an integer >= 1, got {m!r}")
     if not h >= 0:
         raise InputError(f"grace period h must be >= 0 s, got {h!r}")
-    if n_boot < 0:
-        raise InputError(f"n_boot must be >= 0, got {n_boot!r}")
+    if not 0 <= n_boot <= MAX_BOOTSTRAP:
+        raise InputError(f"n_boot must be from 0 to {MAX_BOOTSTRAP} (docs/security.md), "
+                         f"got {n_boot!r}")
     if window not in WINDOWS:
         raise InputError(f"window must be one of {', '.join(WINDOWS)}, got {window!r}")
     if vus_buffer is not None and not vus_buffer >= 0:

@@ -151,7 +151,8 @@ def open_run(root: Path, run_id: str) -> RunData:
                                                   or pa.types.is_integer(f.type)
                                                   or pa.types.is_boolean(f.type))]
     run = RunData(root, run_id, files, metas, numeric, np.nan, np.nan)
-    run.t_start, run.t_end = _column_range(run, "t_s")
+    # + 0.0: Parquet statistics store a float minimum of 0 as -0 (the format's rule)
+    run.t_start, run.t_end = (v + 0.0 for v in _column_range(run, "t_s"))
     return run
 
 
