@@ -403,8 +403,13 @@ def test_report_finds_the_recorded_datasets(data, diagnosed, tmp_path):
     (old / "datasets.json").write_text(json.dumps({"test": [str(tmp_path / "gone")]}))
     text, page = parse(write_report(old, tmp_path / "r.html"))
     assert len(page.imgs) == 8 + 1 and "not found" in text and "gone" in text
-    (old / "datasets.json").write_text("[1, 2]")
-    with pytest.raises(InputError, match="not a datasets file"):
+    for bad in ("[1, 2]", '{"test": [1, 2]}', '{"test": "/data/run"}', '{"test": [null]}'):
+        (old / "datasets.json").write_text(bad)
+        with pytest.raises(InputError, match="not a datasets file"):
+            write_report(old, tmp_path / "r.html")
+    with open(old / "datasets.json", "wb") as f:  # a sparse file beyond the size limit
+        f.truncate((16 << 20) + 1)
+    with pytest.raises(InputError, match="larger than 16 MiB"):
         write_report(old, tmp_path / "r.html")
 
 

@@ -109,14 +109,23 @@ def write_report(results: str | Path, output: str | Path | None = None,
     return out
 
 
+#: largest datasets.json read (a list of absolute paths; 16 MiB holds over 100 000)
+DATASETS_FILE_MAX_BYTES = 16 << 20
+
+
 def _recorded_datasets(src: Path) -> tuple[list[str] | None, str | None]:
     """The test datasets recorded by ``r2rsim diagnose`` (``datasets.json``), or None and a
     note saying which of them are gone (results written before the file existed have none)."""
     f = src / DATASETS_FILE
     if not f.is_file():
         return None, None
+    if f.stat().st_size > DATASETS_FILE_MAX_BYTES:
+        raise InputError(f"{f}: larger than {DATASETS_FILE_MAX_BYTES >> 20} MiB: not a "
+                         f"datasets file written by r2rsim diagnose")
     try:
-        paths = json.loads(f.read_text())["test"]
+        paths = json.loads(f.read_text(encoding="utf-8"))["test"]
+        if not (isinstance(paths, list) and all(isinstance(p, str) for p in paths)):
+            raise TypeError("'test' is not a list of paths")
     except (ValueError, KeyError, TypeError) as exc:
         raise InputError(f"{f}: not a datasets file written by r2rsim diagnose ({exc})") from exc
     gone = [p for p in paths if not Path(p).is_dir()]
