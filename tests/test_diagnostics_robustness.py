@@ -182,6 +182,17 @@ def test_validate_reports_unreadable_files_without_traceback(data, tmp_path, cap
     assert "Traceback" not in capsys.readouterr().err
 
 
+def test_an_oversized_manifest_is_refused_without_reading_it(data, tmp_path, capsys):
+    ds = copy(data, tmp_path)
+    with open(ds / "manifest.json", "wb") as f:  # sparse: no disk, 256 MiB + 1 byte
+        f.truncate((256 << 20) + 1)
+    assert diagnose(data, ds, tmp_path / "out") == 2
+    one_error_line(capsys, ds, "manifest.json", "larger than 256 MiB")
+    assert main(["validate", str(ds)]) == 2
+    err = capsys.readouterr().err
+    assert "larger than 256 MiB" in err and "Traceback" not in err
+
+
 # --------------------------------------------------------------------------- parameters
 
 

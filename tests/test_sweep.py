@@ -904,6 +904,19 @@ def test_files_put_into_an_unfinished_sweep_are_not_adopted(many, tmp_path, caps
     assert_same_dataset(reference, out)
 
 
+@pytest.mark.parametrize("marker", ["[1, 2]", "not json", '{"sweep": 3}'])
+def test_a_damaged_sweep_marker_is_one_error(qs, tmp_path, capsys, marker):
+    sw, _ = qs
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / ".r2rsim-sweep.json").write_text(marker)
+    assert main(["sweep", str(sw), "-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: output directory '{out}' holds an unfinished sweep")
+    assert "Traceback" not in err and err.count("\n") == 1
+    assert sorted(p.name for p in out.iterdir()) == [".r2rsim-sweep.json"]
+
+
 def test_interrupted_finalisation_is_finished_by_running_again(qs, tmp_path, monkeypatch):
     from r2rsim.sweep import _store
 

@@ -26,6 +26,10 @@ from ..errors import R2RError
 MANIFEST = "manifest.json"
 #: the marker of an unfinished sweep's directory (r2rsim.sweep): not a dataset until it is gone
 SWEEP_MARKER = ".r2rsim-sweep.json"
+#: largest JSON file r2rsim reads back: its manifests, sweep marker and failure records (the
+#: manifest of a 100 000-run sweep is tens of MB); a bound so a planted file cannot exhaust
+#: memory
+MAX_JSON_BYTES = 256 << 20
 #: r2rsim's own temporaries next to a dataset: ``.NAME.tmp-PID`` while a run writes,
 #: ``.NAME.old-PID`` for the dataset an ``--overwrite`` run replaces, during the swap
 TEMP_RE = re.compile(r"^\.(?P<name>.+)\.(?P<kind>tmp|old)-(?P<pid>[1-9][0-9]{0,9})$")
@@ -96,14 +100,30 @@ def _relpath_problem(rel: object) -> str | None:
     return None
 
 
+def read_json(path: str | Path) -> object:
+    """A JSON file that r2rsim wrote, bounded in size (:data:`MAX_JSON_BYTES`).
+
+    Raises
+    ------
+    OSError
+        When it cannot be read.
+    ValueError
+        When it is larger than the bound, not UTF-8 or not JSON.
+    """
+    path = Path(path)
+    if path.stat().st_size > MAX_JSON_BYTES:
+        raise ValueError(f"{path.name} is larger than {MAX_JSON_BYTES >> 20} MiB")
+    return json.loads(path.read_text(encoding="utf-8"))
+
+
 def read_manifest(root: Path) -> tuple[dict | None, str | None]:
     """``(manifest, None)`` or ``(None, why it is not an r2rsim manifest)``."""
     mpath = Path(root) / MANIFEST
     if mpath.is_symlink() or not mpath.is_file():
         return None, "no manifest.json"
     try:
-        manifest = json.loads(mpath.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        manifest = read_json(mpath)
+    except (OSError, ValueError) as exc:
         return None, f"manifest.json is not readable JSON ({exc})"
     if not isinstance(manifest, dict) or not isinstance(manifest.get("files"), dict) \
             or "schema_version" not in manifest:

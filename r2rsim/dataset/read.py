@@ -6,7 +6,6 @@ from __future__ import annotations
 import fnmatch
 import hashlib
 import io
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -14,7 +13,7 @@ from pathlib import Path
 import pandas as pd
 
 from ..errors import InputError
-from .paths import SWEEP_MARKER
+from .paths import SWEEP_MARKER, read_json
 
 #: column families a diagnosis algorithm sees by default (docs/dataset.md §2): the time, the
 #: recorded readings with their clipping flags, and the set-points. Never ``true.``,
@@ -99,7 +98,7 @@ class _Reader:
             raise self.fail("no manifest.json, so its files cannot be checked: not a "
                             f"complete r2rsim dataset ({_NO_VERIFY})")
         try:
-            files = json.loads(mf.read_text(encoding="utf-8"))["files"]
+            files = read_json(mf)["files"]
             items = [(str(rel), str(info["sha256"]), info.get("bytes")) for rel, info in
                      files.items()]
         except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:

@@ -23,7 +23,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from .labels import derive_labels
-from .paths import SWEEP_MARKER, dataset_problems, inside, safe_component
+from .paths import SWEEP_MARKER, dataset_problems, inside, read_json, safe_component
 from .writer import (
     VARIABILITY_SCHEMA,
     sha256_file,  # noqa: F401 - kept importable from here
@@ -62,8 +62,8 @@ def validate_dataset(path: str | Path, labels: bool = True) -> list[str]:
     # missing or extra (the full check re-reads every byte)
     problems = dataset_problems(root, hashes=labels)
     try:
-        manifest = json.loads((root / "manifest.json").read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError):
+        manifest = read_json(root / "manifest.json")
+    except (OSError, ValueError):
         return problems
     for name in ("runs", "faults", "channels"):
         if not (root / f"{name}.parquet").is_file():

@@ -34,6 +34,7 @@ from ..dataset.paths import (
     SWEEP_MARKER,
     clean_stale,
     dataset_problems,
+    read_json,
     read_manifest,
     remove_dataset,
     sha256_file,
@@ -145,8 +146,10 @@ class SweepStore:
         name = self.plan.sweep.name
         if self.marker.is_file():
             try:
-                info = json.loads(self.marker.read_text(encoding="utf-8"))
+                info = read_json(self.marker)
             except (OSError, ValueError):
+                info = {}
+            if not isinstance(info, dict):
                 info = {}
             if info.get("sweep") != name:
                 raise InputError(f"output directory '{out}' holds an unfinished sweep "
@@ -178,7 +181,8 @@ class SweepStore:
             raise InputError(f"output directory '{out}' exists and is not an intact r2rsim "
                              f"dataset ({problems[0]}); choose another directory with -o")
         if not self.overwrite:
-            what = (f"sweep '{manifest['sweep'].get('name')}'" if manifest.get("sweep")
+            sweep = manifest.get("sweep")
+            what = (f"sweep '{sweep.get('name')}'" if isinstance(sweep, dict)
                     else "a run's dataset")
             raise InputError(f"output directory '{out}' holds {what}; pass --overwrite to "
                              f"replace it, or choose another directory with -o")
@@ -256,8 +260,10 @@ class SweepStore:
                     foreign.append(rid)
                     continue
                 try:
-                    rec = json.loads(Path(entry.path).read_text(encoding="utf-8"))
+                    rec = read_json(entry.path)
                 except (OSError, ValueError):
+                    continue
+                if not isinstance(rec, dict):
                     continue
                 if rec.get("config_sha256") != plan_ids[rid].config_sha256:
                     changed.append(rid)
