@@ -425,3 +425,19 @@ def test_physics_relations_cancel_the_state_of_the_reduced_model(registration_ru
 def test_physics_parameters_are_validated(registration_runs, params, match):
     with pytest.raises(InputError, match=match):
         GSMMS(**{"model_features": [A_COL, B_COL], **params}).fit(registration_runs[:1])
+
+
+def test_training_arrays_are_what_the_fit_used():
+    # refitting each node's relation on them with the exact solver gives the fitted one
+    runs = [run_frame(0, 1), run_frame(1, 2)]
+    est = GSMMS(**{**PARAMS, "solver": "eigh", "max_samples": 4000}).fit(runs)
+    S, Z = est.training_arrays(runs)
+    assert S.shape == (4000, len(est.partition_columns_))
+    assert Z.shape == (4000, len(est.model_columns_))
+    bmu = est.graph_.bmu(S)
+    for m in range(est.n_nodes_):
+        om, _ = fit_relations(Z[bmu == m], np.ones(np.sum(bmu == m)), solver="eigh")
+        om /= np.linalg.norm(om)
+        assert cosine(om[:, 0], est.models_.omega[m][:, 0]) == pytest.approx(1.0, abs=1e-12)
+    with pytest.raises(RuntimeError, match="not fitted"):
+        GSMMS().training_arrays(runs)

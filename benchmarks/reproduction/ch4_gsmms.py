@@ -217,7 +217,7 @@ def solver_comparison(est, data: Data) -> pd.DataFrame:
     side in this process; RMSE of the parity residuals in N of sensor A."""
     from r2rsim.diagnostics.gsmms import fit_relations
 
-    S, Z = est._pooled(est._frames([r for m in ("OC1", "OC2") for r in data.healthy[m, "train"]]))
+    S, Z = est.training_arrays([r for m in ("OC1", "OC2") for r in data.healthy[m, "train"]])
     bmu = est.graph_.bmu(S)
     F = est._fault_directions()
     scale_a = est.z_scale_[est.model_columns_.index(A)]

@@ -305,6 +305,14 @@ class GSMMS(Diagnostic):
             raise InputError(f"{self.name}: fewer than two complete training samples")
         return S, Z, P
 
+    def training_arrays(self, runs) -> tuple[np.ndarray, np.ndarray]:
+        """The standardised partition features S and model features Z of ``runs`` as a fit
+        uses them (rows holding a NaN dropped, evenly thinned to ``max_samples``), with the
+        fitted standardisation: for studies of the local solvers on the same data."""
+        self._check_fitted()
+        S, Z, _ = self._pooled(self._frames(runs))
+        return S, Z
+
     # ---- the contract ----------------------------------------------------------------------
     def fit(self, runs):
         """Standardise, grow the map on the healthy runs and learn each node's residual
