@@ -605,6 +605,55 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
     -------
     Evaluation
     """
+    _check_settings(alpha, m, h, n_boot, window, vus_buffer)
+    train, val, test = list(train), list(val), list(test)
+    if not train:
+        raise InputError("no training runs")
+    if not test:
+        raise InputError("no test runs")
+    _check_healthy(train, "training")
+    _check_healthy(val, "validation")
+    _check_disjoint({"train": train, "val": val, "test": test})
+    plugin = _Scored(estimator, drive_data)
+    fit_s = plugin.fit(train)
+    theta = plugin.calibrate(val, alpha) if val else math.nan
+
+    t0 = time.perf_counter()
+    ranks = isolation and hasattr(plugin.est, "rank_channels")
+    scored = [plugin.outputs(r, ranks) for r in test]
+    exec_s = time.perf_counter() - t0
+    rd, rd_cal = _run_data(test, scored, theta if val else None, mode_strata, window)
+
+    dataset_sha = _sha(sorted((r.info.get("scenario_sha256"), int(r.info["seed"]),
+                               role) for role, rs in (("train", train), ("val", val),
+                                                      ("test", test)) for r in rs))
+    base = {"method": plugin.name, "params_sha256": _sha(plugin.params),
+            "dataset_sha256": dataset_sha, "split": split}
+    max_buffer = (None if vus_buffer is None else
+                  int(round(vus_buffer / float(np.median([r.period for r in rd if r.n > 1]
+                                                         or [1.0])))))
+    table = _MetricTable(base, m, h, n_boot, seed, max_buffer)
+    table.add_strata(test, rd, rd_cal)
+    if mode_strata:
+        table.add_mode_strata(test, rd, rd_cal)
+    table.add(ALL, ALL, math.nan, "fit_s", fit_s, n=len(train))
+    sim_h = sum(float(r.samples["t_s"].iloc[-1] - r.samples["t_s"].iloc[0]) for r in test) / 3600
+    if sim_h > 0:
+        table.add(ALL, ALL, math.nan, "exec_s_per_sim_h", exec_s / sim_h, n=len(test))
+    if val:
+        table.add(ALL, ALL, math.nan, "theta", theta, n=len(val))
+    return Evaluation(plugin.name, plugin.params,
+                      _predictions(test, scored, rd_cal, plugin.name, base["params_sha256"]),
+                      table.frame(), theta,
+                      {"alpha": alpha, "m": m, "h": h, "n_boot": n_boot, "seed": seed,
+                       "split": split, "fit_s": fit_s, "drive_data": drive_data,
+                       "mode_strata": mode_strata, "window": window, "isolation": isolation,
+                       "vus_buffer": vus_buffer, "vus_max_buffer_samples": max_buffer},
+                      list(dict.fromkeys(str(Path(r.path).resolve()) for r in test)))
+
+
+def _check_settings(alpha, m, h, n_boot, window, vus_buffer) -> None:
+    """The harness settings of :func:`evaluate`, each with one InputError."""
     if not 0.0 < alpha < 1.0:
         raise InputError(f"alpha must be in (0, 1), got {alpha!r}")
     if int(m) != m or m < 1:
@@ -618,34 +667,50 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
         raise InputError(f"window must be one of {', '.join(WINDOWS)}, got {window!r}")
     if vus_buffer is not None and not vus_buffer >= 0:
         raise InputError(f"vus_buffer must be >= 0 s, got {vus_buffer!r}")
-    train, val, test = list(train), list(val), list(test)
-    if not train:
-        raise InputError("no training runs")
-    if not test:
-        raise InputError("no test runs")
-    _check_healthy(train, "training")
-    _check_healthy(val, "validation")
-    _check_disjoint({"train": train, "val": val, "test": test})
-    est = call(estimator, "clone", clone, estimator)
-    name = getattr(est, "name", type(est).__name__)
-    params = call(est, "get_params", est.get_params)
 
-    def frame(run: Run) -> pd.DataFrame:
-        # the plug-in gets the visible columns only: no labels, faults or true states
-        f = run.visible(drive_data)
+
+class _Scored:
+    """A clone of the plug-in under evaluation, called through :func:`call` so that its
+    failures are named, and given the visible columns of runs only."""
+
+    def __init__(self, estimator, drive_data: bool):
+        self.est = call(estimator, "clone", clone, estimator)
+        self.name = getattr(self.est, "name", type(self.est).__name__)
+        self.params = call(self.est, "get_params", self.est.get_params)
+        self.drive_data = drive_data
+
+    def frame(self, run: Run) -> pd.DataFrame:
+        """The plug-in's view of a run: no labels, faults or true states."""
+        f = run.visible(self.drive_data)
         try:
-            est.required_columns(f)
+            self.est.required_columns(f)
         except InputError as exc:
             raise InputError(f"{exc.message} (run {run.run_id} in {run.path})") from None
         return f
 
-    train_frames = [frame(r) for r in train]
-    t0 = time.perf_counter()
-    call(est, "fit", est.fit, train_frames)
-    fit_s = time.perf_counter() - t0
+    def fit(self, train: list[Run]) -> float:
+        """Fit on the training runs; returns the wall time [s]."""
+        frames = [self.frame(r) for r in train]
+        t0 = time.perf_counter()
+        call(self.est, "fit", self.est.fit, frames)
+        return time.perf_counter() - t0
 
-    def outputs(run: Run, rank: bool = False):
-        f = frame(run)
+    def calibrate(self, val: list[Run], alpha: float) -> float:
+        """Theta at false-alarm rate ``alpha`` on the scored samples of the validation runs
+        (M6)."""
+        cal = [self.outputs(r) for r in val]
+        pool = np.concatenate([s[r.samples["label.score_mask"].to_numpy(bool)]
+                               for r, (s, *_) in zip(val, cal, strict=True)])
+        pool = pool[np.isfinite(pool)]
+        if pool.size == 0:
+            raise InputError(f"{self.name}: no finite statistic on the validation runs")
+        return calibrate_threshold(pool, alpha)
+
+    def outputs(self, run: Run, rank: bool = False) -> tuple:
+        """(statistic, alarm, diagnosis or None, ranking or None) of one run, each checked
+        against the contract."""
+        est, name = self.est, self.name
+        f = self.frame(run)
         where = f"run {run.run_id} of {run.path}"
         scores = call(est, f"score ({where})", est.score, f)
         if not isinstance(scores, pd.DataFrame) or "statistic" not in scores.columns:
@@ -664,7 +729,7 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
             raise PluginError(f"plug-in '{name}': decide/diagnose ({where}) returned "
                               f"{len(alarm)} values for {len(f)} samples")
         if not rank:
-            return stat, alarm, diag
+            return stat, alarm, diag, None
         ranking = call(est, f"rank_channels ({where})", est.rank_channels, scores)
         if ranking is not None and (not isinstance(ranking, pd.DataFrame)
                                     or len(ranking) != len(f)):
@@ -672,120 +737,122 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
                               f"or a DataFrame with one row per sample")
         return stat, alarm, diag, ranking
 
-    theta = math.nan
-    if val:
-        cal = [outputs(r) for r in val]
-        pool = np.concatenate([s[r.samples["label.score_mask"].to_numpy(bool)]
-                               for r, (s, _, _) in zip(val, cal, strict=True)])
-        pool = pool[np.isfinite(pool)]
-        if pool.size == 0:
-            raise InputError(f"{name}: no finite statistic on the validation runs")
-        theta = calibrate_threshold(pool, alpha)
 
-    t0 = time.perf_counter()
-    ranks = hasattr(est, "rank_channels") and isolation
-    scored = [outputs(r, ranks) for r in test]
-    exec_s = time.perf_counter() - t0
-    rankings = [o[3] for o in scored] if ranks else [None] * len(test)
-    scored = [o[:3] for o in scored]
-    sim_h = sum(float(r.samples["t_s"].iloc[-1] - r.samples["t_s"].iloc[0]) for r in test) / 3600
+def _run_data(test: list[Run], scored: list[tuple], theta: float | None, mode_strata: bool,
+              window: str) -> tuple[list[RunData], list[RunData] | None]:
+    """The test runs' RunData at the plug-in's own threshold, and (with ``theta``) the same
+    runs with the alarms at theta."""
     # a statistic the plug-in could not compute (nan) never alarms and ranks lowest
-    finite = np.concatenate([s[np.isfinite(s)] for s, _, _ in scored])
+    finite = np.concatenate([s[np.isfinite(s)] for s, *_ in scored])
     floor = (finite.min() if finite.size else 0.0) - 1.0
     rd = [run_data(r, np.where(np.isfinite(s), s, floor), a, d, ranking=rk,
                    modes=mode_strata, steady=window == "steady")
-          for r, (s, a, d), rk in zip(test, scored, rankings, strict=True)]
+          for r, (s, a, d, rk) in zip(test, scored, strict=True)]
     # the same runs at theta: only the alarm differs (a nan statistic never exceeds theta)
-    rd_cal = ([replace(x, alarm=s > theta) for x, (s, _, _) in zip(rd, scored, strict=True)]
-              if val else None)
+    rd_cal = ([replace(x, alarm=o[0] > theta) for x, o in zip(rd, scored, strict=True)]
+              if theta is not None else None)
+    return rd, rd_cal
 
-    dataset_sha = _sha(sorted((r.info.get("scenario_sha256"), int(r.info["seed"]),
-                               role) for role, rs in (("train", train), ("val", val),
-                                                      ("test", test)) for r in rs))
-    base = {"method": name, "params_sha256": _sha(params), "dataset_sha256": dataset_sha,
-            "split": split}
-    rows = []
 
-    def add(cond, ftype, mag, metric, value, lo=math.nan, hi=math.nan, n=0):
+class _MetricTable:
+    """The rows of the long results table, stratum by stratum."""
+
+    def __init__(self, base: dict, m: int, h: float, n_boot: int, seed: int,
+                 max_buffer: int | None):
+        self.base, self.m, self.h = base, m, h
+        self.n_boot, self.seed, self.max_buffer = n_boot, seed, max_buffer
+        self.rows: list[dict] = []
+
+    def add(self, cond, ftype, mag, metric, value, lo=math.nan, hi=math.nan, n=0):
         if value is None or (isinstance(value, float) and math.isnan(value)):
             return
-        rows.append({**base, "condition": cond, "fault": ftype, "magnitude": mag,
-                     "metric": metric, "value": float(value), "ci_low": lo, "ci_high": hi,
-                     "n_runs": n})
+        self.rows.append({**self.base, "condition": cond, "fault": ftype, "magnitude": mag,
+                          "metric": metric, "value": float(value), "ci_low": lo,
+                          "ci_high": hi, "n_runs": n})
 
-    # per-run counts, once per run; a stratum takes its runs' rows
-    per_run = pd.DataFrame([_counts(r, m, h) for r in rd])
-    per_run_cal = pd.DataFrame([_counts(r, m, h) for r in rd_cal]) if rd_cal else None
-    max_buffer = (None if vus_buffer is None else
-                  int(round(vus_buffer / float(np.median([r.period for r in rd if r.n > 1]
-                                                         or [1.0])))))
+    def _counts(self, runs: list[RunData] | None) -> pd.DataFrame | None:
+        """Per-run counts, once per run; a stratum takes its runs' rows."""
+        return None if runs is None else pd.DataFrame([_counts(r, self.m, self.h)
+                                                       for r in runs])
 
-    def stratum(cond, ftype, mag, idx, view=None):
-        """Add the rows of one stratum; ``view``: runs restricted to a regime (per-sample
-        metrics only), with their own per-run counts."""
-        runs_all, pr, prc = (rd, per_run, per_run_cal) if view is None else view
-        skip = _RUN_LEVEL if view is not None else frozenset()
-        runs = [runs_all[i] for i in idx]
-        n = len(idx)
-        counts = pr.iloc[idx]
-        for metric, (est_, lo, hi) in _bootstrap(counts, n_boot, seed).items():
-            if (metric == "ia" and runs[0].diagnosis is None) or metric in skip:
+    def add_strata(self, test: list[Run], rd: list[RunData], rd_cal) -> None:
+        """Every condition × fault stratum, by magnitude where there are several, with the
+        minimum detectable magnitude."""
+        view = (rd, self._counts(rd), self._counts(rd_cal))
+        for cond, ftype, idx in _strata(test):
+            counts, counts_cal = self.stratum(cond, ftype, math.nan, idx, view)
+            faulty_idx = [i for i in idx if rd[i].is_faulty]
+            mags = np.array([rd[i].magnitude for i in faulty_idx])
+            if ftype in (NONE, ALL) or np.unique(mags[np.isfinite(mags)]).size <= 1:
                 continue
-            add(cond, ftype, mag, metric, est_, lo, hi, n)
-        n_faulty = int(counts["elig"].sum())
-        if n_faulty and "n_missed" not in skip:
-            add(cond, ftype, mag, "n_missed", float(n_faulty - counts["det"].sum()), n=n)
-        y = np.concatenate([r.faulty[r.scored] for r in runs])
-        if y.any() and not y.all():
-            s = np.concatenate([r.score[r.scored] for r in runs])
-            add(cond, ftype, mag, "roc_auc", roc_auc(s, y), n=n)
-            add(cond, ftype, mag, "pr_auc", average_precision(s, y), n=n)
-            if max_buffer is not None:
-                ps, py, pg = _pooled(runs)
-                add(cond, ftype, mag, "vus_pr", vus_pr(ps, py, max_buffer, groups=pg), n=n)
-        if prc is not None:
-            cc = prc.iloc[idx]
-            for metric, (est_, lo, hi) in _bootstrap(cc, n_boot, seed).items():
-                if metric in _CAL and metric not in skip:
-                    add(cond, ftype, mag, _CAL[metric], est_, lo, hi, n)
-            return counts, cc
-        return counts, None
-
-    for cond, ftype, idx in _strata(test):
-        counts, counts_cal = stratum(cond, ftype, math.nan, idx)
-        faulty_idx = [i for i in idx if rd[i].is_faulty]
-        mags = np.array([rd[i].magnitude for i in faulty_idx])
-        if ftype not in (NONE, ALL) and np.unique(mags[np.isfinite(mags)]).size > 1:
             for mag in np.unique(mags[np.isfinite(mags)]):
-                stratum(cond, ftype, float(mag), [i for i in faulty_idx
-                                                  if rd[i].magnitude == mag])
+                self.stratum(cond, ftype, float(mag),
+                             [i for i in faulty_idx if rd[i].magnitude == mag], view)
             mag_all = np.array([rd[i].magnitude for i in idx])
             for key, c in (("mdm90", counts), ("mdm90_cal", counts_cal)):
                 if c is None:
                     continue
                 elig = c["elig"].to_numpy(bool)
                 curve = detectability(mag_all[elig], c["det"].to_numpy(bool)[elig])
-                add(cond, ftype, math.nan, key, abs(curve.mdm), n=int(elig.sum()))
-    for mode in _modes(rd) if mode_strata else ():
-        view = [restrict_to_mode(r, mode) for r in rd]
-        view_cal = ([replace(r, alarm=x.alarm) for r, x in zip(view, rd_cal, strict=True)]
-                    if rd_cal else None)
-        counts_of = (view, pd.DataFrame([_counts(r, m, h) for r in view]),
-                     pd.DataFrame([_counts(r, m, h) for r in view_cal]) if view_cal else None)
-        for cond, ftype, idx in _mode_strata(test, view, mode):
-            stratum(cond, ftype, math.nan, idx, counts_of)
-    add(ALL, ALL, math.nan, "fit_s", fit_s, n=len(train))
-    if sim_h > 0:
-        add(ALL, ALL, math.nan, "exec_s_per_sim_h", exec_s / sim_h, n=len(test))
-    if val:
-        add(ALL, ALL, math.nan, "theta", theta, n=len(val))
+                self.add(cond, ftype, math.nan, key, abs(curve.mdm), n=int(elig.sum()))
 
-    metrics = pd.DataFrame(rows, columns=[*base, "condition", "fault", "magnitude",
-                                          "metric", "value", "ci_low", "ci_high", "n_runs"])
-    metrics = metrics.astype({"magnitude": float, "value": float, "ci_low": float,
-                              "ci_high": float, "n_runs": "int64"})
+    def add_mode_strata(self, test: list[Run], rd: list[RunData], rd_cal) -> None:
+        """The per-sample metrics of each regime (``label.mode``) × fault."""
+        for mode in _modes(rd):
+            view = [restrict_to_mode(r, mode) for r in rd]
+            view_cal = ([replace(r, alarm=x.alarm) for r, x in zip(view, rd_cal, strict=True)]
+                        if rd_cal else None)
+            counts_of = (view, self._counts(view), self._counts(view_cal))
+            for cond, ftype, idx in _mode_strata(test, view, mode):
+                self.stratum(cond, ftype, math.nan, idx, counts_of, regime=True)
+
+    def stratum(self, cond, ftype, mag, idx, view, regime: bool = False):
+        """Add the rows of one stratum. ``view``: (runs, their counts, their counts at
+        theta); ``regime``: runs restricted to a regime, per-sample metrics only.
+        Returns the stratum's counts and counts at theta."""
+        runs_all, pr, prc = view
+        skip = _RUN_LEVEL if regime else frozenset()
+        runs = [runs_all[i] for i in idx]
+        n = len(idx)
+        counts = pr.iloc[idx]
+        for metric, (est_, lo, hi) in _bootstrap(counts, self.n_boot, self.seed).items():
+            if (metric == "ia" and runs[0].diagnosis is None) or metric in skip:
+                continue
+            self.add(cond, ftype, mag, metric, est_, lo, hi, n)
+        n_faulty = int(counts["elig"].sum())
+        if n_faulty and "n_missed" not in skip:
+            self.add(cond, ftype, mag, "n_missed", float(n_faulty - counts["det"].sum()), n=n)
+        y = np.concatenate([r.faulty[r.scored] for r in runs])
+        if y.any() and not y.all():
+            s = np.concatenate([r.score[r.scored] for r in runs])
+            self.add(cond, ftype, mag, "roc_auc", roc_auc(s, y), n=n)
+            self.add(cond, ftype, mag, "pr_auc", average_precision(s, y), n=n)
+            if self.max_buffer is not None:
+                ps, py, pg = _pooled(runs)
+                self.add(cond, ftype, mag, "vus_pr", vus_pr(ps, py, self.max_buffer,
+                                                            groups=pg), n=n)
+        if prc is None:
+            return counts, None
+        cc = prc.iloc[idx]
+        for metric, (est_, lo, hi) in _bootstrap(cc, self.n_boot, self.seed).items():
+            if metric in _CAL and metric not in skip:
+                self.add(cond, ftype, mag, _CAL[metric], est_, lo, hi, n)
+        return counts, cc
+
+    def frame(self) -> pd.DataFrame:
+        """The typed long table."""
+        metrics = pd.DataFrame(self.rows, columns=[*self.base, "condition", "fault",
+                                                   "magnitude", "metric", "value", "ci_low",
+                                                   "ci_high", "n_runs"])
+        return metrics.astype({"magnitude": float, "value": float, "ci_low": float,
+                               "ci_high": float, "n_runs": "int64"})
+
+
+def _predictions(test: list[Run], scored: list[tuple], rd_cal, name: str,
+                 params_sha: str) -> pd.DataFrame:
+    """One row per test sample: the plug-in's statistic, alarm (and at theta), diagnosis."""
     preds = []
-    for r, (s, a, d), rc in zip(test, scored, rd_cal or [None] * len(test), strict=True):
+    for r, (s, a, d, _), rc in zip(test, scored, rd_cal or [None] * len(test), strict=True):
         p = pd.DataFrame({"run_id": r.run_id, "k": r.samples["k"].to_numpy(np.int64),
                           "t_s": r.samples["t_s"].to_numpy(float), "statistic": s,
                           "alarm": a})
@@ -796,10 +863,5 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
         preds.append(p)
     predictions = pd.concat(preds, ignore_index=True)
     predictions["method"] = name
-    predictions["params_sha256"] = base["params_sha256"]
-    return Evaluation(name, params, predictions, metrics, theta,
-                      {"alpha": alpha, "m": m, "h": h, "n_boot": n_boot, "seed": seed,
-                       "split": split, "fit_s": fit_s, "drive_data": drive_data,
-                       "mode_strata": mode_strata, "window": window, "isolation": isolation,
-                       "vus_buffer": vus_buffer, "vus_max_buffer_samples": max_buffer},
-                      list(dict.fromkeys(str(Path(r.path).resolve()) for r in test)))
+    predictions["params_sha256"] = params_sha
+    return predictions
