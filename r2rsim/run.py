@@ -316,12 +316,89 @@ def execute(plan: RunPlan, out: str | Path, *, run_id: str | None = None, progre
     """
     out = Path(out)
     compile0 = compile_seconds() if compile0 is None else compile0
-    scenario, line, name = plan.scenario, plan.line, plan.name
+    scenario, name = plan.scenario, plan.name
     check_output(out, overwrite)  # before the work: refuse early what commit would refuse
 
+    prep = _prepare(plan)
+    cl = prep.cl
+    run_id = run_id or f"{name}__s{scenario.seed}"
+    meta = {"r2rsim.schema_version": "0.1", "r2rsim.version": __version__,
+            "r2rsim.scenario_sha256": plan.scenario_sha256,
+            "r2rsim.root_seed": str(scenario.seed)}
+    sensor_chan = {s.id: channel_names(cl, s)[0][len("meas."):] for s in cl.sensors}
+    faults = realise_faults(scenario, prep.line, prep.ss_faults, plan.source,
+                            channel_of=lambda sid: f"meas.{sensor_chan[sid]}")
+    rate = scenario.record_rate
+    fault_rows = [f.record(run_id, int(math.ceil(f.onset * rate - 1e-9))) for f in faults]
+    modes = [(st.at, st.mode) for st in scenario.programme if st.mode is not None]
+    writer = DatasetWriter(out, run_id, meta, overwrite=overwrite, clean=clean_stale)
+    try:
+        sink = _ChunkSink(writer, MeasurementModel(cl, rate, prep.ss_meas, faults), cl,
+                          fault_rows, scenario.warmup, modes, sensor_chan)
+        wall0, compile_sim0 = time.perf_counter(), compile_seconds()
+        res = simulate(cl, scenario.duration, rate, prep.y0,
+                       scenario.solver, on_chunk=sink.on_chunk,
+                       progress=(lambda t: progress(t, scenario.duration)) if progress else None,
+                       initial_state_mode=prep.init_mode, events=scenario.events,
+                       faults=faults, rolls=prep.rolls)
+        sink.close(res.terminated)
+        # the wall time and real-time factor without numba compiling (reported apart)
+        wall = time.perf_counter() - wall0 - (compile_seconds() - compile_sim0)
+        res.stats["compile_s"] = compile_seconds() - compile0
+        sim_end = res.termination_time if res.terminated else scenario.duration
+
+        writer.write_table("channels", _channels_table(cl, sink, sensor_chan, rate))
+        writer.write_table("faults", pa.Table.from_pylist(fault_rows, schema=FAULTS_SCHEMA)
+                           if fault_rows else FAULTS_SCHEMA.empty_table())
+        events = _run_events(res, faults, sim_end)
+        writer.write_table("events", _events_table(run_id, events))
+        variability_rows = prep.variability_rows + (prep.rolls.rows if prep.rolls is not None
+                                                    else [])
+        writer.write_table("variability", pa.Table.from_pylist(
+            [{"run_id": run_id, **r} for r in variability_rows], schema=VARIABILITY_SCHEMA))
+        runs = _runs_table(plan, prep, run_id, res, faults, modes, writer.n_rows, sim_end,
+                           sink.nonfinite_t, wall)
+        for col, arr in (run_columns or {}).items():
+            runs = runs.append_column(col, arr)
+        writer.write_table("runs", runs)
+        for rel, text in plan.files.items():
+            writer.write_text(rel, text)
+        path = writer.commit({"run_ids": [run_id], "scenario_sha256": plan.scenario_sha256,
+                              "root_seed": scenario.seed, **plan.manifest},
+                             check=lambda d: validate_dataset(d, labels=check_labels))
+    except BaseException:
+        writer.abort()
+        raise
+    return RunSummary(path, run_id, float(sim_end), wall, writer.n_rows,
+                      sink.tension_stats(cl.span_ids), events,
+                      res.terminated, res.termination_reason, res.termination_time,
+                      prep.init_mode, res.stats, prep.warnings,
+                      list(scenario.expect.termination), sink.nonfinite_t)
+
+
+@dataclass
+class _Prepared:
+    """A run's realised line (variability drawn), its compiled form and initial state, and
+    the random streams of the rest of the run."""
+
+    line: object
+    cl: object
+    rolls: object
+    variability_rows: list
+    y0: np.ndarray
+    init_mode: str
+    warnings: list
+    ss_process: np.random.SeedSequence
+    ss_meas: np.random.SeedSequence
+    ss_faults: np.random.SeedSequence
+
+
+def _prepare(plan: RunPlan) -> _Prepared:
+    """Draw the run's variability and disturbances from its process stream, compile the
+    line and find the initial state (steady, or nominal when none is found)."""
+    scenario, line = plan.scenario, plan.line
     prog = Programme.from_steps(line, scenario.programme, file=plan.source)
-    root = np.random.SeedSequence(scenario.seed)
-    ss_process, ss_meas, ss_faults = root.spawn(3)
+    ss_process, ss_meas, ss_faults = np.random.SeedSequence(scenario.seed).spawn(3)
     declared_web = line.web
     line, rolls, variability_rows = realise_variability(scenario, line, ss_process)
     disturbances = realise_disturbances(scenario, line, ss_process)
@@ -330,196 +407,182 @@ def execute(plan: RunPlan, out: str | Path, *, run_id: str | None = None, progre
                       joint_slots_needed(scenario, line), nominal_web=declared_web,
                       pitch_offsets=rolls.sensor_pitch_offsets if rolls else None)
     init = scenario.initial
-    y_nom = nominal_state(cl, init.tension, init.span_tension, init.slack, init.position,
-                          file=plan.source)
+    y0 = nominal_state(cl, init.tension, init.span_tension, init.slack, init.position,
+                       file=plan.source)
     for d in disturbances:  # an out-of-round roller starts at a random angle
         if d.type == "out_of_round":
-            y_nom[cl.index(f"{d.element}.angle")] = d.phase
-    init_mode = "nominal"
-    run_warnings = []
+            y0[cl.index(f"{d.element}.angle")] = d.phase
+    init_mode, warnings = "nominal", []
     if init.state == "steady":
-        y_ss = steady_state(cl, y_nom)
+        y_ss = steady_state(cl, y0)
         if y_ss is not None:
             y0, init_mode = y_ss, "steady"
         else:
-            y0, init_mode = y_nom, "nominal (no steady state at the t = 0 set-points)"
-            run_warnings.append(
+            init_mode = "nominal (no steady state at the t = 0 set-points)"
+            warnings.append(
                 f"{plan.source}: initial.state: steady was asked for, but no steady state "
                 "was found at the t = 0 set-points (is the line at rest, or are span tensions "
                 "not held by any loop or draw?); the run starts from the nominal state")
-    else:
-        y0 = y_nom
+    return _Prepared(line, cl, rolls, variability_rows, y0, init_mode, warnings, ss_process,
+                     ss_meas, ss_faults)
 
-    scenario_sha = plan.scenario_sha256
-    run_id = run_id or f"{name}__s{scenario.seed}"
-    meta = {"r2rsim.schema_version": "0.1", "r2rsim.version": __version__,
-            "r2rsim.scenario_sha256": scenario_sha, "r2rsim.root_seed": str(scenario.seed)}
-    sensor_chan = {s.id: channel_names(cl, s)[0][len("meas."):] for s in cl.sensors}
-    faults = realise_faults(scenario, line, ss_faults, plan.source,
-                            channel_of=lambda sid: f"meas.{sensor_chan[sid]}")
-    rate = scenario.record_rate
-    fault_rows = [f.record(run_id, int(math.ceil(f.onset * rate - 1e-9))) for f in faults]
-    modes = [(st.at, st.mode) for st in scenario.programme if st.mode is not None]
-    writer = DatasetWriter(out, run_id, meta, overwrite=overwrite, clean=clean_stale)
-    try:
-        meas = MeasurementModel(cl, rate, ss_meas, faults)
-        cols = true_state_columns(cl)
-        aux_idx = np.array([c["aux"] for c in cols], dtype=np.int64)
-        span_cols = [cl.aux_index(f"{s}.tension_N") for s in cl.span_ids]
-        stats = {"min": np.full(len(span_cols), np.inf), "max": np.full(len(span_cols), -np.inf),
-                 "sum": np.zeros(len(span_cols)), "n": 0}
-        k0 = [0]
-        held: list[dict] = []  # one chunk of look-behind: the last one learns how the run ended
 
-        def flush(terminated: bool):
-            data = held.pop()
-            k_last = int(data["k"][-1]) if terminated and len(data["k"]) else None
-            data.update(derive_labels(fault_rows, data["k"], data["t_s"],
-                                      warmup=scenario.warmup, modes=modes,
-                                      terminated_k=k_last, sensor_channels=sensor_chan))
-            writer.write_chunk(data)
+class _ChunkSink:
+    """Receives the solver's output chunks: measures them, labels them and hands them to
+    the dataset writer one chunk late (the last chunk learns how the run ended); keeps
+    the span tensions' range and the first non-finite sample."""
 
-        nonfinite_t: list[float] = []  # the first sample whose states are not finite
+    def __init__(self, writer, meas, cl, fault_rows, warmup, modes, sensor_chan):
+        self.writer, self.meas = writer, meas
+        self.fault_rows, self.warmup, self.modes = fault_rows, warmup, modes
+        self.sensor_chan = sensor_chan
+        self.cols = true_state_columns(cl)
+        self.aux_idx = np.array([c["aux"] for c in self.cols], dtype=np.int64)
+        self.span_cols = [cl.aux_index(f"{s}.tension_N") for s in cl.span_ids]
+        n = len(self.span_cols)
+        self.t_min, self.t_max, self.t_sum = np.full(n, np.inf), np.full(n, -np.inf), np.zeros(n)
+        self.n = 0
+        self.held: list[dict] = []
+        self.nonfinite_t: float | None = None  # the first sample whose states are not finite
 
-        def on_chunk(t, Y, A):
-            n = len(t)
-            if not nonfinite_t:
-                bad = ~np.isfinite(Y).all(axis=1)
-                if bad.any():
-                    nonfinite_t.append(float(t[np.argmax(bad)]))
-            data = {"k": np.arange(k0[0], k0[0] + n, dtype=np.int64), "t_s": t}
-            data.update(meas.measure(t, A))
-            for c, j in zip(cols, aux_idx, strict=True):
-                data[c["column"]] = A[:, j]
-            if held:
-                flush(False)
-            held.append(data)
-            T = A[:, span_cols]
-            stats["min"] = np.minimum(stats["min"], T.min(axis=0))
-            stats["max"] = np.maximum(stats["max"], T.max(axis=0))
-            stats["sum"] += T.sum(axis=0)
-            stats["n"] += n
-            k0[0] += n
+    def on_chunk(self, t, Y, A):
+        n = len(t)
+        if self.nonfinite_t is None:
+            bad = ~np.isfinite(Y).all(axis=1)
+            if bad.any():
+                self.nonfinite_t = float(t[np.argmax(bad)])
+        data = {"k": np.arange(self.n, self.n + n, dtype=np.int64), "t_s": t}
+        data.update(self.meas.measure(t, A))
+        for c, j in zip(self.cols, self.aux_idx, strict=True):
+            data[c["column"]] = A[:, j]
+        if self.held:
+            self._flush(False)
+        self.held.append(data)
+        T = A[:, self.span_cols]
+        self.t_min = np.minimum(self.t_min, T.min(axis=0))
+        self.t_max = np.maximum(self.t_max, T.max(axis=0))
+        self.t_sum += T.sum(axis=0)
+        self.n += n
 
-        wall0, compile_sim0 = time.perf_counter(), compile_seconds()
-        res = simulate(cl, scenario.duration, rate, y0,
-                       scenario.solver, on_chunk=on_chunk,
-                       progress=(lambda t: progress(t, scenario.duration)) if progress else None,
-                       initial_state_mode=init_mode, events=scenario.events, faults=faults,
-                       rolls=rolls)
-        if held:
-            flush(res.terminated)
-        # the wall time and real-time factor without numba compiling (reported apart)
-        wall = time.perf_counter() - wall0 - (compile_seconds() - compile_sim0)
-        res.stats["compile_s"] = compile_seconds() - compile0
-        sim_end = res.termination_time if res.terminated else scenario.duration
+    def _flush(self, terminated: bool):
+        data = self.held.pop()
+        k_last = int(data["k"][-1]) if terminated and len(data["k"]) else None
+        data.update(derive_labels(self.fault_rows, data["k"], data["t_s"],
+                                  warmup=self.warmup, modes=self.modes,
+                                  terminated_k=k_last, sensor_channels=self.sensor_chan))
+        self.writer.write_chunk(data)
 
-        # channels.parquet: the dictionary of every samples column
-        ch_rows = [("run_id", "index", "", "", "run id (the hive partition key of samples/)",
-                    None),
-                   ("k", "index", "", "", "sample index from 0", None),
-                   ("t_s", "index", "s", "", "simulation time", None)]
-        for mc in meas.channels:  # in the order MeasurementModel.measure writes them
-            s = mc["sensor"]
-            unit = channel_names(cl, s)[2].replace("rad_s", "rad/s")
-            where = getattr(s, "element", None) or s.span
-            ch_rows.append((mc["name"], "measured", unit, where,
-                            f"{s.type} '{s.id}' on {where}: measured (noise, sampling)",
-                            mc["rate"]))
-            ch_rows.append((mc["true"], "true", unit, where,
-                            f"noise- and fault-free shadow of {mc['name']} (never give to "
-                            "algorithms)", rate))
-            if s.range is not None:
-                ch_rows.append((f"flag.{s.id}.clipped", "flag", "", s.id,
-                                f"{mc['name']} was clipped to its range {list(s.range)} "
-                                "(censored)", mc["rate"]))
-        for c in cols:
-            ch_rows.append((c["column"], c["kind"], c["unit"], c["component"], c["description"],
-                            rate))
-        ch_rows += [
-            ("label.is_faulty", "label", "", "", "any fault present", None),
-            ("label.n_active", "label", "", "", "number of faults present", None),
-            ("label.fault_ids", "label", "", "", "ids of the faults present", None),
-            ("label.primary_type", "label", "", "", "type of the present fault with the "
-             "largest magnitude_rel, else 'normal'", None),
-            ("label.severity", "label", "", "", "profile p(t) of the primary fault, 0-1", None),
-            ("label.phase", "label", "", "", "warmup / normal / faulty / terminated", None),
-            ("label.mode", "label", "", "", "operating mode named by the programme", None),
-            ("label.score_mask", "label", "", "", "false during warm-up", None)]
-        ch_rows += [(f"label.ch.{c}", "label", "", sid, f"a sensor fault acts on meas.{c}",
-                     None) for sid, c in sensor_chan.items()]
-        ch_table = pa.table({
-            "channel": [r[0] for r in ch_rows], "kind": [r[1] for r in ch_rows],
-            "unit": [r[2] for r in ch_rows], "component": [r[3] for r in ch_rows],
-            "description": [r[4] for r in ch_rows],
-            "rate_hz": pa.array([r[5] if r[5] is not None else scenario.record_rate
-                                 for r in ch_rows], pa.float64()),
-        })
-        writer.write_table("channels", ch_table)
-        writer.write_table("faults", pa.Table.from_pylist(fault_rows, schema=FAULTS_SCHEMA)
-                           if fault_rows else FAULTS_SCHEMA.empty_table())
-        # every fault's start and end joins the event log (within the simulated time)
-        events = list(res.events) + [
-            Event(tb, "fault", f.target, state, f"{f.id}: {f.type} on {f.target} {state}s",
-                  {"fault_id": f.id})
-            for f in faults for tb, state in ((f.onset, "start"), (f.end, "end"))
-            if tb is not None and tb <= sim_end]
-        events.sort(key=lambda e: e.t)
-        writer.write_table("events", pa.table({
-            "run_id": [run_id] * len(events), "t_s": [e.t for e in events],
-            "kind": [e.kind for e in events], "component": [e.component for e in events],
-            "state": [e.state for e in events], "message": [e.message for e in events],
-            "values_json": [json.dumps(e.values) for e in events]}, schema=EVENTS_SCHEMA))
-        variability_rows += rolls.rows if rolls is not None else []
-        writer.write_table("variability", pa.Table.from_pylist(
-            [{"run_id": run_id, **r} for r in variability_rows], schema=VARIABILITY_SCHEMA))
-        seeds = {"process": int(ss_process.generate_state(1, np.uint64)[0]),
-                 "measurement": int(ss_meas.generate_state(1, np.uint64)[0]),
-                 "fault_sampling": int(ss_faults.generate_state(1, np.uint64)[0])}
-        runs = pa.table({
-            "run_id": [run_id], "scenario_id": [name], "scenario_sha256": [scenario_sha],
-            "seed": pa.array([scenario.seed], pa.uint64()),
-            "seed_streams": pa.array([seeds], pa.struct([("process", pa.uint64()),
-                                                         ("measurement", pa.uint64()),
-                                                         ("fault_sampling", pa.uint64())])),
-            "split": pa.array([scenario.split_of(scenario.seed)], pa.string()),
-            "line_config": [line.name or plan.line_config],
-            "operating_mode": pa.array(["+".join(dict.fromkeys(m for _, m in modes)) or None],
-                                       pa.string()),
-            "modes_json": [json.dumps(modes)],
-            "disturbances_json": [json.dumps([d.model_dump() for d in scenario.disturbances])],
-            "sample_period_s": [1.0 / scenario.record_rate],
-            "duration_s": [scenario.duration], "n_samples": pa.array([writer.n_rows], pa.int64()),
-            "warmup_s": [scenario.warmup], "has_fault": [bool(faults)],
-            "n_faults": pa.array([len(faults)], pa.int16()), "terminated": [res.terminated],
-            "termination_reason": pa.array([res.termination_reason], pa.string()),
-            "termination_t_s": pa.array([res.termination_time], pa.float64()),
-            "simulated_s": [float(sim_end)],
-            "nonfinite_from_t_s": pa.array([nonfinite_t[0] if nonfinite_t else None],
-                                           pa.float64()),
-            "ended_as_expected": [ended_as_expected(
-                res.terminated, res.termination_reason, scenario.expect.termination,
-                nonfinite_t[0] if nonfinite_t else None)],
-            "initial_state": [init_mode], "solver": [res.stats["solver"]],
-            "rhs_evaluations": pa.array([res.stats["nfev"]], pa.int64()),
-            "r2rsim_version": [__version__], "python_version": [platform.python_version()],
-            "numpy_version": [np.__version__], "wallclock_s": [wall],
-        })
-        for col, arr in (run_columns or {}).items():
-            runs = runs.append_column(col, arr)
-        writer.write_table("runs", runs)
-        for rel, text in plan.files.items():
-            writer.write_text(rel, text)
-        path = writer.commit({"run_ids": [run_id], "scenario_sha256": scenario_sha,
-                              "root_seed": scenario.seed, **plan.manifest},
-                             check=lambda d: validate_dataset(d, labels=check_labels))
-    except BaseException:
-        writer.abort()
-        raise
-    n = max(stats["n"], 1)
-    tstats = {sid: (float(stats["min"][i]), float(stats["sum"][i] / n), float(stats["max"][i]))
-              for i, sid in enumerate(cl.span_ids)}
-    return RunSummary(path, run_id, float(sim_end), wall, writer.n_rows, tstats, events,
-                      res.terminated, res.termination_reason, res.termination_time, init_mode,
-                      res.stats, run_warnings, list(scenario.expect.termination),
-                      nonfinite_t[0] if nonfinite_t else None)
+    def close(self, terminated: bool):
+        """Write the held last chunk, knowing how the run ended."""
+        if self.held:
+            self._flush(terminated)
+
+    def tension_stats(self, span_ids) -> dict:
+        """(min, mean, max) true tension of each span [N]."""
+        n = max(self.n, 1)
+        return {sid: (float(self.t_min[i]), float(self.t_sum[i] / n), float(self.t_max[i]))
+                for i, sid in enumerate(span_ids)}
+
+
+#: the label columns of every dataset, with their descriptions (channels.parquet)
+_LABEL_CHANNELS = [
+    ("label.is_faulty", "any fault present"),
+    ("label.n_active", "number of faults present"),
+    ("label.fault_ids", "ids of the faults present"),
+    ("label.primary_type", "type of the present fault with the largest magnitude_rel, "
+     "else 'normal'"),
+    ("label.severity", "profile p(t) of the primary fault, 0-1"),
+    ("label.phase", "warmup / normal / faulty / terminated"),
+    ("label.mode", "operating mode named by the programme"),
+    ("label.score_mask", "false during warm-up")]
+
+
+def _channels_table(cl, sink: _ChunkSink, sensor_chan: dict, rate: float) -> pa.Table:
+    """channels.parquet: the dictionary of every samples column, in the order they are
+    written."""
+    rows = [("run_id", "index", "", "", "run id (the hive partition key of samples/)", None),
+            ("k", "index", "", "", "sample index from 0", None),
+            ("t_s", "index", "s", "", "simulation time", None)]
+    for mc in sink.meas.channels:  # in the order MeasurementModel.measure writes them
+        s = mc["sensor"]
+        unit = channel_names(cl, s)[2].replace("rad_s", "rad/s")
+        where = getattr(s, "element", None) or s.span
+        rows.append((mc["name"], "measured", unit, where,
+                     f"{s.type} '{s.id}' on {where}: measured (noise, sampling)", mc["rate"]))
+        rows.append((mc["true"], "true", unit, where,
+                     f"noise- and fault-free shadow of {mc['name']} (never give to "
+                     "algorithms)", rate))
+        if s.range is not None:
+            rows.append((f"flag.{s.id}.clipped", "flag", "", s.id,
+                         f"{mc['name']} was clipped to its range {list(s.range)} "
+                         "(censored)", mc["rate"]))
+    rows += [(c["column"], c["kind"], c["unit"], c["component"], c["description"], rate)
+             for c in sink.cols]
+    rows += [(col, "label", "", "", text, None) for col, text in _LABEL_CHANNELS]
+    rows += [(f"label.ch.{c}", "label", "", sid, f"a sensor fault acts on meas.{c}", None)
+             for sid, c in sensor_chan.items()]
+    return pa.table({
+        "channel": [r[0] for r in rows], "kind": [r[1] for r in rows],
+        "unit": [r[2] for r in rows], "component": [r[3] for r in rows],
+        "description": [r[4] for r in rows],
+        "rate_hz": pa.array([r[5] if r[5] is not None else rate for r in rows], pa.float64()),
+    })
+
+
+def _run_events(res, faults, sim_end: float) -> list[Event]:
+    """The solver's events and every fault's start and end within the simulated time, in
+    time order."""
+    events = list(res.events) + [
+        Event(tb, "fault", f.target, state, f"{f.id}: {f.type} on {f.target} {state}s",
+              {"fault_id": f.id})
+        for f in faults for tb, state in ((f.onset, "start"), (f.end, "end"))
+        if tb is not None and tb <= sim_end]
+    events.sort(key=lambda e: e.t)
+    return events
+
+
+def _events_table(run_id: str, events: list[Event]) -> pa.Table:
+    return pa.table({
+        "run_id": [run_id] * len(events), "t_s": [e.t for e in events],
+        "kind": [e.kind for e in events], "component": [e.component for e in events],
+        "state": [e.state for e in events], "message": [e.message for e in events],
+        "values_json": [json.dumps(e.values) for e in events]}, schema=EVENTS_SCHEMA)
+
+
+def _runs_table(plan: RunPlan, prep: _Prepared, run_id: str, res, faults, modes,
+                n_rows: int, sim_end: float, nonfinite_t: float | None,
+                wall: float) -> pa.Table:
+    """The run's row of runs.parquet."""
+    scenario = plan.scenario
+    seeds = {"process": int(prep.ss_process.generate_state(1, np.uint64)[0]),
+             "measurement": int(prep.ss_meas.generate_state(1, np.uint64)[0]),
+             "fault_sampling": int(prep.ss_faults.generate_state(1, np.uint64)[0])}
+    return pa.table({
+        "run_id": [run_id], "scenario_id": [plan.name],
+        "scenario_sha256": [plan.scenario_sha256],
+        "seed": pa.array([scenario.seed], pa.uint64()),
+        "seed_streams": pa.array([seeds], pa.struct([("process", pa.uint64()),
+                                                     ("measurement", pa.uint64()),
+                                                     ("fault_sampling", pa.uint64())])),
+        "split": pa.array([scenario.split_of(scenario.seed)], pa.string()),
+        "line_config": [prep.line.name or plan.line_config],
+        "operating_mode": pa.array(["+".join(dict.fromkeys(m for _, m in modes)) or None],
+                                   pa.string()),
+        "modes_json": [json.dumps(modes)],
+        "disturbances_json": [json.dumps([d.model_dump() for d in scenario.disturbances])],
+        "sample_period_s": [1.0 / scenario.record_rate],
+        "duration_s": [scenario.duration], "n_samples": pa.array([n_rows], pa.int64()),
+        "warmup_s": [scenario.warmup], "has_fault": [bool(faults)],
+        "n_faults": pa.array([len(faults)], pa.int16()), "terminated": [res.terminated],
+        "termination_reason": pa.array([res.termination_reason], pa.string()),
+        "termination_t_s": pa.array([res.termination_time], pa.float64()),
+        "simulated_s": [float(sim_end)],
+        "nonfinite_from_t_s": pa.array([nonfinite_t], pa.float64()),
+        "ended_as_expected": [ended_as_expected(
+            res.terminated, res.termination_reason, scenario.expect.termination,
+            nonfinite_t)],
+        "initial_state": [prep.init_mode], "solver": [res.stats["solver"]],
+        "rhs_evaluations": pa.array([res.stats["nfev"]], pa.int64()),
+        "r2rsim_version": [__version__], "python_version": [platform.python_version()],
+        "numpy_version": [np.__version__], "wallclock_s": [wall],
+    })
