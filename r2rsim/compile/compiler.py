@@ -324,108 +324,157 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
     CompiledLine
     """
     prog = programme or Programme.constant(line)
-    web = line.web
-    EA = web.EA
-    els = line.elements
-    nN, nS = len(els), len(line.spans)
-    sensors = list(line.sensors)
-    ctrls = list(line.controllers)
-    nSe, nC = len(sensors), len(ctrls)
-    sens_idx = {s.id: j for j, s in enumerate(sensors)}
-    node_idx = {e.id: k for k, e in enumerate(els)}
-    channel = {name: ch for ch, name in enumerate(prog.names)}
+    pk = _Packer(line, prog, faults, disturbances, extra_joint_slots, nominal_web,
+                 pitch_offsets)
+    for k, e in enumerate(line.elements):  # states in web order: element, then its span
+        pk.element(k, e)
+        pk.element_controllers(k, e)
+        pk.element_sensors(k, e)
+        if k < pk.nS:
+            pk.span(k)
+    ev_I, ev_kinds, ev_comp = pk.events()
+    aux_names, aux_units = pk.outputs()
+    I, P = pk.pack(ev_I, len(aux_names), pitch_variations)
+    cl = CompiledLine(
+        line=line, programme=prog, I=I, P=P, n_states=len(pk.names), state_names=pk.names,
+        state_units=pk.units, state_kinds=pk.kinds, atol=np.array(pk.atol),
+        aux_names=aux_names, aux_units=aux_units, event_kinds=ev_kinds,
+        event_components=ev_comp, node_ids=[e.id for e in line.elements],
+        span_ids=pk.span_ids, sensors=pk.sensors, controllers=pk.ctrls,
+        mover_ids=pk.mover_ids, mover_q0=pk.mover_q0, splice_nodes=pk.splice_nodes,
+        n_joint_slots=pk.nJ,
+    )
+    assert len(aux_names) == AUX_SPAN * pk.nS + AUX_NODE * pk.nN + AUX_SENS * pk.nSe \
+        + AUX_CTRL * pk.nC + AUX_MOVER * pk.nM + AUX_JOINT * pk.nJ + 2 + (len(prog.names) - 1)
+    _attach_pattern(cl)
+    return cl
 
-    names: list[str] = []
-    units: list[str] = []
-    kinds: list[str] = []
-    atol: list[float] = []
 
-    def add(name, unit, kind, tol):
-        names.append(name)
-        units.append(unit)
-        kinds.append(kind)
-        atol.append(tol)
-        return len(names) - 1
+class _Packer:
+    """The integer (I) and float (P) records of a line's elements, spans, sensors,
+    controllers and movers, and its states in web order, filled element by element by
+    :func:`compile_line`; :meth:`pack` lays them out for the kernels (layout.py)."""
 
-    node_I = np.full((nN, NI), -1, np.int64)
-    node_P = np.zeros((nN, NP))
-    span_I = np.full((nS, NSI), -1, np.int64)
-    span_P = np.zeros((nS, NSP))
-    sens_I = np.full((max(nSe, 0), NSEI), -1, np.int64)
-    sens_P = np.zeros((max(nSe, 0), NSEP))
-    ctrl_I = np.full((max(nC, 0), NCI), -1, np.int64)
-    ctrl_P = np.zeros((max(nC, 0), NCP))
-    ctrl_P[:, CP_GATE] = 1.0  # loops are on (a splice gates the dancer loop off)
+    def __init__(self, line: Line, prog: Programme, faults, disturbances,
+                 extra_joint_slots: int, nominal_web, pitch_offsets):
+        self.line, self.prog = line, prog
+        self.faults, self.disturbances = faults, disturbances
+        self.web = line.web
+        self.EA = self.web.EA
+        self.els = els = line.elements
+        self.nN, self.nS = len(els), len(line.spans)
+        self.sensors = list(line.sensors)
+        self.ctrls = list(line.controllers)
+        self.nSe, self.nC = len(self.sensors), len(self.ctrls)
+        self.sens_idx = {s.id: j for j, s in enumerate(self.sensors)}
+        self.node_idx = {e.id: k for k, e in enumerate(els)}
+        self.channel = {name: ch for ch, name in enumerate(prog.names)}
+        self.nominal_web, self.pitch_offsets = nominal_web, pitch_offsets
 
-    speed_of = {c.element: j for j, c in enumerate(ctrls) if c.type == "speed_pi"}
-    tens_of = {c.element: j for j, c in enumerate(ctrls) if c.type == "tension_pi"}
+        self.names: list[str] = []
+        self.units: list[str] = []
+        self.kinds: list[str] = []
+        self.atol: list[float] = []
 
-    # movers: dancers (on a node) and festoon carriages (on a span)
-    span_ids = [sp.id for sp in line.spans]
-    mover_ids = [e.id for e in els if e.type in DANCERS] + [
-        sp.id for sp in line.spans if sp.festoon is not None]
-    nM = len(mover_ids)
-    mover_idx = {m: i for i, m in enumerate(mover_ids)}
-    mov_I = np.full((nM, NMI), -1, np.int64)
-    mov_P = np.zeros((nM, NMP))
-    mover_q0 = [0.0] * nM
-    splice_nodes = [k for k, e in enumerate(els) if getattr(e, "splicer", None) is not None]
-    n_modulus = sum(f.type == "process.modulus_change" for f in faults)
-    nJ = (N_JOINT_SLOTS if splice_nodes else 0) + n_modulus + extra_joint_slots
-    nFS = len(faults)
-    eccentric = {f.target for f in faults if f.type == "process.eccentricity"} | {
-        d.element for d in disturbances if d.type == "out_of_round"}
-    pitch_filters: list = []
-    pitch_var_terms: list = []  # (sensor index, sensor) with a relaxed-pitch variation
+        self.node_I = np.full((self.nN, NI), -1, np.int64)
+        self.node_P = np.zeros((self.nN, NP))
+        self.span_I = np.full((self.nS, NSI), -1, np.int64)
+        self.span_P = np.zeros((self.nS, NSP))
+        self.sens_I = np.full((max(self.nSe, 0), NSEI), -1, np.int64)
+        self.sens_P = np.zeros((max(self.nSe, 0), NSEP))
+        self.ctrl_I = np.full((max(self.nC, 0), NCI), -1, np.int64)
+        self.ctrl_P = np.zeros((max(self.nC, 0), NCP))
+        self.ctrl_P[:, CP_GATE] = 1.0  # loops are on (a splice gates the dancer loop off)
 
-    def add_mover(mid, kind, k_node, span_u, span_d, mp, q0, unit):
-        m = mover_idx[mid]
-        mov_P[m] = mp
-        mov_P[m, MP_LOADF] = mov_P[m, MP_FRICF] = 1.0
-        mover_q0[m] = q0
-        mov_I[m, MI_NODE] = k_node
-        mov_I[m, MI_SPAN_U], mov_I[m, MI_SPAN_D] = span_u, span_d
+        self.speed_of = {c.element: j for j, c in enumerate(self.ctrls) if c.type == "speed_pi"}
+        self.tens_of = {c.element: j for j, c in enumerate(self.ctrls)
+                        if c.type == "tension_pi"}
+
+        # movers: dancers (on a node) and festoon carriages (on a span)
+        self.span_ids = [sp.id for sp in line.spans]
+        self.mover_ids = [e.id for e in els if e.type in DANCERS] + [
+            sp.id for sp in line.spans if sp.festoon is not None]
+        self.nM = len(self.mover_ids)
+        self.mover_idx = {m: i for i, m in enumerate(self.mover_ids)}
+        self.mov_I = np.full((self.nM, NMI), -1, np.int64)
+        self.mov_P = np.zeros((self.nM, NMP))
+        self.mover_q0 = [0.0] * self.nM
+        self.splice_nodes = [k for k, e in enumerate(els)
+                             if getattr(e, "splicer", None) is not None]
+        n_modulus = sum(f.type == "process.modulus_change" for f in faults)
+        self.nJ = (N_JOINT_SLOTS if self.splice_nodes else 0) + n_modulus + extra_joint_slots
+        self.nFS = len(faults)
+        self.eccentric = {f.target for f in faults if f.type == "process.eccentricity"} | {
+            d.element for d in disturbances if d.type == "out_of_round"}
+        self.pitch_filters: list = []
+        self.pitch_var_terms: list = []  # (sensor index, sensor) with a relaxed-pitch variation
+
+    # ---- states ------------------------------------------------------------------------------
+    def add(self, name, unit, kind, tol) -> int:
+        """A new state (its index)."""
+        self.names.append(name)
+        self.units.append(unit)
+        self.kinds.append(kind)
+        self.atol.append(tol)
+        return len(self.names) - 1
+
+    def add_mover(self, mid, kind, k_node, span_u, span_d, mp, q0, unit):
+        """A dancer or festoon carriage, then its position loops and position sensors,
+        which sit next to it (keeps the band narrow)."""
+        m = self.mover_idx[mid]
+        self.mov_P[m] = mp
+        self.mov_P[m, MP_LOADF] = self.mov_P[m, MP_FRICF] = 1.0
+        self.mover_q0[m] = q0
+        mi = self.mov_I[m]
+        mi[MI_NODE] = k_node
+        mi[MI_SPAN_U], mi[MI_SPAN_D] = span_u, span_d
         tol = 1e-7 if unit == "m" else 1e-6
-        mov_I[m, MI_Q] = add(f"{mid}.position", unit, "mover", tol)
-        mov_I[m, MI_QD] = add(f"{mid}.velocity", f"{unit}/s", "mover", 10 * tol)
-        mov_I[m, MI_KIND] = kind
-        # its position loops and position sensors sit next to it (keeps the band narrow)
-        for j, c in enumerate(ctrls):
+        mi[MI_Q] = self.add(f"{mid}.position", unit, "mover", tol)
+        mi[MI_QD] = self.add(f"{mid}.velocity", f"{unit}/s", "mover", 10 * tol)
+        mi[MI_KIND] = kind
+        for j, c in enumerate(self.ctrls):
             if c.type == "dancer_pi" and c.dancer == mid:
-                ci, cp = ctrl_I[j], ctrl_P[j]
-                ci[CI_TYPE] = C_DANCER
-                ci[CI_NODE] = node_idx[c.element]
-                ci[CI_MOVER] = m
-                ci[CI_SENSOR] = sens_idx[c.sensor] if c.sensor else -1
-                cp[CP_KP], cp[CP_KI] = c.kp, c.ki
-                cp[CP_KAW] = c.anti_windup_gain if c.anti_windup_gain is not None else (
-                    c.ki / c.kp if c.kp > 0 else 1.0)
-                cp[CP_LIM] = c.output_limit if c.output_limit is not None else math.inf
-                cp[CP_SETP] = c.setpoint if c.setpoint is not None else q0
-                cp[CP_GATE] = 1.0
-                # storage grows with q where sum(dL/dq) > 0; a short dancer speeds an
-                # upstream element up or slows a downstream one
-                grow = _storage_slope(mov_P[m], mov_I[m, MI_KIND], q0)
-                upstream = ci[CI_NODE] <= (k_node - 1 if k_node >= 0 else span_u)
-                cp[CP_SIGN] = math.copysign(1.0, grow) * (1.0 if upstream else -1.0)
-                if c.ki > 0:
-                    ci[CI_X] = add(f"{c.id}.integral", "", "controller", 1e-8 / c.ki)
-        for j, sn in enumerate(sensors):
+                self._dancer_loop(j, c, m, k_node, span_u, q0)
+        for j, sn in enumerate(self.sensors):
             if sn.type == "dancer_position" and sn.element == mid:
-                sens_I[j, SEI_TYPE] = SE_DANCER
-                sens_I[j, SEI_NODE] = m
-                sens_P[j, SEP_GAIN], sens_P[j, SEP_OFF], sens_P[j, SEP_TAU] = (
+                self.sens_I[j, SEI_TYPE] = SE_DANCER
+                self.sens_I[j, SEI_NODE] = m
+                self.sens_P[j, SEP_GAIN], self.sens_P[j, SEP_OFF], self.sens_P[j, SEP_TAU] = (
                     sn.gain, sn.offset, sn.filter)
                 if sn.filter > 0:
-                    sens_I[j, SEI_F] = add(f"{sn.id}.filtered", unit, "sensor_filter", tol)
+                    self.sens_I[j, SEI_F] = self.add(f"{sn.id}.filtered", unit,
+                                                     "sensor_filter", tol)
 
-    for k, e in enumerate(els):
+    def _dancer_loop(self, j, c, m, k_node, span_u, q0):
+        ci, cp = self.ctrl_I[j], self.ctrl_P[j]
+        ci[CI_TYPE] = C_DANCER
+        ci[CI_NODE] = self.node_idx[c.element]
+        ci[CI_MOVER] = m
+        ci[CI_SENSOR] = self.sens_idx[c.sensor] if c.sensor else -1
+        cp[CP_KP], cp[CP_KI] = c.kp, c.ki
+        cp[CP_KAW] = c.anti_windup_gain if c.anti_windup_gain is not None else (
+            c.ki / c.kp if c.kp > 0 else 1.0)
+        cp[CP_LIM] = c.output_limit if c.output_limit is not None else math.inf
+        cp[CP_SETP] = c.setpoint if c.setpoint is not None else q0
+        cp[CP_GATE] = 1.0
+        # storage grows with q where sum(dL/dq) > 0; a short dancer speeds an
+        # upstream element up or slows a downstream one
+        grow = _storage_slope(self.mov_P[m], self.mov_I[m, MI_KIND], q0)
+        upstream = ci[CI_NODE] <= (k_node - 1 if k_node >= 0 else span_u)
+        cp[CP_SIGN] = math.copysign(1.0, grow) * (1.0 if upstream else -1.0)
+        if c.ki > 0:
+            ci[CI_X] = self.add(f"{c.id}.integral", "", "controller", 1e-8 / c.ki)
+
+    # ---- element by element ------------------------------------------------------------------
+    def element(self, k, e):
+        """Element k's record, its states (roll lengths, speed, angle, drive torque) and,
+        for a dancer, its mover."""
         f = e.friction
-        ni, npr = node_I[k], node_P[k]
+        ni, npr = self.node_I[k], self.node_P[k]
         npr[NP_VGAIN] = 1.0
         npr[NP_TEFF] = npr[NP_FRICF] = 1.0
         npr[NP_WRAP] = e.wrap_angle if e.wrap_angle is not None else math.pi
-        for d in disturbances:
+        for d in self.disturbances:
             if d.type == "out_of_round" and d.element == e.id:
                 npr[NP_ECC] = d.eccentricity
         ni[NI_KIND] = {"unwind": NK_UNWIND, "rewind": NK_REWIND}.get(e.type, NK_ROLLER)
@@ -433,11 +482,11 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
         ni[NI_DRIVE] = DRV_NONE if drive is None else (
             DRV_IDEAL if drive.type == "ideal_speed" else DRV_TORQUE)
         ni[NI_SPAN_UP] = k - 1 if k > 0 else -1
-        ni[NI_SPAN_DN] = k if k < nN - 1 else -1
-        ni[NI_SPEEDC] = speed_of.get(e.id, -1)
-        ni[NI_TENSC] = tens_of.get(e.id, -1)
-        ni[NI_DRAWCH] = channel.get(f"draw:{e.id}", -1)
-        ni[NI_TQCH] = channel.get(f"torque:{e.id}", -1)
+        ni[NI_SPAN_DN] = k if k < self.nN - 1 else -1
+        ni[NI_SPEEDC] = self.speed_of.get(e.id, -1)
+        ni[NI_TENSC] = self.tens_of.get(e.id, -1)
+        ni[NI_DRAWCH] = self.channel.get(f"draw:{e.id}", -1)
+        ni[NI_TQCH] = self.channel.get(f"torque:{e.id}", -1)
         npr[NP_B], npr[NP_TC], npr[NP_WEPS] = f.viscous, f.coulomb, f.smoothing_speed
         npr[NP_TMAX] = math.inf
         if drive is not None:
@@ -450,19 +499,7 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
         if e.wrap_angle is not None and e.friction_coefficient is not None:
             npr[NP_EMB] = math.exp(e.friction_coefficient * e.wrap_angle)
         if e.type in ("unwind", "rewind"):
-            r = e.roll
-            cw = r.build_per_wrap if r.build_per_wrap is not None else web.thickness
-            npr[NP_R0], npr[NP_RC], npr[NP_JC], npr[NP_CW] = (r.outer_radius, r.core_radius,
-                                                              r.core_inertia, cw)
-            # wound density from mass conservation: rho_r·c_w = rho·t_w (physics.md 1.4)
-            npr[NP_RHOW] = web.density * web.thickness / cw * web.width
-            npr[NP_EPSW], npr[NP_EPSW1], npr[NP_EPSW2] = r.wound_in_coefficients()
-            npr[NP_R] = r.outer_radius
-            sp_ = getattr(e, "splicer", None)
-            if sp_ is not None and sp_.trigger_radius is not None:
-                npr[NP_RTRIG] = sp_.trigger_radius
-            ni[NI_S] = add(f"{e.id}.length", "m", "roll_length", 1e-6)
-            ni[NI_U] = add(f"{e.id}.unstretched_length", "m", "material", 1e-6)
+            self._roll(k, e)
         elif e.type == "nip":
             pr = e.pressure_roller
             ratio = e.radius / pr.radius
@@ -473,19 +510,39 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
         else:
             npr[NP_R], npr[NP_J] = e.radius, e.inertia
         if ni[NI_DRIVE] != DRV_IDEAL:
-            ni[NI_W] = add(f"{e.id}.speed", "rad/s", "speed", 1e-6)
-        if e.id in eccentric:
-            ni[NI_TH] = add(f"{e.id}.angle", "rad", "angle", 1e-6)
+            ni[NI_W] = self.add(f"{e.id}.speed", "rad/s", "speed", 1e-6)
+        if e.id in self.eccentric:
+            ni[NI_TH] = self.add(f"{e.id}.angle", "rad", "angle", 1e-6)
         if ni[NI_DRIVE] == DRV_TORQUE and drive.torque_lag > 0:
-            ni[NI_TAU] = add(f"{e.id}.drive_torque", "N*m", "torque", 1e-4)
+            ni[NI_TAU] = self.add(f"{e.id}.drive_torque", "N*m", "torque", 1e-4)
         if e.type in DANCERS:
-            mp, kind, q0, unit = _dancer_record(line, k)
-            add_mover(e.id, kind, k, k - 1, k, mp, q0, unit)
-            ni[NI_MOVER] = mover_idx[e.id]
-        for j, c in enumerate(ctrls):
+            mp, kind, q0, unit = _dancer_record(self.line, k)
+            self.add_mover(e.id, kind, k, k - 1, k, mp, q0, unit)
+            ni[NI_MOVER] = self.mover_idx[e.id]
+
+    def _roll(self, k, e):
+        """An unwind's or rewind's roll: geometry, wound density and strain, its states."""
+        web, npr, ni, r = self.web, self.node_P[k], self.node_I[k], e.roll
+        cw = r.build_per_wrap if r.build_per_wrap is not None else web.thickness
+        npr[NP_R0], npr[NP_RC], npr[NP_JC], npr[NP_CW] = (r.outer_radius, r.core_radius,
+                                                          r.core_inertia, cw)
+        # wound density from mass conservation: rho_r·c_w = rho·t_w (physics.md 1.4)
+        npr[NP_RHOW] = web.density * web.thickness / cw * web.width
+        npr[NP_EPSW], npr[NP_EPSW1], npr[NP_EPSW2] = r.wound_in_coefficients()
+        npr[NP_R] = r.outer_radius
+        sp_ = getattr(e, "splicer", None)
+        if sp_ is not None and sp_.trigger_radius is not None:
+            npr[NP_RTRIG] = sp_.trigger_radius
+        ni[NI_S] = self.add(f"{e.id}.length", "m", "roll_length", 1e-6)
+        ni[NI_U] = self.add(f"{e.id}.unstretched_length", "m", "material", 1e-6)
+
+    def element_controllers(self, k, e):
+        """The speed and tension loops acting on element k (dancer loops sit with their
+        dancer)."""
+        for j, c in enumerate(self.ctrls):
             if c.element != e.id or c.type == "dancer_pi":
                 continue
-            ci, cp = ctrl_I[j], ctrl_P[j]
+            ci, cp = self.ctrl_I[j], self.ctrl_P[j]
             ci[CI_NODE] = k
             cp[CP_KP], cp[CP_KI] = c.kp, c.ki
             cp[CP_KAW] = c.anti_windup_gain if c.anti_windup_gain is not None else (
@@ -493,38 +550,45 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
             cp[CP_LIM] = math.inf
             if c.type == "speed_pi":
                 ci[CI_TYPE] = C_SPEED
-                ci[CI_SENSOR] = sens_idx[c.encoder] if c.encoder else -1
+                ci[CI_SENSOR] = self.sens_idx[c.encoder] if c.encoder else -1
                 cp[CP_DRAW] = c.draw
                 cp[CP_FF] = 1.0 if c.torque_feedforward else 0.0
                 out_tol = 1e-4  # N m
             else:
-                roll = e.type in ("unwind", "rewind")
-                ci[CI_TYPE] = C_TENSION_TORQUE if (roll and drive.type == "torque") \
-                    else C_TENSION_TRIM
-                ci[CI_SENSOR] = sens_idx[c.sensor]
-                ci[CI_RSENSOR] = sens_idx[c.radius_sensor] if c.radius_sensor else -1
-                ci[CI_CH] = channel[c.id]
-                cp[CP_LIM] = c.output_limit if c.output_limit is not None else math.inf
-                ff = c.feedforward
-                cp[CP_FF] = 1.0 if ff.tension else 0.0
-                if ff.inertia.value is not None:
-                    cp[CP_JABS] = ff.inertia.value
-                else:
-                    cp[CP_JFAC] = ff.inertia.factor
-                cp[CP_RR] = 1.0 if ff.radius_rate else 0.0
-                cp[CP_FRF] = 1.0 if ff.friction else 0.0
-                # a trim raises the tension of a span upstream of the node, lowers one downstream
-                sm = sensors[sens_idx[c.sensor]]
-                meas = (span_ids.index(sm.span) + 1 if sm.type == "pitch_length"
-                        else node_idx[sm.element])
-                cp[CP_SIGN] = 1.0 if meas <= k else -1.0
-                out_tol = 1e-4 if ci[CI_TYPE] == C_TENSION_TORQUE else 1e-8
+                out_tol = self._tension_loop(k, e, c, ci, cp)
             if c.ki > 0:
-                ci[CI_X] = add(f"{c.id}.integral", "", "controller", out_tol / c.ki)
-        for j, s in enumerate(sensors):
+                ci[CI_X] = self.add(f"{c.id}.integral", "", "controller", out_tol / c.ki)
+
+    def _tension_loop(self, k, e, c, ci, cp) -> float:
+        """A tension loop's record; returns the tolerance of its output."""
+        roll = e.type in ("unwind", "rewind")
+        ci[CI_TYPE] = C_TENSION_TORQUE if (roll and e.drive.type == "torque") \
+            else C_TENSION_TRIM
+        ci[CI_SENSOR] = self.sens_idx[c.sensor]
+        ci[CI_RSENSOR] = self.sens_idx[c.radius_sensor] if c.radius_sensor else -1
+        ci[CI_CH] = self.channel[c.id]
+        cp[CP_LIM] = c.output_limit if c.output_limit is not None else math.inf
+        ff = c.feedforward
+        cp[CP_FF] = 1.0 if ff.tension else 0.0
+        if ff.inertia.value is not None:
+            cp[CP_JABS] = ff.inertia.value
+        else:
+            cp[CP_JFAC] = ff.inertia.factor
+        cp[CP_RR] = 1.0 if ff.radius_rate else 0.0
+        cp[CP_FRF] = 1.0 if ff.friction else 0.0
+        # a trim raises the tension of a span upstream of the node, lowers one downstream
+        sm = self.sensors[self.sens_idx[c.sensor]]
+        meas = (self.span_ids.index(sm.span) + 1 if sm.type == "pitch_length"
+                else self.node_idx[sm.element])
+        cp[CP_SIGN] = 1.0 if meas <= k else -1.0
+        return 1e-4 if ci[CI_TYPE] == C_TENSION_TORQUE else 1e-8
+
+    def element_sensors(self, k, e):
+        """The load cells, encoders and diameter sensors on element k."""
+        for j, s in enumerate(self.sensors):
             if getattr(s, "element", None) != e.id or s.type == "dancer_position":
                 continue
-            si, sp = sens_I[j], sens_P[j]
+            si, sp = self.sens_I[j], self.sens_P[j]
             si[SEI_NODE] = k
             sp[SEP_GAIN], sp[SEP_OFF], sp[SEP_TAU] = s.gain, s.offset, s.filter
             if s.type == "load_cell":
@@ -532,7 +596,7 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
                 beta = s.wrap_angle or e.wrap_angle or math.pi
                 half = 0.5 * (math.pi - beta)
                 cin = math.cos(half - s.axis_angle) if k > 0 else 0.0
-                cout = math.cos(half + s.axis_angle) if k < nN - 1 else 0.0
+                cout = math.cos(half + s.axis_angle) if k < self.nN - 1 else 0.0
                 if cin + cout <= 1e-9:
                     raise InputError(f"load cell '{s.id}': its measuring axis sees no tension",
                                      path=f"sensors[{j}].axis_angle")
@@ -546,228 +610,237 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
                 si[SEI_TYPE] = SE_DIAMETER
                 unit, tol = "m", 1e-8
             if s.filter > 0:
-                si[SEI_F] = add(f"{s.id}.filtered", unit, "sensor_filter", tol)
-        if k < nS:
-            si_ = span_I[k]
-            si_[SI_UP], si_[SI_DN] = k, k + 1
-            fe = line.spans[k].festoon
-            if fe is not None:
-                mp = np.zeros(NMP)
-                mp[MP_MASS] = fe.carriage_mass
-                mp[MP_QMIN], mp[MP_QMAX] = fe.stroke
-                mp[MP_C], mp[MP_FC], mp[MP_EPS] = fe.damping, fe.coulomb, fe.smoothing_speed
-                mp[MP_F0] = fe.carriage_mass * fe.gravity
-                mp[MP_FAIR] = fe.force
-                mp[MP_NSTR] = 2.0 * fe.moving_rollers
-                add_mover(line.spans[k].id, MV_FESTOON, -1, k, -1, mp, fe.initial_position, "m")
-                si_[SI_MOVER] = mover_idx[line.spans[k].id]
-            span_P[k, SP_L] = line.spans[k].length or 0.0
-            for j, sn in enumerate(sensors):
-                if sn.type == "pitch_length" and sn.span == line.spans[k].id:
-                    sens_I[j, SEI_TYPE], sens_I[j, SEI_NODE] = SE_PITCH, k
-                    sens_P[j, SEP_GAIN], sens_P[j, SEP_OFF], sens_P[j, SEP_TAU] = (
-                        sn.gain, sn.offset, sn.filter)
-                    # the loop's Hooke calibration: the declared web, not a drawn roll's
-                    sens_P[j, SEP_COUT] = EA if nominal_web is None else nominal_web.EA
-                    law = sn.relaxed_pitch_law
-                    dl0 = (pitch_offsets or {}).get(sn.id)
-                    sens_P[j, SEP_DL0] = dl0 or 0.0
-                    if law is None and sn.pitch_variation is None and dl0 is None:
-                        sens_P[j, SEP_CIN] = sn.relaxed_pitch
-                    else:  # L0 = q0 + q1·R³ (+ variation) of an unwind's radius
-                        sens_P[j, SEP_CIN] = sn.relaxed_pitch if law is None else law.q0
-                        sens_P[j, SEP_Q1] = 0.0 if law is None else law.q1
-                        sens_I[j, SEI_RNODE] = node_idx[pitch_unwind(line, sn)]
-                        sens_I[j, SEI_VN] = 0
-                        if sn.pitch_variation is not None:
-                            pitch_var_terms.append((j, sn))
-                    pitch_filters.append((j, sn))
-            span_P[k, SP_EA] = EA
-            span_P[k, SP_TBRK] = web.break_tension
-            # strain tolerance ~1e-4 N of tension (physics.md 1.2, solver.md 6)
-            si_[SI_E] = add(f"{line.spans[k].id}.strain", "", "strain", 1e-4 / EA)
-            for j, sn in pitch_filters:
-                if sn.filter > 0:
-                    sens_I[j, SEI_F] = add(f"{sn.id}.filtered", "m", "sensor_filter", 1e-9)
-            pitch_filters.clear()
+                si[SEI_F] = self.add(f"{s.id}.filtered", unit, "sensor_filter", tol)
 
-    # events: slack and break per span, capstan per monitored interior roller, empty unwind
-    ev_kinds: list[int] = []
-    ev_comp: list[str] = []
-    ev_I: list[tuple[int, int]] = []
-    for i, sp in enumerate(line.spans):
-        ev_I.append((EV_SLACK, i))
-        ev_kinds.append(EV_SLACK)
-        ev_comp.append(sp.id)
-        if math.isfinite(web.break_tension):
-            ev_I.append((EV_BREAK, i))
-            ev_kinds.append(EV_BREAK)
-            ev_comp.append(sp.id)
-    for k, e in enumerate(els):
-        if 0 < k < nN - 1 and node_P[k, NP_EMB] > 0:
-            ev_I.append((EV_CAPSTAN, k))
-            ev_kinds.append(EV_CAPSTAN)
-            ev_comp.append(e.id)
-        if e.type == "unwind":
-            ev_I.append((EV_EMPTY, k))
-            ev_kinds.append(EV_EMPTY)
-            ev_comp.append(e.id)
-        if k in splice_nodes:
-            ev_I.append((EV_SPLICE_RADIUS, k))
-            ev_kinds.append(EV_SPLICE_RADIUS)
-            ev_comp.append(e.id)
-    for m, mid in enumerate(mover_ids):
-        for kind in (EV_STOP_LO, EV_STOP_HI):
-            ev_I.append((kind, m))
-            ev_kinds.append(kind)
-            ev_comp.append(mid)
-    for js in range(nJ):
-        for kind in (EV_JOINT_PASS, EV_JOINT_BREAK):
-            ev_I.append((kind, js))
-            ev_kinds.append(kind)
-            ev_comp.append(f"splice_joint{js + 1}")
-    for j, c in enumerate(ctrls):
-        if c.type == "dancer_pi" and node_idx[c.element] in splice_nodes:
-            ev_I.append((EV_REFILL, j))
-            ev_kinds.append(EV_REFILL)
-            ev_comp.append(c.element)
+    def span(self, k):
+        """Span k (after element k): its festoon, pitch sensors and strain state."""
+        line = self.line
+        sp_k = line.spans[k]
+        si_ = self.span_I[k]
+        si_[SI_UP], si_[SI_DN] = k, k + 1
+        fe = sp_k.festoon
+        if fe is not None:
+            mp = np.zeros(NMP)
+            mp[MP_MASS] = fe.carriage_mass
+            mp[MP_QMIN], mp[MP_QMAX] = fe.stroke
+            mp[MP_C], mp[MP_FC], mp[MP_EPS] = fe.damping, fe.coulomb, fe.smoothing_speed
+            mp[MP_F0] = fe.carriage_mass * fe.gravity
+            mp[MP_FAIR] = fe.force
+            mp[MP_NSTR] = 2.0 * fe.moving_rollers
+            self.add_mover(sp_k.id, MV_FESTOON, -1, k, -1, mp, fe.initial_position, "m")
+            si_[SI_MOVER] = self.mover_idx[sp_k.id]
+        self.span_P[k, SP_L] = sp_k.length or 0.0
+        for j, sn in enumerate(self.sensors):
+            if sn.type == "pitch_length" and sn.span == sp_k.id:
+                self._pitch_sensor(j, sn, k)
+        self.span_P[k, SP_EA] = self.EA
+        self.span_P[k, SP_TBRK] = self.web.break_tension
+        # strain tolerance ~1e-4 N of tension (physics.md 1.2, solver.md 6)
+        si_[SI_E] = self.add(f"{sp_k.id}.strain", "", "strain", 1e-4 / self.EA)
+        for j, sn in self.pitch_filters:
+            if sn.filter > 0:
+                self.sens_I[j, SEI_F] = self.add(f"{sn.id}.filtered", "m", "sensor_filter",
+                                                 1e-9)
+        self.pitch_filters.clear()
 
-    # algebraic output names
-    aux_names, aux_units = [], []
-    for sp in line.spans:
-        aux_names += [f"{sp.id}.tension_N", f"{sp.id}.geometric_strain", f"{sp.id}.length_m"]
-        aux_units += ["N", "1", "m"]
-    for e in els:
-        aux_names += [f"{e.id}.surface_speed_m_s", f"{e.id}.speed_rad_s", f"{e.id}.radius_m",
+    def _pitch_sensor(self, j, sn, k):
+        si, sp = self.sens_I[j], self.sens_P[j]
+        si[SEI_TYPE], si[SEI_NODE] = SE_PITCH, k
+        sp[SEP_GAIN], sp[SEP_OFF], sp[SEP_TAU] = sn.gain, sn.offset, sn.filter
+        # the loop's Hooke calibration: the declared web, not a drawn roll's
+        sp[SEP_COUT] = self.EA if self.nominal_web is None else self.nominal_web.EA
+        law = sn.relaxed_pitch_law
+        dl0 = (self.pitch_offsets or {}).get(sn.id)
+        sp[SEP_DL0] = dl0 or 0.0
+        if law is None and sn.pitch_variation is None and dl0 is None:
+            sp[SEP_CIN] = sn.relaxed_pitch
+        else:  # L0 = q0 + q1·R³ (+ variation) of an unwind's radius
+            sp[SEP_CIN] = sn.relaxed_pitch if law is None else law.q0
+            sp[SEP_Q1] = 0.0 if law is None else law.q1
+            si[SEI_RNODE] = self.node_idx[pitch_unwind(self.line, sn)]
+            si[SEI_VN] = 0
+            if sn.pitch_variation is not None:
+                self.pitch_var_terms.append((j, sn))
+        self.pitch_filters.append((j, sn))
+
+    # ---- the whole line ----------------------------------------------------------------------
+    def events(self) -> tuple[list, list, list]:
+        """(kind, index) of every event the kernels watch, with kinds and components:
+        slack and break per span, capstan per monitored interior roller, empty unwind,
+        splice radius, mover stops, splice joints, dancer refill."""
+        ev_I: list[tuple[int, int]] = []
+        ev_comp: list[str] = []
+
+        def ev(kind, index, component):
+            ev_I.append((kind, index))
+            ev_comp.append(component)
+
+        for i, sp in enumerate(self.line.spans):
+            ev(EV_SLACK, i, sp.id)
+            if math.isfinite(self.web.break_tension):
+                ev(EV_BREAK, i, sp.id)
+        for k, e in enumerate(self.els):
+            if 0 < k < self.nN - 1 and self.node_P[k, NP_EMB] > 0:
+                ev(EV_CAPSTAN, k, e.id)
+            if e.type == "unwind":
+                ev(EV_EMPTY, k, e.id)
+            if k in self.splice_nodes:
+                ev(EV_SPLICE_RADIUS, k, e.id)
+        for m, mid in enumerate(self.mover_ids):
+            for kind in (EV_STOP_LO, EV_STOP_HI):
+                ev(kind, m, mid)
+        for js in range(self.nJ):
+            for kind in (EV_JOINT_PASS, EV_JOINT_BREAK):
+                ev(kind, js, f"splice_joint{js + 1}")
+        for j, c in enumerate(self.ctrls):
+            if c.type == "dancer_pi" and self.node_idx[c.element] in self.splice_nodes:
+                ev(EV_REFILL, j, c.element)
+        return ev_I, [k for k, _ in ev_I], ev_comp
+
+    def outputs(self) -> tuple[list[str], list[str]]:
+        """Names and units of the algebraic outputs, in the kernels' order."""
+        names, units = [], []
+        for sp in self.line.spans:
+            names += [f"{sp.id}.tension_N", f"{sp.id}.geometric_strain", f"{sp.id}.length_m"]
+            units += ["N", "1", "m"]
+        for e in self.els:
+            names += [f"{e.id}.surface_speed_m_s", f"{e.id}.speed_rad_s", f"{e.id}.radius_m",
                       f"{e.id}.inertia_kg_m2", f"{e.id}.web_mass_kg", f"{e.id}.torque_N_m",
                       f"{e.id}.torque_command_N_m", f"{e.id}.tension_ratio"]
-        aux_units += ["m/s", "rad/s", "m", "kg*m^2", "kg", "N*m", "N*m", "1"]
-    mover_unit = {mid: units[mov_I[m, MI_Q]] for m, mid in enumerate(mover_ids)}
-    for s in sensors:
-        u = {"load_cell": "N", "encoder": "rad_s", "roll_diameter": "m", "pitch_length": "m",
-             "dancer_position": mover_unit.get(getattr(s, "element", ""), "m")}[s.type]
-        q = {"load_cell": "tension", "encoder": "speed", "roll_diameter": "diameter",
-             "dancer_position": "position", "pitch_length": "pitch"}[s.type]
-        aux_names += [f"{s.id}.{q}_{u}", f"{s.id}.{q}_seen_{u}", f"{s.id}.force_N"]
-        aux_units += [u.replace("_", "/"), u.replace("_", "/"), "N"]
-    for c in ctrls:
-        if c.type == "speed_pi":
-            aux_names += [f"{c.id}.error_rad_s", f"{c.id}.output_N_m", f"{c.id}.integral"]
-            aux_units += ["rad/s", "N*m", "rad"]
-        elif c.type == "dancer_pi":
-            u = mover_unit.get(c.dancer, "m")
-            aux_names += [f"{c.id}.error_{u}", f"{c.id}.output_m_s", f"{c.id}.integral"]
-            aux_units += [u, "m/s", f"{u}*s"]
-        else:
-            out_u = "N" if ctrl_I[ctrls.index(c), CI_TYPE] == C_TENSION_TORQUE else "m_s"
-            aux_names += [f"{c.id}.error_N", f"{c.id}.output_{out_u}", f"{c.id}.integral"]
-            aux_units += ["N", out_u.replace("_", "/"), "N*s"]
-    for mid in mover_ids:
-        u = mover_unit[mid]
-        f_u = "N" if u == "m" else "N_m"
-        aux_names += [f"{mid}.position_{u}", f"{mid}.velocity_{u}_s", f"{mid}.web_force_{f_u}",
+            units += ["m/s", "rad/s", "m", "kg*m^2", "kg", "N*m", "N*m", "1"]
+        mover_unit = {mid: self.units[self.mov_I[m, MI_Q]]
+                      for m, mid in enumerate(self.mover_ids)}
+        for s in self.sensors:
+            u = {"load_cell": "N", "encoder": "rad_s", "roll_diameter": "m",
+                 "pitch_length": "m",
+                 "dancer_position": mover_unit.get(getattr(s, "element", ""), "m")}[s.type]
+            q = {"load_cell": "tension", "encoder": "speed", "roll_diameter": "diameter",
+                 "dancer_position": "position", "pitch_length": "pitch"}[s.type]
+            names += [f"{s.id}.{q}_{u}", f"{s.id}.{q}_seen_{u}", f"{s.id}.force_N"]
+            units += [u.replace("_", "/"), u.replace("_", "/"), "N"]
+        for j, c in enumerate(self.ctrls):
+            if c.type == "speed_pi":
+                names += [f"{c.id}.error_rad_s", f"{c.id}.output_N_m", f"{c.id}.integral"]
+                units += ["rad/s", "N*m", "rad"]
+            elif c.type == "dancer_pi":
+                u = mover_unit.get(c.dancer, "m")
+                names += [f"{c.id}.error_{u}", f"{c.id}.output_m_s", f"{c.id}.integral"]
+                units += [u, "m/s", f"{u}*s"]
+            else:
+                out_u = "N" if self.ctrl_I[j, CI_TYPE] == C_TENSION_TORQUE else "m_s"
+                names += [f"{c.id}.error_N", f"{c.id}.output_{out_u}", f"{c.id}.integral"]
+                units += ["N", out_u.replace("_", "/"), "N*s"]
+        for mid in self.mover_ids:
+            u = mover_unit[mid]
+            f_u = "N" if u == "m" else "N_m"
+            names += [f"{mid}.position_{u}", f"{mid}.velocity_{u}_s", f"{mid}.web_force_{f_u}",
                       f"{mid}.static_force_{f_u}", f"{mid}.stop_state"]
-        aux_units += [u, f"{u}/s", f_u.replace("_", "*"), f_u.replace("_", "*"), "1"]
-    for js in range(nJ):
-        aux_names += [f"splice_joint{js + 1}.lead_m", f"splice_joint{js + 1}.span_index"]
-        aux_units += ["m", "1"]
-    aux_names += ["setpoint.line_speed_m_s", "setpoint.line_acceleration_m_s2"]
-    aux_units += ["m/s", "m/s^2"]
-    for name in prog.names[1:]:
-        kind, _, eid = name.rpartition(":")
-        if kind == "torque":
-            aux_names.append(f"setpoint.{eid}.torque_N_m")
-            aux_units.append("N*m")
-        elif kind == "draw":
-            aux_names.append(f"setpoint.{eid}.draw")
-            aux_units.append("1")
-        else:
-            aux_names.append(f"setpoint.{name}.tension_N")
-            aux_units.append("N")
+            units += [u, f"{u}/s", f_u.replace("_", "*"), f_u.replace("_", "*"), "1"]
+        for js in range(self.nJ):
+            names += [f"splice_joint{js + 1}.lead_m", f"splice_joint{js + 1}.span_index"]
+            units += ["m", "1"]
+        names += ["setpoint.line_speed_m_s", "setpoint.line_acceleration_m_s2"]
+        units += ["m/s", "m/s^2"]
+        for name in self.prog.names[1:]:
+            kind, _, eid = name.rpartition(":")
+            if kind == "torque":
+                names.append(f"setpoint.{eid}.torque_N_m")
+                units.append("N*m")
+            elif kind == "draw":
+                names.append(f"setpoint.{eid}.draw")
+                units.append("1")
+            else:
+                names.append(f"setpoint.{name}.tension_N")
+                units.append("N")
+        return names, units
 
-    # the programme tables
-    nch = len(prog.names)
-    maxpts = max(len(t) for t in prog.times) + 4  # room for an e-stop ramp
-    sch_n = np.array([len(t) for t in prog.times], np.int64)
-    sch_t = np.zeros((nch, maxpts))
-    sch_v = np.zeros((nch, maxpts))
-    for ch in range(nch):
-        sch_t[ch, : sch_n[ch]] = prog.times[ch]
-        sch_v[ch, : sch_n[ch]] = prog.values[ch]
-        sch_t[ch, sch_n[ch]:] = math.inf
+    def _programme_tables(self):
+        """The set-point tables, padded with +inf times (room for an e-stop ramp)."""
+        prog = self.prog
+        nch = len(prog.names)
+        maxpts = max(len(t) for t in prog.times) + 4
+        sch_n = np.array([len(t) for t in prog.times], np.int64)
+        sch_t = np.zeros((nch, maxpts))
+        sch_v = np.zeros((nch, maxpts))
+        for ch in range(nch):
+            sch_t[ch, : sch_n[ch]] = prog.times[ch]
+            sch_v[ch, : sch_n[ch]] = prog.values[ch]
+            sch_t[ch, sch_n[ch]:] = math.inf
+        return nch, maxpts, sch_n, sch_t, sch_v
 
-    # ---- pack I and P
-    tables = [d for d in disturbances if d.type in ("bearing_drag", "wound_in_strain")]
-    tab_I = np.zeros((len(tables), NTI), np.int64)
-    tab_P = []
-    for m, d in enumerate(tables):
-        kind = {"bearing_drag": TB_DRAG, "wound_in_strain": TB_WOUND}[d.type]
-        if d.shape == "sines":
-            tab_I[m] = (kind, node_idx[d.element], len(d.amplitudes), 0, SH_SINES)
-            tab_P.append(np.concatenate([d.amplitudes, d.omegas, d.phases]))
-        else:
-            tab_I[m] = (kind, node_idx[d.element], len(d.values), 0, SH_TABLE)
-            tab_P.append(np.concatenate([[d.x0, d.dx], d.values]))
-    blocks_I = [node_I.ravel(), span_I.ravel(), sens_I.ravel(), ctrl_I.ravel(), sch_n,
-                np.array(ev_I, np.int64).reshape(-1, NEVI).ravel(), mov_I.ravel(),
-                tab_I.ravel()]
-    offs_I, pos = [], HEADER
-    for b in blocks_I:
-        offs_I.append(pos)
-        pos += b.size
-    if pitch_var_terms and pitch_variations is None:
-        pitch_variations = {}
-    var_P = []
-    for j, sn in pitch_var_terms:
-        terms = pitch_variations.get(sn.id)
-        if terms is None:
-            terms = realise_pitch_variations(line, np.random.SeedSequence(0))[sn.id]
-        sens_I[j, SEI_VN] = len(terms)
-        var_P.append(np.ascontiguousarray(terms, float).ravel())
-    blocks_P = [node_P.ravel(), span_P.ravel(), sens_P.ravel(), ctrl_P.ravel(), sch_t.ravel(),
-                sch_v.ravel(), np.zeros(4), mov_P.ravel(), np.zeros(nJ * NJP), np.array([EA]),
-                np.zeros(nFS * NFS), *tab_P, *var_P]
-    offs_P, ppos = [], 0
-    for b in blocks_P:
-        offs_P.append(ppos)
-        ppos += b.size
-    P = np.concatenate(blocks_P)
-    n = len(names)
-    nq = 3 * nS + 7 * nN + 2 * nSe + 2 * nC
-    header = np.zeros(HEADER, np.int64)
-    header[H_NN], header[H_NS], header[H_NSE], header[H_NC], header[H_NY] = nN, nS, nSe, nC, n
-    header[H_OFF_NI], header[H_OFF_SI], header[H_OFF_SEI], header[H_OFF_CI] = offs_I[:4]
-    header[H_OFF_SCHN], header[H_OFF_EV] = offs_I[4], offs_I[5]
-    header[H_OFF_NP], header[H_OFF_SP], header[H_OFF_SEP], header[H_OFF_CP] = offs_P[:4]
-    header[H_OFF_SCHT], header[H_OFF_SCHV], header[H_OFF_RT] = offs_P[4:7]
-    header[H_NM], header[H_OFF_MI], header[H_OFF_MP] = nM, offs_I[6], offs_P[7]
-    header[H_NJ], header[H_OFF_JP], header[H_EA] = nJ, offs_P[8], offs_P[9]
-    header[H_NFS], header[H_OFF_FS] = nFS, offs_P[10]
-    header[H_NTB], header[H_OFF_TB] = len(tables), offs_I[7]
-    for m in range(len(tables)):  # each table's values follow the fault slots in P
-        tab_I[m, TI_OFFP] = offs_P[11 + m]
-    blocks_I[7] = tab_I.ravel()
-    for m, (j, _) in enumerate(pitch_var_terms):  # the variations' terms follow the tables
-        sens_I[j, SEI_VOFF] = offs_P[11 + len(tables) + m]
-    blocks_I[2] = sens_I.ravel()
-    header[H_MODEL] = 1 if line.span_model == "linear" else 0
-    header[H_NCH], header[H_MAXPTS] = nch, maxpts
-    header[H_NQ], header[H_MAXD] = nq, MAXD
-    header[H_NAUX] = len(aux_names)
-    header[H_NEV] = len(ev_I)
-    I = np.concatenate([header] + blocks_I)
+    def _disturbance_tables(self):
+        """The bearing-drag and wound-in-strain disturbances: records and values."""
+        tables = [d for d in self.disturbances if d.type in ("bearing_drag", "wound_in_strain")]
+        tab_I = np.zeros((len(tables), NTI), np.int64)
+        tab_P = []
+        for m, d in enumerate(tables):
+            kind = {"bearing_drag": TB_DRAG, "wound_in_strain": TB_WOUND}[d.type]
+            if d.shape == "sines":
+                tab_I[m] = (kind, self.node_idx[d.element], len(d.amplitudes), 0, SH_SINES)
+                tab_P.append(np.concatenate([d.amplitudes, d.omegas, d.phases]))
+            else:
+                tab_I[m] = (kind, self.node_idx[d.element], len(d.values), 0, SH_TABLE)
+                tab_P.append(np.concatenate([[d.x0, d.dx], d.values]))
+        return tab_I, tab_P
 
-    cl = CompiledLine(
-        line=line, programme=prog, I=I, P=P, n_states=n, state_names=names, state_units=units,
-        state_kinds=kinds, atol=np.array(atol), aux_names=aux_names, aux_units=aux_units,
-        event_kinds=ev_kinds, event_components=ev_comp, node_ids=[e.id for e in els],
-        span_ids=span_ids, sensors=sensors, controllers=ctrls, mover_ids=mover_ids,
-        mover_q0=mover_q0, splice_nodes=splice_nodes, n_joint_slots=nJ,
-    )
-    assert len(aux_names) == AUX_SPAN * nS + AUX_NODE * nN + AUX_SENS * nSe + AUX_CTRL * nC \
-        + AUX_MOVER * nM + AUX_JOINT * nJ + 2 + (nch - 1)
-    _attach_pattern(cl)
-    return cl
+    def _pitch_variation_terms(self, pitch_variations) -> list[np.ndarray]:
+        """The relaxed-pitch variations' terms, sensor by sensor (a missing one: seed 0's)."""
+        pitch_variations = pitch_variations or {}
+        out = []
+        for j, sn in self.pitch_var_terms:
+            terms = pitch_variations.get(sn.id)
+            if terms is None:
+                terms = realise_pitch_variations(self.line, np.random.SeedSequence(0))[sn.id]
+            self.sens_I[j, SEI_VN] = len(terms)
+            out.append(np.ascontiguousarray(terms, float).ravel())
+        return out
+
+    def pack(self, ev_I, n_aux: int, pitch_variations) -> tuple[np.ndarray, np.ndarray]:
+        """The header and the record blocks as the kernels' I (int64) and P (float64)."""
+        nch, maxpts, sch_n, sch_t, sch_v = self._programme_tables()
+        tab_I, tab_P = self._disturbance_tables()
+        blocks_I = [self.node_I.ravel(), self.span_I.ravel(), self.sens_I.ravel(),
+                    self.ctrl_I.ravel(), sch_n,
+                    np.array(ev_I, np.int64).reshape(-1, NEVI).ravel(), self.mov_I.ravel(),
+                    tab_I.ravel()]
+        offs_I, pos = [], HEADER
+        for b in blocks_I:
+            offs_I.append(pos)
+            pos += b.size
+        var_P = self._pitch_variation_terms(pitch_variations)
+        nJ, nFS = self.nJ, self.nFS
+        blocks_P = [self.node_P.ravel(), self.span_P.ravel(), self.sens_P.ravel(),
+                    self.ctrl_P.ravel(), sch_t.ravel(), sch_v.ravel(), np.zeros(4),
+                    self.mov_P.ravel(), np.zeros(nJ * NJP), np.array([self.EA]),
+                    np.zeros(nFS * NFS), *tab_P, *var_P]
+        offs_P, ppos = [], 0
+        for b in blocks_P:
+            offs_P.append(ppos)
+            ppos += b.size
+        P = np.concatenate(blocks_P)
+        header = np.zeros(HEADER, np.int64)
+        header[H_NN], header[H_NS], header[H_NSE], header[H_NC], header[H_NY] = (
+            self.nN, self.nS, self.nSe, self.nC, len(self.names))
+        header[H_OFF_NI], header[H_OFF_SI], header[H_OFF_SEI], header[H_OFF_CI] = offs_I[:4]
+        header[H_OFF_SCHN], header[H_OFF_EV] = offs_I[4], offs_I[5]
+        header[H_OFF_NP], header[H_OFF_SP], header[H_OFF_SEP], header[H_OFF_CP] = offs_P[:4]
+        header[H_OFF_SCHT], header[H_OFF_SCHV], header[H_OFF_RT] = offs_P[4:7]
+        header[H_NM], header[H_OFF_MI], header[H_OFF_MP] = self.nM, offs_I[6], offs_P[7]
+        header[H_NJ], header[H_OFF_JP], header[H_EA] = nJ, offs_P[8], offs_P[9]
+        header[H_NFS], header[H_OFF_FS] = nFS, offs_P[10]
+        header[H_NTB], header[H_OFF_TB] = len(tab_P), offs_I[7]
+        for m in range(len(tab_P)):  # each table's values follow the fault slots in P
+            tab_I[m, TI_OFFP] = offs_P[11 + m]
+        blocks_I[7] = tab_I.ravel()
+        for m, (j, _) in enumerate(self.pitch_var_terms):  # the variations follow the tables
+            self.sens_I[j, SEI_VOFF] = offs_P[11 + len(tab_P) + m]
+        blocks_I[2] = self.sens_I.ravel()
+        header[H_MODEL] = 1 if self.line.span_model == "linear" else 0
+        header[H_NCH], header[H_MAXPTS] = nch, maxpts
+        header[H_NQ], header[H_MAXD] = 3 * self.nS + 7 * self.nN + 2 * self.nSe + 2 * self.nC, MAXD
+        header[H_NAUX] = n_aux
+        header[H_NEV] = len(ev_I)
+        return np.concatenate([header] + blocks_I), P
 
 
 def _attach_pattern(cl: CompiledLine) -> None:
