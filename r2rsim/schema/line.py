@@ -9,6 +9,7 @@ quantities are SI floats after validation. Cross-references are checked in
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Annotated, Literal
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, WithJsonSchema, model_validator
@@ -717,7 +718,41 @@ class Line(Strict):
 
 
 def check_line(line: Line) -> list[tuple[str, str]]:
-    """Cross-field checks of a line; returns ``[(yaml_path, message), ...]``."""
+    """Cross-field checks of a line; returns ``[(yaml_path, message), ...]`` in the order
+    of the checks (the first is the one reported)."""
+    ix = _LineIndex.of(line)
+    return [*_check_topology(line), *_check_geometry(line), *_check_sensors(line, ix),
+            *_check_dancer_loops(line, ix), *_check_splicers(line, ix),
+            *_check_drive_loops(line, ix), *_check_tension_loops(line, ix),
+            *_check_torque_commands(line)]
+
+
+@dataclass
+class _LineIndex:
+    """Look-ups the cross checks share."""
+
+    by_id: dict  # element id -> (index, element)
+    movers: set  # dancers and festoon spans
+    sensors: dict  # sensor id -> sensor
+    span_names: set
+    speed_ctrl: dict  # element id -> index of its speed_pi
+
+    @classmethod
+    def of(cls, line: Line) -> _LineIndex:
+        els = line.elements
+        festoons = {sp.id or f"span{i + 1}" for i, sp in enumerate(line.spans)
+                    if sp.festoon is not None}
+        return cls(by_id={e.id: (i, e) for i, e in enumerate(els)},
+                   movers={e.id for e in els if e.type in DANCERS} | festoons,
+                   sensors={s.id: s for s in line.sensors},
+                   span_names={sp.id or f"span{i + 1}" for i, sp in enumerate(line.spans)},
+                   speed_ctrl={c.element: j for j, c in enumerate(line.controllers)
+                               if c.type == "speed_pi"})
+
+
+def _check_topology(line: Line) -> list[tuple[str, str]]:
+    """An unwind first, a rewind last, a span between each pair, unique ids, rolls larger
+    than their cores."""
     out: list[tuple[str, str]] = []
     els = line.elements
     if els[0].type != "unwind":
@@ -749,23 +784,23 @@ def check_line(line: Line) -> list[tuple[str, str]]:
                 out.append((f"elements[{i}].roll.core_radius",
                             f"core radius {r.core_radius:g} m must be smaller than the roll's "
                             f"outer radius {r.outer_radius:g} m"))
-    out += _check_geometry(line)
-    by_id = {e.id: (i, e) for i, e in enumerate(els)}
-    festoons = {sp.id or f"span{i + 1}": sp for i, sp in enumerate(line.spans)
-                if sp.festoon is not None}
-    movers = {e.id for e in els if e.type in DANCERS} | set(festoons)
-    sensors = {s.id: s for s in line.sensors}
-    span_names = {sp.id or f"span{i + 1}" for i, sp in enumerate(line.spans)}
+    return out
+
+
+def _check_sensors(line: Line, ix: _LineIndex) -> list[tuple[str, str]]:
+    """Every sensor sits on something that exists and can carry it."""
+    out: list[tuple[str, str]] = []
+    by_id = ix.by_id
     for j, s in enumerate(line.sensors):
         if s.type == "pitch_length":
-            if s.span not in span_names:
-                out.append((f"sensors[{j}].span", _missing("span", s.span, span_names)))
+            if s.span not in ix.span_names:
+                out.append((f"sensors[{j}].span", _missing("span", s.span, ix.span_names)))
             out += _check_pitch_law(j, s, by_id)
             continue
         if s.type == "dancer_position":
-            if s.element not in movers:
+            if s.element not in ix.movers:
                 out.append((f"sensors[{j}].element",
-                            _missing("dancer or festoon span", s.element, movers)))
+                            _missing("dancer or festoon span", s.element, ix.movers)))
             continue
         if s.element not in by_id:
             out.append((f"sensors[{j}].element", _missing("element", s.element, by_id)))
@@ -776,14 +811,19 @@ def check_line(line: Line) -> list[tuple[str, str]]:
                         f"a roll_diameter sensor needs an unwind or rewind, '{e.id}' is {e.type}"))
         if s.type in ("encoder", "load_cell") and not hasattr(e, "friction"):
             out.append((f"sensors[{j}].element", f"'{e.id}' cannot carry a {s.type}"))
-    speed_ctrl = {c.element: j for j, c in enumerate(line.controllers)
-                  if c.type == "speed_pi"}
+    return out
+
+
+def _check_dancer_loops(line: Line, ix: _LineIndex) -> list[tuple[str, str]]:
+    """A dancer_pi reads a position sensor on its dancer and trims a speed."""
+    out: list[tuple[str, str]] = []
+    sensors = ix.sensors
     for j, c in enumerate(line.controllers):
         if c.type != "dancer_pi":
             continue
         p = f"controllers[{j}]"
-        if c.dancer not in movers:
-            out.append((f"{p}.dancer", _missing("dancer or festoon span", c.dancer, movers)))
+        if c.dancer not in ix.movers:
+            out.append((f"{p}.dancer", _missing("dancer or festoon span", c.dancer, ix.movers)))
         if c.sensor is not None:
             s = sensors.get(c.sensor)
             if s is None or s.type != "dancer_position":
@@ -793,14 +833,21 @@ def check_line(line: Line) -> list[tuple[str, str]]:
             elif s.element != c.dancer:
                 out.append((f"{p}.sensor", f"sensor '{s.id}' is on '{s.element}', not on "
                                            f"'{c.dancer}'"))
-        if c.element not in by_id:
-            out.append((f"{p}.element", _missing("element", c.element, by_id)))
+        if c.element not in ix.by_id:
+            out.append((f"{p}.element", _missing("element", c.element, ix.by_id)))
             continue
-        drive = getattr(by_id[c.element][1], "drive", None)
-        if drive is None or (drive.type == "torque" and c.element not in speed_ctrl):
+        drive = getattr(ix.by_id[c.element][1], "drive", None)
+        if drive is None or (drive.type == "torque" and c.element not in ix.speed_ctrl):
             out.append((f"{p}.element", f"a dancer_pi trims a speed: '{c.element}' needs an "
                                         f"ideal_speed drive or a speed_pi"))
-    for i, e in enumerate(els):
+    return out
+
+
+def _check_splicers(line: Line, ix: _LineIndex) -> list[tuple[str, str]]:
+    """A splicer has its spare roll, a trigger radius within the rolls, and what a
+    zero-speed splice needs (speed control, a web store)."""
+    out: list[tuple[str, str]] = []
+    for i, e in enumerate(line.elements):
         sp = getattr(e, "splicer", None)
         if sp is None:
             continue
@@ -814,20 +861,28 @@ def check_line(line: Line) -> list[tuple[str, str]]:
                         f"{e.roll.core_radius:g} m and the spare roll's radius "
                         f"{e.spare_roll.outer_radius:g} m"))
         if sp.type == "zero_speed":
-            if e.id not in speed_ctrl and e.drive.type != "ideal_speed":
+            if e.id not in ix.speed_ctrl and e.drive.type != "ideal_speed":
                 out.append((f"{p}.splicer.type", "a zero_speed splice stops the unwind under "
                                                  "speed control: add a speed_pi on it"))
-            if not movers:
+            if not ix.movers:
                 out.append((f"{p}.splicer.type", "a zero_speed splice needs a dancer or a "
                                                  "festoon to supply web while the roll stops"))
+    return out
+
+
+def _check_drive_loops(line: Line, ix: _LineIndex) -> list[tuple[str, str]]:
+    """Speed and tension loops act on a driven element and read the right sensors; one
+    master speed node at most."""
+    out: list[tuple[str, str]] = []
+    sensors, speed_ctrl = ix.sensors, ix.speed_ctrl
     for j, c in enumerate(line.controllers):
         p = f"controllers[{j}]"
         if c.type == "dancer_pi":
             continue
-        if c.element not in by_id:
-            out.append((f"{p}.element", _missing("element", c.element, by_id)))
+        if c.element not in ix.by_id:
+            out.append((f"{p}.element", _missing("element", c.element, ix.by_id)))
             continue
-        _, e = by_id[c.element]
+        _, e = ix.by_id[c.element]
         drive = getattr(e, "drive", None)
         if drive is None:
             out.append((f"{p}.element", f"'{e.id}' is an {e.type} and has no drive to control"))
@@ -867,12 +922,19 @@ def check_line(line: Line) -> list[tuple[str, str]]:
     masters = [j for j, c in enumerate(line.controllers) if c.type == "speed_pi" and c.master]
     if len(masters) > 1:
         out.append((f"controllers[{masters[1]}].master", "only one master speed node is allowed"))
+    return out
+
+
+def _check_tension_loops(line: Line, ix: _LineIndex) -> list[tuple[str, str]]:
+    """One tension loop per element, in a mode its drive supports, with feed-forward
+    only in torque mode."""
+    out: list[tuple[str, str]] = []
     tension_ctrl: dict[str, int] = {}
     for j, c in enumerate(line.controllers):
-        if c.type != "tension_pi" or c.element not in by_id:
+        if c.type != "tension_pi" or c.element not in ix.by_id:
             continue
         p = f"controllers[{j}]"
-        _, e = by_id[c.element]
+        _, e = ix.by_id[c.element]
         drive = getattr(e, "drive", None)
         if drive is None:
             continue
@@ -881,10 +943,10 @@ def check_line(line: Line) -> list[tuple[str, str]]:
                                         f"(controllers[{tension_ctrl[c.element]}])"))
         tension_ctrl[c.element] = j
         roll = e.type in ("unwind", "rewind")
-        if drive.type == "torque" and not roll and c.element not in speed_ctrl:
+        if drive.type == "torque" and not roll and c.element not in ix.speed_ctrl:
             out.append((f"{p}.element", f"a tension_pi on driven element '{e.id}' trims its speed "
                                         f"and needs a speed_pi on the same element"))
-        if drive.type == "torque" and roll and c.element in speed_ctrl:
+        if drive.type == "torque" and roll and c.element in ix.speed_ctrl:
             out.append((f"{p}.element", f"'{e.id}' has both a speed_pi and a torque-mode "
                                         f"tension_pi; use one of them"))
         if c.radius_sensor is not None and not roll:
@@ -894,7 +956,13 @@ def check_line(line: Line) -> list[tuple[str, str]]:
             out.append((f"{p}.feedforward", f"feed-forward terms apply to torque mode (a "
                                             f"tension_pi on an unwind/rewind with a torque "
                                             f"drive); on '{e.id}' the loop trims a speed"))
-    for i, e in enumerate(els):
+    return out
+
+
+def _check_torque_commands(line: Line) -> list[tuple[str, str]]:
+    """A torque command needs a torque drive that no loop already commands."""
+    out: list[tuple[str, str]] = []
+    for i, e in enumerate(line.elements):
         drive = getattr(e, "drive", None)
         if drive is None or drive.torque_command is None:
             continue
