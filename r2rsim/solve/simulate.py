@@ -499,17 +499,7 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
     k_next = 0  # next sample index to emit
     terminated, reason, t_term = False, None, None
     restarts = 0
-    # A span that starts above its break tension breaks at once. Events are found as sign
-    # changes of their functions, and its break condition is true from t = 0 on, so no change
-    # would ever report it (a 20 kN start on a 10.5 kN web ran on, and later logged "web
-    # break" when the tension fell through the limit).
-    broken = [m for m in np.nonzero(flags)[0] if cl.event_kinds[m] == EV_BREAK]
-    if broken:
-        aux0 = cl.outputs(np.array([0.0]), y[None, :])[0]
-        for m in broken:
-            state, msg, vals = _message(cl, EV_BREAK, cl.event_components[m], True, aux0)
-            log.append(Event(0.0, EVENT_NAMES[EV_BREAK], cl.event_components[m], state,
-                             msg + " (above the break tension from the start)", vals))
+    if _broken_at_start(cl, y, flags, log):
         k_next = _emit_samples(emit, sample_t, k_next, np.array([0.0]), y[None, :])
         terminated, reason, t_term = True, EVENT_NAMES[EV_BREAK], 0.0
     # Event detection: normally on the solver's steps after each chunk (cheap, but the part
@@ -539,14 +529,7 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
             k_end = int(np.searchsorted(sample_t, t_seg_end + (1e-9 if t_seg_end >= duration
                                                                else -1e-9), side="right"))
             k_hi = min(k_end, k_next + rows_per_chunk)
-            t_chunk_end = t_seg_end if k_hi == k_end else float(sample_t[k_hi - 1])
-            ts = sample_t[k_next:k_hi]
-            grid = ts[ts > t + 1e-12]
-            tspan = np.concatenate([[t], grid])
-            if tspan[-1] < t_chunk_end - 1e-12:
-                tspan = np.append(tspan, t_chunk_end)
-            if len(tspan) < 3:  # scikit-sundae: 2 points means "every step"; pad
-                tspan = np.array([t, 0.5 * (t + tspan[-1]), tspan[-1]])
+            tspan = _chunk_times(t, sample_t, k_next, k_hi, k_end, t_seg_end)
             tt, Y, err, ts, ys, root = backend.solve(tspan, y, find_events=hot,
                                                      resume=resume)
             resume = False
@@ -573,17 +556,9 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
                     continue
             else:
                 # event detection at the solver's steps (as CVODE's own root finding does)
-                hit_row = None
-                if len(cl.event_kinds) and not backend.locates_events(hot):
-                    cond = cl.events(ts, ys) < 0
-                    # the first row is the chunk's start, whose conditions are known (after
-                    # an event it sits on a root, where the sign of g is not meaningful)
-                    cond[0] = flags
-                    prev = np.vstack([flags[None, :], cond[:-1]])
-                    changed = np.nonzero(np.any(cond != prev, axis=1))[0]
-                    if len(changed):
-                        hit_row = int(changed[0])
-                if hit_row is None:
+                hit = (_event_on_steps(cl, flags, ts, ys)
+                       if len(cl.event_kinds) and not backend.locates_events(hot) else None)
+                if hit is None:
                     k_next = _emit_samples(emit, sample_t, k_next, tt, Y, k_end)
                     t, y = float(tt[-1]), Y[-1].copy()
                     resume = k_hi < k_end and not hot
@@ -593,6 +568,7 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
                     continue
                 # an event between steps hit_row-1 and hit_row: locate it exactly from the
                 # earlier step, then emit the samples before it
+                hit_row, cond = hit
                 r0 = hit_row - 1
                 found = backend.locate(float(ts[r0]), ys[r0].copy(), float(ts[hit_row]))
                 if found is None:  # no root seen by CVODE (g grazing 0): take the step
@@ -607,23 +583,9 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
             k_next = _emit_samples(emit, sample_t, k_next, tt[before], Y[before])
             new_flags = flags.copy()
             new_flags[which] = ~flags[which]
-            aux_ev = cl.outputs(np.array([t_ev]), y_ev[None, :])[0]
-            y_ev = y_ev.copy()
-            for m in which:
-                kind = cl.event_kinds[m]
-                comp = cl.event_components[m]
-                if kind in PHYSICAL:
-                    state, msg, vals = _message(cl, kind, comp, bool(new_flags[m]), aux_ev)
-                    log.append(Event(t_ev, EVENT_NAMES[kind], comp, state, msg, vals))
-                    if kind in TERMINAL and new_flags[m]:
-                        terminated = True
-                        reason = EVENT_NAMES[kind]
-                        t_term = t_ev
-                    continue
-                y_ev, entries, _ = logic.on_event(int(m), bool(new_flags[m]), t_ev, y_ev)
-                record(entries)
-                if logic.terminate_reason is not None:
-                    terminated, reason, t_term = True, logic.terminate_reason, t_ev
+            y_ev, ended = _fire(cl, logic, log, which, new_flags, t_ev, y_ev)
+            if ended is not None:
+                terminated, reason, t_term = True, ended, t_ev
             flags = refresh_mode_flags(t_ev, y_ev, new_flags)
             if terminated:
                 break
@@ -631,15 +593,7 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
             if progress:
                 progress(t)
     events = log
-
-    if keep and kept_t:
-        T_all = np.concatenate(kept_t)
-        Y_all = np.concatenate(kept_y)
-        A_all = np.concatenate(kept_a) if outputs else np.zeros((len(T_all), 0))
-    else:
-        T_all = np.zeros(0)
-        Y_all = np.zeros((0, cl.n_states))
-        A_all = np.zeros((0, len(cl.aux_names)))
+    T_all, Y_all, A_all = _kept(cl, kept_t, kept_y, kept_a, keep, outputs)
     wall = _time.perf_counter() - wall0
     stats = {"nfev": backend.nfev, "njev": backend.njev, "restarts": restarts, "wall_s": wall,
              "steps": backend.steps if s.backend != "radau" else None,
@@ -647,6 +601,82 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
              "solver_messages": list(getattr(backend, "messages", []))[:20]}
     return SimulationResult(cl, T_all, Y_all, A_all, events, terminated, reason, t_term, stats,
                             duration, initial_state_mode, y0)
+
+
+def _broken_at_start(cl, y, flags, log: list) -> bool:
+    """Log a break for every span above its break tension at t = 0; True if any.
+
+    A span that starts above its break tension breaks at once. Events are found as sign
+    changes of their functions, and its break condition is true from t = 0 on, so no change
+    would ever report it (a 20 kN start on a 10.5 kN web ran on, and later logged "web
+    break" when the tension fell through the limit)."""
+    broken = [m for m in np.nonzero(flags)[0] if cl.event_kinds[m] == EV_BREAK]
+    if broken:
+        aux0 = cl.outputs(np.array([0.0]), y[None, :])[0]
+        for m in broken:
+            state, msg, vals = _message(cl, EV_BREAK, cl.event_components[m], True, aux0)
+            log.append(Event(0.0, EVENT_NAMES[EV_BREAK], cl.event_components[m], state,
+                             msg + " (above the break tension from the start)", vals))
+    return bool(broken)
+
+
+def _chunk_times(t: float, sample_t, k_next: int, k_hi: int, k_end: int,
+                 t_seg_end: float) -> np.ndarray:
+    """The output times of the next chunk: its start ``t``, the samples after it, and the
+    chunk's end (the segment's end, or the last sample at a memory boundary)."""
+    t_chunk_end = t_seg_end if k_hi == k_end else float(sample_t[k_hi - 1])
+    ts = sample_t[k_next:k_hi]
+    tspan = np.concatenate([[t], ts[ts > t + 1e-12]])
+    if tspan[-1] < t_chunk_end - 1e-12:
+        tspan = np.append(tspan, t_chunk_end)
+    if len(tspan) < 3:  # scikit-sundae: 2 points means "every step"; pad
+        tspan = np.array([t, 0.5 * (t + tspan[-1]), tspan[-1]])
+    return tspan
+
+
+def _event_on_steps(cl, flags, ts, ys):
+    """Event detection at the solver's steps (as CVODE's own root finding does): the first
+    step where a condition differs from the step before, with every step's conditions, or
+    None."""
+    cond = cl.events(ts, ys) < 0
+    # the first row is the chunk's start, whose conditions are known (after an event it
+    # sits on a root, where the sign of g is not meaningful)
+    cond[0] = flags
+    prev = np.vstack([flags[None, :], cond[:-1]])
+    changed = np.nonzero(np.any(cond != prev, axis=1))[0]
+    return (int(changed[0]), cond) if len(changed) else None
+
+
+def _fire(cl, logic, log: list, which, new_flags, t_ev: float, y_ev):
+    """Act on the events ``which`` at t_ev: log the physical ones, hand the others to the
+    discrete logic. Returns the state after them and the reason the run ends, or None."""
+    aux_ev = cl.outputs(np.array([t_ev]), y_ev[None, :])[0]
+    y_ev = y_ev.copy()
+    ended = None
+    for m in which:
+        kind = cl.event_kinds[m]
+        comp = cl.event_components[m]
+        if kind in PHYSICAL:
+            state, msg, vals = _message(cl, kind, comp, bool(new_flags[m]), aux_ev)
+            log.append(Event(t_ev, EVENT_NAMES[kind], comp, state, msg, vals))
+            if kind in TERMINAL and new_flags[m]:
+                ended = EVENT_NAMES[kind]
+            continue
+        y_ev, entries, _ = logic.on_event(int(m), bool(new_flags[m]), t_ev, y_ev)
+        log.extend(entries)
+        if logic.terminate_reason is not None:
+            ended = logic.terminate_reason
+    return y_ev, ended
+
+
+def _kept(cl, kept_t, kept_y, kept_a, keep: bool, outputs: bool):
+    """The kept samples as arrays (empty when they went to a chunk callback)."""
+    if keep and kept_t:
+        T_all = np.concatenate(kept_t)
+        Y_all = np.concatenate(kept_y)
+        A_all = np.concatenate(kept_a) if outputs else np.zeros((len(T_all), 0))
+        return T_all, Y_all, A_all
+    return np.zeros(0), np.zeros((0, cl.n_states)), np.zeros((0, len(cl.aux_names)))
 
 
 def _over_budget(s: SolverSettings, steps: int | None, step_budget: float, wall0: float,
