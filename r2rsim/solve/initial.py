@@ -54,27 +54,37 @@ def nominal_state(cl: CompiledLine, tension: float | None = None,
     """
     line = cl.line
     y = np.zeros(cl.n_states)
-    V0 = cl.programme.value("line_speed", 0.0)
     tension_sps = [c.setpoint for c in line.controllers if c.type == "tension_pi"]
     T0 = tension if tension is not None else (tension_sps[0] if tension_sps else 0.0)
-    EA = line.web.EA
     T = [T0 for _ in line.spans]
     for i, sp in enumerate(line.spans):
         if span_tension and sp.id in span_tension:
             T[i] = span_tension[sp.id]
-        y[cl.index(f"{sp.id}.strain")] = T[i] / EA
-    draw = {}
-    for c in line.controllers:
-        if c.type == "speed_pi":
-            draw[c.element] = c.draw
+        y[cl.index(f"{sp.id}.strain")] = T[i] / line.web.EA
+    needed_torque = _speeds_in_balance(cl, y, T)
+    _integrators(cl, y, needed_torque)
+    # dancers and festoon carriages at their initial positions, at rest
+    for mid, q0 in zip(cl.mover_ids, cl.mover_q0, strict=True):
+        y[cl.index(f"{mid}.position")] = (position or {}).get(mid, q0)
+    if slack:
+        _slack(cl, y, slack, file)
+    _filters_at_input(cl, y)
+    return y
+
+
+def _speeds_in_balance(cl: CompiledLine, y: np.ndarray, T: list) -> dict[str, float]:
+    """Every roller at the t = 0 line speed times its draw, its drive torque (when it has
+    a lag) in balance with the span tensions ``T``; returns the torque each needs."""
+    line = cl.line
+    V0 = cl.programme.value("line_speed", 0.0)
+    draw = {c.element: c.draw for c in line.controllers if c.type == "speed_pi"}
     needed_torque = {}
     for k, e in enumerate(line.elements):
         drive = getattr(e, "drive", None)
         if drive is not None and drive.type == "ideal_speed":
             continue
         R = e.roll.outer_radius if e.type in ("unwind", "rewind") else e.radius
-        v = V0 * (1.0 + draw.get(e.id, 0.0))
-        om = v / R
+        om = V0 * (1.0 + draw.get(e.id, 0.0)) / R
         y[cl.index(f"{e.id}.speed")] = om
         Tup = T[k - 1] if k > 0 else 0.0
         Tdn = T[k] if k < len(line.spans) else 0.0
@@ -83,7 +93,12 @@ def nominal_state(cl: CompiledLine, tension: float | None = None,
         needed_torque[e.id] = -R * (Tdn - Tup) + tf
         if f"{e.id}.drive_torque" in cl.state_names:
             y[cl.index(f"{e.id}.drive_torque")] = needed_torque[e.id]
-    # integrators so that the PI outputs produce the needed torque at zero error
+    return needed_torque
+
+
+def _integrators(cl: CompiledLine, y: np.ndarray, needed_torque: dict) -> None:
+    """Loop integrators such that the PI outputs produce the needed torque at zero error."""
+    line = cl.line
     aux = cl.outputs(0.0, y[None, :])[0]
     I, P = cl.I, cl.P
     for c_idx, c in enumerate(line.controllers):
@@ -102,19 +117,23 @@ def nominal_state(cl: CompiledLine, tension: float | None = None,
             sgn = -1.0 if line.element(eid).type == "unwind" else 1.0
             u = (needed_torque.get(eid, 0.0) - tau_ff) / (sgn * R)
             y[ix] = u / ki
-    # dancers and festoon carriages at their initial positions, at rest
-    for mid, q0 in zip(cl.mover_ids, cl.mover_q0, strict=True):
-        y[cl.index(f"{mid}.position")] = (position or {}).get(mid, q0)
-    if slack:
-        aux = cl.outputs(0.0, y[None, :])[0]
-        for sid, extra in slack.items():
-            length = aux[cl.aux_index(f"{sid}.length_m")]
-            if not extra < 0.5 * length:
-                raise InputError(f"{extra:g} m of slack is not below half the span's length "
-                                 f"({length:g} m at t = 0)", file=file,
-                                 path=f"initial.slack.{sid}")
-            y[cl.index(f"{sid}.strain")] = -extra / length
-    # sensor filters start at their input
+
+
+def _slack(cl: CompiledLine, y: np.ndarray, slack: dict, file: str | None) -> None:
+    """Spans that hold web beyond their taut length start at strain -slack/L (0 N)."""
+    aux = cl.outputs(0.0, y[None, :])[0]
+    for sid, extra in slack.items():
+        length = aux[cl.aux_index(f"{sid}.length_m")]
+        if not extra < 0.5 * length:
+            raise InputError(f"{extra:g} m of slack is not below half the span's length "
+                             f"({length:g} m at t = 0)", file=file,
+                             path=f"initial.slack.{sid}")
+        y[cl.index(f"{sid}.strain")] = -extra / length
+
+
+def _filters_at_input(cl: CompiledLine, y: np.ndarray) -> None:
+    """Sensor filters start at their input. Two passes, as the first version had: the
+    second changes nothing unless a reading depends on a filter's state."""
     for _ in range(2):
         aux = cl.outputs(0.0, y[None, :])[0]
         for s in cl.sensors:
@@ -125,7 +144,6 @@ def nominal_state(cl: CompiledLine, tension: float | None = None,
                 q = q or next(n.split(".", 1)[1] for n in cl.aux_names
                               if n.startswith(f"{s.id}.position_"))
                 y[cl.index(name)] = s.gain * aux[cl.aux_index(f"{s.id}.{q}")] + s.offset
-    return y
 
 
 def steady_state(cl: CompiledLine, y_guess: np.ndarray, tol: float = 1e-10,
