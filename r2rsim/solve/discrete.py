@@ -730,66 +730,19 @@ class DiscreteLogic:
             n_rows = len(self.rolls.rows)
             new, ea_ratio, dl0 = self.rolls.next_roll(e.id, new, t)
             drawn = {r["parameter"]: r["value"] for r in self.rolls.rows[n_rows:]}
-        I, P = self.cl.I, self.cl.P
-        web = self.line.web
         R_old = float(self.cl.outputs(t, y[None, :])[0][self.cl.aux_index(f"{e.id}.radius_m")])
-        cw = new.build_per_wrap if new.build_per_wrap is not None else web.thickness
-        P[self._np(k, NP_R0)] = new.outer_radius
-        P[self._np(k, NP_R)] = new.outer_radius
-        P[self._np(k, NP_RC)] = new.core_radius
-        P[self._np(k, NP_JC)] = new.core_inertia
-        P[self._np(k, NP_CW)] = cw
-        P[self._np(k, NP_RHOW)] = web.density * web.thickness / cw * web.width
-        (P[self._np(k, NP_EPSW)], P[self._np(k, NP_EPSW1)],
-         P[self._np(k, NP_EPSW2)]) = new.wound_in_coefficients()
+        self._load_roll(k, new)
         y[self._ni(k, NI_S)] = 0.0
         iw = self._ni(k, NI_W)
         if iw >= 0:  # the new roll is brought up to the running web's surface speed
             v_web = R_old * float(y[iw])
             y[iw] = v_web * (1.0 + sp.speed_match_error) / new.outer_radius if flying else 0.0
         elif flying:  # an imposed-speed unwind keeps the new roll's speed error
-            P[self._np(k, NP_VGAIN)] = 1.0 + sp.speed_match_error
-        # bumpless transfer: the tension trims of the old roll restart from zero; the radius
-        # estimate (diameter-sensor filter) takes the new roll's measured diameter
-        for c in self._ctrls_on(k, (C_TENSION_TORQUE, C_TENSION_TRIM)):
-            ix = int(I[I[H_OFF_CI] + c * NCI + CI_X])
-            if ix >= 0:
-                y[ix] = 0.0
-        # the speed loop's integrator holds the tension torque -T·R: scale it to the new
-        # radius so the drive takes the web's pull from the first instant
-        for c in self._ctrls_on(k, (C_SPEED,)):
-            ix = int(I[I[H_OFF_CI] + c * NCI + CI_X])
-            if ix >= 0:
-                y[ix] *= new.outer_radius / R_old
-        for j, s in enumerate(self.cl.sensors):
-            b = I[H_OFF_SEI] + j * NSEI
-            if I[b + SEI_TYPE] == SE_DIAMETER and I[b + SEI_NODE] == k and I[b + SEI_F] >= 0:
-                y[I[b + SEI_F]] = s.gain * 2.0 * new.outer_radius + s.offset
-        # new material paid out since a modulus change ends here: close its joint
+            self.cl.P[self._np(k, NP_VGAIN)] = 1.0 + sp.speed_match_error
+        self._restart_loops(k, y, R_old, new)
         u_now = y[self._ni(k, NI_U)]
-        for js in range(self.cl.n_joint_slots):
-            bj = I[H_OFF_JP] + js * NJP
-            if P[bj + JP_ACTIVE] != 0.0 and P[bj + JP_NODE] == k and \
-                    P[bj + JP_LEN] == OPEN_JOINT:
-                P[bj + JP_LEN] = u_now - P[bj + JP_U0]
-                P[bj + JP_TSPAN] = float(k)  # its trail leaves the roll now
-        # the joint
-        slot = self._free_joint_slot()
-        if slot is not None:
-            bj = I[H_OFF_JP] + slot * NJP
-            P[bj + JP_ACTIVE] = 1.0
-            P[bj + JP_MAT] = 0.0
-            P[bj + JP_DL0] = 0.0
-            P[bj + JP_U0] = u_now
-            P[bj + JP_LEN] = sp.joint.length
-            P[bj + JP_RATIO] = sp.joint.stiffness_ratio
-            P[bj + JP_TBRK] = (sp.joint.break_tension if sp.joint.break_tension is not None
-                               else web.break_tension)
-            if k in self._weak_splice:
-                P[bj + JP_TBRK] = self._weak_splice.pop(k)
-            P[bj + JP_SPAN] = float(k)
-            P[bj + JP_TSPAN] = float(k) - 1.0
-            P[bj + JP_NODE] = float(k)
+        self._close_material_joints(k, u_now)
+        slot = self._splice_joint(k, sp, u_now)
         self._material.pop(k, None)  # the new roll's web is the line's again, unless:
         if ea_ratio is not None:
             self._open_material(k, u_now, ea_ratio, dl0=dl0, no_slot=(
@@ -803,15 +756,84 @@ class DiscreteLogic:
                              "joint_slot": slot,
                              **({"roll_drawn": drawn} if drawn else {})}))
         if slot is not None:
-            # a joint weaker than the tension it is made under breaks at once (its break
-            # event can only see a crossing, not a joint born past its limit)
-            T = float(self.cl.outputs(t, y[None, :])[0][self.cl.aux_index(
-                f"{self.cl.span_ids[k]}.tension_N")])
-            if T >= P[bj + JP_TBRK]:
-                log.append(Event(t, "web_break", self.cl.span_ids[k], "start",
-                                 f"web break at the new splice joint in {self.cl.span_ids[k]}"
-                                 f" at {T:.1f} N (joint strength {P[bj + JP_TBRK]:.1f} N)",
-                                 {"tension_N": T, "at_splice_joint": True}))
-                self.terminate_reason = "web_break"
+            self._joint_born_broken(t, y, k, slot, log)
         return y
+
+    def _load_roll(self, k, new):
+        """The new roll's geometry, inertia, wound density and wound-in strain."""
+        P, web = self.cl.P, self.line.web
+        cw = new.build_per_wrap if new.build_per_wrap is not None else web.thickness
+        P[self._np(k, NP_R0)] = new.outer_radius
+        P[self._np(k, NP_R)] = new.outer_radius
+        P[self._np(k, NP_RC)] = new.core_radius
+        P[self._np(k, NP_JC)] = new.core_inertia
+        P[self._np(k, NP_CW)] = cw
+        P[self._np(k, NP_RHOW)] = web.density * web.thickness / cw * web.width
+        (P[self._np(k, NP_EPSW)], P[self._np(k, NP_EPSW1)],
+         P[self._np(k, NP_EPSW2)]) = new.wound_in_coefficients()
+
+    def _restart_loops(self, k, y, R_old, new):
+        """Bumpless transfer: the tension trims of the old roll restart from zero; the
+        speed loop's integrator, which holds the tension torque -T·R, is scaled to the new
+        radius so the drive takes the web's pull from the first instant; the radius
+        estimate (diameter-sensor filter) takes the new roll's measured diameter."""
+        I = self.cl.I
+        for c in self._ctrls_on(k, (C_TENSION_TORQUE, C_TENSION_TRIM)):
+            ix = int(I[I[H_OFF_CI] + c * NCI + CI_X])
+            if ix >= 0:
+                y[ix] = 0.0
+        for c in self._ctrls_on(k, (C_SPEED,)):
+            ix = int(I[I[H_OFF_CI] + c * NCI + CI_X])
+            if ix >= 0:
+                y[ix] *= new.outer_radius / R_old
+        for j, s in enumerate(self.cl.sensors):
+            b = I[H_OFF_SEI] + j * NSEI
+            if I[b + SEI_TYPE] == SE_DIAMETER and I[b + SEI_NODE] == k and I[b + SEI_F] >= 0:
+                y[I[b + SEI_F]] = s.gain * 2.0 * new.outer_radius + s.offset
+
+    def _close_material_joints(self, k, u_now):
+        """New material paid out since a modulus change ends here: close its joint."""
+        I, P = self.cl.I, self.cl.P
+        for js in range(self.cl.n_joint_slots):
+            bj = I[H_OFF_JP] + js * NJP
+            if P[bj + JP_ACTIVE] != 0.0 and P[bj + JP_NODE] == k and \
+                    P[bj + JP_LEN] == OPEN_JOINT:
+                P[bj + JP_LEN] = u_now - P[bj + JP_U0]
+                P[bj + JP_TSPAN] = float(k)  # its trail leaves the roll now
+
+    def _splice_joint(self, k, sp, u_now):
+        """The splice joint, in a free slot (its index, or None when none is free)."""
+        slot = self._free_joint_slot()
+        if slot is None:
+            return None
+        P = self.cl.P
+        bj = self.cl.I[H_OFF_JP] + slot * NJP
+        P[bj + JP_ACTIVE] = 1.0
+        P[bj + JP_MAT] = 0.0
+        P[bj + JP_DL0] = 0.0
+        P[bj + JP_U0] = u_now
+        P[bj + JP_LEN] = sp.joint.length
+        P[bj + JP_RATIO] = sp.joint.stiffness_ratio
+        P[bj + JP_TBRK] = (sp.joint.break_tension if sp.joint.break_tension is not None
+                           else self.line.web.break_tension)
+        if k in self._weak_splice:
+            P[bj + JP_TBRK] = self._weak_splice.pop(k)
+        P[bj + JP_SPAN] = float(k)
+        P[bj + JP_TSPAN] = float(k) - 1.0
+        P[bj + JP_NODE] = float(k)
+        return slot
+
+    def _joint_born_broken(self, t, y, k, slot, log):
+        """A joint weaker than the tension it is made under breaks at once (its break
+        event can only see a crossing, not a joint born past its limit)."""
+        P = self.cl.P
+        bj = self.cl.I[H_OFF_JP] + slot * NJP
+        span = self.cl.span_ids[k]
+        T = float(self.cl.outputs(t, y[None, :])[0][self.cl.aux_index(f"{span}.tension_N")])
+        if T >= P[bj + JP_TBRK]:
+            log.append(Event(t, "web_break", span, "start",
+                             f"web break at the new splice joint in {span}"
+                             f" at {T:.1f} N (joint strength {P[bj + JP_TBRK]:.1f} N)",
+                             {"tension_N": T, "at_splice_joint": True}))
+            self.terminate_reason = "web_break"
 
