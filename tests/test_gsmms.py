@@ -421,6 +421,8 @@ def test_physics_relations_cancel_the_state_of_the_reduced_model(registration_ru
     ({"physics": {"line": REG_LINE, "drive_speed": "meas.none"}}, "meas.none"),
     ({"lambda2": -1.0}, "lambda2 must be a finite number >= 0"),
     ({"lambda2": float("nan")}, "lambda2"),
+    ({"lambda2": True}, "lambda2 must be a number"),
+    ({"physics": {"line": True}}, "line must be the path of a line file"),
 ])
 def test_physics_parameters_are_validated(registration_runs, params, match):
     with pytest.raises(InputError, match=match):

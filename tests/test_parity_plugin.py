@@ -141,7 +141,9 @@ def test_parameters_and_channels_are_checked(dataset):
                     ({"schedule_step_s": 1e-300}, "schedule_step_s must be from 0.001"),
                     ({"modulus_spread": 1e300}, "modulus_spread must be from 0 to 0.5"),
                     ({"pitch_spread_m": float("nan")}, "pitch_spread_m must be from 0"),
-                    ({"alpha": 1.5}, "alpha must be in"),
+                    ({"alpha": 1.5}, "alpha must be a number in"),
+                    ({"savgol_window_s": True}, "savgol_window_s must be a number"),
+                    ({"line": True}, "line must be the path of a line file"),
                     ({"time_base": "space"}, "time_base must be one of"),
                     ({"sensor_b": "meas.vision.pitch_m"}, "no column matching meas.vision")):
         with pytest.raises(InputError, match=msg):

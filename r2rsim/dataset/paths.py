@@ -100,8 +100,8 @@ def _relpath_problem(rel: object) -> str | None:
     return None
 
 
-def read_json(path: str | Path) -> object:
-    """A JSON file that r2rsim wrote, bounded in size (:data:`MAX_JSON_BYTES`).
+def read_json(path: str | Path, limit: int = MAX_JSON_BYTES) -> object:
+    """A JSON file that r2rsim wrote, bounded in size (``limit`` bytes).
 
     Raises
     ------
@@ -111,8 +111,8 @@ def read_json(path: str | Path) -> object:
         When it is larger than the bound, not UTF-8 or not JSON.
     """
     path = Path(path)
-    if path.stat().st_size > MAX_JSON_BYTES:
-        raise ValueError(f"{path.name} is larger than {MAX_JSON_BYTES >> 20} MiB")
+    if path.stat().st_size > limit:
+        raise ValueError(f"{path.name} is larger than {limit >> 20} MiB")
     return json.loads(path.read_text(encoding="utf-8"))
 
 

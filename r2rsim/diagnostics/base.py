@@ -98,6 +98,13 @@ class Diagnostic(BaseEstimator):
         if not (isinstance(a, (int, float)) and not isinstance(a, bool) and 0 < a < 1):
             raise InputError(f"{self.name}: alpha must be a number in (0, 1), got {a!r}")
 
+    def _number(self, key: str) -> float:
+        """Parameter ``key`` as a float; a bool or a non-number is refused."""
+        v = getattr(self, key)
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+            raise InputError(f"{self.name}: {key} must be a number, got {v!r}")
+        return float(v)
+
     def _check_int(self, key: str, low: int, high: int):
         """Parameter ``key`` must be an integer from ``low`` to ``high`` (bounds that keep a
         fit's memory and time finite)."""

@@ -7,7 +7,6 @@ from __future__ import annotations
 import base64
 import html
 import io
-import json
 import os
 import tempfile
 from pathlib import Path
@@ -15,6 +14,7 @@ from pathlib import Path
 import pandas as pd
 
 from .._version import __version__
+from ..dataset.paths import read_json
 from ..errors import InputError
 from ..evaluate.harness import DATASETS_FILE, METRICS, fault_key
 from ._diagnostics import (
@@ -119,11 +119,8 @@ def _recorded_datasets(src: Path) -> tuple[list[str] | None, str | None]:
     f = src / DATASETS_FILE
     if not f.is_file():
         return None, None
-    if f.stat().st_size > DATASETS_FILE_MAX_BYTES:
-        raise InputError(f"{f}: larger than {DATASETS_FILE_MAX_BYTES >> 20} MiB: not a "
-                         f"datasets file written by r2rsim diagnose")
     try:
-        paths = json.loads(f.read_text(encoding="utf-8"))["test"]
+        paths = read_json(f, DATASETS_FILE_MAX_BYTES)["test"]
         if not (isinstance(paths, list) and all(isinstance(p, str) for p in paths)):
             raise TypeError("'test' is not a list of paths")
     except (ValueError, KeyError, TypeError) as exc:

@@ -149,26 +149,23 @@ class GSMMS(Diagnostic):
                 raise InputError(f"{self.name}: {key} must be one of {', '.join(allowed)}, "
                                  f"got {getattr(self, key)!r}")
         for key, (low, high) in _INT_RANGES.items():
-            v = getattr(self, key)
-            if not (isinstance(v, (int, np.integer)) and not isinstance(v, bool)
-                    and low <= v <= high):
-                raise InputError(f"{self.name}: {key} must be an integer from {low} to "
-                                 f"{high}, got {v!r}")
+            self._check_int(key, low, high)
         for key in ("lambda1", "k_sigma", "zeta_threshold"):
-            if not 0 < float(getattr(self, key)) < math.inf:
+            if not 0 < self._number(key) < math.inf:
                 raise InputError(f"{self.name}: {key} must be a positive finite number, "
                                  f"got {getattr(self, key)!r}")
         for key, high in _FLOAT_LIMITS.items():  # beyond these a fit diverges or never ends
-            if not 0 < float(getattr(self, key)) <= high:
+            if not 0 < self._number(key) <= high:
                 raise InputError(f"{self.name}: {key} must be > 0 and at most {high:g}, "
                                  f"got {getattr(self, key)!r}")
-        if not 0 <= float(self.lambda2) < math.inf:
+        if not 0 <= self._number("lambda2") < math.inf:
             raise InputError(f"{self.name}: lambda2 must be a finite number >= 0, "
                              f"got {self.lambda2!r}")
-        if not 0 <= float(self.smooth_s) < math.inf:
+        if not 0 <= self._number("smooth_s") < math.inf:
             raise InputError(f"{self.name}: smooth_s must be a finite number >= 0 s, "
                              f"got {self.smooth_s!r}")
-        if self.min_improvement is not None and not 0 <= float(self.min_improvement) < math.inf:
+        if self.min_improvement is not None and \
+                not 0 <= self._number("min_improvement") < math.inf:
             raise InputError(f"{self.name}: min_improvement must be a finite number >= 0 or "
                              f"null, got {self.min_improvement!r}")
         if self.initial_nodes > self.max_nodes:
@@ -289,13 +286,15 @@ class GSMMS(Diagnostic):
         S, Z = self._features(f)
         return (S - self.s_mean_) / self.s_scale_, (Z - self.z_mean_) / self.z_scale_
 
-    def _pooled(self, frames) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _pooled(self, frames, points: bool = True
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Standardised rows of all runs, without rows holding a NaN, evenly thinned to at
-        most ``max_samples``, and their operating points (:meth:`_operating_points`)."""
+        most ``max_samples``, and (with ``points``) their operating points
+        (:meth:`_operating_points`; else an (n, 0) array)."""
         parts = [self._standardised(f) for f in frames]
         S = np.vstack([p[0] for p in parts])
         Z = np.vstack([p[1] for p in parts])
-        P = self._operating_points(frames)
+        P = self._operating_points(frames) if points else np.zeros((len(S), 0))
         ok = np.all(np.isfinite(S), axis=1) & np.all(np.isfinite(Z), axis=1)
         S, Z, P = S[ok], Z[ok], P[ok]
         if len(S) > self.max_samples:
@@ -310,7 +309,7 @@ class GSMMS(Diagnostic):
         uses them (rows holding a NaN dropped, evenly thinned to ``max_samples``), with the
         fitted standardisation: for studies of the local solvers on the same data."""
         self._check_fitted()
-        S, Z, _ = self._pooled(self._frames(runs))
+        S, Z, _ = self._pooled(self._frames(runs), points=False)
         return S, Z
 
     # ---- the contract ----------------------------------------------------------------------
@@ -363,7 +362,7 @@ class GSMMS(Diagnostic):
         runs (the map and relations stay); nodes those runs never reach keep theirs.
         Returns ``self``."""
         self._check_fitted()
-        S, Z, _ = self._pooled(self._frames(runs))
+        S, Z, _ = self._pooled(self._frames(runs), points=False)
         self._node_statistics(S, Z, keep_unseen=True)
         return self
 

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -176,11 +177,14 @@ class ParitySpaceDetector(Diagnostic):
                              f"got {self.time_base!r}")
         if self.mode not in MODES:
             raise InputError(f"parity: mode must be one of {', '.join(MODES)}, got {self.mode!r}")
+        if self.line is not None and not isinstance(self.line, (str, Path)):
+            raise InputError(f"parity: line must be the path of a line file, "
+                             f"got {self.line!r}")
         for key in ("web_EA_N", "span_length_m", "drive_radius_m", "downstream_radius_m",
                     "savgol_window_s", "schedule_step_s", "signature_z"):
-            v = getattr(self, key)
-            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
-                raise InputError(f"parity: {key} must be a positive number, got {v!r}")
+            if not (np.isfinite(v := self._number(key)) and v > 0):
+                raise InputError(f"parity: {key} must be a positive number, "
+                                 f"got {getattr(self, key)!r}")
         if self.relaxed_pitch_m is not None and not self.relaxed_pitch_m > 0:
             raise InputError(f"parity: relaxed_pitch_m must be > 0 m or null, "
                              f"got {self.relaxed_pitch_m!r}")
@@ -190,15 +194,11 @@ class ParitySpaceDetector(Diagnostic):
                                      ("pitch_spread_m", 0.0, 1e-3, " m"),
                                      ("savgol_window_s", 0.0, 600.0, " s"),
                                      ("schedule_step_s", 1e-3, 1e6, " s")):
-            v = getattr(self, key)
-            if not (isinstance(v, (int, float)) and low <= v <= high):
+            if not low <= self._number(key) <= high:
                 raise InputError(f"parity: {key} must be from {low:g} to {high:g}{unit}, "
-                                 f"got {v!r}")
-        if not (isinstance(self.savgol_order, int) and 2 <= self.savgol_order <= 10):
-            raise InputError(f"parity: savgol_order must be an integer from 2 to 10, "
-                             f"got {self.savgol_order!r}")
-        if not 0 < self.alpha < 1:
-            raise InputError(f"parity: alpha must be in (0, 1), got {self.alpha!r}")
+                                 f"got {getattr(self, key)!r}")
+        self._check_int("savgol_order", 2, 10)
+        self._check_alpha()
 
     def required_columns(self, frame: pd.DataFrame) -> list[str]:
         super().required_columns(frame)
