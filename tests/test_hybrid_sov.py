@@ -106,6 +106,12 @@ def test_models_fit_and_predict(run):
     ({"line": str(LINE), "censor_at": float("inf")}, "censor_at must be a finite"),
     ({"line": str(LINE), "censor_at": 1e300}, "within ±1e6 N"),
     ({"line": str(LINE), "window_s": 1e300}, "at most 60 s"),
+    ({"line": str(LINE), "window_s": True}, "window_s must be a number"),
+    ({"line": str(LINE), "alpha_enter": True}, "alpha_enter must be a number"),
+    ({"line": str(LINE), "alpha_enter": 0.0}, r"alpha_enter must be a number in \(0, 1\)"),
+    ({"line": str(LINE), "alpha": False}, r"alpha must be a number in \(0, 1\)"),
+    ({"line": str(LINE), "censor_at": "0"}, "censor_at must be a number"),
+    ({"line": True}, "line must be the path"),
 ])
 def test_plugin_parameters_are_checked(run, params, match):
     with pytest.raises(InputError, match=match):

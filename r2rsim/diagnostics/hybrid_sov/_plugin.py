@@ -79,6 +79,9 @@ class HybridSoV(Diagnostic):
         if self.line is None:
             raise InputError("hybrid-sov needs line=<path of the line file> (its stage: "
                              "attributes define the model)")
+        if not isinstance(self.line, (str, Path)):
+            raise InputError(f"hybrid-sov: line must be the path of a line file, "
+                             f"got {self.line!r}")
         if not Path(self.line).is_file():
             raise InputError(f"hybrid-sov: line file {self.line!s} does not exist")
         if self.selection not in ("LR", "F"):
@@ -87,16 +90,16 @@ class HybridSoV(Diagnostic):
         if self.denoise not in F.DENOISE:
             raise InputError(f"hybrid-sov: denoise must be 'savgol', 'wavelet' or None, got "
                              f"{self.denoise!r}")
-        for key, lo, hi in (("alpha_enter", 0.0, 1.0), ("alpha", 0.0, 1.0)):
-            v = getattr(self, key)
-            if not (isinstance(v, (int, float)) and lo < v < hi):
-                raise InputError(f"hybrid-sov: {key} must be in ({lo}, {hi}), got {v!r}")
+        self._check_alpha()
+        if not 0 < self._number("alpha_enter") < 1:
+            raise InputError(f"hybrid-sov: alpha_enter must be a number in (0, 1), "
+                             f"got {self.alpha_enter!r}")
         # a window over a minute smears every roll change; a limit beyond ±1 MN overflows
         # the Tobit likelihood and censors nothing or everything
-        if not (isinstance(self.window_s, (int, float)) and 0 < self.window_s <= 60.0):
+        if not 0 < self._number("window_s") <= 60.0:
             raise InputError(f"hybrid-sov: window_s must be a finite number > 0 s and at "
                              f"most 60 s, got {self.window_s!r}")
-        if not (isinstance(self.censor_at, (int, float)) and abs(self.censor_at) <= 1e6):
+        if not abs(self._number("censor_at")) <= 1e6:
             raise InputError(f"hybrid-sov: censor_at must be a finite number of newtons "
                              f"within ±1e6 N, got {self.censor_at!r}")
 
