@@ -12,6 +12,7 @@ import yaml
 from test_jacobian import FULL, _assert_jacobian_matches_fd, _state
 
 import r2rsim
+from r2rsim.compile import kernels
 from r2rsim.compile.disturbances import (
     CUTOFF,
     N_SINES,
@@ -19,6 +20,7 @@ from r2rsim.compile.disturbances import (
     autocorrelation,
     realise_disturbances,
 )
+from r2rsim.compile.layout import H_OFF_NP, NP, NP_J
 from r2rsim.errors import InputError
 from r2rsim.schema.loader import load_scenario
 from r2rsim.schema.scenario import ProgrammeStep
@@ -180,6 +182,35 @@ def test_jacobian_with_disturbances(tmp_path, model):
     assert J[iu, iu] != 0.0 and J[ie, iu] != 0.0
     assert plain.jacobian(1.7, y)[ie, iu] == 0.0
     assert (cl.lband, cl.uband) == (plain.lband, plain.uband)  # the band does not grow
+
+
+def test_bearing_drag_cache_never_changes_a_value(tmp_path):
+    # the kernel keeps the last three drag values by time (Radau IIA evaluates each stage
+    # time several times per step): the first evaluation of a fresh line is at t = 0, where
+    # an unmarked (zeroed) slot would match; then repeats, the stage pattern, and more
+    # distinct times than slots
+    path = write(tmp_path / "full.yaml", FULL.format(model="exact", limit=200))
+    line = r2rsim.load_line(path)
+    prog = r2rsim.Programme.from_steps(line, [ProgrammeStep(at=0, line_speed=2.0)])
+    rng = np.random.default_rng(8)
+    n = N_SINES
+    drag = DisturbanceInstance("bearing_drag", "idler1", "sines", amplitudes=np.full(n, 0.01),
+                               omegas=rng.uniform(1, 60, n), phases=rng.uniform(0, 6, n))
+    cl = r2rsim.compile_line(line, prog, (), [drag])
+    plain = r2rsim.compile_line(line, prog)
+    y = _state(cl, np.random.default_rng(3))
+    iw = cl.index("idler1.speed")
+    inertia = cl.P[cl.I[H_OFF_NP] + cl.node_ids.index("idler1") * NP + NP_J]
+    start, end = kernels.scratch_layout(cl.I)
+    times = [0.0, 0.3, 0.3, 0.1, 0.2, 0.3, 0.1, 0.2, 0.3, 0.3, 5.0, 0.7, 0.9, 0.1, 0.0]
+    for t in times:
+        got = cl.rhs(t, y)
+        cl._W[start:end] = np.nan  # the same evaluation with an empty cache
+        assert np.array_equal(got, cl.rhs(t, y))
+        torque = float(np.sum(drag.amplitudes * np.sin(drag.omegas * t + drag.phases)))
+        assert torque != 0.0
+        dw = got[iw] - plain.rhs(t, y)[iw]
+        assert dw == pytest.approx(-torque / inertia, rel=1e-9)
 
 
 def test_disturbances_are_seeded_and_apart_from_measurement_noise(tmp_path):

@@ -195,8 +195,11 @@ class CompiledLine:
 
     def __post_init__(self):
         nq = int(self.I[H_NQ])
-        self._W = np.zeros(4 * self.n_states + 16 * (len(self.node_ids) + len(self.span_ids))
-                           + 8 * (len(self.sensors) + len(self.controllers)) + 16)
+        drag_cache, end = kernels.scratch_layout(self.I)
+        self._W = np.zeros(max(end, 4 * self.n_states + 16 * (len(self.node_ids)
+                                                              + len(self.span_ids))
+                               + 8 * (len(self.sensors) + len(self.controllers)) + 16))
+        self._W[drag_cache:end] = np.nan  # no time matches an empty slot
         self._GI = np.zeros(nq * MAXD, np.int64)
         self._GC = np.zeros(nq, np.int64)
         self._GV = np.zeros(nq * MAXD)

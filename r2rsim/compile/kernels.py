@@ -138,8 +138,38 @@ def _offsets(I):
     oMW = oMF + nM
     oXF = oMW + nM
     oRW0 = oXF + nN
+    oEW = oRW0 + nSe
+    oDC = oEW + 2 * nN
     return (oT, oEM, oL, oLD, oLP, oLPP, oEAE, oV, oR, oOM, oJ, oTRIM, oTCMD, oTM, oRAW, oYS,
-            oU, oE, oMF, oMW, oXF, oRW0)
+            oU, oE, oMF, oMW, oXF, oRW0, oEW, oDC)
+
+
+DRAG_CACHE = 7  # per node: three times, their drag torques, the next slot to fill
+
+
+@njit(cache=True)
+def scratch_layout(I):
+    """(start of the drag cache, length W needs): the compiler sizes W with them and marks
+    the cache empty."""
+    oDC = _offsets(I)[-1]
+    return oDC, oDC + DRAG_CACHE * I[H_NN]
+
+
+@njit(cache=True)
+def _drag(I, P, W, oDC, k, t):
+    """Random bearing-drag torque on node ``k`` at ``t``, through a three-slot cache: Radau
+    IIA evaluates each stage time at every Newton iteration and again at the step's end, and
+    the drag tables are fixed when the line is compiled, so ``t`` alone is the key."""
+    b = oDC + DRAG_CACHE * k
+    for s in range(3):
+        if W[b + s] == t:
+            return W[b + 3 + s]
+    v = table_value(I, P, TB_DRAG, k, t)
+    s = int(W[b + 6]) % 3
+    W[b + s] = t
+    W[b + 3 + s] = v
+    W[b + 6] = s + 1
+    return v
 
 
 # --------------------------------------------------------------------------- mover geometry
@@ -317,7 +347,7 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
     ntb = I[H_NTB]
 
     (oT, oEM, oL, oLD, oLP, oLPP, oEAE, oV, oR, oOM, oJ, oTRIM, oTCMD, oTM, oRAW, oYS, oU, oE,
-     oMF, oMW, oXF, oRW0) = _offsets(I)
+     oMF, oMW, oXF, oRW0, oEW, oDC) = _offsets(I)
     # gradient quantity ids
     qT = 0
     qL = qT + nS
@@ -865,7 +895,7 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         if P[b + NP_RIPA] != 0.0:
             num += P[b + NP_RIPA] * math.sin(P[b + NP_RIPW] * t)
         if ntb > 0:  # random bearing drag torque (a process disturbance)
-            num -= table_value(I, P, TB_DRAG, k, t)
+            num -= _drag(I, P, W, oDC, k, t)
         # eccentric roller: the web's pull on the moving centre, -sum T·dL/dth
         ith = I[oNI + k * NI + NI_TH]
         fu = 0.0
@@ -906,6 +936,10 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             esrc_fwd, desrc = roll_wound_in_strain(P, oNP + k * NP, W[oR + k])
             if ntb > 0:
                 esrc_fwd += table_value(I, P, TB_WOUND, k, y[iU])
+            # kept for the first span (section 11): its sum of sinusoids costs as much as
+            # the rest of the evaluation
+            W[oEW + 2 * k] = esrc_fwd
+            W[oEW + 2 * k + 1] = desrc
             q = _flux(v, xk * esrc_fwd, xk * W[oEM + sp], linear)
         else:
             sp = I[oNI + k * NI + NI_SPAN_UP]
@@ -940,9 +974,13 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         if sp_before >= 0:
             ef = W[oEM + sp_before]
         else:
-            ef, dwa = roll_wound_in_strain(P, oNP + a * NP, W[oR + a])
-            if ntb > 0:
-                ef += table_value(I, P, TB_WOUND, a, y[I[oNI + a * NI + NI_U]])
+            if I[oNI + a * NI + NI_KIND] == NK_UNWIND:
+                ef = W[oEW + 2 * a]
+                dwa = W[oEW + 2 * a + 1]
+            else:
+                ef, dwa = roll_wound_in_strain(P, oNP + a * NP, W[oR + a])
+                if ntb > 0:
+                    ef += table_value(I, P, TB_WOUND, a, y[I[oNI + a * NI + NI_U]])
         xa = W[oXF + a]
         xb = W[oXF + bnode]
         qa = _flux(W[oV + a], xa * ef, xa * W[oEM + i], linear)
@@ -1190,7 +1228,7 @@ def event_values(t, y, g, I, P, W, GI, GC, GV, yd, JJ):
     """
     evaluate(t, y, yd, JJ, MODE_RHS, I, P, W, GI, GC, GV, yd[:0])
     (oT, oEM, oL, oLD, oLP, oLPP, oEAE, oV, oR, oOM, oJ, oTRIM, oTCMD, oTM, oRAW, oYS, oU, oE,
-     oMF, oMW, oXF, oRW0) = _offsets(I)
+     oMF, oMW, oXF, oRW0, oEW, oDC) = _offsets(I)
     oNI = I[H_OFF_NI]
     oSI = I[H_OFF_SI]
     oNP = I[H_OFF_NP]
