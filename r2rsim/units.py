@@ -292,36 +292,83 @@ def _small_int(text: str) -> int:
     return int(text)
 
 
-def _parse_units(tokens: list) -> tuple[float, dict]:
-    """Fold the unit tokens left to right into ``(SI factor, dimensions)``.
+class _UnitFolder:
+    """Folds unit tokens left to right into ``(SI factor, dimensions)``: one pass with an
+    explicit one-level group, so nothing here recurses or loops more than a fixed number
+    of times per token."""
 
-    One pass over the tokens with an explicit one-level group, so nothing here recurses
-    or loops more than a fixed number of times per token.
-    """
-    acc_f, acc_d = 1.0, {}  # value of everything folded so far (the number is outside)
-    op = "*"  # how the pending operand joins acc
-    pend = None  # the latest operand, not yet folded: [factor, dims, may take a power]
-    after_operand = True  # the number itself is an operand: "5 /s" and "5*m" read fine
-    group = None  # (acc_f, acc_d, op) saved at "("; one level only
+    def __init__(self):
+        self.acc_f, self.acc_d = 1.0, {}  # everything folded so far (the number is outside)
+        self.op = "*"  # how the pending operand joins acc
+        self.pend = None  # the latest operand, not yet folded: [factor, dims, may take a power]
+        self.after_operand = True  # the number is an operand: "5 /s" and "5*m" read fine
+        self.group = None  # (acc_f, acc_d, op) saved at "("; one level only
 
-    def fold():
-        nonlocal acc_f, acc_d, pend
-        if pend is not None:
-            f, d, _ = pend
-            acc_f = acc_f * f if op == "*" else acc_f / f
-            acc_d = _combine(acc_d, d, 1 if op == "*" else -1)
-            pend = None
+    def fold(self) -> None:
+        if self.pend is not None:
+            f, d, _ = self.pend
+            sign = 1 if self.op == "*" else -1
+            self.acc_f = self.acc_f * f if sign == 1 else self.acc_f / f
+            self.acc_d = _combine(self.acc_d, d, sign)
+            self.pend = None
 
-    def power(n: int | None) -> None:
-        if pend is None or not pend[2]:
+    def power(self, n: int | None) -> None:
+        """Raise the pending operand to ``n`` (None: only check that there is one)."""
+        if self.pend is None or not self.pend[2]:
             raise _Unreadable("an exponent must follow a unit name or a parenthesis, "
                               "as in 'm^2'")
         if n is None:
             return
-        pend[0] = pend[0] ** n
-        pend[1] = {k: v * n for k, v in pend[1].items() if v * n}
-        pend[2] = False  # "m^2^2" is refused: pint reads it right to left, people may not
+        self.pend[0] = self.pend[0] ** n
+        self.pend[1] = {k: v * n for k, v in self.pend[1].items() if v * n}
+        self.pend[2] = False  # "m^2^2" is refused: pint reads it right to left, people may not
 
+    def operator(self, kind: str, tok: str, pos: int) -> None:
+        if not self.after_operand:
+            raise _Unreadable(f"{tok!r} at position {pos + 1} must follow a unit")
+        self.fold()
+        self.op, self.after_operand = ("*" if kind == "mul" else "/"), False
+
+    def operand(self, pend: list) -> None:
+        if self.after_operand:  # juxtaposition: "N m" is N*m
+            self.fold()
+            self.op = "*"
+        self.pend = pend
+        self.after_operand = True
+
+    def open(self) -> None:
+        if self.after_operand:
+            self.fold()
+            self.op = "*"
+        if self.group is not None:
+            raise _Unreadable("parentheses cannot be nested; write e.g. 'kg/(m*s)'")
+        self.group = (self.acc_f, self.acc_d, self.op)
+        self.acc_f, self.acc_d, self.op, self.pend = 1.0, {}, "*", None
+        self.after_operand = False
+
+    def close(self, pos: int) -> None:
+        if self.group is None:
+            raise _Unreadable(f"')' at position {pos + 1} closes nothing")
+        if not self.after_operand:
+            raise _Unreadable(f"nothing before ')' at position {pos + 1}")
+        self.fold()
+        g_f, g_d = self.acc_f, self.acc_d
+        self.acc_f, self.acc_d, self.op = self.group
+        self.group = None
+        self.pend = [g_f, g_d, True]
+
+    def result(self) -> tuple[float, dict]:
+        if self.group is not None:
+            raise _Unreadable("'(' is never closed")
+        if not self.after_operand:
+            raise _Unreadable("it ends with an operator")
+        self.fold()
+        return self.acc_f, self.acc_d
+
+
+def _parse_units(tokens: list) -> tuple[float, dict]:
+    """Fold the unit tokens left to right into ``(SI factor, dimensions)``."""
+    u = _UnitFolder()
     i = 0
     while i < len(tokens):
         kind, tok, pos = tokens[i]
@@ -329,55 +376,28 @@ def _parse_units(tokens: list) -> tuple[float, dict]:
         if kind == "name" and tok == "per":
             kind, tok = "div", "/"
         if kind in ("mul", "div"):
-            if not after_operand:
-                raise _Unreadable(f"{tok!r} at position {pos + 1} must follow a unit")
-            fold()
-            op, after_operand = ("*" if kind == "mul" else "/"), False
-        elif kind in ("name", "int", "open"):
-            if after_operand:  # juxtaposition: "N m" is N*m
-                fold()
-                op = "*"
-            if kind == "name":
-                f, d = _unit(tok)
-                pend = [f, d, True]
-            elif kind == "int":
-                # "1/min", "5 1/s": a literal 1 is accepted only as a numerator
-                if tok != "1" or i >= len(tokens) or tokens[i][0] != "div":
-                    raise _Unreadable(f"unexpected number {tok!r} at position {pos + 1}; "
-                                      "only one number, at the start, is allowed")
-                pend = [1.0, {}, False]
-            else:
-                if group is not None:
-                    raise _Unreadable("parentheses cannot be nested; write e.g. 'kg/(m*s)'")
-                group = (acc_f, acc_d, op)
-                acc_f, acc_d, op, pend = 1.0, {}, "*", None
-                after_operand = False
-                continue
-            after_operand = True
+            u.operator(kind, tok, pos)
+        elif kind == "name":
+            u.operand([*_unit(tok), True])
+        elif kind == "int":
+            # "1/min", "5 1/s": a literal 1 is accepted only as a numerator
+            if tok != "1" or i >= len(tokens) or tokens[i][0] != "div":
+                raise _Unreadable(f"unexpected number {tok!r} at position {pos + 1}; "
+                                  "only one number, at the start, is allowed")
+            u.operand([1.0, {}, False])
+        elif kind == "open":
+            u.open()
         elif kind == "close":
-            if group is None:
-                raise _Unreadable(f"')' at position {pos + 1} closes nothing")
-            if not after_operand:
-                raise _Unreadable(f"nothing before ')' at position {pos + 1}")
-            fold()
-            g_f, g_d = acc_f, acc_d
-            acc_f, acc_d, op = group
-            group = None
-            pend = [g_f, g_d, True]
+            u.close(pos)
         elif kind == "pow":
-            power(None)  # check there is something to raise before reading the exponent
+            u.power(None)  # check there is something to raise before reading the exponent
             n, i = _exponent(tokens, i)
-            power(n)
+            u.power(n)
         elif kind == "sup":
-            power(_small_int(tok.translate(_SUPERSCRIPTS)))
+            u.power(_small_int(tok.translate(_SUPERSCRIPTS)))
         else:  # pragma: no cover - every token kind is handled above
             raise _Unreadable(f"unexpected {tok!r} at position {pos + 1}")
-    if group is not None:
-        raise _Unreadable("'(' is never closed")
-    if not after_operand:
-        raise _Unreadable("it ends with an operator")
-    fold()
-    return acc_f, acc_d
+    return u.result()
 
 
 def _parse_text(text: str) -> tuple[float, dict]:

@@ -144,17 +144,9 @@ def _column(batch: pa.RecordBatch, name: str) -> np.ndarray | list:
 def _check_samples(part: Path, run: dict, rows: list[dict], channels: list[str],
                    labels: bool = True) -> list[str]:
     """The problems of one run's samples file, read batch by batch."""
-    problems: list[str] = []
     pf = pq.ParquetFile(part)
     names = pf.schema_arrow.names
-    if ["run_id", *names] != channels:
-        extra = sorted(set(names) - set(channels) - {"run_id"})
-        missing = sorted(set(channels) - set(names) - {"run_id"})
-        problems.append(f"sample columns differ from channels.parquet "
-                        f"(not listed: {extra[:5]}, absent: {missing[:5]})")
-    n = pf.metadata.num_rows
-    if n != run["n_samples"]:
-        problems.append(f"{n} rows but runs.n_samples = {run['n_samples']}")
+    problems = _check_layout(pf, run, channels)
     if "k" not in names or "t_s" not in names:
         return [*problems, "no k or t_s column"]
     if not labels:
@@ -166,11 +158,7 @@ def _check_samples(part: Path, run: dict, rows: list[dict], channels: list[str],
     if run["terminated"]:
         if not run["termination_reason"]:
             problems.append("terminated without a termination_reason")
-        for i in reversed(range(pf.num_row_groups)):  # the last sample's k
-            last = pf.read_row_group(i, columns=["k"]).column("k")
-            if len(last):
-                terminated_k = int(last[-1].as_py())
-                break
+        terminated_k = _last_k(pf)
     sensor_channels = {c[len("label.ch."):].split(".")[0]: c[len("label.ch."):]
                        for c in names if c.startswith("label.ch.")}
     modes = json.loads(run.get("modes_json") or "[]")
@@ -191,30 +179,10 @@ def _check_samples(part: Path, run: dict, rows: list[dict], channels: list[str],
             reported.add("k")
         k_next += m
         t_last = float(t[-1])
-        for f in rows:
-            if onset_seen[f["fault_id"]]:
-                continue
-            first = int(np.searchsorted(t, f["onset_t_s"] - 1e-9))
-            if first < m:
-                onset_seen[f["fault_id"]] = True
-                if f["onset_k"] != int(k[first]):
-                    problems.append(f"fault {f['fault_id']} onset_k = {f['onset_k']}, but "
-                                    f"the first sample at or after its onset is {k[first]}")
+        problems += _check_onsets(rows, k, t, onset_seen)
         want = derive_labels(rows, k, t, warmup=run["warmup_s"], modes=modes,
                              terminated_k=terminated_k, sensor_channels=sensor_channels)
-        for name, expected in want.items():
-            if name in reported:
-                continue
-            if name not in names:
-                problems.append(f"label column {name} missing")
-                reported.add(name)
-                continue
-            got = _column(batch, name)
-            bad = _first_difference(name, got, expected)
-            if bad is not None:
-                problems.append(f"{name} at k = {k[bad]} is {_item(got[bad])!r}; "
-                                f"faults.parquet gives {_item(expected[bad])!r}")
-                reported.add(name)
+        problems += _check_labels(batch, k, want, names, reported)
         if first_onset is not None and "early" not in reported and "label.is_faulty" in names:
             early = _column(batch, "label.is_faulty").astype(bool) & (t < first_onset - 1e-12)
             if early.any():
@@ -223,6 +191,67 @@ def _check_samples(part: Path, run: dict, rows: list[dict], channels: list[str],
     if run["terminated"] and t_last is not None and run["termination_t_s"] is not None \
             and t_last > run["termination_t_s"] + 1e-9:
         problems.append("samples after termination_t_s")
+    return problems
+
+
+def _check_layout(pf: pq.ParquetFile, run: dict, channels: list[str]) -> list[str]:
+    """The samples' columns against channels.parquet, their rows against runs.parquet."""
+    problems = []
+    names = pf.schema_arrow.names
+    if ["run_id", *names] != channels:
+        extra = sorted(set(names) - set(channels) - {"run_id"})
+        missing = sorted(set(channels) - set(names) - {"run_id"})
+        problems.append(f"sample columns differ from channels.parquet "
+                        f"(not listed: {extra[:5]}, absent: {missing[:5]})")
+    n = pf.metadata.num_rows
+    if n != run["n_samples"]:
+        problems.append(f"{n} rows but runs.n_samples = {run['n_samples']}")
+    return problems
+
+
+def _last_k(pf: pq.ParquetFile) -> int | None:
+    """The last sample's k (row groups read from the end until one has rows)."""
+    for i in reversed(range(pf.num_row_groups)):
+        last = pf.read_row_group(i, columns=["k"]).column("k")
+        if len(last):
+            return int(last[-1].as_py())
+    return None
+
+
+def _check_onsets(rows: list[dict], k: np.ndarray, t: np.ndarray, seen: dict) -> list[str]:
+    """Each fault's onset_k against the first sample at or after its onset, in the batch
+    (k, t) that holds it (``seen`` marks the faults already checked)."""
+    problems = []
+    for f in rows:
+        if seen[f["fault_id"]]:
+            continue
+        first = int(np.searchsorted(t, f["onset_t_s"] - 1e-9))
+        if first < len(k):
+            seen[f["fault_id"]] = True
+            if f["onset_k"] != int(k[first]):
+                problems.append(f"fault {f['fault_id']} onset_k = {f['onset_k']}, but "
+                                f"the first sample at or after its onset is {k[first]}")
+    return problems
+
+
+def _check_labels(batch, k: np.ndarray, want: dict, names: list[str],
+                  reported: set[str]) -> list[str]:
+    """The batch's label columns against those derived from faults.parquet: one message
+    per column, at its first difference (``reported`` holds the columns already told)."""
+    problems = []
+    for name, expected in want.items():
+        if name in reported:
+            continue
+        if name not in names:
+            problems.append(f"label column {name} missing")
+            reported.add(name)
+            continue
+        got = _column(batch, name)
+        bad = _first_difference(name, got, expected)
+        if bad is not None:
+            problems.append(f"{name} at k = {k[bad]} is {_item(got[bad])!r}; "
+                            f"faults.parquet gives {_item(expected[bad])!r}")
+            reported.add(name)
     return problems
 
 

@@ -104,8 +104,6 @@ def line_problems(line) -> list[tuple[str, str, str]]:
     """Plausibility of a validated :class:`r2rsim.schema.line.Line`:
     ``[(level, yaml_path, message), ...]``, errors and warnings in file order."""
     out: list[tuple[str, str, str]] = []
-    web = line.web
-    els = line.elements
 
     def err(path, msg):
         out.append((ERROR, path, msg))
@@ -113,7 +111,20 @@ def line_problems(line) -> list[tuple[str, str, str]]:
     def warn(path, msg):
         out.append((WARNING, path, msg))
 
-    # the web
+    for check in (_web_properties, _web_wraps, _web_strength, _roll_sizes, _span_lengths):
+        check(line, err, warn)
+    # tension set-points
+    for j, c in enumerate(line.controllers):
+        if c.type == "tension_pi":
+            out += tension_problems(line, c.setpoint, f"controllers[{j}].setpoint")
+    if not any(level == ERROR for level, _, _ in out):  # the loop estimates need a sane web
+        out += controller_problems(line)
+    return out
+
+
+def _web_properties(line, err, warn) -> None:
+    """Modulus, density, thickness and width against the range of real webs."""
+    web = line.web
     if web.modulus > MODULUS_MAX:
         err("web.modulus", f"{_fmt(web.modulus)} Pa is stiffer than diamond (1.2e12 Pa), the "
             "stiffest solid; web moduli are 3-130 GPa (physics.md §2.1)")
@@ -132,6 +143,11 @@ def line_problems(line) -> list[tuple[str, str, str]]:
     if not WIDTH_RANGE[0] <= web.width <= WIDTH_RANGE[1]:
         warn("web.width", f"{_fmt(web.width)} m is outside the range of webs (10 mm to 12 m; "
              "physics.md §2.1: 0.3-10 m)")
+
+
+def _web_wraps(line, err, warn) -> None:
+    """The web must be thin compared with the smallest radius it wraps."""
+    web, els = line.web, line.elements
     radii = []  # (radius, path) of everything the web wraps
     for i, e in enumerate(els):
         if e.type in ("unwind", "rewind"):
@@ -144,6 +160,11 @@ def line_problems(line) -> list[tuple[str, str, str]]:
             err("web.thickness", f"a web {_fmt(web.thickness)} m thick cannot wrap a roller of "
                 f"radius {_fmt(r_min)} m ({where}): a web is thin compared with its rollers "
                 "(physics.md §2.1: 6-250 µm)")
+
+
+def _web_strength(line, err, warn) -> None:
+    """Break stress: given (or said to be absent), and within what solids can bear."""
+    web = line.web
     if web.break_stress is None:
         if web.breakable:
             warn("web.break_stress", "not given, and no material preset gives one: the web "
@@ -157,6 +178,11 @@ def line_problems(line) -> list[tuple[str, str, str]]:
         warn("web.break_stress", f"the web would stretch by {web.break_stress / web.modulus:.0%}"
              " before it breaks (break_stress / modulus): the linear-elastic span model "
              "T = EA·strain is not meant for that")
+
+
+def _roll_sizes(line, err, warn) -> None:
+    """Every roll (and spare roll) holds at least one wrap of web."""
+    web, els = line.web, line.elements
     for i, e in enumerate(els):
         for key in ("roll", "spare_roll"):
             roll = getattr(e, key, None)
@@ -168,7 +194,11 @@ def line_problems(line) -> list[tuple[str, str, str]]:
                      f"the roll holds less than one wrap of web ({_fmt(cw)} m per wrap between "
                      f"radii {_fmt(roll.core_radius)} and {_fmt(roll.outer_radius)} m): it is "
                      "empty at once")
-    # spans
+
+
+def _span_lengths(line, err, warn) -> None:
+    """Free spans between 1 mm (an error: too stiff to integrate) and the range of lines."""
+    web = line.web
     for i, sp in enumerate(line.spans):
         if sp.length is None:
             continue
@@ -180,13 +210,6 @@ def line_problems(line) -> list[tuple[str, str, str]]:
         elif not SPAN_RANGE[0] <= sp.length <= SPAN_RANGE[1]:
             warn(f"spans[{i}].length", f"{_fmt(sp.length)} m is outside the range of free "
                  "spans (10 mm to 100 m; physics.md §2.2: 0.03-30 m)")
-    # tension set-points
-    for j, c in enumerate(line.controllers):
-        if c.type == "tension_pi":
-            out += tension_problems(line, c.setpoint, f"controllers[{j}].setpoint")
-    if not any(level == ERROR for level, _, _ in out):  # the loop estimates need a sane web
-        out += controller_problems(line)
-    return out
 
 
 def tension_problems(line, tension: float, path: str) -> list[tuple[str, str, str]]:

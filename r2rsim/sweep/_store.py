@@ -375,23 +375,39 @@ class SweepStore:
 
     def finalise(self, outcomes: dict[str, Outcome]) -> Path:
         """Build the dataset from the runs' outcomes (every run of the plan has one)."""
-        plan = self.plan
         self.check_foreign()  # files put there while the sweep ran are not adopted
         tmp = self.work / ".final"
         if tmp.exists():
             shutil.rmtree(tmp)
         tmp.mkdir()
+        meta = {b"r2rsim.schema_version": SCHEMA_VERSION.encode(),
+                b"r2rsim.version": __version__.encode(),
+                b"r2rsim.sweep": self.plan.sweep.name.encode()}
+        run_ids, failure_rows, channels = self._merge_tables(outcomes, tmp, meta)
+        pq.write_table(pa.Table.from_pylist(failure_rows, schema=failures_schema(self.plan))
+                       .replace_schema_metadata(meta), tmp / "failures.parquet",
+                       compression="zstd")
+        if channels is None:
+            channels = pa.table({"channel": pa.array([], pa.string())})
+        pq.write_table(channels.replace_schema_metadata(meta), tmp / "channels.parquet",
+                       compression="zstd")
+        known_sha: dict = {}
+        self._place_samples(outcomes, known_sha)
+        self._install(tmp, run_ids, [r["run_id"] for r in failure_rows], known_sha)
+        return self.out
+
+    def _merge_tables(self, outcomes: dict[str, Outcome], tmp: Path, meta: dict):
+        """Write the runs' small tables (``TABLES``), run after run in the plan's order, to
+        ``tmp``; return the finished run ids, the failed runs' rows and the merged channels
+        table (None when no run finished)."""
         old = _OldTables(self.out) if self.final is not None else None
         writers: dict[str, _TableWriter] = {}
         schemas = {"faults": FAULTS_SCHEMA, "events": EVENTS_SCHEMA,
                    "variability": VARIABILITY_SCHEMA}
-        meta = {b"r2rsim.schema_version": SCHEMA_VERSION.encode(),
-                b"r2rsim.version": __version__.encode(),
-                b"r2rsim.sweep": plan.sweep.name.encode()}
         channels, old_channels, seen_channels = None, False, set()
-        run_ids, failure_rows, known_sha = [], [], {}
+        run_ids, failure_rows = [], []
         try:
-            for spec in plan.runs:
+            for spec in self.plan.runs:
                 o = outcomes[spec.run_id]
                 if o.where is None:
                     failure_rows.append({"run_id": spec.run_id, "seed": spec.seed,
@@ -410,16 +426,8 @@ class SweepStore:
                                                      schema.with_metadata(meta))
                     writers[name].add(table.replace_schema_metadata(None).cast(schema))
                 if o.where == "work" or not old_channels:
-                    # every run's (those of a reopened dataset as one): a swept record_rate,
-                    # sensor rate or range changes them. Runs whose file has the same bytes
-                    # (its sha256 in their manifest) are not read again.
-                    sha = (_listed_sha(self.work / spec.run_id, "channels.parquet")
-                           if o.where == "work" else None)
-                    if sha is None or sha not in seen_channels:
-                        channels = _merge_channels(channels, pq.read_table(
-                            self.work / spec.run_id / "channels.parquet" if o.where == "work"
-                            else self.out / "channels.parquet"))
-                        seen_channels.add(sha)
+                    channels = self._add_channels(channels, spec.run_id, o.where,
+                                                  seen_channels)
                     old_channels = old_channels or o.where != "work"
             for name in TABLES:
                 if name not in writers:  # no run has data
@@ -429,30 +437,39 @@ class SweepStore:
         finally:
             for w in writers.values():
                 w.close()
-        pq.write_table(pa.Table.from_pylist(failure_rows, schema=failures_schema(plan))
-                       .replace_schema_metadata(meta), tmp / "failures.parquet",
-                       compression="zstd")
-        if channels is None:
-            channels = pa.table({"channel": pa.array([], pa.string())})
-        pq.write_table(channels.replace_schema_metadata(meta), tmp / "channels.parquet",
-                       compression="zstd")
-        self._place_samples(outcomes, known_sha)
+        return run_ids, failure_rows, channels
+
+    def _add_channels(self, channels, run_id: str, where: str, seen: set):
+        """``channels`` merged with a run's channels table: every run's (those of a reopened
+        dataset as one), since a swept record_rate, sensor rate or range changes them. A run
+        whose file has bytes already merged (its sha256 in its manifest) is not read again."""
+        sha = _listed_sha(self.work / run_id, "channels.parquet") if where == "work" else None
+        if sha is not None and sha in seen:
+            return channels
+        seen.add(sha)
+        return _merge_channels(channels, pq.read_table(
+            self.work / run_id / "channels.parquet" if where == "work"
+            else self.out / "channels.parquet"))
+
+    def _install(self, tmp: Path, run_ids: list[str], failed: list[str],
+                 known_sha: dict) -> None:
+        """Move the merged tables into the dataset, write the plan's files and the manifest,
+        and remove the work directory and the marker: the dataset is complete."""
         # the old manifest stays until the new one replaces it: the marker already says the
         # dataset is unfinished, and a resume needs the old checksums
         for p in tmp.iterdir():
             os.replace(p, self.out / p.name)
         for rel in (self.final or {}).get("files", {}):  # copies of renamed files
-            if rel.startswith(("sweep/", "scenario/")) and rel not in plan.files:
+            if rel.startswith(("sweep/", "scenario/")) and rel not in self.plan.files:
                 (self.out / rel).unlink(missing_ok=True)
-        for rel, text in plan.files.items():
+        for rel, text in self.plan.files.items():
             target = self.out / rel
             target.parent.mkdir(parents=True, exist_ok=True)
             target.write_text(text, encoding="utf-8")
-        self._write_manifest(run_ids, [r["run_id"] for r in failure_rows], known_sha)
+        self._write_manifest(run_ids, failed, known_sha)
         shutil.rmtree(self.work)
         self.close()
         self.marker.unlink()
-        return self.out
 
     def _place_samples(self, outcomes: dict[str, Outcome], known_sha: dict) -> None:
         """Hard-link (else copy) the samples of the runs in .work/ into samples/, and
