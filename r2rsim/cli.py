@@ -544,7 +544,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"r2rsim {__version__}")
     p.add_argument("--debug", action="store_true", help="show tracebacks on errors")
     sub = p.add_subparsers(dest="command", required=True)
+    for add in (_add_run_parser, _add_sweep_parser, _add_file_parsers, _add_diagnose_parser,
+                _add_bench_parser, _add_report_parser, _add_list_parser, _add_plot_parser):
+        add(sub)
+    for sp in sub.choices.values():  # `r2rsim run X --debug` as well as `r2rsim --debug run X`
+        sp.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                        help="show tracebacks on errors")
+    return p
 
+
+def _add_run_parser(sub) -> None:
     r = sub.add_parser("run", help="run a scenario and write its dataset")
     r.add_argument("scenario")
     r.add_argument("-o", "--output", help="dataset directory (default: the scenario's "
@@ -559,6 +568,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=_cmd_run)
 
+
+def _add_sweep_parser(sub) -> None:
     sw = sub.add_parser("sweep", help="run a sweep file (a base scenario x axes x seeds) "
                         "into one dataset; continues an unfinished one")
     sw.add_argument("sweep")
@@ -577,6 +588,9 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     sw.set_defaults(func=_cmd_sweep)
 
+
+def _add_file_parsers(sub) -> None:
+    """``validate`` and ``schema``."""
     v = sub.add_parser("validate", help="check line, scenario and sweep files and datasets, "
                        "list every problem")
     v.add_argument("files", nargs="+")
@@ -587,6 +601,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("kind", choices=["line", "scenario", "sweep"])
     s.set_defaults(func=_cmd_schema)
 
+
+def _add_diagnose_parser(sub) -> None:
     d = sub.add_parser("diagnose", help="fit a diagnostic plug-in on healthy runs, score "
                        "test runs, write predictions and metrics")
     d.add_argument("--method", required=True, help="registered plug-in (r2rsim list plugins)")
@@ -629,6 +645,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="use datasets whose files differ from their manifest.json checksums")
     d.set_defaults(func=_cmd_diagnose)
 
+
+def _add_bench_parser(sub) -> None:
     b = sub.add_parser("bench", help="run a diagnostic benchmark spec and compare with its "
                        "baseline results (non-zero exit on a regression)")
     b.add_argument("spec")
@@ -639,20 +657,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="reuse --workdir datasets without checking their checksums")
     b.set_defaults(func=_cmd_bench)
 
-    _add_report_parser(sub)
 
+def _add_list_parser(sub) -> None:
     ls = sub.add_parser("list", help="list element, sensor, controller or fault types, "
                         "diagnostic plug-ins, or the channels of a line")
     ls.add_argument("what", choices=["elements", "sensors", "controllers", "faults",
                                      "plugins", "channels"])
     ls.add_argument("line", nargs="?", help="line file (for 'channels')")
     ls.set_defaults(func=_cmd_list)
-
-    _add_plot_parser(sub)
-    for sp in sub.choices.values():  # `r2rsim run X --debug` as well as `r2rsim --debug run X`
-        sp.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
-                        help="show tracebacks on errors")
-    return p
 
 
 def main(argv: list[str] | None = None) -> int:
