@@ -454,13 +454,6 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
 
 def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mode, outputs,
          events, faults, backend, sample_t, wall0, rolls=None):
-    logic = DiscreteLogic(cl, events, faults, duration, rolls)
-    step_budget = s.max_steps_per_s * max(duration, 1.0)
-    compile0 = compile_seconds()
-    prog_breaks = sorted(b for b in cl.programme.breakpoints if 0.0 < b < duration)
-    rows_per_chunk = max(16, int(s.chunk_memory_mb * 1e6 / 8 / max(cl.n_states + len(
-        cl.aux_names), 1)))
-
     keep = on_chunk is None
     kept_t, kept_y, kept_a = [], [], []
 
@@ -475,132 +468,184 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
         else:
             on_chunk(t, Y, A)
 
-    log: list[Event] = []
-    mode_idx = np.array([m for m, k in enumerate(cl.event_kinds) if k in MODE_EVENTS], int)
+    loop = _EventLoop(cl, DiscreteLogic(cl, events, faults, duration, rolls), duration, s,
+                      backend, sample_t, emit, progress, wall0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        loop.run(y0)
+    T_all, Y_all, A_all = _kept(cl, kept_t, kept_y, kept_a, keep, outputs)
+    wall = _time.perf_counter() - wall0
+    stats = {"nfev": backend.nfev, "njev": backend.njev, "restarts": loop.restarts,
+             "wall_s": wall, "steps": backend.steps if s.backend != "radau" else None,
+             "solver": describe_settings(s), "n_samples": int(loop.k_next),
+             "solver_messages": list(getattr(backend, "messages", []))[:20]}
+    return SimulationResult(cl, T_all, Y_all, A_all, loop.log, loop.terminated, loop.reason,
+                            loop.t_term, stats, duration, initial_state_mode, y0)
 
-    record = log.extend
 
-    def refresh_mode_flags(t, y, flags):
+class _EventLoop:
+    """Integration from discrete change to discrete change: chunks of samples between the
+    programme's breakpoints and the discrete logic's times, events found on the solver's
+    steps (or by CVODE's root finding when "hot") and fired, samples emitted in order.
+
+    Event detection is normally on the solver's steps after each chunk (cheap, but the part
+    of the chunk after an event is integrated again). After a discrete change or an event
+    more events tend to follow (a splice joint crossing nodes, a dancer at its stops), so the
+    next chunks use CVODE's root finding, which stops at the event ("hot").
+    """
+
+    def __init__(self, cl, logic, duration, s, backend, sample_t, emit, progress, wall0):
+        self.cl, self.logic, self.duration, self.s = cl, logic, duration, s
+        self.backend, self.sample_t, self.emit, self.progress = backend, sample_t, emit, progress
+        self.wall0 = wall0
+        self.step_budget = s.max_steps_per_s * max(duration, 1.0)
+        self.compile0 = compile_seconds()
+        self.prog_breaks = sorted(b for b in cl.programme.breakpoints if 0.0 < b < duration)
+        self.rows_per_chunk = max(16, int(s.chunk_memory_mb * 1e6 / 8 / max(
+            cl.n_states + len(cl.aux_names), 1)))
+        self.mode_idx = np.array([m for m, k in enumerate(cl.event_kinds)
+                                  if k in MODE_EVENTS], int)
+        self.log: list[Event] = []
+        self.k_next = 0  # next sample index to emit
+        self.terminated, self.reason, self.t_term = False, None, None
+        self.restarts = 0
+        self.hot = False
+        self.resume = False  # the last chunk ended at a memory boundary only: continue
+
+    def run(self, y0) -> None:
+        cl, logic = self.cl, self.logic
+        cl.set_segment_start(0.0)
+        self.y, entries = logic.apply_due(0.0, y0.copy())
+        self.log.extend(entries)
+        self.flags = (cl.events(0.0, self.y)[0] < 0 if len(cl.event_kinds)
+                      else np.zeros(0, bool))
+        self.t = 0.0
+        if _broken_at_start(cl, self.y, self.flags, self.log):
+            self.k_next = _emit_samples(self.emit, self.sample_t, self.k_next,
+                                        np.array([0.0]), self.y[None, :])
+            self.terminated, self.reason, self.t_term = True, EVENT_NAMES[EV_BREAK], 0.0
+        while self.t < self.duration - 1e-12 and not self.terminated:
+            if logic.next_time() <= self.t + 1e-12 and not self._apply_due():
+                break
+            event = self._chunk()
+            if event is not None:
+                self._fire_at(*event)
+
+    def _refresh_mode_flags(self, t, y, flags):
         # after a discrete change the mode events' functions mean something new: re-read
         # them (a value exactly at 0 keeps the flag it had)
-        if len(mode_idx):
-            g = cl.events(t, y)[0]
-            for m in mode_idx:
+        if len(self.mode_idx):
+            g = self.cl.events(t, y)[0]
+            for m in self.mode_idx:
                 if g[m] != 0.0:
                     flags[m] = g[m] < 0
         return flags
 
-    cl.set_segment_start(0.0)
-    y0_applied, entries = logic.apply_due(0.0, y0.copy())
-    record(entries)
-    y = y0_applied
-    flags = cl.events(0.0, y)[0] < 0 if len(cl.event_kinds) else np.zeros(0, bool)
-    t = 0.0
-    k_next = 0  # next sample index to emit
-    terminated, reason, t_term = False, None, None
-    restarts = 0
-    if _broken_at_start(cl, y, flags, log):
-        k_next = _emit_samples(emit, sample_t, k_next, np.array([0.0]), y[None, :])
-        terminated, reason, t_term = True, EVENT_NAMES[EV_BREAK], 0.0
-    # Event detection: normally on the solver's steps after each chunk (cheap, but the part
-    # of the chunk after an event is integrated again). After a discrete change or an event
-    # more events tend to follow (a splice joint crossing nodes, a dancer at its stops), so
-    # the next chunks use CVODE's root finding, which stops at the event ("hot").
-    hot = False
-    resume = False  # the last chunk ended at a memory boundary only: continue smoothly
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        while t < duration - 1e-12 and not terminated:
-            if logic.next_time() <= t + 1e-12:
-                y, entries = logic.apply_due(t, y)
-                record(entries)
-                if logic.terminate_reason is not None:
-                    terminated, reason, t_term = True, logic.terminate_reason, t
-                    break
-                flags = refresh_mode_flags(t, y, flags)
-                hot = True
-                resume = False
-            bps = [b for b in (*prog_breaks, *logic.extra_breakpoints()) if b > t + 1e-12]
-            t_seg_end = min([*bps, logic.next_time(), duration])
-            cl.set_segment_start(t)
-            # samples in [t, t_seg_end]
-            # a sample on a segment's end belongs to the next segment: it sees the discrete
-            # change made there (a fault acts from its onset sample on)
-            k_end = int(np.searchsorted(sample_t, t_seg_end + (1e-9 if t_seg_end >= duration
-                                                               else -1e-9), side="right"))
-            k_hi = min(k_end, k_next + rows_per_chunk)
-            tspan = _chunk_times(t, sample_t, k_next, k_hi, k_end, t_seg_end)
-            tt, Y, err, ts, ys, root = backend.solve(tspan, y, find_events=hot,
-                                                     resume=resume)
-            resume = False
-            restarts += 1
-            if err is None:
-                err = _over_budget(s, backend.steps, step_budget, wall0, ts,
-                                   compile_seconds() - compile0)
-            if err is not None:
-                k_next = _emit_samples(emit, sample_t, k_next, tt, Y, k_end)
-                terminated, reason = True, f"solver_failure: {err}"
-                t_term = float(ts[-1]) if len(ts) else t
-                break
-            if root is not None:  # hot: CVODE stopped at a root
-                t_ev, y_ev, dirs = root
-                # a falling event function makes the condition (g < 0) true
-                which = np.array([m for m in np.nonzero(dirs)[0]
-                                  if (dirs[m] < 0) != flags[m]], int)
-                if not len(which):  # touched 0 and turned back: nothing changes
-                    k_next = _emit_samples(emit, sample_t, k_next, tt[tt < t_ev - 1e-12],
-                                           Y[tt < t_ev - 1e-12])
-                    if t_ev <= t + 1e-12:  # stuck on a root at the start: step past it
-                        hot = False
-                    t, y = t_ev, y_ev.copy()
-                    continue
-            else:
-                # event detection at the solver's steps (as CVODE's own root finding does)
-                hit = (_event_on_steps(cl, flags, ts, ys)
-                       if len(cl.event_kinds) and not backend.locates_events(hot) else None)
-                if hit is None:
-                    k_next = _emit_samples(emit, sample_t, k_next, tt, Y, k_end)
-                    t, y = float(tt[-1]), Y[-1].copy()
-                    resume = k_hi < k_end and not hot
-                    hot = False
-                    if progress:
-                        progress(t)
-                    continue
-                # an event between steps hit_row-1 and hit_row: locate it exactly from the
-                # earlier step, then emit the samples before it
-                hit_row, cond = hit
-                r0 = hit_row - 1
-                found = backend.locate(float(ts[r0]), ys[r0].copy(), float(ts[hit_row]))
-                if found is None:  # no root seen by CVODE (g grazing 0): take the step
-                    t_ev, y_ev = float(ts[hit_row]), ys[hit_row].copy()
-                    which = np.nonzero(cond[hit_row] != flags)[0]
-                else:  # only the events found at this root flip; others seen from here on
-                    t_ev, y_ev, which = found
-                    which = np.array([m for m in which if cond[hit_row, m] != flags[m]]
-                                     or which)
-            hot = True
-            before = tt < t_ev - 1e-12
-            k_next = _emit_samples(emit, sample_t, k_next, tt[before], Y[before])
-            new_flags = flags.copy()
-            new_flags[which] = ~flags[which]
-            y_ev, ended = _fire(cl, logic, log, which, new_flags, t_ev, y_ev)
-            if ended is not None:
-                terminated, reason, t_term = True, ended, t_ev
-            flags = refresh_mode_flags(t_ev, y_ev, new_flags)
-            if terminated:
-                break
-            t, y = t_ev, y_ev
-            if progress:
-                progress(t)
-    events = log
-    T_all, Y_all, A_all = _kept(cl, kept_t, kept_y, kept_a, keep, outputs)
-    wall = _time.perf_counter() - wall0
-    stats = {"nfev": backend.nfev, "njev": backend.njev, "restarts": restarts, "wall_s": wall,
-             "steps": backend.steps if s.backend != "radau" else None,
-             "solver": describe_settings(s), "n_samples": int(k_next),
-             "solver_messages": list(getattr(backend, "messages", []))[:20]}
-    return SimulationResult(cl, T_all, Y_all, A_all, events, terminated, reason, t_term, stats,
-                            duration, initial_state_mode, y0)
+    def _apply_due(self) -> bool:
+        """The discrete logic's changes due now; False when they end the run."""
+        self.y, entries = self.logic.apply_due(self.t, self.y)
+        self.log.extend(entries)
+        if self.logic.terminate_reason is not None:
+            self.terminated, self.reason, self.t_term = True, self.logic.terminate_reason, self.t
+            return False
+        self.flags = self._refresh_mode_flags(self.t, self.y, self.flags)
+        self.hot = True
+        self.resume = False
+        return True
+
+    def _chunk(self):
+        """Integrate the next chunk of samples up to the segment's end. Returns None when
+        the chunk ends without an event (its samples emitted, or the run ended), else the
+        event to fire: (t_ev, y_ev, which, tt, Y)."""
+        t, logic = self.t, self.logic
+        bps = [b for b in (*self.prog_breaks, *logic.extra_breakpoints()) if b > t + 1e-12]
+        t_seg_end = min([*bps, logic.next_time(), self.duration])
+        self.cl.set_segment_start(t)
+        # samples in [t, t_seg_end]; a sample on a segment's end belongs to the next
+        # segment: it sees the discrete change made there (a fault acts from its onset on)
+        k_end = int(np.searchsorted(self.sample_t, t_seg_end + (
+            1e-9 if t_seg_end >= self.duration else -1e-9), side="right"))
+        k_hi = min(k_end, self.k_next + self.rows_per_chunk)
+        tspan = _chunk_times(t, self.sample_t, self.k_next, k_hi, k_end, t_seg_end)
+        tt, Y, err, ts, ys, root = self.backend.solve(tspan, self.y, find_events=self.hot,
+                                                      resume=self.resume)
+        self.resume = False
+        self.restarts += 1
+        if err is None:
+            err = _over_budget(self.s, self.backend.steps, self.step_budget, self.wall0, ts,
+                               compile_seconds() - self.compile0)
+        if err is not None:
+            self.k_next = _emit_samples(self.emit, self.sample_t, self.k_next, tt, Y, k_end)
+            self.terminated, self.reason = True, f"solver_failure: {err}"
+            self.t_term = float(ts[-1]) if len(ts) else t
+            return None
+        if root is not None:  # hot: CVODE stopped at a root
+            return self._at_root(root, tt, Y)
+        return self._on_steps(tt, Y, ts, ys, k_hi, k_end)
+
+    def _at_root(self, root, tt, Y):
+        """CVODE stopped at a root: the events whose condition turns, or None (and the
+        samples before it emitted) when the function touched 0 and turned back."""
+        t_ev, y_ev, dirs = root
+        # a falling event function makes the condition (g < 0) true
+        which = np.array([m for m in np.nonzero(dirs)[0]
+                          if (dirs[m] < 0) != self.flags[m]], int)
+        if len(which):
+            return t_ev, y_ev, which, tt, Y
+        before = tt < t_ev - 1e-12
+        self.k_next = _emit_samples(self.emit, self.sample_t, self.k_next, tt[before],
+                                    Y[before])
+        if t_ev <= self.t + 1e-12:  # stuck on a root at the start: step past it
+            self.hot = False
+        self.t, self.y = t_ev, y_ev.copy()
+        return None
+
+    def _on_steps(self, tt, Y, ts, ys, k_hi, k_end):
+        """Event detection at the solver's steps (as CVODE's own root finding does): the
+        first event located exactly, or None with the chunk's samples emitted."""
+        cl, backend = self.cl, self.backend
+        hit = (_event_on_steps(cl, self.flags, ts, ys)
+               if len(cl.event_kinds) and not backend.locates_events(self.hot) else None)
+        if hit is None:
+            self.k_next = _emit_samples(self.emit, self.sample_t, self.k_next, tt, Y, k_end)
+            self.t, self.y = float(tt[-1]), Y[-1].copy()
+            self.resume = k_hi < k_end and not self.hot
+            self.hot = False
+            if self.progress:
+                self.progress(self.t)
+            return None
+        # an event between steps hit_row-1 and hit_row: locate it exactly from the earlier
+        # step
+        hit_row, cond = hit
+        r0 = hit_row - 1
+        found = backend.locate(float(ts[r0]), ys[r0].copy(), float(ts[hit_row]))
+        if found is None:  # no root seen by CVODE (g grazing 0): take the step
+            t_ev, y_ev = float(ts[hit_row]), ys[hit_row].copy()
+            which = np.nonzero(cond[hit_row] != self.flags)[0]
+        else:  # only the events found at this root flip; others seen from here on
+            t_ev, y_ev, which = found
+            which = np.array([m for m in which if cond[hit_row, m] != self.flags[m]]
+                             or which)
+        return t_ev, y_ev, which, tt, Y
+
+    def _fire_at(self, t_ev, y_ev, which, tt, Y) -> None:
+        """Emit the samples before the event, flip the conditions of ``which`` and let the
+        discrete logic act on them."""
+        self.hot = True
+        before = tt < t_ev - 1e-12
+        self.k_next = _emit_samples(self.emit, self.sample_t, self.k_next, tt[before],
+                                    Y[before])
+        new_flags = self.flags.copy()
+        new_flags[which] = ~self.flags[which]
+        y_ev, ended = _fire(self.cl, self.logic, self.log, which, new_flags, t_ev, y_ev)
+        if ended is not None:
+            self.terminated, self.reason, self.t_term = True, ended, t_ev
+        self.flags = self._refresh_mode_flags(t_ev, y_ev, new_flags)
+        if self.terminated:
+            return
+        self.t, self.y = t_ev, y_ev
+        if self.progress:
+            self.progress(self.t)
 
 
 def _broken_at_start(cl, y, flags, log: list) -> bool:
