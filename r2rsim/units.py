@@ -329,17 +329,18 @@ class _UnitFolder:
         self.fold()
         self.op, self.after_operand = ("*" if kind == "mul" else "/"), False
 
-    def operand(self, pend: list) -> None:
+    def _juxtapose(self) -> None:
         if self.after_operand:  # juxtaposition: "N m" is N*m
             self.fold()
             self.op = "*"
+
+    def operand(self, pend: list) -> None:
+        self._juxtapose()
         self.pend = pend
         self.after_operand = True
 
     def open(self) -> None:
-        if self.after_operand:
-            self.fold()
-            self.op = "*"
+        self._juxtapose()
         if self.group is not None:
             raise _Unreadable("parentheses cannot be nested; write e.g. 'kg/(m*s)'")
         self.group = (self.acc_f, self.acc_d, self.op)

@@ -506,6 +506,7 @@ class _EventLoop:
         self.mode_idx = np.array([m for m, k in enumerate(cl.event_kinds)
                                   if k in MODE_EVENTS], int)
         self.log: list[Event] = []
+        self.t, self.y, self.flags = 0.0, None, None  # set by run
         self.k_next = 0  # next sample index to emit
         self.terminated, self.reason, self.t_term = False, None, None
         self.restarts = 0

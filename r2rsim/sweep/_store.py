@@ -391,8 +391,7 @@ class SweepStore:
             channels = pa.table({"channel": pa.array([], pa.string())})
         pq.write_table(channels.replace_schema_metadata(meta), tmp / "channels.parquet",
                        compression="zstd")
-        known_sha: dict = {}
-        self._place_samples(outcomes, known_sha)
+        known_sha = self._place_samples(outcomes)
         self._install(tmp, run_ids, [r["run_id"] for r in failure_rows], known_sha)
         return self.out
 
@@ -471,9 +470,11 @@ class SweepStore:
         self.close()
         self.marker.unlink()
 
-    def _place_samples(self, outcomes: dict[str, Outcome], known_sha: dict) -> None:
+    def _place_samples(self, outcomes: dict[str, Outcome]) -> dict:
         """Hard-link (else copy) the samples of the runs in .work/ into samples/, and
-        remove the samples of runs that have none any more (retried and failed)."""
+        remove the samples of runs that have none any more (retried and failed). Returns
+        the placed files' sha256 as their runs' manifests give them, by relative path."""
+        known_sha: dict = {}
         samples = self.out / "samples"
         samples.mkdir(exist_ok=True)
         for rid, o in outcomes.items():
@@ -495,6 +496,7 @@ class SweepStore:
                 os.link(src, dst)
             except OSError:  # a file system without hard links
                 shutil.copy2(src, dst)
+        return known_sha
 
     def _write_manifest(self, run_ids: list[str], failed_ids: list[str], known_sha: dict
                         ) -> None:
