@@ -6,7 +6,9 @@ Errors are one line on stderr and a non-zero exit code; ``--debug`` shows the tr
 from __future__ import annotations
 
 import argparse
+import atexit
 import contextlib
+import gc
 import os
 import signal
 import sys
@@ -667,10 +669,23 @@ def _add_list_parser(sub) -> None:
     ls.set_defaults(func=_cmd_list)
 
 
+def _quick_exit() -> None:
+    """Skip the garbage collector's passes over every live object when the interpreter
+    shuts down: with numba's compiled kernels loaded they take about 0.3 s, a fifth of a
+    quick-start ``r2rsim run``. Files are closed and stdout flushed before then, so nothing
+    is lost; the frozen objects are freed with the process. Only for the console script's
+    own process (main() called in-process returns to a caller that may need a full
+    shutdown), and only for the commands that load no plug-ins (some extension libraries
+    report objects left at exit as leaks)."""
+    atexit.register(gc.freeze)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``r2rsim`` console script."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    if argv is None and args.command in ("run", "sweep"):
+        _quick_exit()
     try:
         code = _run_command(args)
         sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit

@@ -1058,3 +1058,17 @@ def test_reopened_sweep_renumbers_its_combinations_and_drops_stale_copies(tmp_pa
     assert runs["run_id"][0] == old_ids[0] and runs["run_id"][2] == old_ids[1]
     assert sorted(p.name for p in (out / "sweep").iterdir()) == ["sweep2.yaml"]
     assert validate_dataset(out) == []
+
+
+def test_a_pool_worker_skips_the_collector_at_exit():
+    """Each worker freezes the collector at exit (its shutdown otherwise took ~0.3 s of
+    passes over numba's objects, which the sweep waited for); its runs are committed by then
+    (the process sweeps above compare their datasets with serial ones)."""
+    probe = ("import atexit, gc, os\n"
+             "atexit.register(lambda: print('frozen at exit:', gc.get_freeze_count() > 0))\n"
+             "from r2rsim.sweep._execute import _worker_init\n"
+             "_worker_init(os.getppid())\n")
+    p = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                       timeout=120)
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.strip() == "frozen at exit: True"

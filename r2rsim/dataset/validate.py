@@ -23,7 +23,14 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from .labels import derive_labels
-from .paths import SWEEP_MARKER, dataset_problems, inside, read_json, safe_component
+from .paths import (
+    SWEEP_MARKER,
+    dataset_problems,
+    inside,
+    read_json,
+    read_parquet_file,
+    safe_component,
+)
 from .writer import (
     VARIABILITY_SCHEMA,
     sha256_file,  # noqa: F401 - kept importable from here
@@ -71,7 +78,7 @@ def validate_dataset(path: str | Path, labels: bool = True) -> list[str]:
     tables = {}
     for name in ("runs", "faults", "channels"):
         try:  # a file that is not Parquet is a problem to list, not a crash
-            tables[name] = pq.read_table(root / f"{name}.parquet")
+            tables[name] = read_parquet_file(root / f"{name}.parquet")
         except Exception as exc:  # noqa: BLE001 - pyarrow raises several types on bad files
             problems.append(f"{name}.parquet: {_unreadable(exc)}")
     if len(tables) < 3:
@@ -114,7 +121,7 @@ def _variability_problems(root: Path, run_ids: set[str]) -> list[str]:
     if not path.is_file():
         return []
     try:
-        table = pq.read_table(path)
+        table = read_parquet_file(path)
     except Exception as exc:  # noqa: BLE001 - pyarrow raises several types on bad files
         return [f"variability.parquet: {_unreadable(exc)}"]
     missing = [n for n in VARIABILITY_SCHEMA.names if n not in table.column_names]

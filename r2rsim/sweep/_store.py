@@ -36,6 +36,7 @@ from ..dataset.paths import (
     dataset_problems,
     read_json,
     read_manifest,
+    read_parquet_file,
     remove_dataset,
     sha256_file,
 )
@@ -82,7 +83,7 @@ def finished(path: Path, config_sha256: str) -> dict | None:
     reporting it has its run given to another worker, which finds it here."""
     if not (path / MANIFEST).is_file() or dataset_problems(path):
         return None
-    row = pq.read_table(path / "runs.parquet").to_pylist()[0]
+    row = read_parquet_file(path / "runs.parquet").to_pylist()[0]
     return row if row.get("config_sha256") == config_sha256 else None
 
 
@@ -222,7 +223,7 @@ class SweepStore:
 
     def _final_outcomes(self, plan_ids, found, foreign, changed) -> None:
         files = self.final.get("files", {})
-        runs = pq.read_table(self.out / "runs.parquet").to_pylist()
+        runs = read_parquet_file(self.out / "runs.parquet").to_pylist()
         for row in runs:
             rid = row["run_id"]
             spec = plan_ids.get(rid)
@@ -240,7 +241,7 @@ class SweepStore:
             found[rid] = Outcome("failed" if reason else "done", "final", reason)
         failures = self.out / "failures.parquet"
         if failures.is_file():
-            for row in pq.read_table(failures).to_pylist():
+            for row in read_parquet_file(failures).to_pylist():
                 rid = row["run_id"]
                 if rid not in plan_ids:
                     foreign.append(rid)
@@ -276,7 +277,7 @@ class SweepStore:
             path = Path(entry.path)
             if dataset_problems(path):
                 continue  # damaged (not as written): run again
-            row = pq.read_table(path / "runs.parquet").to_pylist()[0]
+            row = read_parquet_file(path / "runs.parquet").to_pylist()[0]
             if row.get("config_sha256") != plan_ids[name].config_sha256:
                 changed.append(name)
                 continue
@@ -414,7 +415,7 @@ class SweepStore:
                     continue
                 run_ids.append(spec.run_id)
                 for name in TABLES:
-                    table = (pq.read_table(self.work / spec.run_id / f"{name}.parquet")
+                    table = (read_parquet_file(self.work / spec.run_id / f"{name}.parquet")
                              if o.where == "work" else old.rows(name, spec.run_id))
                     if name == "runs":  # as this plan numbers and names them
                         table = _sweep_columns(table, spec)
@@ -446,7 +447,7 @@ class SweepStore:
         if sha is not None and sha in seen:
             return channels
         seen.add(sha)
-        return _merge_channels(channels, pq.read_table(
+        return _merge_channels(channels, read_parquet_file(
             self.work / run_id / "channels.parquet" if where == "work"
             else self.out / "channels.parquet"))
 
@@ -609,7 +610,7 @@ class _OldTables:
 
     def __init__(self, root: Path):
         # variability.parquet is newer than some datasets: none is no variability
-        self.tables = {n: pq.read_table(root / f"{n}.parquet") if n != "variability" or (
+        self.tables = {n: read_parquet_file(root / f"{n}.parquet") if n != "variability" or (
             root / f"{n}.parquet").is_file() else VARIABILITY_SCHEMA.empty_table()
             for n in TABLES}
         self.index = {}
