@@ -190,11 +190,22 @@ class DiscreteLogic:
         self._saved_integral: dict[int, float] = {}
         self.terminate_reason: str | None = None
         self._breakpoints: list[float] = []
-        # faults acting inside the loop: an action at each breakpoint of their profiles
-        # resets the target sensor's fault coefficients (the solver restarts there)
-        sensor_idx = {s.id: j for j, s in enumerate(cl.sensors)}
-        in_loop = loop_sensor_ids(cl.line)
         self._sensor_faults: dict[int, list] = {}
+        self._param_faults: dict[int, list] = {}   # P index -> faults
+        self._slot: dict[int, int] = {}            # P index -> slot
+        self._base: dict[int, float] = {}
+        self._weak_splice: dict[int, float] = {}   # unwind node -> joint break tension
+        self._schedule_sensor_faults(faults, duration)
+        self._schedule_model_faults(faults, duration)
+        # scheduled events after the faults: a fault at the time of an event acts on it
+        # (a weak splice at the splice time makes that joint weak)
+        self._schedule_events(events)
+
+    def _schedule_sensor_faults(self, faults, duration: float) -> None:
+        """Faults acting inside the loop: an action at each breakpoint of their profiles
+        resets the target sensor's fault coefficients (the solver restarts there)."""
+        sensor_idx = {s.id: j for j, s in enumerate(self.cl.sensors)}
+        in_loop = loop_sensor_ids(self.cl.line)
         for f in faults:
             if f.kind.acts != "loop" or f.kind.target != "sensor" or f.target not in in_loop \
                     or f.record_only:
@@ -203,12 +214,11 @@ class DiscreteLogic:
             self._sensor_faults.setdefault(j, []).append(f)
             for tb in f.breakpoints(duration):
                 self._push(tb, "sensor_fault", j)
-        # faults that change the model: parameters through slots (one per parameter), or
-        # discrete changes (stuck drive or dancer, new material, weak splice)
-        self._param_faults: dict[int, list] = {}   # P index -> faults
-        self._slot: dict[int, int] = {}            # P index -> slot
-        self._base: dict[int, float] = {}
-        self._weak_splice: dict[int, float] = {}   # unwind node -> joint break tension
+
+    def _schedule_model_faults(self, faults, duration: float) -> None:
+        """Faults that change the model: parameters through slots (one per parameter), or
+        discrete changes (stuck drive or dancer, new material, weak splice)."""
+        cl = self.cl
         for f in faults:
             if f.kind.acts != "model":
                 continue
@@ -232,13 +242,14 @@ class DiscreteLogic:
             self._param_faults.setdefault(idx, []).append(f)
             for tb in f.breakpoints(duration):
                 self._push(tb, "param_fault", idx)
-        # scheduled events after the faults: a fault at the time of an event acts on it
-        # (a weak splice at the splice time makes that joint weak)
-        node_idx = {nid: k for k, nid in enumerate(cl.node_ids)}
-        mover_idx = {mid: m for m, mid in enumerate(cl.mover_ids)}
+
+    def _schedule_events(self, events) -> None:
+        """The scenario's scheduled events: splices, e-stops, dancer seizures."""
+        node_idx = {nid: k for k, nid in enumerate(self.cl.node_ids)}
+        mover_idx = {mid: m for m, mid in enumerate(self.cl.mover_ids)}
         for ev in events:
             if ev.type == "splice":
-                k = node_idx[ev.element] if ev.element else cl.splice_nodes[0]
+                k = node_idx[ev.element] if ev.element else self.cl.splice_nodes[0]
                 self._push(ev.at, "splice", k)
             elif ev.type == "e_stop":
                 self._push(ev.at, "e_stop", -1, {"decel": ev.deceleration})
@@ -606,69 +617,81 @@ class DiscreteLogic:
     def on_event(self, m: int, on: bool, t: float, y: np.ndarray):
         """Handle a change of event m's condition. Returns (y, log entries, handled)."""
         kind = self.cl.event_kinds[m]
-        I, P = self.cl.I, self.cl.P
         comp = self.cl.event_components[m]
         log: list[Event] = []
         if kind in (EV_STOP_LO, EV_STOP_HI):
-            mv = self._event_index(m)
-            bm = I[H_OFF_MP] + mv * NMP
-            iq = I[I[H_OFF_MI] + mv * NMI + MI_Q]
-            iqd = I[I[H_OFF_MI] + mv * NMI + MI_QD]
-            lo = kind == EV_STOP_LO
-            if on and P[bm + MP_MODE] == 0.0:
-                v = float(y[iqd])
-                P[bm + MP_MODE] = -1.0 if lo else 1.0
-                y[iq] = P[bm + (MP_QMIN if lo else MP_QMAX)]
-                y[iqd] = 0.0
-                log.append(Event(t, EVENT_NAMES[kind], comp, "start",
-                                    f"{comp} hits its {'lower' if lo else 'upper'} stop at "
-                                    f"{v:.3g}/s", {"velocity": v}))
-            elif not on and P[bm + MP_MODE] in (-1.0, 1.0):
-                P[bm + MP_MODE] = 0.0
-                log.append(Event(t, EVENT_NAMES[kind], comp, "end",
-                                    f"{comp} leaves its {'lower' if lo else 'upper'} stop"))
-            return y, log, True
-        if kind == EV_JOINT_PASS and on:
-            js = self._event_index(m)
-            bj = I[H_OFF_JP] + js * NJP
-            nS = len(self.cl.span_ids)
-            if self._joint_lead_crossed(bj, t, y):
-                P[bj + JP_SPAN] += 1.0
-                sp = int(P[bj + JP_SPAN])
-                if sp < nS:
-                    log.append(Event(t, "splice_joint", comp, self.cl.span_ids[sp],
-                                     f"{comp} passes {self.cl.node_ids[sp]} into "
-                                     f"{self.cl.span_ids[sp]}"))
-            else:  # the trail crossed a node: the joint has left a span
-                P[bj + JP_TSPAN] += 1.0
-                if int(P[bj + JP_TSPAN]) >= nS:
-                    P[bj + JP_ACTIVE] = 0.0
-                    log.append(Event(t, "splice_joint", comp, "end",
-                                     f"{comp} is wound into {self.cl.node_ids[-1]}"))
-            return y, log, True
-        if kind == EV_JOINT_BREAK and on:
-            js = self._event_index(m)
-            sp = int(P[I[H_OFF_JP] + js * NJP + JP_SPAN])
-            T = float(self.cl.outputs(t, y[None, :])[0][self.cl.aux_index(
-                f"{self.cl.span_ids[sp]}.tension_N")])
-            log.append(Event(t, "web_break", self.cl.span_ids[sp], "start",
-                                f"web break at the splice joint in {self.cl.span_ids[sp]} at "
-                                f"{T:.1f} N", {"tension_N": T, "at_splice_joint": True}))
-            self.terminate_reason = "web_break"
-            return y, log, True
-        if kind == EV_SPLICE_RADIUS and on:
+            self._on_stop(m, kind == EV_STOP_LO, on, t, y, comp, log)
+        elif kind == EV_JOINT_PASS and on:
+            self._on_joint_pass(m, t, y, comp, log)
+        elif kind == EV_JOINT_BREAK and on:
+            self._on_joint_break(m, t, y, log)
+        elif kind == EV_SPLICE_RADIUS and on:
             k = self._event_index(m)
             if k not in self.splicing:
                 self._push(t, "splice", k)
                 y, log = self.apply_due(t, y)
-            return y, log, True
-        if kind == EV_REFILL and on:
+        elif kind == EV_REFILL and on:
             c = self._event_index(m)
-            k = int(I[I[H_OFF_CI] + c * NCI + CI_NODE])
+            k = int(self.cl.I[self.cl.I[H_OFF_CI] + c * NCI + CI_NODE])
             if self.splicing.get(k) == "refill":
                 y = self._complete(t, y, k, log)
-            return y, log, True
-        return y, log, kind in MODE_EVENTS or kind == EV_JOINT_BREAK
+        else:
+            return y, log, kind in MODE_EVENTS or kind == EV_JOINT_BREAK
+        return y, log, True
+
+    def _on_stop(self, m: int, lo: bool, on: bool, t: float, y: np.ndarray, comp: str,
+                 log: list) -> None:
+        """A dancer or festoon carriage reaches (on) or leaves (off) an end stop: it latches
+        there at rest, then moves freely again."""
+        I, P = self.cl.I, self.cl.P
+        mv = self._event_index(m)
+        bm = I[H_OFF_MP] + mv * NMP
+        iq = I[I[H_OFF_MI] + mv * NMI + MI_Q]
+        iqd = I[I[H_OFF_MI] + mv * NMI + MI_QD]
+        kind = EV_STOP_LO if lo else EV_STOP_HI
+        if on and P[bm + MP_MODE] == 0.0:
+            v = float(y[iqd])
+            P[bm + MP_MODE] = -1.0 if lo else 1.0
+            y[iq] = P[bm + (MP_QMIN if lo else MP_QMAX)]
+            y[iqd] = 0.0
+            log.append(Event(t, EVENT_NAMES[kind], comp, "start",
+                             f"{comp} hits its {'lower' if lo else 'upper'} stop at "
+                             f"{v:.3g}/s", {"velocity": v}))
+        elif not on and P[bm + MP_MODE] in (-1.0, 1.0):
+            P[bm + MP_MODE] = 0.0
+            log.append(Event(t, EVENT_NAMES[kind], comp, "end",
+                             f"{comp} leaves its {'lower' if lo else 'upper'} stop"))
+
+    def _on_joint_pass(self, m: int, t: float, y: np.ndarray, comp: str, log: list) -> None:
+        """A splice joint's lead or trail crosses a node: it enters the next span, or has
+        left the line."""
+        P = self.cl.P
+        bj = self.cl.I[H_OFF_JP] + self._event_index(m) * NJP
+        nS = len(self.cl.span_ids)
+        if self._joint_lead_crossed(bj, t, y):
+            P[bj + JP_SPAN] += 1.0
+            sp = int(P[bj + JP_SPAN])
+            if sp < nS:
+                log.append(Event(t, "splice_joint", comp, self.cl.span_ids[sp],
+                                 f"{comp} passes {self.cl.node_ids[sp]} into "
+                                 f"{self.cl.span_ids[sp]}"))
+        else:  # the trail crossed a node: the joint has left a span
+            P[bj + JP_TSPAN] += 1.0
+            if int(P[bj + JP_TSPAN]) >= nS:
+                P[bj + JP_ACTIVE] = 0.0
+                log.append(Event(t, "splice_joint", comp, "end",
+                                 f"{comp} is wound into {self.cl.node_ids[-1]}"))
+
+    def _on_joint_break(self, m: int, t: float, y: np.ndarray, log: list) -> None:
+        """A weak splice joint breaks: the run ends with a web break."""
+        js = self._event_index(m)
+        sp = int(self.cl.P[self.cl.I[H_OFF_JP] + js * NJP + JP_SPAN])
+        span = self.cl.span_ids[sp]
+        T = float(self.cl.outputs(t, y[None, :])[0][self.cl.aux_index(f"{span}.tension_N")])
+        log.append(Event(t, "web_break", span, "start",
+                         f"web break at the splice joint in {span} at {T:.1f} N",
+                         {"tension_N": T, "at_splice_joint": True}))
+        self.terminate_reason = "web_break"
 
     # ---- helpers ----------------------------------------------------------------------------
     def _event_index(self, m):
