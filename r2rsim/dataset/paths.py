@@ -116,8 +116,8 @@ def read_json(path: str | Path, limit: int = MAX_JSON_BYTES) -> object:
     return json.loads(path.read_text(encoding="utf-8"))
 
 
-def read_parquet_file(path: str | Path, columns: list[str] | None = None):
-    """One Parquet file as a ``pyarrow.Table`` (``columns``: these only).
+def read_parquet_file(path: str | Path):
+    """One Parquet file as a ``pyarrow.Table``.
 
     Unlike ``pyarrow.parquet.read_table``, it does not go through ``pyarrow.dataset`` (an
     import, and a dataset discovery per call: a third of the time of reading back a small
@@ -127,7 +127,7 @@ def read_parquet_file(path: str | Path, columns: list[str] | None = None):
     import pyarrow.parquet as pq
 
     with pq.ParquetFile(path) as f:
-        return f.read(columns=columns)
+        return f.read()
 
 
 def read_manifest(root: Path) -> tuple[dict | None, str | None]:
