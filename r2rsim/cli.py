@@ -321,7 +321,7 @@ def _add_report_parser(sub) -> None:
 
 
 def _cmd_validate(args) -> int:
-    from .schema import load_line, load_scenario, read_yaml
+    from .schema import load_line, read_yaml
 
     status = 0
     for f in args.files:
@@ -346,6 +346,8 @@ def _cmd_validate(args) -> int:
                 from .sweep import plan_sweep
 
                 plan = plan_sweep(path)
+                plan.default_output  # noqa: B018 - raises for an output outside its folder
+
                 def n(k, what):
                     return f"{k} {what}{'' if k == 1 else 's'}"
 
@@ -353,7 +355,9 @@ def _cmd_validate(args) -> int:
                         f"{n(plan.n_combinations, 'combination')} x "
                         f"{n(len(plan.seeds), 'seed')})")
             else:
-                load_scenario(path)
+                from .run import default_output, plan_from_file
+
+                default_output(plan_from_file(path))  # what `r2rsim run` checks first
                 kind = "scenario"
             print(f"{f}: valid {kind}")
         except InputError as exc:

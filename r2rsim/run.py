@@ -273,14 +273,24 @@ def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
     InputError
         For any problem with the input files or the output directory; nothing is written.
     """
-    scenario_path = Path(scenario_path)
     compile0 = compile_seconds()
     plan = plan_from_file(scenario_path, seed, duration)
-    scenario = plan.scenario
-    out = (Path(output) if output is not None else
-           _scenario_output(scenario_path, scenario.output) if scenario.output is not None
-           else Path(f"runs/{plan.name}"))
+    out = Path(output) if output is not None else default_output(plan)
     return execute(plan, out, progress=progress, overwrite=overwrite, compile0=compile0)
+
+
+def default_output(plan: RunPlan) -> Path:
+    """Where a run of a scenario file writes without ``-o``: the scenario's ``output``
+    (relative to the scenario file and inside its directory), else ``runs/<name>``.
+
+    Raises
+    ------
+    InputError
+        For an ``output`` outside the scenario file's directory.
+    """
+    if plan.scenario.output is None:
+        return Path(f"runs/{plan.name}")
+    return _scenario_output(Path(plan.source), plan.scenario.output)
 
 
 def execute(plan: RunPlan, out: str | Path, *, run_id: str | None = None, progress=None,

@@ -207,6 +207,9 @@ def test_output_key_is_relative_to_the_scenario_and_stays_in_its_directory(tmp_p
         err = capsys.readouterr().err
         assert f"{scen}: output: " in err and "outside the scenario's directory" in err
         assert "-o" in err
+        # `r2rsim validate` refuses what `r2rsim run` refuses, with the same message
+        assert main(["validate", str(scen)]) == 2
+        assert f"{scen}: output: " in capsys.readouterr().err
     # a symbolic link inside the project that leads out of it
     (proj / "out_link").symlink_to(tmp_path / "cwd", target_is_directory=True)
     scen = scenario_copy(proj, output="out_link/qs")
@@ -238,6 +241,8 @@ def test_a_file_name_that_cannot_name_the_run_asks_for_a_name(tmp_path, capsys):
     assert main(["run", str(bad), "-o", str(tmp_path / "out"), "-q"]) == 2
     err = capsys.readouterr().err
     assert f"{bad}: name: " in err and "add a name" in err
+    assert main(["validate", str(bad)]) == 2  # validate asks for it too
+    assert f"{bad}: name: " in capsys.readouterr().err
     good = bad.rename(tmp_path / "run-2024.yaml")
     assert main(["run", str(good), "-o", str(tmp_path / "out"), "-q"]) == 0
     assert (tmp_path / "out" / "samples" / "run_id=run-2024__s1").is_dir()

@@ -627,6 +627,8 @@ def test_output_key_outside_the_sweep_directory(tmp_path, capsys, monkeypatch):
     code, _, err = cli(capsys, sw)
     assert code == 2 and "output: '../elsewhere' is outside the sweep's directory" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["proj"]
+    assert main(["validate", str(sw)]) == 2  # validate refuses it too
+    assert "output: '../elsewhere' is outside the sweep's directory" in capsys.readouterr().err
     # inside it: relative to the sweep file, whatever the working directory
     sw = sweep_file(tmp_path / "proj", "set: {duration: 2 s}\noutput: data/t\n")
     code, out, _ = cli(capsys, sw, "--workers", "0")
