@@ -1,4 +1,4 @@
-"""Calibration of the thesis-realistic set (scenarios/thesis_realistic/, docs/dataset.md §9).
+"""Calibration of the thesis-realistic set (scenarios/thesis_realistic/, docs/dataset.md §8.2).
 
 Measures the noise of a well-designed *local* residual on healthy runs of each condition and
 prints how many of its standard deviations a 5 % and a 20 % sensor-A fault are. The residual

@@ -4,7 +4,7 @@ Every limit is checked when a file is loaded (or when ``--duration``/``--seed`` 
 before anything is compiled or simulated, and a file over a limit is refused with one
 ``file: yaml.path: problem`` line naming the limit. ``docs/security.md`` lists them for users.
 The values sit one to three orders of magnitude above anything a real line or scenario needs
-(the shipped files are all below 7 kB, 60 s at 1 kHz, 10 programme steps), so that they only
+(the shipped files are all below 7.5 kB and at most 600 s at up to 500 Hz), so that they only
 stop files that would otherwise exhaust memory or run for hours before failing.
 """
 
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 
-#: Largest line or scenario file read [bytes]: 1 MiB. The largest shipped file is 6.5 kB and a
+#: Largest line or scenario file read [bytes]: 1 MiB. The largest shipped file is 7.4 kB and a
 #: generated 1000-element line about 150 kB; parsing and validating 1 MiB of YAML takes about a
 #: second, and the limit keeps a path such as /dev/zero (endless) or a huge file from filling
 #: memory before the YAML parser sees it.

@@ -4,6 +4,7 @@ stream, recorded as ground truth that plug-ins never see."""
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -261,3 +262,20 @@ def test_a_sweep_gathers_every_runs_variability(tmp_path, repo):
     for seed in (1, 2):
         assert z[(seed, 0.005)] == pytest.approx(z[(seed, 0.01)], rel=1e-9)
     assert validate_dataset(out) == []
+
+
+def test_the_example_of_dataset_md_is_valid_on_the_line_it_names(tmp_path, repo):
+    """docs/dataset.md §8.1 shows every kind of variability; the block must load on the
+    line its comment names, so the page cannot fall behind the schema."""
+    text = (repo / "docs" / "dataset.md").read_text(encoding="utf-8")
+    section = text[text.index("### 8.1"):text.index("### 8.2")]
+    block = section.split("```yaml\n", 1)[1].split("```", 1)[0]
+    line = re.search(r"lines/\S+\.yaml", block).group(0)
+    data = {"name": "doc_example", "line": str(repo / line), "duration": 2.0,
+            "programme": [{"at": 0.0, "line_speed": 0.5}], **yaml.safe_load(block)}
+    path = tmp_path / "doc_example.yaml"
+    path.write_text(yaml.safe_dump(data, allow_unicode=True))
+    scenario, _, _ = load_scenario(path)
+    assert set(scenario.variability.rolls["unwind"].model_dump(exclude_none=True)) == {
+        "modulus", "thickness", "outer_radius", "wound_in_strain", "relaxed_pitch"}
+    assert scenario.variability.sensors and scenario.variability.friction is not None

@@ -4,7 +4,7 @@ sensor (``hybrid-sov``) against the data-driven comparator, on the calibrated Ch
 
 Data: the test bed's roll-change cycles (scenarios/thesis_realistic/testbed_cycles.yaml,
 600 s runs with about eight roll changes, every roll different) and the dancer-failure runs
-(testbed_dancer_failure_sweep.yaml). As the dataset documents it (docs/dataset.md §9), the
+(testbed_dancer_failure_sweep.yaml). As the dataset documents it (docs/dataset.md §8.2), the
 models train on the first 4 complete cycles of the 0.5 m/s run of seed 1 and validate on the
 first 3 complete cycles of the 0.6 m/s run of seed 2 (other rolls, other speed); the last 3
 cycles of the training run (same speed, other rolls) are a second, reported-only validation.
@@ -645,7 +645,7 @@ def write_report(out, args, t23, t24, t25, ta, stage3, climbs, diag, cens, m, wa
         f"Training: the first {N_TRAIN} complete cycles (roll swap to roll swap) of the "
         f"0.5 m/s run of seed 1. Validation: the first {N_VAL} complete cycles of the 0.6 m/s "
         "run of seed 2 (other rolls, other friction, other speed; the split docs/dataset.md "
-        f"§9 documents). Second validation (reported only): cycles {N_TRAIN + 1}-"
+        f"§8.2 documents). Second validation (reported only): cycles {N_TRAIN + 1}-"
         f"{N_TRAIN + N_VAL} of the training run (same speed, other rolls). Units: N and µm "
         "(the thesis's numbers are normalised: compare ratios and directions only).", "",
         "## Assertions", "", md_table(ta), "",
