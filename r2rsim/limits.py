@@ -84,10 +84,10 @@ def run_size_problem(duration: float, record_rate: float) -> tuple[str, str] | N
     if not (math.isfinite(record_rate) and record_rate > 0):
         return "record_rate", f"must be a finite rate > 0, got {record_rate!r}"
     if duration > MAX_DURATION_S:
-        return "duration", (f"{duration:g} s is longer than the limit of {MAX_DURATION_S:g} s "
+        return "duration", (f"{duration:.10g} s is longer than the limit of {MAX_DURATION_S:g} s "
                             f"({MAX_DURATION_S / 86400:.1f} days; docs/security.md)")
     if record_rate > MAX_RECORD_RATE_HZ:
-        return "record_rate", (f"{record_rate:g} Hz is above the limit of "
+        return "record_rate", (f"{record_rate:.10g} Hz is above the limit of "
                                f"{MAX_RECORD_RATE_HZ:g} Hz (docs/security.md): nothing in the "
                                "model is faster than the drives' ~1 ms torque lag")
     samples = duration * record_rate

@@ -297,6 +297,8 @@ def test_bad_duration_is_an_argparse_error(capsys, value, words):
 
 @pytest.mark.parametrize("flag, value, words", [
     ("--duration", "1e300", "longer than the limit of 1e+06 s"),
+    # just over the limit: the value is printed in full, not rounded onto the limit
+    ("--duration", "1000001", "1000001 s is longer than the limit of 1e+06 s"),
     ("--duration", "1e6", "samples, more than the limit"),
     ("--seed", "99999999999999999999999", "--seed must be at most 2**64 - 1"),
 ])
