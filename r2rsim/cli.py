@@ -373,9 +373,22 @@ def _cmd_validate(args) -> int:
 
 
 def _cmd_schema(args) -> int:
-    from .schema import json_schema
+    from .schema import json_schema, reference_markdown
 
-    print(json_schema(args.kind))
+    kinds = ("line", "scenario", "sweep")
+    bad = [k for k in args.kind if k not in kinds]
+    if bad:
+        print(f"error: r2rsim schema: unknown file kind '{bad[0]}' (line, scenario or sweep)",
+              file=sys.stderr)
+        return EXIT_INPUT
+    if args.markdown:
+        print(reference_markdown(args.kind or kinds), end="")
+        return 0
+    if len(args.kind) != 1:
+        print("error: r2rsim schema: name one of line, scenario, sweep (or give --markdown for "
+              "the reference of every key)", file=sys.stderr)
+        return EXIT_INPUT
+    print(json_schema(args.kind[0]))
     return 0
 
 
@@ -603,8 +616,13 @@ def _add_file_parsers(sub) -> None:
     v.set_defaults(func=_cmd_validate)
 
     s = sub.add_parser("schema", help="print the JSON Schema of a line, scenario or sweep "
-                       "file")
-    s.add_argument("kind", choices=["line", "scenario", "sweep"])
+                       "file, or (--markdown) a reference of every key")
+    # no `choices`: argparse (3.11) checks an empty nargs="*" list against them and fails
+    s.add_argument("kind", nargs="*", metavar="{line,scenario,sweep}",
+                   help="the file kind (with --markdown: any number, default all)")
+    s.add_argument("--markdown", action="store_true",
+                   help="print every key (type, default, meaning) as Markdown tables: the text "
+                   "of docs/keys.md")
     s.set_defaults(func=_cmd_schema)
 
 

@@ -121,19 +121,23 @@ def superposable(a: str, b: str) -> bool:
 class Uniform(Strict):
     """A value drawn uniformly from [low, high] (seeded by the fault-sampling stream)."""
 
-    uniform: pair(NumberOrText)
+    uniform: pair(NumberOrText) = Field(
+        description="[low, high]: the value is drawn uniformly between them")
 
 
 class LogUniform(Strict):
     """A value whose logarithm is uniform on [log low, log high] (low, high > 0)."""
 
-    loguniform: pair(NumberOrText)
+    loguniform: pair(NumberOrText) = Field(
+        description="[low, high], both > 0: the logarithm of the value is drawn uniformly")
 
 
 class Choice(Strict):
     """One of the listed values, each equally likely."""
 
-    choice: list[NumberOrText] = Field(min_length=1, max_length=1000)
+    choice: list[NumberOrText] = Field(
+        min_length=1, max_length=1000, description="the values to choose from, each equally "
+        "likely")
 
 
 def _sampled_kind(value) -> str | None:
@@ -158,7 +162,8 @@ class Profile(Strict):
     every ``period`` from onset, else 0.
     """
 
-    shape: Literal["step", "ramp", "exp", "intermittent"] = "step"
+    shape: Literal["step", "ramp", "exp", "intermittent"] = Field(
+        "step", description="step, ramp, exp or intermittent: how the effect grows from onset")
     ramp: Annotated[Time, Field(gt=0)] | None = Field(
         None, description="ramp: time to full magnitude; exp: time constant [s]")
     period: Annotated[Time, Field(gt=0)] | None = Field(None, description="intermittent [s]")
@@ -181,13 +186,18 @@ class Profile(Strict):
 class Fault(Strict):
     """A fault instance of the scenario (``r2rsim list faults`` shows the types)."""
 
-    id: Id
-    type: Literal[tuple(CATALOGUE)]  # type: ignore[valid-type]
+    id: Id = Field(
+        description="name of the fault instance, unique in the scenario (faults.parquet, label.* "
+        "columns)")
+    type: Literal[tuple(CATALOGUE)] = Field(  # type: ignore[valid-type]
+        description="the fault type (r2rsim list faults)")
     target: Id = Field(description="sensor / element / dancer id, as the type requires")
-    onset: Annotated[Time, Field(ge=0)] | Sampled
+    onset: Annotated[Time, Field(ge=0)] | Sampled = Field(
+        description="when the fault starts [s], or a distribution to draw it from")
     end: Annotated[Time, Field(gt=0)] | None = Field(
         None, description="when the fault stops acting; default: to the end of the run")
-    profile: Profile = Field(default_factory=Profile)
+    profile: Profile = Field(default_factory=Profile,
+                             description="time course of the effect (default: a step)")
     magnitude: Annotated[float | str | Sampled | None, BeforeValidator(number_or_text)] = Field(
         None, description="in the unit the type fixes (see `r2rsim list faults`); a number "
         "is SI, a string may carry units ('5 N')")

@@ -49,7 +49,8 @@ def pair(item):
     return Annotated[tuple[item, item], BeforeValidator(_list_to_tuple)]
 
 
-Id = Annotated[str, Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$", max_length=64)]
+ID_PATTERN = r"^[A-Za-z][A-Za-z0-9_]*$"
+Id = Annotated[str, Field(pattern=ID_PATTERN, max_length=64)]
 PosLength = Annotated[Length, Field(gt=0)]
 NonNegTime = Annotated[Time, Field(ge=0)]
 Vec2 = pair(Length)
@@ -76,7 +77,9 @@ class Web(Strict):
     """Web material. ``material`` picks a preset (PET, paper, aluminium, copper); any property
     given here overrides the preset."""
 
-    material: Literal["PET", "paper", "aluminium", "aluminum", "copper"] | None = None
+    material: Literal["PET", "paper", "aluminium", "aluminum", "copper"] | None = Field(
+        None, description="material preset that gives modulus, density and break_stress (each "
+        "can still be given here)")
     thickness: PosLength = Field(description="caliper t_w [m]")
     width: PosLength = Field(description="web width w [m]")
     modulus: Annotated[Pressure, Field(gt=0)] | None = Field(None, description="E (MD) [Pa]")
@@ -118,8 +121,10 @@ class Web(Strict):
 class Friction(Strict):
     """Bearing friction tau_f = viscous·omega + coulomb·tanh(omega/smoothing_speed)."""
 
-    viscous: Annotated[ViscousTorque, Field(ge=0)] = 0.0
-    coulomb: Annotated[Torque, Field(ge=0)] = 0.0
+    viscous: Annotated[ViscousTorque, Field(ge=0)] = Field(
+        0.0, description="viscous bearing friction coefficient: torque per angular speed [N m s]")
+    coulomb: Annotated[Torque, Field(ge=0)] = Field(
+        0.0, description="Coulomb (dry) bearing friction torque [N m]")
     smoothing_speed: Annotated[AngularSpeed, Field(gt=0)] = Field(
         1e-2, description="tanh smoothing of the Coulomb term near zero speed [rad/s]"
     )
@@ -128,8 +133,8 @@ class Friction(Strict):
 class TorqueRipple(Strict):
     """A sinusoidal disturbance torque amplitude·sin(2π·frequency·t) at a drive's shaft."""
 
-    amplitude: Annotated[Torque, Field(ge=0)]
-    frequency: Annotated[Frequency, Field(gt=0)]
+    amplitude: Annotated[Torque, Field(ge=0)] = Field(description="ripple torque amplitude [N m]")
+    frequency: Annotated[Frequency, Field(gt=0)] = Field(description="ripple frequency [Hz]")
 
 
 class Drive(Strict):
@@ -138,7 +143,10 @@ class Drive(Strict):
     speed is imposed (line speed x (1 + draw) + trim), a kinematic node for verification and
     idealised studies."""
 
-    type: Literal["torque", "ideal_speed"] = "torque"
+    type: Literal["torque", "ideal_speed"] = Field(
+        "torque", description="torque: a motor with a first-order torque loop, commanded by a "
+        "controller or torque_command; ideal_speed: an imposed surface speed (line speed x (1 + "
+        "draw))")
     torque_lag: NonNegTime = Field(1e-3, description="current/torque loop time constant [s]")
     torque_max: Annotated[Torque, Field(gt=0)] | None = Field(
         None, description="torque saturation |tau| <= torque_max [N m]"
@@ -157,7 +165,7 @@ class Drive(Strict):
 class Roll(Strict):
     """A wound roll on an unwind or rewind."""
 
-    core_radius: PosLength
+    core_radius: PosLength = Field(description="radius of the empty core [m]")
     outer_radius: PosLength = Field(description="radius at the start of the run [m]")
     core_inertia: Annotated[Inertia, Field(ge=0)] = Field(
         description="core + shaft + chucks + reflected rotor inertia [kg m^2]"
@@ -181,9 +189,12 @@ class Roll(Strict):
 
 
 class _Element(Strict):
-    id: Id
+    id: Id = Field(
+        description="name of the element, unique in the line (letters, digits, _); sensors and "
+        "controllers refer to it")
     stage: Annotated[int, Field(ge=1)] | None = Field(None, description="thesis stage 1..5")
-    friction: Friction = Field(default_factory=Friction)
+    friction: Friction = Field(
+        default_factory=Friction, description="bearing friction of the element's shaft")
     wrap_angle: Annotated[Angle, Field(gt=0, le=2 * math.pi)] | None = Field(
         None, description="wrap angle of the web on this element [rad]"
     )
@@ -219,12 +230,15 @@ class Splicer(Strict):
     The unwind needs a speed_pi. ``flying``: the new roll is pre-accelerated to line speed
     with a relative speed-match error and swapped in at once."""
 
-    type: Literal["zero_speed", "flying"]
+    type: Literal["zero_speed", "flying"] = Field(
+        description="zero_speed: the roll stops for the splice while a dancer or festoon feeds "
+        "the line; flying: the new roll is spliced on at line speed")
     trigger_radius: PosLength | None = Field(
         None, description="splice when the running roll's radius falls to this [m]; "
         "otherwise only at the scenario's splice events"
     )
-    joint: SpliceJoint = Field(default_factory=SpliceJoint)
+    joint: SpliceJoint = Field(
+        default_factory=SpliceJoint, description="the splice joint that travels with the web")
     fill_time: NonNegTime = Field(5.0, description="zero_speed: fill phase duration [s]")
     fill_overspeed: Annotated[Dimensionless, Field(ge=0, le=0.5)] = Field(
         0.08, description="zero_speed: relative overspeed of the unwind while filling/refilling"
@@ -250,55 +264,64 @@ class Unwind(_Element):
     """Unwind stand: a roll paying out web; torque drive (default) or ideal speed. With a
     ``splicer`` the expiring roll is replaced by a fresh ``spare_roll`` at every splice."""
 
-    type: Literal["unwind"]
-    roll: Roll
-    drive: Drive = Field(default_factory=Drive)
+    type: Literal["unwind"] = Field(description="selects an unwind")
+    roll: Roll = Field(description="the roll the run starts with")
+    drive: Drive = Field(
+        default_factory=Drive, description="the unwind's motor (default: a torque drive)")
     spare_roll: Roll | None = Field(None, description="the roll loaded at each splice")
-    splicer: Splicer | None = None
+    splicer: Splicer | None = Field(None, description="roll changes; needs spare_roll")
 
 
 class Rewind(_Element):
     """Rewind stand: a roll taking up web."""
 
-    type: Literal["rewind"]
-    roll: Roll
-    drive: Drive = Field(default_factory=Drive)
+    type: Literal["rewind"] = Field(description="selects a rewind")
+    roll: Roll = Field(description="the roll (core and the web already wound) the run starts with")
+    drive: Drive = Field(
+        default_factory=Drive, description="the rewind's motor (default: a torque drive)")
 
 
 class Idler(_Element):
     """Undriven roller."""
 
-    type: Literal["idler"]
-    radius: PosLength
-    inertia: Annotated[Inertia, Field(gt=0)]
+    type: Literal["idler"] = Field(description="selects an idler")
+    radius: PosLength = Field(description="roller radius [m]")
+    inertia: Annotated[Inertia, Field(gt=0)] = Field(description="roller spin inertia [kg m^2]")
 
 
 class Driven(_Element):
     """Motor-driven roller (pull roll, S-wrap roller, ...)."""
 
-    type: Literal["driven"]
-    radius: PosLength
-    inertia: Annotated[Inertia, Field(gt=0)]
-    drive: Drive = Field(default_factory=Drive)
+    type: Literal["driven"] = Field(description="selects a driven roller")
+    radius: PosLength = Field(description="roller radius [m]")
+    inertia: Annotated[Inertia, Field(gt=0)] = Field(
+        description="roller and motor inertia [kg m^2]")
+    drive: Drive = Field(
+        default_factory=Drive, description="the roller's motor (default: a torque drive)")
 
 
 class PressureRoller(Strict):
     """The undriven roller of a nip pair."""
 
-    radius: PosLength
-    inertia: Annotated[Inertia, Field(ge=0)]
-    friction: Friction = Field(default_factory=Friction)
+    radius: PosLength = Field(description="pressure roller radius [m]")
+    inertia: Annotated[Inertia, Field(ge=0)] = Field(
+        description="pressure roller spin inertia [kg m^2]")
+    friction: Friction = Field(
+        default_factory=Friction, description="bearing friction of the pressure roller")
 
 
 class Nip(_Element):
     """Nip pair clamping the web (no slip): one degree of freedom with
     J_eff = J1 + J2 (R1/R2)^2 (physics.md eq. 1.9). The drive acts on the main roller."""
 
-    type: Literal["nip"]
-    radius: PosLength
-    inertia: Annotated[Inertia, Field(gt=0)]
-    drive: Drive = Field(default_factory=Drive)
-    pressure_roller: PressureRoller
+    type: Literal["nip"] = Field(description="selects a nip")
+    radius: PosLength = Field(description="radius of the main (driven) roller [m]")
+    inertia: Annotated[Inertia, Field(gt=0)] = Field(
+        description="spin inertia of the main roller [kg m^2]")
+    drive: Drive = Field(
+        default_factory=Drive, description="the main roller's motor (default: a torque drive)")
+    pressure_roller: PressureRoller = Field(
+        description="the undriven roller pressed on the main one; it turns with it without slip")
 
 
 class Dancer(_Element):
@@ -306,11 +329,13 @@ class Dancer(_Element):
     (physics.md eq. 1.15). The roller spins like an idler; the lengths of the spans on both
     sides follow from the geometry (the neighbours need ``position`` and ``wrap``)."""
 
-    type: Literal["dancer"]
-    radius: PosLength
+    type: Literal["dancer"] = Field(description="selects a translating dancer")
+    radius: PosLength = Field(description="dancer roller radius [m]")
     inertia: Annotated[Inertia, Field(gt=0)] = Field(description="roller spin inertia")
     position: Vec2 = Field(description="roller centre at travel 0 [m]")
-    wrap: Wrap
+    wrap: Wrap = Field(
+        description="direction the web travels around the dancer roller (x right, y up): cw or "
+        "ccw")
     direction: pair(float) = Field(
         (0.0, -1.0), description="unit vector along which the travel x grows (normalised)"
     )
@@ -320,22 +345,28 @@ class Dancer(_Element):
     load_force: Force = Field(
         0.0, description="actuator force along direction (air cylinder at regulated pressure)"
     )
-    spring_stiffness: Annotated[Stiffness, Field(ge=0)] = 0.0
-    spring_free_travel: Length = 0.0
-    damping: Annotated[Damping, Field(ge=0)] = 0.0
+    spring_stiffness: Annotated[Stiffness, Field(ge=0)] = Field(
+        0.0, description="spring on the carriage, force -spring_stiffness·(x - "
+        "spring_free_travel) [N/m]")
+    spring_free_travel: Length = Field(
+        0.0, description="travel x at which the spring exerts no force [m]")
+    damping: Annotated[Damping, Field(ge=0)] = Field(
+        0.0, description="viscous damping of the carriage [N s/m]")
     coulomb: Annotated[Force, Field(ge=0)] = Field(0.0, description="carriage Coulomb friction")
     smoothing_speed: Annotated[Speed, Field(gt=0)] = Field(
         1e-3, description="tanh smoothing of the Coulomb friction [m/s]"
     )
-    gravity: pair(Acceleration) = GRAVITY
+    gravity: pair(Acceleration) = Field(
+        GRAVITY, description="gravity vector [g_x, g_y] acting on the moving mass [m/s^2] (y up)")
 
 
 class Cylinder(Strict):
     """Air cylinder between a fixed point and a point on the arm; regulated pressure gives a
     constant force (physics.md §1.5). Positive force pushes the two points apart."""
 
-    force: Force
-    fixed_point: Vec2
+    force: Force = Field(
+        description="constant cylinder force [N]; positive pushes the two points apart")
+    fixed_point: Vec2 = Field(description="the cylinder's fixed mounting point [x, y] [m]")
     arm_point: PosLength = Field(description="distance of the rod end from the pivot [m]")
 
 
@@ -343,35 +374,44 @@ class TorsionSpring(Strict):
     """Torsion spring at the pivot: M = -stiffness·(angle - free_angle)."""
 
     stiffness: Annotated[Torque, Field(ge=0)] = Field(description="[N m/rad]")
-    free_angle: Angle = 0.0
+    free_angle: Angle = Field(
+        0.0, description="arm angle at which the spring exerts no torque [rad]")
 
 
 class PivotDancer(_Element):
     """Pivoted (pendulum) dancer: roller at the end of an arm (physics.md eq. 1.17), loaded by
     an air cylinder, a torsion spring, a torque motor and/or gravity."""
 
-    type: Literal["pivot_dancer"]
-    radius: PosLength
+    type: Literal["pivot_dancer"] = Field(description="selects a pivoted dancer")
+    radius: PosLength = Field(description="dancer roller radius [m]")
     inertia: Annotated[Inertia, Field(gt=0)] = Field(description="roller spin inertia")
-    wrap: Wrap
-    pivot: Vec2
-    arm_length: PosLength
+    wrap: Wrap = Field(
+        description="direction the web travels around the dancer roller (x right, y up): cw or "
+        "ccw")
+    pivot: Vec2 = Field(description="arm pivot [x, y] [m]")
+    arm_length: PosLength = Field(description="pivot to roller centre [m]")
     arm_angle: Angle = Field(description="arm angle from +x at t = 0 [rad]")
     angle_range: pair(Angle) = Field(description="end stops [min, max] [rad]")
     arm_inertia: Annotated[Inertia, Field(ge=0)] = Field(
         description="arm inertia about the pivot, without the roller [kg m^2]"
     )
-    roller_mass: Annotated[Mass, Field(ge=0)] = 0.0
-    arm_mass: Annotated[Mass, Field(ge=0)] = 0.0
+    roller_mass: Annotated[Mass, Field(ge=0)] = Field(
+        0.0, description="mass of the roller at the arm's end [kg] (inertia about the pivot and "
+        "gravity)")
+    arm_mass: Annotated[Mass, Field(ge=0)] = Field(
+        0.0, description="mass of the arm [kg] (gravity, at arm_com)")
     arm_com: Length | None = Field(None, description="pivot to arm centre of mass; default "
                                    "half the arm length")
-    cylinder: Cylinder | None = None
-    torsion_spring: TorsionSpring | None = None
+    cylinder: Cylinder | None = Field(None, description="air cylinder loading the arm")
+    torsion_spring: TorsionSpring | None = Field(None, description="torsion spring at the pivot")
     torque: Torque = Field(0.0, description="torque motor at the pivot (active dancer)")
-    damping: Annotated[ViscousTorque, Field(ge=0)] = 0.0
-    coulomb: Annotated[Torque, Field(ge=0)] = 0.0
-    smoothing_speed: Annotated[AngularSpeed, Field(gt=0)] = 1e-3
-    gravity: pair(Acceleration) = GRAVITY
+    damping: Annotated[ViscousTorque, Field(ge=0)] = Field(
+        0.0, description="viscous damping at the pivot [N m s/rad]")
+    coulomb: Annotated[Torque, Field(ge=0)] = Field(
+        0.0, description="Coulomb friction torque at the pivot [N m]")
+    smoothing_speed: Annotated[AngularSpeed, Field(gt=0)] = Field(
+        1e-3, description="tanh smoothing of the Coulomb friction [rad/s]")
+    gravity: pair(Acceleration) = Field(GRAVITY, description="gravity vector [g_x, g_y] [m/s^2]")
 
 
 Element = Annotated[Unwind | Rewind | Idler | Driven | Nip | Dancer | PivotDancer,
@@ -384,17 +424,22 @@ class Festoon(Strict):
     """Festoon accumulator lumped into its span (physics.md eq. 1.18): ``moving_rollers`` on a
     carriage give 2n strands; the span length is ``length + 2n·x``."""
 
-    moving_rollers: Annotated[int, Field(ge=1)]
-    carriage_mass: Annotated[Mass, Field(gt=0)]
+    moving_rollers: Annotated[int, Field(ge=1)] = Field(
+        description="rollers on the carriage (n); the stored web is 2n·x")
+    carriage_mass: Annotated[Mass, Field(gt=0)] = Field(
+        description="moving mass of the carriage with its rollers [kg]")
     stroke: pair(Length) = Field(description="carriage end stops [x_min, x_max] [m]")
     initial_position: Length = Field(description="carriage position x at t = 0 [m]")
     force: Force = Field(description="carriage actuator force along +x (storage grows) [N]")
     gravity: Acceleration = Field(
         0.0, description="gravity component along +x [m/s^2] (-9.81: storage grows upward)"
     )
-    damping: Annotated[Damping, Field(ge=0)] = 0.0
-    coulomb: Annotated[Force, Field(ge=0)] = 0.0
-    smoothing_speed: Annotated[Speed, Field(gt=0)] = 1e-3
+    damping: Annotated[Damping, Field(ge=0)] = Field(
+        0.0, description="viscous damping of the carriage [N s/m]")
+    coulomb: Annotated[Force, Field(ge=0)] = Field(
+        0.0, description="Coulomb friction force on the carriage [N]")
+    smoothing_speed: Annotated[Speed, Field(gt=0)] = Field(
+        1e-3, description="tanh smoothing of the Coulomb friction [m/s]")
 
 
 class Span(Strict):
@@ -405,7 +450,7 @@ class Span(Strict):
         None, description="free length [m]; omitted next to a dancer (from the geometry); "
         "with a festoon, the length at carriage position 0"
     )
-    festoon: Festoon | None = None
+    festoon: Festoon | None = Field(None, description="a festoon accumulator in this span")
 
 
 NOISE_PER_SPEED_DOC = (
@@ -416,8 +461,10 @@ NOISE_PER_SPEED_DOC = (
 
 
 class _Sensor(Strict):
-    id: Id
-    element: Id
+    id: Id = Field(
+        description="name of the sensor, unique in the line; its columns are meas.<id>.* and "
+        "true.<id>.*")
+    element: Id = Field(description="id of the element the sensor is on")
     rate: Annotated[Frequency, Field(gt=0)] | None = Field(
         None, description="sample rate [Hz]; default: the scenario's record rate"
     )
@@ -443,7 +490,7 @@ class LoadCell(_Sensor):
     """Load cell on a roller: measures the bearing force component along its axis and reports
     the indicated tension (physics.md §1.3)."""
 
-    type: Literal["load_cell"]
+    type: Literal["load_cell"] = Field(description="selects a load cell")
     wrap_angle: Annotated[Angle, Field(gt=0, le=2 * math.pi)] | None = Field(
         None, description="wrap angle; default: the element's wrap_angle, else 180 deg"
     )
@@ -457,7 +504,7 @@ class LoadCell(_Sensor):
 class Encoder(_Sensor):
     """Encoder on a rotating element: angular speed."""
 
-    type: Literal["encoder"]
+    type: Literal["encoder"] = Field(description="selects an encoder")
     counts_per_rev: Annotated[int, Field(gt=0)] | None = Field(
         None, description="edges per revolution: the recorded speed is the difference of the "
         "accumulated edge count over the counting window, times 2π/(counts_per_rev·window) "
@@ -465,8 +512,9 @@ class Encoder(_Sensor):
     window: Annotated[Time, Field(gt=0)] | None = Field(
         None, description="counting window of an encoder with counts_per_rev [s]; default: "
         "one sensor sample period")
-    noise: Annotated[AngularSpeed, Field(ge=0)] = 0.0
-    offset: AngularSpeed = 0.0
+    noise: Annotated[AngularSpeed, Field(ge=0)] = Field(
+        0.0, description="noise std of the speed reading [rad/s]")
+    offset: AngularSpeed = Field(0.0, description="calibration offset b [rad/s]")
 
     @model_validator(mode="after")
     def _check_window(self):
@@ -478,18 +526,21 @@ class Encoder(_Sensor):
 class RollDiameter(_Sensor):
     """Ultrasonic/laser roll-diameter sensor on an unwind or rewind."""
 
-    type: Literal["roll_diameter"]
-    noise: Annotated[Length, Field(ge=0)] = 0.0
-    offset: Length = 0.0
+    type: Literal["roll_diameter"] = Field(description="selects a roll-diameter sensor")
+    noise: Annotated[Length, Field(ge=0)] = Field(
+        0.0, description="noise std of the diameter reading [m]")
+    offset: Length = Field(0.0, description="calibration offset b [m]")
 
 
 class DancerPosition(_Sensor):
     """Position of a dancer (travel in m, or arm angle in rad) or festoon carriage (m);
     ``element`` is the dancer's id or the festoon span's id."""
 
-    type: Literal["dancer_position"]
-    noise: Annotated[float, Field(ge=0)] = 0.0
-    offset: float = 0.0
+    type: Literal["dancer_position"] = Field(description="selects a dancer-position sensor")
+    noise: Annotated[float, Field(ge=0)] = Field(
+        0.0, description="noise std of the position reading [m, or rad for a pivoted dancer's "
+        "angle]")
+    offset: float = Field(0.0, description="calibration offset b [m or rad]")
 
 
 class RelaxedPitchLaw(Strict):
@@ -525,9 +576,11 @@ class PitchLength(Strict):
     controller reads the sensor, in the loop. A tension_pi reading it converts the pitch back to
     tension with the web's nominal E·S and the nominal L0 (the law, without the variation)."""
 
-    id: Id
-    type: Literal["pitch_length"]
-    span: Id
+    id: Id = Field(
+        description="name of the sensor, unique in the line; its columns are meas.<id>.* and "
+        "true.<id>.*")
+    type: Literal["pitch_length"] = Field(description="selects a pitch-length (vision) sensor")
+    span: Id = Field(description="id of the span the camera sees")
     relaxed_pitch: PosLength | None = Field(
         None, description="constant pitch length L0 of the relaxed web [m]; give this or "
         "relaxed_pitch_law")
@@ -535,11 +588,13 @@ class PitchLength(Strict):
         None, description="L0(R) = q0 + q1·R³ of the unwind roll's radius R (thesis eq. 2.24)")
     pitch_variation: PitchVariation | None = Field(
         None, description="zero-mean printing variation of L0, correlated along the web")
-    rate: Annotated[Frequency, Field(gt=0)] | None = None
-    filter: NonNegTime = 0.0
-    gain: float = 1.0
-    noise: Annotated[Length, Field(ge=0)] = 0.0
-    offset: Length = 0.0
+    rate: Annotated[Frequency, Field(gt=0)] | None = Field(
+        None, description="sample rate [Hz]; default: the scenario's record rate")
+    filter: NonNegTime = Field(0.0, description="first-order filter time constant [s]")
+    gain: float = Field(1.0, description="calibration gain g in y = g·x + b")
+    noise: Annotated[Length, Field(ge=0)] = Field(
+        0.0, description="noise std of the pitch reading [m]")
+    offset: Length = Field(0.0, description="calibration offset b [m]")
     range: pair(float) | None = Field(None, description="[low, high] in m")
     quantization: Annotated[float, Field(ge=0)] = Field(0.0, description="resolution [m]")
     delay: NonNegTime = Field(0.0, description="processing delay of the record [s]")
@@ -565,8 +620,9 @@ Sensor = Annotated[LoadCell | Encoder | RollDiameter | DancerPosition | PitchLen
 
 
 class _Controller(Strict):
-    id: Id
-    element: Id
+    id: Id = Field(
+        description="name of the controller, unique in the line; its columns are ctrl.<id>.*")
+    element: Id = Field(description="id of the element whose drive the controller commands")
     kp: float = Field(description="proportional gain")
     ki: Annotated[float, Field(ge=0)] = Field(0.0, description="integral gain")
     anti_windup_gain: Annotated[float, Field(ge=0)] | None = Field(
@@ -578,9 +634,11 @@ class SpeedPI(_Controller):
     """Speed PI on a torque-driven element: omega_ref = line speed·(1 + draw)/R + trim/R.
     kp [N m s/rad], ki [N m/rad]."""
 
-    type: Literal["speed_pi"]
+    type: Literal["speed_pi"] = Field(description="selects a speed loop")
     master: bool = Field(False, description="the master speed node sets line speed (draw 0)")
-    draw: Dimensionless = 0.0
+    draw: Dimensionless = Field(
+        0.0, description="relative speed offset from line speed (0.01: 1 % faster); the master "
+        "has 0")
     torque_feedforward: bool = Field(True, description="add J·d(omega_ref)/dt")
     encoder: Id | None = Field(None, description="encoder sensor read; default true speed")
 
@@ -649,9 +707,10 @@ class TensionPI(_Controller):
     torque (radius-compensated feed-forward T_ref·R + load-cell trim, kp [N/N], ki [N/(N s)]);
     on a speed-controlled element it trims the surface speed (kp [(m/s)/N], ki [(m/s)/(N s)])."""
 
-    type: Literal["tension_pi"]
-    sensor: Id
-    setpoint: Annotated[Force, Field(ge=0)]
+    type: Literal["tension_pi"] = Field(description="selects a tension loop")
+    sensor: Id = Field(description="id of the load_cell or pitch_length sensor the loop reads")
+    setpoint: Annotated[Force, Field(ge=0)] = Field(
+        description="tension set-point [N] (the scenario's programme can change it)")
     output_limit: Annotated[float, Field(gt=0)] | None = Field(
         None, description="|PI output| limit: N (torque mode) or m/s (speed trim)"
     )
@@ -673,7 +732,7 @@ class DancerPI(_Controller):
     kp [(m/s)/m] or [(m/s)/rad]. The sign is chosen from the geometry so that a dancer
     short of web speeds an upstream element up (or slows a downstream one)."""
 
-    type: Literal["dancer_pi"]
+    type: Literal["dancer_pi"] = Field(description="selects a dancer (or festoon) position loop")
     dancer: Id = Field(description="dancer element id or festoon span id")
     sensor: Id | None = Field(None, description="dancer_position sensor; default true position")
     setpoint: float | None = Field(None, description="position set-point; default the "
@@ -687,17 +746,21 @@ Controller = Annotated[SpeedPI | TensionPI | DancerPI, Field(discriminator="type
 class Line(Strict):
     """A roll-to-roll line."""
 
-    name: str | None = None
-    description: str | None = None
+    name: str | None = Field(None, description="name of the line, for messages and the dataset")
+    description: str | None = Field(None, description="free text")
     span_model: Literal["exact", "linear"] = Field(
         "exact", description="exact mass conservation (default) or the textbook linear form"
     )
-    web: Web
-    elements: Annotated[list[Element], Field(min_length=2, max_length=MAX_LINE_ITEMS)]
-    spans: Annotated[list[Span], Field(max_length=MAX_LINE_ITEMS)]
+    web: Web = Field(description="the web material and its cross-section")
+    elements: Annotated[list[Element], Field(min_length=2, max_length=MAX_LINE_ITEMS)] = Field(
+        description="rolls and rollers in web order; span i joins element i-1 to element i")
+    spans: Annotated[list[Span], Field(max_length=MAX_LINE_ITEMS)] = Field(
+        description="one entry per span (number of elements - 1), in web order")
     sensors: Annotated[list[Sensor], Field(max_length=MAX_LINE_ITEMS)] = Field(
+        description="measurements; each records meas.* and true.* columns",
         default_factory=list)
     controllers: Annotated[list[Controller], Field(max_length=MAX_LINE_ITEMS)] = Field(
+        description="speed, tension and dancer loops",
         default_factory=list)
 
     @model_validator(mode="after")

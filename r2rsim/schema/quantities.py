@@ -17,10 +17,14 @@ def _quantity(dimension: str):
     def convert(value):
         return parse_quantity(value, dimension)
 
+    # x-dimension and x-unit survive a field's own description, which replaces this one
+    # (docs/keys.md is generated from them: r2rsim.schema.reference_markdown)
     schema = {
         "anyOf": [{"type": "number"}, {"type": "string"}],
         "description": f"{dimension.replace('_', ' ')}: a number in {si_unit} or a string with "
         f"units such as '{example}'",
+        "x-dimension": dimension.replace("_", " "),
+        "x-unit": si_unit,
     }
     return Annotated[float, BeforeValidator(convert), WithJsonSchema(schema)]
 

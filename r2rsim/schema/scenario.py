@@ -37,8 +37,9 @@ class ProgrammeStep(Strict):
     given, in which case the set-point moves linearly to its new value.
     """
 
-    at: Annotated[Time, Field(ge=0)]
-    line_speed: Speed | None = None
+    at: Annotated[Time, Field(ge=0)] = Field(description="time of the change [s]")
+    line_speed: Speed | None = Field(
+        None, description="new line speed [m/s] (the master speed node's surface speed)")
     tension: dict[Id, Annotated[Force, Field(ge=0)]] | None = Field(
         None, description="new set-points of tension controllers, by controller id"
     )
@@ -76,9 +77,13 @@ class ScenarioEvent(Strict):
     ``dancer_seize``: the dancer (or festoon carriage) ``element`` seizes where it is.
     """
 
-    at: Annotated[Time, Field(ge=0)]
-    type: Literal["splice", "e_stop", "dancer_seize"]
-    element: Id | None = None
+    at: Annotated[Time, Field(ge=0)] = Field(description="time of the event [s]")
+    type: Literal["splice", "e_stop", "dancer_seize"] = Field(
+        description="splice: start a roll change; e_stop: ramp the line speed down to 0; "
+        "dancer_seize: the dancer or festoon carriage seizes where it is")
+    element: Id | None = Field(
+        None, description="splice: the unwind (default the only one with a splicer); "
+        "dancer_seize: the dancer or festoon span")
     deceleration: Annotated[Acceleration, Field(gt=0)] | None = Field(
         None, description="e_stop: line deceleration limit [m/s^2]"
     )
@@ -96,12 +101,16 @@ class Initial(Strict):
     """Initial state. ``steady``: solve for the steady state at the t = 0 set-points (default).
     ``nominal``: all nodes at line speed, every span at ``tension`` (overridable per span)."""
 
-    state: Literal["steady", "nominal"] = "steady"
+    state: Literal["steady", "nominal"] = Field(
+        "steady", description="steady: the steady state at the t = 0 set-points; nominal: every "
+        "node at line speed, every span at tension")
     tension: Annotated[Force, Field(ge=0)] | None = Field(
         None, description="nominal mode: tension of every span [N]; default the first "
         "tension set-point, else 0"
     )
-    span_tension: dict[Id, Annotated[Force, Field(ge=0)]] = Field(default_factory=dict)
+    span_tension: dict[Id, Annotated[Force, Field(ge=0)]] = Field(
+        default_factory=dict, description="nominal mode: tension [N] of single spans, by span "
+        "id, instead of tension")
     slack: dict[Id, Annotated[Length, Field(gt=0)]] = Field(
         default_factory=dict, description="nominal mode: web [m] a span holds beyond its taut "
         "length, by span id (less than half the span): the span starts slack, at 0 N, as a "
@@ -126,7 +135,8 @@ class SolverOptions(Strict):
         "radau5", description="radau5: r2rsim's compiled Radau IIA, order 5 (default: the "
         "fastest at equal accuracy on the project's benchmark); cvode: SUNDIALS CVODE BDF2 "
         "(scikit-sundae); radau: scipy's Radau (cross-check)")
-    rtol: Annotated[float, Field(gt=0, lt=1)] = 1e-6
+    rtol: Annotated[float, Field(gt=0, lt=1)] = Field(
+        1e-6, description="relative tolerance of the integrator")
     atol_scale: Annotated[float, Field(gt=0)] = Field(
         1.0, description="multiplies the per-state absolute tolerances"
     )
@@ -165,10 +175,13 @@ class SplitBySeed(Strict):
     """Assign the run to a split from its seed: fractions of train/val/test, deterministic
     in the seed (the same seed always lands in the same split)."""
 
-    by: Literal["seed"]
-    train: Annotated[float, Field(ge=0, le=1)] = 0.6
-    val: Annotated[float, Field(ge=0, le=1)] = 0.2
-    test: Annotated[float, Field(ge=0, le=1)] = 0.2
+    by: Literal["seed"] = Field(description="assign the split from the run's seed")
+    train: Annotated[float, Field(ge=0, le=1)] = Field(
+        0.6, description="fraction of seeds in the train split")
+    val: Annotated[float, Field(ge=0, le=1)] = Field(
+        0.2, description="fraction of seeds in the val split")
+    test: Annotated[float, Field(ge=0, le=1)] = Field(
+        0.2, description="fraction of seeds in the test split")
 
     @model_validator(mode="after")
     def _check(self):
@@ -202,8 +215,11 @@ class Disturbance(Strict):
     :mod:`r2rsim.compile.disturbances`).
     """
 
-    type: Literal["bearing_drag", "wound_in_strain", "out_of_round"]
-    element: Id
+    type: Literal["bearing_drag", "wound_in_strain", "out_of_round"] = Field(
+        description="bearing_drag: a random drag torque on a roller; wound_in_strain: strain "
+        "wound into an unwind's roll, varying along the web; out_of_round: an eccentric roller")
+    element: Id = Field(
+        description="id of the roller (bearing_drag, out_of_round) or unwind (wound_in_strain)")
     std: NumberOrText | None = Field(
         None, description="bearing_drag: torque [N m]; wound_in_strain: strain [1]. The "
         "standard deviation: with shape sines, the mean square of every realisation over a "
@@ -217,7 +233,9 @@ class Disturbance(Strict):
         "autocorrelation exp(-|lag|/l_c) (a first-order spectrum of corner 1/(2 pi l_c) per "
         "metre); with shape sines the spectrum is cut off at 10/(2 pi l_c) per metre, "
         "wavelengths down to 0.63 l_c")
-    eccentricity: Annotated[Length, Field(gt=0)] | None = None
+    eccentricity: Annotated[Length, Field(gt=0)] | None = Field(
+        None, description="out_of_round: distance of the axis of rotation from the roller's "
+        "centre [m]")
     shape: Literal["sines", "table"] | None = Field(
         None, description="bearing_drag and wound_in_strain: 'sines' (default), a smooth sum "
         "of 32 sinusoids with random phases and frequencies drawn from the declared spectrum "
@@ -254,10 +272,11 @@ class Scenario(Strict):
         None, description="the run's name, an identifier (letters, digits and '_', starting "
         "with a letter): it names the run id <name>__s<seed> and paths in the dataset; "
         "default the file name")
-    description: str | None = None
+    description: str | None = Field(None, description="free text")
     line: str = Field(description="path of the line file, relative to the scenario file")
-    duration: Annotated[Time, Field(gt=0)]
-    record_rate: Annotated[Frequency, Field(gt=0)] = Field(1000.0, description="[Hz]")
+    duration: Annotated[Time, Field(gt=0)] = Field(description="simulated time [s]")
+    record_rate: Annotated[Frequency, Field(gt=0)] = Field(
+        1000.0, description="rate of the recorded samples [Hz]")
     seed: Annotated[int, Field(ge=0, le=limits.MAX_SEED)] = Field(
         0, description="root seed, 0 to 2**64 - 1")
     output: str | None = Field(
@@ -265,19 +284,23 @@ class Scenario(Strict):
         "directory that holds it (-o writes anywhere); default runs/<scenario name> in the "
         "working directory"
     )
-    initial: Initial = Field(default_factory=Initial)
+    initial: Initial = Field(default_factory=Initial, description="the state at t = 0")
     programme: Annotated[list[ProgrammeStep], Field(max_length=limits.MAX_PROGRAMME_STEPS)] = \
-        Field(default_factory=list)
+        Field(default_factory=list, description="set-point changes in time order; the first, "
+              "at 0 s, sets the starting line speed and set-points")
     events: Annotated[list[ScenarioEvent], Field(max_length=limits.MAX_EVENTS)] = Field(
+        description="scheduled discrete events: splices, e-stops, dancer seizures",
         default_factory=list)
-    solver: SolverOptions = Field(default_factory=SolverOptions)
+    solver: SolverOptions = Field(default_factory=SolverOptions, description="integrator settings")
     warmup: Annotated[Time, Field(ge=0)] = Field(
         0.0, description="initial period labelled 'warmup' in the dataset [s]"
     )
     faults: Annotated[list[Fault], Field(max_length=limits.MAX_FAULTS)] = Field(
+        description="the faults injected into the run (labelled; r2rsim list faults)",
         default_factory=list)
     disturbances: Annotated[list[Disturbance], Field(max_length=limits.MAX_DISTURBANCES)] = \
-        Field(default_factory=list)
+        Field(default_factory=list, description="process disturbances, always present and "
+              "not labelled")
     variability: Variability | None = Field(
         None, description="unlabelled spread between rolls (modulus, thickness, starting "
         "radius, wound-in strain) and runs (bearing friction, sensor calibration), drawn "

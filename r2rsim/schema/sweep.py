@@ -49,10 +49,12 @@ class Range(Strict):
     ``step`` apart. Numbers or strings with units (``"0.5 m/s"``; start, stop and step in one
     dimension)."""
 
-    start: NumberOrText
-    stop: NumberOrText
-    num: Annotated[int, Field(ge=1, le=limits.MAX_AXIS_VALUES)] | None = None
-    step: NumberOrText | None = None
+    start: NumberOrText = Field(description="the first value")
+    stop: NumberOrText = Field(
+        description="the last value (with step: the last one not beyond it)")
+    num: Annotated[int, Field(ge=1, le=limits.MAX_AXIS_VALUES)] | None = Field(
+        None, description="how many values")
+    step: NumberOrText | None = Field(None, description="their spacing, from start towards stop")
 
     @model_validator(mode="after")
     def _one_spacing(self):
@@ -73,7 +75,7 @@ class Axis(Strict):
     values: Annotated[list[Any], Field(min_length=1, max_length=limits.MAX_AXIS_VALUES)] | None \
         = Field(None, description="the values, as the scenario would write them; null on a "
                 "list element chosen by id (faults.f) leaves the element out")
-    range: Range | None = None
+    range: Range | None = Field(None, description="evenly spaced numbers")
     uniform: pair(NumberOrText) | None = Field(
         None, description="[low, high]: drawn uniformly (combine: random)")
     loguniform: pair(NumberOrText) | None = Field(
@@ -103,7 +105,7 @@ class Sweep(Strict):
 
     name: Id = Field(description="names the sweep, its run ids and its default output "
                      "directory runs/<name>")
-    description: str | None = None
+    description: str | None = Field(None, description="free text, for people")
     scenario: str = Field(description="the base scenario file, relative to the sweep file")
     output: str | None = Field(
         None, description="output directory, relative to the sweep file and inside its "
@@ -111,7 +113,8 @@ class Sweep(Strict):
     set: dict[Path_, Any] = Field(
         default_factory=dict, description="values set in every run (path: value), before "
         "the axes; e.g. {duration: 10 s}")
-    axes: Annotated[list[Axis], Field(max_length=100)] = Field(default_factory=list)
+    axes: Annotated[list[Axis], Field(max_length=100)] = Field(
+        default_factory=list, description="the values that change from run to run")
     combine: Literal["grid", "zip", "random"] = Field(
         "grid", description="grid: every combination of the axes' values; zip: the i-th "
         "value of every axis together (equal lengths); random: n draws")

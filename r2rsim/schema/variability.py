@@ -106,8 +106,9 @@ class SensorCalibration(Strict):
 
 
 class Variability(Strict):
-    """Unlabelled process variability (see the module docstring of
-    :mod:`r2rsim.schema.variability`)."""
+    """Unlabelled process variability: what differs between the rolls of an unwind and
+    between runs, drawn from the run's process stream and recorded in variability.parquet,
+    never in the columns a method sees (docs/dataset.md §8.1; this module's docstring)."""
 
     rolls: dict[Id, RollVariability] = Field(
         default_factory=dict, description="per unwind id: what differs between its rolls")
