@@ -167,6 +167,39 @@ CASES = [
      "shorter than 1 mm"),
     ("faster than the web's waves", S(["programme", 0, "line_speed"], "5 km/s"), "scen.yaml",
      "programme[0].line_speed", "wave speed"),
+    # values whose arithmetic overflowed the integrator or the float32 samples (they ended
+    # in a ZeroDivisionError traceback, or in columns of inf with exit 0)
+    ("coulomb friction 1e300", L(["elements", 1, "friction"], {"coulomb": "1e300 N*m"}),
+     "line.yaml", "elements[1].friction.coulomb", "beyond any bearing"),
+    ("bearing drag 1e300", S(["disturbances"], [{"type": "bearing_drag", "element": "idler1",
+                                                  "std": "1e300 N*m", "bandwidth": "1 Hz"}]),
+     "scen.yaml", "disturbances[0].std", "beyond any bearing"),
+    ("gain 1e300 on the loop's load cell", L(["sensors", 0, "gain"], 1e300), "line.yaml",
+     "sensors[0].gain", "not a calibration"),
+    ("gain 0", L(["sensors", 0, "gain"], 0.0), "line.yaml", "sensors[0].gain",
+     "not a calibration"),
+    ("load-cell noise 1e300", L(["sensors", 0, "noise"], "1e300 N"), "line.yaml",
+     "sensors[0].noise", "beyond any sensor's reading"),
+    ("speed noise 1e300", L(["sensors", 0, "noise_per_speed"], 1e300), "line.yaml",
+     "sensors[0].noise_per_speed", "beyond any sensor's reading"),
+    ("quantization 1e-320", L(["sensors", 0, "quantization"], 1e-320), "line.yaml",
+     "sensors[0].quantization", "finer than any instrument"),
+    ("wound-in strain 17", L(["elements", 0, "roll", "wound_in_strain"], 17.0), "line.yaml",
+     "elements[0].roll.wound_in_strain", "Hooke's law no longer describes"),
+    ("wound-in strain std 0.1", S(["disturbances"], [
+        {"type": "wound_in_strain", "element": "unwind", "std": 0.1,
+         "correlation_length": "5 m"}]), "scen.yaml", "disturbances[0].std",
+     "within 4 standard deviations"),
+    ("a drawn wound-in strain of 10", S(["variability"], {
+        "rolls": {"unwind": {"wound_in_strain": {"std": 10}}}}), "scen.yaml",
+     "variability.rolls.unwind.wound_in_strain.std", "Hooke's law no longer describes"),
+    ("a drawn offset of 1e30 N", S(["variability"], {
+        "sensors": {"lc": {"offset": {"tolerance": "1e30 N"}}}}), "scen.yaml",
+     "variability.sensors.lc.offset.tolerance", "beyond any sensor's reading"),
+    ("two eccentricities on one roller", S(["disturbances"], [
+        {"type": "out_of_round", "element": "idler1", "eccentricity": "0.01 mm"},
+        {"type": "out_of_round", "element": "idler1", "eccentricity": "0.02 mm"}]),
+     "scen.yaml", "disturbances[1].element", "already out of round"),
 ]
 
 

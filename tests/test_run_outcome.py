@@ -109,3 +109,39 @@ def test_wall_clock_budget(tmp_path, repo):
     runs = _runs(tmp_path / "o")
     assert runs["termination_reason"].startswith("solver_failure: wall-clock budget: ")
     assert runs["termination_t_s"] < 60.0
+
+
+def test_an_arithmetic_error_in_the_compiled_integrator_is_a_solver_failure(
+        tmp_path, repo, monkeypatch, capsys):
+    """numba raises ZeroDivisionError as Python does; inputs whose values overflowed the
+    arithmetic (a friction of 1e300 N m, before the plausibility bounds) ended in a traceback.
+    Now the run ends as a solver failure, its dataset written and marked."""
+    from r2rsim.solve import radau
+
+    def broken(*args):
+        raise ZeroDivisionError("division by zero")
+
+    monkeypatch.setattr(radau, "integrate", broken)
+    out = tmp_path / "out"
+    assert main(["run", str(repo / "scenarios" / "quickstart.yaml"), "-o", str(out), "-q",
+                 "--duration", "1"]) == 1
+    cap = capsys.readouterr()
+    assert "Traceback" not in cap.err
+    assert "solver_failure: ZeroDivisionError in the compiled integrator" in cap.out
+    runs = _runs(out)
+    assert runs["termination_reason"].startswith("solver_failure: ZeroDivisionError")
+    assert runs["termination_t_s"] == 0.0 and runs["n_samples"] == 1
+    assert main(["validate", str(out)]) == 0
+
+
+def test_a_run_shorter_than_one_sample_period_records_its_start(tmp_path, repo, capsys):
+    """A run that ends before its first sample (here: shorter than the solver's first
+    chunk; also a web break within femtoseconds) records the state at t = 0 instead of
+    failing its own dataset check."""
+    scen = _scenario(tmp_path, repo, "quickstart.yaml", duration="1e-12 s")
+    out = tmp_path / "out"
+    assert main(["run", str(scen), "-o", str(out), "-q"]) == 0
+    t = pq.read_table(next((out / "samples").glob("*/*.parquet")), columns=["t_s"])
+    assert t["t_s"].to_pylist() == [0.0]
+    assert _runs(out)["n_samples"] == 1
+    assert main(["validate", str(out)]) == 0

@@ -717,8 +717,14 @@ def check_variability(scenario, line, file: str) -> None:
                                  "below (a normal draw reaches 4 standard deviations)",
                                  file=file, path=path)
         if r.wound_in_strain is not None:
-            width(r.wound_in_strain, 0.0, "dimensionless",
-                  f"{where}.wound_in_strain.{r.wound_in_strain.key}")
+            path = f"{where}.wound_in_strain.{r.wound_in_strain.key}"
+            e0 = max(abs(roll.wound_in_coefficients()[0]) for roll in rolls)
+            if e0 + width(r.wound_in_strain, 0.0, "dimensionless", path) \
+                    >= plausibility.WOUND_IN_STRAIN_MAX:
+                raise InputError(f"the wound-in strain could be drawn to "
+                                 f"{plausibility.WOUND_IN_STRAIN_MAX:g} or beyond, where "
+                                 "Hooke's law no longer describes the web (a normal draw "
+                                 "reaches 4 standard deviations)", file=file, path=path)
         if r.relaxed_pitch is not None:
             _check_pitch_offset(line, uid, r.relaxed_pitch, width, file,
                                 f"{where}.relaxed_pitch.{r.relaxed_pitch.key}")
@@ -735,8 +741,12 @@ def check_variability(scenario, line, file: str) -> None:
                 raise InputError(f"gain {s.gain:g} could be drawn down to 0 or below",
                                  file=file, path=path)
         if cal.offset is not None:
-            width(cal.offset, s.offset, sensor_dimension(line, s)[0],
-                  f"{where}.offset.{cal.offset.key}")
+            path = f"{where}.offset.{cal.offset.key}"
+            w = width(cal.offset, s.offset, sensor_dimension(line, s)[0], path)
+            if abs(s.offset) + w > plausibility.READING_MAX:
+                raise InputError(f"the offset could be drawn beyond any sensor's reading "
+                                 f"({plausibility.READING_MAX:g} in its SI unit)", file=file,
+                                 path=path)
 
 
 def _check_pitch_offset(line, uid, spread, width, file, path) -> None:

@@ -58,6 +58,26 @@ SPAN_RANGE = (1.0e-2, 100.0)
 #: Fastest line in physics.md §2.2: paper machines, 15-35 m/s.
 SPEED_MAX = 50.0
 
+# --- torques, strains and sensors --------------------------------------------------------------
+#: Largest bearing friction or drag torque [N m] (and viscous coefficient [N m s]): the drives
+#: of the largest paper-machine reels deliver ~1e5 N m; a friction beyond 1e6 is a typo, and at
+#: 1e300 the integrator's arithmetic overflows.
+TORQUE_MAX = 1.0e6
+#: A wound-in strain (or its spread) as large as this is not a pre-strain the span model can
+#: carry: the break strain above which Hooke's law no longer describes the web.
+WOUND_IN_STRAIN_MAX = BREAK_STRAIN_MAX
+#: Calibration gain g of y = g·x + b: outside [1e-3, 1e3] it is not a calibration (a sensor
+#: whose reading is a thousandth or a thousand times the quantity); sensor.gain faults model
+#: gain errors separately.
+GAIN_RANGE = (1.0e-3, 1.0e3)
+#: Largest noise, offset or speed-noise slope (per m/s at the fastest line) of a reading, in
+#: its SI unit (N, m, rad, rad/s): no sensor reads 1e9 of its unit, and readings are stored as
+#: float32, which overflows to inf at 3.4e38.
+READING_MAX = 1.0e9
+#: Finest quantization step of a reading [SI unit] (0 = none): a finer step is below any
+#: instrument, and one near 1e-308 overflows when the reading is divided by it.
+QUANTIZATION_MIN = 1.0e-12
+
 # --- controllers (physics.md §1.10) ----------------------------------------------------------
 #: Highest loop rate [rad/s] an error allows: 1e6 rad/s = 160 kHz, 100 times the fastest
 #: current loop (0.5-2 kHz); the solver would need sub-microsecond steps.
@@ -111,7 +131,8 @@ def line_problems(line) -> list[tuple[str, str, str]]:
     def warn(path, msg):
         out.append((WARNING, path, msg))
 
-    for check in (_web_properties, _web_wraps, _web_strength, _roll_sizes, _span_lengths):
+    for check in (_web_properties, _web_wraps, _web_strength, _roll_sizes, _span_lengths,
+                  _frictions, _wound_in_strains, _sensor_values):
         check(line, err, warn)
     # tension set-points
     for j, c in enumerate(line.controllers):
@@ -210,6 +231,60 @@ def _span_lengths(line, err, warn) -> None:
         elif not SPAN_RANGE[0] <= sp.length <= SPAN_RANGE[1]:
             warn(f"spans[{i}].length", f"{_fmt(sp.length)} m is outside the range of free "
                  "spans (10 mm to 100 m; physics.md §2.2: 0.03-30 m)")
+
+
+def _frictions(line, err, warn) -> None:
+    for i, e in enumerate(line.elements):
+        frictions = [("friction", e.friction)]
+        if e.type == "nip":
+            frictions.append(("pressure_roller.friction", e.pressure_roller.friction))
+        for where, f in frictions:
+            for key, value, unit in (("coulomb", f.coulomb, "N m"),
+                                     ("viscous", f.viscous, "N m s")):
+                if value > TORQUE_MAX:
+                    err(f"elements[{i}].{where}.{key}", f"{_fmt(value)} {unit} is beyond any "
+                        f"bearing (at most {_fmt(TORQUE_MAX)} {unit})")
+
+
+def _wound_in_strains(line, err, warn) -> None:
+    for i, e in enumerate(line.elements):
+        for key in ("roll", "spare_roll"):
+            roll = getattr(e, key, None)
+            if roll is None:
+                continue
+            e0, e1, e2 = roll.wound_in_coefficients()
+            for R in (roll.core_radius, roll.outer_radius):
+                strain = e0 + e1 * R + e2 * R * R
+                if abs(strain) >= WOUND_IN_STRAIN_MAX:
+                    err(f"elements[{i}].{key}.wound_in_strain", f"a wound-in strain of "
+                        f"{_fmt(strain)} at R = {_fmt(R)} m: at a strain of "
+                        f"{WOUND_IN_STRAIN_MAX:g} or more Hooke's law no longer describes "
+                        "the web")
+                    break
+
+
+def _sensor_values(line, err, warn) -> None:
+    for i, s in enumerate(line.sensors):
+        p = f"sensors[{i}]"
+        if not GAIN_RANGE[0] <= s.gain <= GAIN_RANGE[1]:
+            err(f"{p}.gain", f"a calibration gain of {_fmt(s.gain)} is not a calibration "
+                f"(from {GAIN_RANGE[0]:g} to {GAIN_RANGE[1]:g}; a sensor.gain fault models a "
+                "gain error)")
+        for key, value in (("noise", s.noise), ("offset", abs(s.offset)),
+                           ("noise_per_speed", s.noise_per_speed * SPEED_MAX)):
+            if value > READING_MAX:
+                err(f"{p}.{key}", f"{_fmt(getattr(s, key))} is beyond any sensor's reading "
+                    f"(at most {READING_MAX:g} in the reading's SI unit"
+                    + (f", at {SPEED_MAX:g} m/s" if key == "noise_per_speed" else "") + ")")
+        if 0.0 < s.quantization < QUANTIZATION_MIN:
+            err(f"{p}.quantization", f"{_fmt(s.quantization)} is finer than any instrument "
+                f"(0, for none, or at least {QUANTIZATION_MIN:g})")
+        if s.type == "pitch_length":
+            L0 = s.relaxed_pitch if s.relaxed_pitch is not None else s.relaxed_pitch_law.q0
+            key = "relaxed_pitch" if s.relaxed_pitch is not None else "relaxed_pitch_law.q0"
+            if L0 > SPAN_RANGE[1]:
+                err(f"{p}.{key}", f"a relaxed pitch of {_fmt(L0)} m is longer than any span "
+                    f"({SPAN_RANGE[1]:g} m)")
 
 
 def tension_problems(line, tension: float, path: str) -> list[tuple[str, str, str]]:
@@ -332,4 +407,31 @@ def scenario_problems(scenario, line) -> list[tuple[str, str, str]]:
                 for lvl, path, msg in tension_problems(line, init.tension, "initial.tension")]
     for sid, T in init.span_tension.items():
         out += tension_problems(line, T, f"initial.span_tension.{sid}")
+    return out + disturbance_problems(scenario)
+
+
+def disturbance_problems(scenario) -> list[tuple[str, str, str]]:
+    """Disturbances beyond physics, and two eccentricities of one roller (which would not
+    say what they do together)."""
+    out = []
+    eccentric: dict[str, int] = {}
+    for i, d in enumerate(scenario.disturbances):
+        p = f"disturbances[{i}]"
+        if d.type == "out_of_round":
+            if d.element in eccentric:
+                out.append((ERROR, f"{p}.element", f"'{d.element}' is already out of round "
+                            f"(disturbances[{eccentric[d.element]}]): give one eccentricity"))
+            eccentric.setdefault(d.element, i)
+            continue
+        try:
+            std = d.std_si()
+        except ValueError:  # a bad unit: the loader reports it with its path
+            continue
+        if d.type == "bearing_drag" and std > TORQUE_MAX:
+            out.append((ERROR, f"{p}.std", f"a drag torque of {_fmt(std)} N m is beyond any "
+                        f"bearing (at most {_fmt(TORQUE_MAX)} N m)"))
+        if d.type == "wound_in_strain" and 4 * std >= WOUND_IN_STRAIN_MAX:
+            out.append((ERROR, f"{p}.std", f"a wound-in strain of std {_fmt(std)} reaches "
+                        f"{WOUND_IN_STRAIN_MAX:g} within 4 standard deviations, where Hooke's "
+                        "law no longer describes the web"))
     return out

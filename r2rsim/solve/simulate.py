@@ -31,6 +31,8 @@ from .discrete import MODE_EVENTS, DiscreteLogic, Event
 
 TERMINAL = {EV_BREAK, EV_EMPTY}
 NONFINITE = "the state is not finite (nan or inf)"
+#: status of a compiled integration that raised an ArithmeticError (not a radau status)
+_ARITHMETIC = -1
 PHYSICAL = {EV_SLACK, EV_BREAK, EV_CAPSTAN, EV_EMPTY}
 
 
@@ -326,6 +328,7 @@ class _Radau5Backend:
         self.njev = 0
         self.nlu = 0
         self.steps = 0
+        self.arithmetic_error = ""
 
     def _integrate(self, tspan, y0, resume=False):
         r = self.radau
@@ -333,11 +336,20 @@ class _Radau5Backend:
         tq = np.ascontiguousarray(tspan, float)
         out = np.empty((len(tq), cl.n_states))
         warm = resume and self.h_next > 0.0
-        status, t_reached, n_out, nfev, njev, nlu, nsteps, self.h_next = r.integrate(
-            float(tq[0]), float(tq[-1]), np.ascontiguousarray(y0, float), tq, out, self.rtol,
-            self.atol, 200000, self.line, self.rows, self.cols, max(cl.lband, 0),
-            max(cl.uband, 0), r.CONSTS, self.g, self.y_root, self.dirs, self.vals,
-            self.h_next if warm else 0.0, warm)
+        try:
+            status, t_reached, n_out, nfev, njev, nlu, nsteps, self.h_next = r.integrate(
+                float(tq[0]), float(tq[-1]), np.ascontiguousarray(y0, float), tq, out,
+                self.rtol, self.atol, 200000, self.line, self.rows, self.cols,
+                max(cl.lband, 0), max(cl.uband, 0), r.CONSTS, self.g, self.y_root, self.dirs,
+                self.vals, self.h_next if warm else 0.0, warm)
+        except ArithmeticError as exc:
+            # a division by zero in the compiled code (numba raises as Python does): values
+            # so large that the arithmetic broke down. The chunk's samples are lost with it;
+            # the run ends as a solver failure at the chunk's start.
+            self.h_next = 0.0
+            self.arithmetic_error = (f"{type(exc).__name__} in the compiled integrator "
+                                     f"({exc}): the states left the range of floating point")
+            return _ARITHMETIC, float(tq[0]), tq[:0], out[:0]
         self.nfev += nfev
         self.njev += njev
         self.nlu += nlu
@@ -354,6 +366,8 @@ class _Radau5Backend:
         if status == self.radau.ROOT:
             root = (t_reached, self.y_root.copy(), self.dirs.copy())
             return tt, Y, None, tt, Y, root
+        if status == _ARITHMETIC:
+            return tt, Y, self.arithmetic_error, tt, Y, None
         if status != self.radau.DONE:
             return tt, Y, self.radau.MESSAGES[status], tt, Y, None
         return tt, Y, None, tt, Y, None
@@ -521,6 +535,7 @@ class _EventLoop:
         self.flags = (cl.events(0.0, self.y)[0] < 0 if len(cl.event_kinds)
                       else np.zeros(0, bool))
         self.t = 0.0
+        y_start = self.y.copy()
         if _broken_at_start(cl, self.y, self.flags, self.log):
             self.k_next = _emit_samples(self.emit, self.sample_t, self.k_next,
                                         np.array([0.0]), self.y[None, :])
@@ -531,6 +546,9 @@ class _EventLoop:
             event = self._chunk()
             if event is not None:
                 self._fire_at(*event)
+        if self.k_next == 0:  # ended (or too short) before its first sample: record t = 0
+            self.k_next = _emit_samples(self.emit, self.sample_t, 0, np.array([0.0]),
+                                        y_start[None, :])
 
     def _refresh_mode_flags(self, t, y, flags):
         # after a discrete change the mode events' functions mean something new: re-read
