@@ -114,6 +114,11 @@ MAX_SWEEP_RUNS = 100_000
 #: Most values of one sweep axis (a list or a range): 10 000.
 MAX_AXIS_VALUES = 10_000
 
+#: Most worker processes a sweep starts on this machine (--workers, also a LocalCluster's):
+#: 1024. Each loads numba's kernels (~300 MB); the largest single machines have a few
+#: hundred cores. A sweep never starts more workers than it has runs to do.
+MAX_LOCAL_WORKERS = 1024
+
 #: Most bootstrap replicates of an evaluation: 100 000. The replicate index is held in
 #: memory (replicates x runs), and 10 000 already puts a 95 % interval's ends within a few
 #: tenths of a percent of their limit.

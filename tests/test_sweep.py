@@ -544,6 +544,27 @@ BAD = {
         f"seed: {limits.MAX_SEED}\nseeds: 2\n",
         ["seeds: the last seed 18446744073709551616 is above 2**64 - 1"]),
     "invalid YAML": ("axes: [\n", ["invalid YAML"]),
+    # numbers at the ends of floating point (OverflowError tracebacks before)
+    "a range step near 1e-320": (
+        "axes:\n  - {path: solver.rtol, range: {start: 0, stop: 1, step: 1.0e-320}}\n",
+        ["axes[0].range: the range from 0 to 1 in steps of", "has more than 10000 values"]),
+    "a range wider than floating point": (
+        "axes:\n  - {path: solver.rtol, range: {start: -1.0e+308, stop: 1.0e+308, "
+        "step: 1.0e+307}}\n", ["axes[0].range: the range from -1e+308 to 1e+308 is wider "
+                               "than floating point can hold"]),
+    "a uniform wider than floating point": (
+        "combine: random\nn: 2\naxes:\n  - {path: solver.rtol, "
+        "uniform: [-1.0e+308, 1.0e+308]}\n",
+        ["axes[0].uniform: the interval from -1e+308 to 1e+308 is wider than floating point"]),
+    # one value spelled two ways: the second axis overwrote the first (duplicate runs)
+    "one value swept by two axes under two spellings": (
+        "axes:\n  - {name: a, path: line.sensors.lc_rewind.noise, values: [1 N, 2 N]}\n"
+        "  - {name: b, path: 'line.sensors[1].noise', values: [3 N, 4 N]}\n",
+        ["axes[1].path: 'line.sensors[1].noise' is the value axes[0] sweeps "
+         "('line.sensors.lc_rewind.noise'); sweep it once"]),
+    "a scenario that is not a regular file": (
+        "__scenario__: /dev/null\n", ["scenario: scenario file '/dev/null' is not a regular "
+                                       "file"]),
 }
 
 
@@ -978,6 +999,11 @@ def test_bad_worker_counts(tmp_path, capsys, qs):
     code, _, err = cli(capsys, sw, "-o", tmp_path / "out", "--workers", "0", "--scheduler",
                        "local")
     assert code == 2 and err == "error: --workers must be >= 1, got 0\n"
+    # one machine: a bounded number of processes (each loads the kernels, ~300 MB)
+    for extra in ([], ["--scheduler", "local"]):
+        code, _, err = cli(capsys, sw, "-o", tmp_path / "out", "--workers", "100000", *extra)
+        assert code == 2 and err == ("error: --workers 100000: at most 1024 worker processes "
+                                     "on one machine (docs/security.md)\n")
     assert not (tmp_path / "out").exists()
 
 

@@ -16,6 +16,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .. import limits
 from ..errors import InputError
 from ._plan import RunSpec, SweepPlan, load_sweep, plan_sweep
 from ._store import Outcome, SweepStore, write_failure
@@ -130,6 +131,9 @@ def run_sweep(sweep_path: str | Path, output: str | Path | None = None, *,
     workers = default_workers() if workers is None else workers
     if workers < 0 or (scheduler is not None and workers < 1):
         raise InputError(f"--workers must be >= {1 if scheduler else 0}, got {workers}")
+    if workers > limits.MAX_LOCAL_WORKERS and scheduler in (None, "local"):
+        raise InputError(f"--workers {workers}: at most {limits.MAX_LOCAL_WORKERS} worker "
+                         "processes on one machine (docs/security.md)")
     store = SweepStore(out, plan, overwrite)
     store.inspect()
     outcomes = store.outcomes(retry_failed)
@@ -166,7 +170,7 @@ def run_sweep(sweep_path: str | Path, output: str | Path | None = None, *,
         if not todo:
             summary.executor = "none (nothing to run)"
         elif scheduler is not None:
-            _execute.run_dask(todo, work, on_result, scheduler, workers)
+            _execute.run_dask(todo, work, on_result, scheduler, min(workers, len(todo)))
         elif workers == 0:
             _execute.run_serial(todo, work, on_result)
         else:

@@ -157,7 +157,15 @@ def _axis_values(axis: Axis, file: str, where: str) -> list:
     if step == 0 or (stop - start) * step < 0:
         raise InputError(f"step {step:g} does not lead from {start:g} to {stop:g}", file=file,
                          path=f"{where}.range.step")
-    n = math.floor((stop - start) / step * (1 + 1e-12) + 1e-9) + 1
+    if not math.isfinite(stop - start):
+        raise InputError(f"the range from {start:g} to {stop:g} is wider than floating point "
+                         "can hold", file=file, path=f"{where}.range")
+    count = (stop - start) / step  # inf for a step near 1e-320
+    if not count <= limits.MAX_AXIS_VALUES:
+        raise InputError(f"the range from {start:g} to {stop:g} in steps of {step:g} has "
+                         f"more than {limits.MAX_AXIS_VALUES} values", file=file,
+                         path=f"{where}.range")
+    n = math.floor(count * (1 + 1e-12) + 1e-9) + 1
     if n > limits.MAX_AXIS_VALUES:
         raise InputError(f"the range has {n} values; at most {limits.MAX_AXIS_VALUES}",
                          file=file, path=f"{where}.range")
@@ -172,6 +180,9 @@ def _distribution(axis: Axis, file: str, where: str):
     if not lo < hi:
         raise InputError(f"low {lo:g} must be below high {hi:g}", file=file,
                          path=f"{where}.{key}")
+    if not math.isfinite(hi - lo):  # numpy's uniform cannot draw from a wider interval
+        raise InputError(f"the interval from {lo:g} to {hi:g} is wider than floating point "
+                         "can hold", file=file, path=f"{where}.{key}")
     if key == "uniform":
         return lambda rng: float(rng.uniform(lo, hi))
     if lo <= 0:
@@ -449,8 +460,9 @@ def plan_sweep(path: str | Path) -> SweepPlan:
     sweep = load_sweep(path)
     scenario_path = path.parent / sweep.scenario
     if not scenario_path.is_file():
-        raise InputError(f"scenario file '{sweep.scenario}' not found (looked at "
-                         f"{scenario_path.resolve()})", file=file, path="scenario")
+        raise InputError(f"scenario file '{sweep.scenario}' "
+                         + ("is not a regular file" if scenario_path.exists() else "not found")
+                         + f" (looked at {scenario_path.resolve()})", file=file, path="scenario")
     base = read_yaml(scenario_path)
     line_path = line_path_of(base, scenario_path)
     base_line = read_yaml(line_path)
@@ -472,6 +484,7 @@ def plan_sweep(path: str | Path) -> SweepPlan:
         except _paths.PathError as exc:
             checker.fail(k, [_path_problem(sweep, values, base, base_line, file, exc)])
             continue
+        _check_aliases(sweep, combo, file)
         record = checker.check(k, combo)
         if record is not None:
             made.append(record)
@@ -491,6 +504,20 @@ def plan_sweep(path: str | Path) -> SweepPlan:
 def _shown(sweep: Sweep, values: tuple) -> str:
     return ", ".join(f"{a.path} = {_value(v)}" for a, v in zip(sweep.axes, values, strict=True)) \
         or "the base scenario"
+
+
+def _check_aliases(sweep: Sweep, combo: _Combination, file: str) -> None:
+    """Two spellings of one value (``line.sensors.lc.noise``, ``line.sensors[0].noise``)
+    would let the second axis overwrite the first: runs under other ids that are the same
+    run. The schema compares the paths as written; here they are compared as resolved."""
+    seen: dict[tuple[str, str], int] = {}
+    for i, where in sorted(combo.where.items()):
+        if where in seen:
+            j = seen[where]
+            raise InputError(f"'{sweep.axes[i].path}' is the value axes[{j}] sweeps "
+                             f"('{sweep.axes[j].path}'); sweep it once", file=file,
+                             path=f"axes[{i}].path")
+        seen[where] = i
 
 
 def _path_problem(sweep, values, base, base_line, file, exc) -> str:
