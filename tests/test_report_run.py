@@ -366,3 +366,45 @@ def test_cli_errors_exit_2_with_one_message_and_no_file(case, needle, faults_ds,
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("error: ") and needle in err
     assert files(tmp_path, faults_ds) == before
+
+
+def _damage(ds, how: str):
+    """Break one file of a copy of a dataset the way a disk or a careless edit would."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    samples = next((ds / "samples").glob("*/part-0.parquet"))
+    small = pa.table({"x": [1]})
+    if how == "runs truncated":
+        (ds / "runs.parquet").write_bytes((ds / "runs.parquet").read_bytes()[:10])
+    elif how == "samples truncated":
+        samples.write_bytes(samples.read_bytes()[:100])
+    elif how == "runs without run_id":
+        pq.write_table(small, ds / "runs.parquet")
+    elif how == "samples without t_s":
+        pq.write_table(pq.read_table(samples).drop(["t_s"]), samples)
+    else:  # channels / faults / events of the wrong shape
+        pq.write_table(small, ds / f"{how.split()[0]}.parquet")
+    return {"runs truncated": "runs.parquet", "samples truncated": samples.relative_to(ds),
+            "runs without run_id": "runs.parquet", "samples without t_s":
+            samples.relative_to(ds)}.get(how, f"{how.split()[0]}.parquet")
+
+
+@pytest.mark.parametrize("how", ["runs truncated", "samples truncated", "runs without run_id",
+                                 "samples without t_s", "channels of the wrong shape",
+                                 "faults of the wrong shape", "events of the wrong shape"])
+def test_a_damaged_dataset_is_one_error_naming_the_file(how, faults_ds, tmp_path, capsys):
+    """plot reads only what it draws and does not check checksums: a damaged file (it gave
+    ArrowInvalid, KeyError or StopIteration tracebacks) is one error naming it."""
+    import shutil
+
+    ds = tmp_path / "ds"
+    shutil.copytree(faults_ds, ds)
+    name = _damage(ds, how)
+    out = tmp_path / "fig.png"
+    assert main(["plot", str(ds), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert err.startswith(f"error: dataset {ds}: {name} cannot be read (")
+    assert err.rstrip().endswith(f"`r2rsim validate {ds}` checks every file")
+    assert not out.exists()

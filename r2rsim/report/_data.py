@@ -4,6 +4,7 @@ in a memory far below the size of its samples."""
 
 from __future__ import annotations
 
+import contextlib
 import difflib
 import fnmatch
 from dataclasses import dataclass
@@ -104,6 +105,20 @@ class RunData:
     t_end: float
 
 
+@contextlib.contextmanager
+def _reading(root: Path, path: Path):
+    """A file of the dataset that cannot be read, or lacks a column a figure needs, is one
+    error naming it. Figures read only the footers, columns and row groups they draw and do
+    not check checksums (``r2rsim validate`` does), so a damaged file shows here."""
+    try:
+        yield
+    except (pa.ArrowException, OSError, KeyError, StopIteration) as exc:
+        text = str(exc.args[0] if isinstance(exc, KeyError) and exc.args else exc).strip()
+        why = text.splitlines()[0] if text else type(exc).__name__
+        raise InputError(f"dataset {root}: {path.relative_to(root)} cannot be read "
+                         f"({why}); `r2rsim validate {root}` checks every file") from None
+
+
 def open_dataset(path) -> Path:
     """The dataset directory, checked to be one (runs.parquet and samples/)."""
     root = Path(path)
@@ -116,8 +131,12 @@ def open_dataset(path) -> Path:
 
 
 def runs_table(root: Path) -> pd.DataFrame:
-    """runs.parquet of the dataset."""
-    return pd.read_parquet(root / "runs.parquet")
+    """runs.parquet of the dataset (with its run_id column)."""
+    with _reading(root, root / "runs.parquet"):
+        runs = pd.read_parquet(root / "runs.parquet")
+        if "run_id" not in runs:
+            raise KeyError("no column run_id")
+    return runs
 
 
 def sample_files(root: Path, run_id: str) -> list[Path]:
@@ -145,7 +164,11 @@ def open_run(root: Path, run_id: str) -> RunData:
     if not files:
         raise InputError(f"dataset {root}: run {run_id} has no samples (samples/run_id="
                          f"{run_id}/part-*.parquet)")
-    metas = [pq.read_metadata(f) for f in files]
+    metas = []
+    for f in files:
+        with _reading(root, f):
+            metas.append(pq.read_metadata(f))
+            _stats(metas[-1], "t_s")  # the time column is there
     numeric = [f.name for f in metas[0].schema.to_arrow_schema()
                if f.name not in ("k", "t_s") and (pa.types.is_floating(f.type)
                                                   or pa.types.is_integer(f.type)
@@ -159,7 +182,10 @@ def open_run(root: Path, run_id: str) -> RunData:
 def _stats(meta: pq.FileMetaData, column: str) -> list:
     """The statistics of a top-level column in each row group (None where missing)."""
     # leaf columns, not Arrow fields: a list column (label.fault_ids) has its own paths
-    leaf = next(i for i in range(meta.num_columns) if meta.schema.column(i).path == column)
+    leaf = next((i for i in range(meta.num_columns) if meta.schema.column(i).path == column),
+                None)
+    if leaf is None:
+        raise KeyError(f"no column {column}")
     out = []
     for g in range(meta.num_row_groups):
         st = meta.row_group(g).column(leaf).statistics
@@ -212,7 +238,8 @@ def channel_units(root: Path) -> dict[str, str]:
     f = root / "channels.parquet"
     if not f.is_file():
         return {}
-    ch = pd.read_parquet(f, columns=["channel", "unit"])
+    with _reading(root, f):
+        ch = pd.read_parquet(f, columns=["channel", "unit"])
     return dict(zip(ch["channel"], ch["unit"].fillna(""), strict=True))
 
 
@@ -221,7 +248,8 @@ def run_rows(root: Path, name: str, run_id: str) -> pd.DataFrame:
     f = root / name
     if not f.is_file():
         return pd.DataFrame()
-    df = pd.read_parquet(f, filters=[("run_id", "=", run_id)])
+    with _reading(root, f):
+        df = pd.read_parquet(f, filters=[("run_id", "=", run_id)])
     return df.reset_index(drop=True)
 
 
@@ -238,7 +266,8 @@ def iter_window(run: RunData, columns: list[str], t0: float, t1: float):
     for path, meta in zip(run.files, run.metas, strict=True):
         f = pq.ParquetFile(path, metadata=meta)
         for g in _row_groups_in(meta, t0, t1):
-            table = f.read_row_group(g, columns=["t_s", *columns])
+            with _reading(run.root, path):
+                table = f.read_row_group(g, columns=["t_s", *columns])
             pa.default_memory_pool().release_unused()  # keep the process small on long runs
             t = table.column(0).to_numpy()
             inside = (t >= t0) & (t <= t1)
