@@ -346,7 +346,7 @@ def _cmd_validate(args) -> int:
                 from .sweep import plan_sweep
 
                 plan = plan_sweep(path)
-                plan.default_output  # noqa: B018 - raises for an output outside its folder
+                _ = plan.default_output  # raises for an output outside its folder
 
                 def n(k, what):
                     return f"{k} {what}{'' if k == 1 else 's'}"
