@@ -12,6 +12,7 @@ import sys
 import textwrap
 from importlib.metadata import EntryPoint
 
+import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -213,6 +214,16 @@ def test_unbounded_values_are_refused_before_anything_is_written(data, tmp_path,
                     method="dpca") == 2
     one_error_line(capsys, "dpca", "lags must be an integer from 0 to 50")
     assert not (tmp_path / "out").exists()
+
+
+def test_iforest_seed_is_checked_before_the_fit():
+    # scikit-learn refused -1 inside the fit: a plug-in crash, exit 1, parameter not named
+    frame = pd.DataFrame({"t_s": np.arange(50.0),
+                          "meas.x": np.random.default_rng(0).normal(size=50)})
+    with pytest.raises(InputError, match="iforest: random_state must be null or an integer "
+                                         "from 0 to 4294967295, got -1"):
+        registry.get("iforest")(random_state=-1).fit([frame])
+    assert registry.get("iforest")(random_state=2**32 - 1).fit([frame]).threshold_ > 0
 
 
 def test_check_param_converts_numbers_given_as_text():
