@@ -29,7 +29,7 @@ from .dataset.read import Run, read_runs
 from .diagnostics.registry import call, check_param, get, unknown_parameter
 from .errors import InputError
 from .evaluate.harness import METRICS, Evaluation, evaluate
-from .limits import MAX_BOOTSTRAP
+from .limits import MAX_BOOTSTRAP, MAX_SEED, MAX_VUS_BUFFER_S
 from .schema.line import Id, Strict
 from .schema.loader import _validate, read_yaml
 from .schema.quantities import Time
@@ -42,8 +42,9 @@ class RunSet(Strict):
     selected by their axis values."""
 
     scenario: str | None = Field(None, description="scenario file, relative to the spec")
-    seeds: Annotated[list[int], Field(min_length=1)] | None = Field(
-        None, description="root seeds (with scenario)")
+    seeds: Annotated[list[Annotated[int, Field(ge=0, le=MAX_SEED)]],
+                     Field(min_length=1)] | None = Field(
+        None, description="root seeds (with scenario), each once")
     sweep: str | None = Field(None, description="sweep file, relative to the spec")
     where: dict[str, Any] = Field(
         default_factory=dict, description="with sweep: only the runs with these axis values "
@@ -90,13 +91,14 @@ class EvaluationSettings(Strict):
     persistence: Annotated[int, Field(ge=1)] = 1
     grace: Annotated[Time, Field(ge=0)] = 0.0
     n_boot: Annotated[int, Field(ge=0, le=MAX_BOOTSTRAP)] = 200
-    seed: int = 0
+    seed: Annotated[int, Field(ge=0, le=MAX_SEED)] = Field(0, description="seed of the "
+                                                          "bootstrap")
     drive_data: bool = Field(False, description="also show plug-ins cmd.*, act.*, ctrl.*")
     mode_strata: bool = Field(False, description="also report per-regime (label.mode) strata")
     window: Literal["fault", "steady"] = Field(
         "fault", description="steady: also report dr/pd/dd over severity-1 samples")
     isolation: bool = Field(False, description="score rank_channels against label.ch.*")
-    vus_buffer: Annotated[Time, Field(ge=0)] | None = Field(
+    vus_buffer: Annotated[Time, Field(ge=0, le=MAX_VUS_BUFFER_S)] | None = Field(
         None, description="report vus_pr with buffers up to this duration")
 
 
@@ -120,8 +122,8 @@ class BenchSpec(Strict):
 
 
 def load_spec(path: str | Path) -> BenchSpec:
-    """Load and check a benchmark spec: scenario files exist, methods are registered and
-    their parameters are theirs.
+    """Load and check a benchmark spec: scenario files exist, seeds are listed once, methods
+    are registered and their parameters are theirs.
 
     Raises
     ------
@@ -138,6 +140,11 @@ def load_spec(path: str | Path) -> BenchSpec:
         for role in ("train", "val", "test"):
             for j, rs in enumerate(getattr(st, role)):
                 key = "scenario" if rs.scenario is not None else "sweep"
+                seeds = rs.seeds or []
+                for k, seed in enumerate(seeds):  # the same run twice would count twice
+                    if seeds.index(seed) != k:
+                        raise InputError(f"seed {seed} is listed twice", file=f,
+                                         path=f"studies[{i}].{role}[{j}].seeds[{k}]")
                 if not (path.parent / getattr(rs, key)).is_file():
                     raise InputError(f"{key} file '{getattr(rs, key)}' not found",
                                      file=f, path=f"studies[{i}].{role}[{j}].{key}")

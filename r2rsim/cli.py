@@ -232,10 +232,19 @@ def parse_where(items: list[str]) -> dict:
 
 def _cmd_diagnose(args) -> int:
     from .diagnostics.registry import call, get
-    from .evaluate.harness import evaluate, read_datasets, split_by_condition, split_by_seed
+    from .evaluate.harness import (
+        check_settings,
+        evaluate,
+        read_datasets,
+        split_by_condition,
+        split_by_seed,
+    )
 
     cls = get(args.method)
     params = _parse_params(args.param, cls)
+    # every flag is checked before a dataset is read
+    check_settings(alpha=args.alpha, m=args.persistence, h=args.grace, n_boot=args.n_boot,
+                   window=args.window, vus_buffer=args.vus_buffer, seed=args.seed)
     est = call(cls, "__init__", cls, **params)
     verify = not args.no_verify
     where = parse_where(args.where)
@@ -661,9 +670,9 @@ def _add_diagnose_parser(sub) -> None:
     d.add_argument("--isolation", action="store_true",
                    help="score rank_channels against label.ch.* (hit1)")
     d.add_argument("--vus-buffer", type=float, default=None, metavar="SECONDS",
-                   help="report vus_pr with buffers from 0 to SECONDS")
+                   help="report vus_pr with buffers from 0 to SECONDS (at most 60 s)")
     d.add_argument("--n-boot", type=int, default=1000, help="bootstrap replicates over runs")
-    d.add_argument("--seed", type=int, default=0, help="seed of the bootstrap")
+    d.add_argument("--seed", type=int, default=0, help="seed of the bootstrap (0 to 2**64 - 1)")
     d.add_argument("-o", "--output", help="output directory (default: results/METHOD)")
     d.add_argument("--no-verify", action="store_true",
                    help="use datasets whose files differ from their manifest.json checksums")

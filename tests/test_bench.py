@@ -121,6 +121,17 @@ def test_a_missing_result_is_a_regression(bench, capsys):
      "not found"),
     ("base.csv", "missing.csv", "compare.baseline", "--update"),
     ("n_boot: 20", "n_boot: 20, window: ramp", "evaluation.window", "'fault' or 'steady'"),
+    # refused when the spec is loaded, not after every run is simulated
+    ("n_boot: 20", "n_boot: 20, vus_buffer: 1e9 s", "evaluation.vus_buffer", "<= 60"),
+    ("n_boot: 20", "n_boot: 20, seed: -1", "evaluation.seed", "must be >= 0"),
+    ("n_boot: 20", "n_boot: 20, seed: 18446744073709551616", "evaluation.seed",
+     "must be <= 18446744073709551615"),
+    # a run set's seeds: the YAML path, not a --seed the user never gave
+    ("seeds: [4]", "seeds: [-4]", "studies[0].test[0].seeds[0]", "must be >= 0"),
+    ("seeds: [4]", "seeds: [18446744073709551616]", "studies[0].test[0].seeds[0]",
+     "must be <= 18446744073709551615"),
+    ("seeds: [1, 2]", "seeds: [1, 2, 1]", "studies[0].train[0].seeds[2]",
+     "seed 1 is listed twice"),
 ])
 def test_bad_specs_are_refused(tmp_path, capsys, old, new, path, message):
     spec = write_spec(tmp_path, **{old: new})
@@ -128,6 +139,7 @@ def test_bad_specs_are_refused(tmp_path, capsys, old, new, path, message):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith(f"error: {spec}: {path}: ")
     assert message in err
+    assert not (tmp_path / "w").exists()  # before anything is simulated
 
 
 def test_thesis_options_add_metrics_and_keep_the_baseline(bench, capsys):

@@ -216,6 +216,20 @@ def test_unbounded_values_are_refused_before_anything_is_written(data, tmp_path,
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.parametrize("flag, value, words", [
+    ("--vus-buffer", "1e9", "vus_buffer must be from 0 to 60 s"),  # hung: 1e11 buffer lengths
+    ("--seed", "-1", "seed must be an integer from 0 to 2**64 - 1, got -1"),  # numpy traceback
+    ("--seed", str(2**64), "seed must be an integer from 0 to 2**64 - 1"),
+])
+def test_settings_are_refused_before_any_dataset_is_read(tmp_path, capsys, flag, value, words):
+    # the test dataset does not exist: a setting checked later would report that instead
+    assert main(["diagnose", "--method", "residual", "--train", str(tmp_path / "nosuch"),
+                 "--test", str(tmp_path / "nosuch"), "-o", str(tmp_path / "out"),
+                 flag, value]) == 2
+    one_error_line(capsys, *words.split(", "))
+    assert not (tmp_path / "out").exists()
+
+
 def test_iforest_seed_is_checked_before_the_fit():
     # scikit-learn refused -1 inside the fit: a plug-in crash, exit 1, parameter not named
     frame = pd.DataFrame({"t_s": np.arange(50.0),

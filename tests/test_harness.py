@@ -200,6 +200,10 @@ def test_bad_input_is_refused(train):
         evaluate(Passthrough(), train, [f], alpha=1.5)
     with pytest.raises(InputError, match="persistence"):
         evaluate(Passthrough(), train, [f], m=0)
+    # numpy refused a negative bootstrap seed with a traceback after the fit
+    for seed in (-1, 2**64, 1.5, True):
+        with pytest.raises(InputError, match=r"seed must be an integer from 0 to 2\*\*64 - 1"):
+            evaluate(Passthrough(), train, [f], seed=seed)
     with pytest.raises(InputError, match="no test runs"):
         evaluate(Passthrough(), train, [])
 
