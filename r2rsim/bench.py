@@ -30,6 +30,7 @@ from .dataset.read import Run, read_runs
 from .diagnostics.registry import call, check_param, get, unknown_parameter
 from .errors import InputError
 from .evaluate.harness import METRICS, Evaluation, evaluate
+from .evaluate.results import write_results as _write_results
 from .limits import MAX_BOOTSTRAP, MAX_SEED, MAX_VUS_BUFFER_S
 from .schema.line import Id, Strict
 from .schema.loader import _validate, read_yaml
@@ -425,6 +426,15 @@ def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
     regressions, improvements, n = compare(results, read_baseline(baseline, str(spec_path)),
                                            spec.compare.metrics)
     return BenchResult(results, evaluations, regressions, improvements, n, baseline)
+
+
+def write_results(results: pd.DataFrame, output: str | Path, overwrite: bool = False) -> Path:
+    """Write a bench's results table as ``results.parquet`` and ``results.csv`` into
+    ``output``: a new or empty directory, or (``overwrite``) one holding only earlier bench
+    results (:func:`r2rsim.evaluate.results.check_results_output`). Returns ``output``."""
+    return _write_results(output, "bench", {
+        "results.parquet": lambda p: results.to_parquet(p, index=False),
+        "results.csv": lambda p: results.to_csv(p, index=False)}, overwrite)
 
 
 def _fmt(v: float) -> str:

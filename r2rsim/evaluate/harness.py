@@ -56,6 +56,7 @@ from .metrics import (
     vus_pr,
     window_counts,
 )
+from .results import DATASETS_FILE, write_results
 
 __all__ = ["METRICS", "Evaluation", "Split", "check_settings", "evaluate", "read_datasets",
            "run_data", "split_by_condition", "split_by_seed"]
@@ -397,10 +398,6 @@ def _bootstrap(counts: pd.DataFrame, n_boot: int, seed: int, level: float = 0.95
 # --------------------------------------------------------------------------- evaluation
 
 
-#: the file of a diagnose results directory that names the test datasets
-DATASETS_FILE = "datasets.json"
-
-
 @dataclass
 class Evaluation:
     """What :func:`evaluate` measured.
@@ -467,17 +464,35 @@ class Evaluation:
             float_format=lambda v: f"{v:.3g}", na_rep="-")
         return head + "\n" + body
 
-    def write(self, outdir: str | Path) -> Path:
+    def write(self, outdir: str | Path, overwrite: bool = False) -> Path:
         """Write ``predictions.parquet``, ``metrics.parquet``, ``metrics.csv`` and
-        ``datasets.json`` (the test dataset directories, :data:`DATASETS_FILE`)."""
-        out = Path(outdir)
-        out.mkdir(parents=True, exist_ok=True)
-        self.predictions.to_parquet(out / "predictions.parquet", index=False)
-        self.metrics.to_parquet(out / "metrics.parquet", index=False)
-        self.metrics.to_csv(out / "metrics.csv", index=False)
-        (out / DATASETS_FILE).write_text(json.dumps({"test": self.test_datasets}, indent=1)
-                                         + "\n")
-        return out
+        ``datasets.json`` (the test dataset directories, :data:`DATASETS_FILE`).
+
+        Parameters
+        ----------
+        outdir : str or Path
+            A new or empty directory, or one holding only results of ``r2rsim diagnose``
+            (:func:`r2rsim.evaluate.results.check_results_output`).
+        overwrite : bool
+            Replace earlier diagnose results there.
+
+        Returns
+        -------
+        Path
+            ``outdir``, written completely or not at all.
+
+        Raises
+        ------
+        InputError
+            When ``outdir`` holds anything else, or earlier results without ``overwrite``.
+        """
+        datasets = json.dumps({"test": self.test_datasets}, indent=1) + "\n"
+        return write_results(outdir, "diagnose", {
+            "predictions.parquet": lambda p: self.predictions.to_parquet(p, index=False),
+            "metrics.parquet": lambda p: self.metrics.to_parquet(p, index=False),
+            "metrics.csv": lambda p: self.metrics.to_csv(p, index=False),
+            DATASETS_FILE: lambda p: p.write_text(datasets, encoding="utf-8"),
+        }, overwrite)
 
 
 def _sha(obj) -> str:
