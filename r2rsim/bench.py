@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import os
 import shutil
 import sys
 import tempfile
@@ -29,7 +30,8 @@ from .dataset.read import Run, read_runs
 from .diagnostics.registry import call, check_param, get, unknown_parameter
 from .errors import InputError
 from .evaluate.harness import METRICS, Evaluation, evaluate
-from .limits import MAX_BOOTSTRAP
+from .evaluate.results import write_results as _write_results
+from .limits import MAX_BOOTSTRAP, MAX_SEED, MAX_VUS_BUFFER_S
 from .schema.line import Id, Strict
 from .schema.loader import _validate, read_yaml
 from .schema.quantities import Time
@@ -42,8 +44,9 @@ class RunSet(Strict):
     selected by their axis values."""
 
     scenario: str | None = Field(None, description="scenario file, relative to the spec")
-    seeds: Annotated[list[int], Field(min_length=1)] | None = Field(
-        None, description="root seeds (with scenario)")
+    seeds: Annotated[list[Annotated[int, Field(ge=0, le=MAX_SEED)]],
+                     Field(min_length=1)] | None = Field(
+        None, description="root seeds (with scenario), each once")
     sweep: str | None = Field(None, description="sweep file, relative to the spec")
     where: dict[str, Any] = Field(
         default_factory=dict, description="with sweep: only the runs with these axis values "
@@ -90,13 +93,14 @@ class EvaluationSettings(Strict):
     persistence: Annotated[int, Field(ge=1)] = 1
     grace: Annotated[Time, Field(ge=0)] = 0.0
     n_boot: Annotated[int, Field(ge=0, le=MAX_BOOTSTRAP)] = 200
-    seed: int = 0
+    seed: Annotated[int, Field(ge=0, le=MAX_SEED)] = Field(0, description="seed of the "
+                                                          "bootstrap")
     drive_data: bool = Field(False, description="also show plug-ins cmd.*, act.*, ctrl.*")
     mode_strata: bool = Field(False, description="also report per-regime (label.mode) strata")
     window: Literal["fault", "steady"] = Field(
         "fault", description="steady: also report dr/pd/dd over severity-1 samples")
     isolation: bool = Field(False, description="score rank_channels against label.ch.*")
-    vus_buffer: Annotated[Time, Field(ge=0)] | None = Field(
+    vus_buffer: Annotated[Time, Field(ge=0, le=MAX_VUS_BUFFER_S)] | None = Field(
         None, description="report vus_pr with buffers up to this duration")
 
 
@@ -119,9 +123,21 @@ class BenchSpec(Strict):
     compare: Compare | None = None
 
 
+def _spec_file(spec_path: Path, rel: str, what: str, ypath: str) -> Path:
+    """A file the spec names (relative to it), which must be a regular file."""
+    p = spec_path.parent / rel
+    if not p.exists():
+        raise InputError(f"{what} file '{rel}' not found", file=str(spec_path), path=ypath)
+    if not p.is_file():  # a directory, /dev/zero, a FIFO: there, but nothing to read
+        raise InputError(f"{what} file '{rel}' is not a regular file", file=str(spec_path),
+                         path=ypath)
+    return p
+
+
 def load_spec(path: str | Path) -> BenchSpec:
-    """Load and check a benchmark spec: scenario files exist, methods are registered and
-    their parameters are theirs.
+    """Load and check a benchmark spec: scenario and sweep files exist, seeds are listed
+    once, methods are registered and their parameters are theirs, and a baseline file that
+    exists is one that ``--update`` wrote (:func:`read_baseline`).
 
     Raises
     ------
@@ -138,13 +154,20 @@ def load_spec(path: str | Path) -> BenchSpec:
         for role in ("train", "val", "test"):
             for j, rs in enumerate(getattr(st, role)):
                 key = "scenario" if rs.scenario is not None else "sweep"
-                if not (path.parent / getattr(rs, key)).is_file():
-                    raise InputError(f"{key} file '{getattr(rs, key)}' not found",
-                                     file=f, path=f"studies[{i}].{role}[{j}].{key}")
+                seeds = rs.seeds or []
+                for k, seed in enumerate(seeds):  # the same run twice would count twice
+                    if seeds.index(seed) != k:
+                        raise InputError(f"seed {seed} is listed twice", file=f,
+                                         path=f"studies[{i}].{role}[{j}].seeds[{k}]")
+                _spec_file(path, getattr(rs, key), key, f"studies[{i}].{role}[{j}].{key}")
                 if key == "sweep" and spec.duration is not None:
                     raise InputError("duration overrides scenarios, not sweeps: set the "
                                      "sweep's duration in the sweep file (set: {duration: "
                                      "...})", file=f, path="duration")
+    if spec.compare is not None and (path.parent / spec.compare.baseline).exists():
+        # read now, not after the simulations (a missing one: run_bench, by --update)
+        read_baseline(_spec_file(path, spec.compare.baseline, "baseline", "compare.baseline"),
+                      f)
     for name in spec.compare.metrics if spec.compare else ():
         if name not in METRICS:
             raise InputError(f"unknown metric '{name}' (known: {', '.join(METRICS)})", file=f,
@@ -167,6 +190,91 @@ def load_spec(path: str | Path) -> BenchSpec:
             except InputError as exc:
                 raise InputError(exc.message, file=f, path=f"methods[{i}].params.{k}") from None
     return spec
+
+
+#: the columns of a baseline file, in this order (docs/diagnostics.md §7)
+BASELINE_COLUMNS = [*KEY, "value"]
+
+
+def read_baseline(path: str | Path, spec_file: str | None = None) -> pd.DataFrame:
+    """Read a baseline results file, checked to be one that ``r2rsim bench --update``
+    writes.
+
+    Parameters
+    ----------
+    path : str or Path
+        The baseline CSV.
+    spec_file : str, optional
+        The spec naming it, for messages.
+
+    Returns
+    -------
+    pandas.DataFrame
+        The columns :data:`BASELINE_COLUMNS`; ``magnitude`` and ``value`` are numbers.
+
+    Raises
+    ------
+    InputError
+        Naming the spec file and ``compare.baseline``: the file cannot be read, its first line
+        is not the header of a baseline, or it is not a CSV of numbers.
+    """
+    def bad(why: str) -> InputError:
+        return InputError(f"'{path}' {why}", file=spec_file,
+                          path="compare.baseline")
+
+    header = ",".join(BASELINE_COLUMNS)
+    try:
+        with open(path, "rb") as fh:
+            first = fh.readline(len(header) + 3).decode("utf-8", "replace").strip()
+    except OSError as exc:
+        raise bad(f"cannot be read ({exc.strerror or exc})") from None
+    if first.removeprefix("\ufeff") != header:  # (a BOM from a spreadsheet is fine)
+        raise bad(f"is not a baseline file written by `r2rsim bench --update` (its first "
+                  f"line is not '{header}')")
+    try:
+        table = pd.read_csv(path, encoding="utf-8-sig")
+    except (OSError, ValueError) as exc:  # pandas' ParserError, UnicodeDecodeError
+        first = (str(exc).strip().splitlines() or [""])[0]
+        raise bad(f"is not a readable CSV ({type(exc).__name__}: {first})") from None
+    for col in ("magnitude", "value"):
+        try:  # (a header-only file has text columns, and nothing in them)
+            table[col] = pd.to_numeric(table[col]).astype(float)
+        except (ValueError, TypeError):
+            raise bad(f"is not a baseline file: its {col} column holds text, not "
+                      f"numbers") from None
+    return table
+
+
+def _update_target(spec_path: Path, rel: str) -> Path:
+    """Where ``--update`` may write the baseline ``rel``: inside the spec's directory (a spec,
+    which may come from someone else, does not choose to write elsewhere), in a directory that
+    exists. An existing file there has already been checked to be a baseline
+    (:func:`load_spec`)."""
+    base = spec_path.resolve().parent
+    target = (spec_path.parent / rel).resolve()
+    if target == base or not target.is_relative_to(base):
+        raise InputError(f"'{rel}' is outside the spec's directory {base}: --update writes the "
+                         f"baseline only inside it (a path relative to the spec file)",
+                         file=str(spec_path), path="compare.baseline")
+    out = spec_path.parent / rel
+    if not out.parent.is_dir():  # as the OS walks it (sub/../x needs sub)
+        raise InputError(f"no directory {out.parent} to write the baseline '{rel}' into",
+                         file=str(spec_path), path="compare.baseline")
+    return out
+
+
+def _write_baseline(table: pd.DataFrame, path: Path) -> None:
+    """Write the baseline CSV atomically (a temporary file next to it, then renamed): a
+    failure leaves the previous baseline."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+            table.to_csv(fh, index=False, float_format="%.10g")
+        os.chmod(tmp, 0o644)  # mkstemp's 0600 is for the temporary file only
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
 
 
 @dataclass
@@ -257,9 +365,12 @@ def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
     """
     spec_path = Path(spec_path)
     spec = load_spec(spec_path)
-    # a missing baseline is found before anything is simulated
+    # a missing baseline, or one --update must not write, is found before anything is
+    # simulated (an existing one is checked by load_spec)
     baseline = spec_path.parent / spec.compare.baseline if spec.compare else None
-    if baseline is not None and not update and not baseline.is_file():
+    if baseline is not None and update:
+        baseline = _update_target(spec_path, spec.compare.baseline)
+    elif baseline is not None and not baseline.is_file():
         raise InputError(f"baseline file '{spec.compare.baseline}' not found (create it with "
                          f"`r2rsim bench {spec_path} --update`)", file=str(spec_path),
                          path="compare.baseline")
@@ -309,12 +420,21 @@ def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
         return BenchResult(results, evaluations, [], [], 0, None)
     if update:
         keep = results[results["metric"].isin(list(spec.compare.metrics))]
-        keep[KEY + ["value"]].to_csv(baseline, index=False, float_format="%.10g")
+        _write_baseline(keep[BASELINE_COLUMNS], baseline)
         log(f"baseline written: {baseline} ({len(keep)} values)")
         return BenchResult(results, evaluations, [], [], 0, baseline)
-    regressions, improvements, n = compare(results, pd.read_csv(baseline),
+    regressions, improvements, n = compare(results, read_baseline(baseline, str(spec_path)),
                                            spec.compare.metrics)
     return BenchResult(results, evaluations, regressions, improvements, n, baseline)
+
+
+def write_results(results: pd.DataFrame, output: str | Path, overwrite: bool = False) -> Path:
+    """Write a bench's results table as ``results.parquet`` and ``results.csv`` into
+    ``output``: a new or empty directory, or (``overwrite``) one holding only earlier bench
+    results (:func:`r2rsim.evaluate.results.check_results_output`). Returns ``output``."""
+    return _write_results(output, "bench", {
+        "results.parquet": lambda p: results.to_parquet(p, index=False),
+        "results.csv": lambda p: results.to_csv(p, index=False)}, overwrite)
 
 
 def _fmt(v: float) -> str:

@@ -232,10 +232,22 @@ def parse_where(items: list[str]) -> dict:
 
 def _cmd_diagnose(args) -> int:
     from .diagnostics.registry import call, get
-    from .evaluate.harness import evaluate, read_datasets, split_by_condition, split_by_seed
+    from .evaluate.harness import (
+        check_settings,
+        evaluate,
+        read_datasets,
+        split_by_condition,
+        split_by_seed,
+    )
+    from .evaluate.results import check_results_output
 
     cls = get(args.method)
     params = _parse_params(args.param, cls)
+    # every flag, and the output directory, is checked before a dataset is read
+    check_settings(alpha=args.alpha, m=args.persistence, h=args.grace, n_boot=args.n_boot,
+                   window=args.window, vus_buffer=args.vus_buffer, seed=args.seed)
+    output = args.output or Path("results") / args.method
+    check_results_output(output, "diagnose", args.overwrite)
     est = call(cls, "__init__", cls, **params)
     verify = not args.no_verify
     where = parse_where(args.where)
@@ -265,22 +277,22 @@ def _cmd_diagnose(args) -> int:
                   split=split.name, drive_data=args.drive_data,
                   mode_strata=args.mode_strata, window=args.window, isolation=args.isolation,
                   vus_buffer=args.vus_buffer)
-    out = ev.write(args.output or Path("results") / args.method)
+    out = ev.write(output, overwrite=args.overwrite)
     print(ev.format())
     print(f"written: {out}/predictions.parquet, metrics.parquet, metrics.csv, datasets.json")
     return 0
 
 
 def _cmd_bench(args) -> int:
-    from .bench import run_bench
+    from .bench import run_bench, write_results
+    from .evaluate.results import check_results_output
 
+    if args.output:  # before anything is simulated
+        check_results_output(args.output, "bench", args.overwrite)
     res = run_bench(args.spec, workdir=args.workdir, update=args.update,
                     verify=not args.no_verify)
     if args.output:
-        out = Path(args.output)
-        out.mkdir(parents=True, exist_ok=True)
-        res.results.to_parquet(out / "results.parquet", index=False)
-        res.results.to_csv(out / "results.csv", index=False)
+        out = write_results(res.results, args.output, overwrite=args.overwrite)
         print(f"results written: {out}/results.parquet, results.csv")
     if res.baseline is None or args.update:
         return 0
@@ -661,10 +673,14 @@ def _add_diagnose_parser(sub) -> None:
     d.add_argument("--isolation", action="store_true",
                    help="score rank_channels against label.ch.* (hit1)")
     d.add_argument("--vus-buffer", type=float, default=None, metavar="SECONDS",
-                   help="report vus_pr with buffers from 0 to SECONDS")
+                   help="report vus_pr with buffers from 0 to SECONDS (at most 60 s)")
     d.add_argument("--n-boot", type=int, default=1000, help="bootstrap replicates over runs")
-    d.add_argument("--seed", type=int, default=0, help="seed of the bootstrap")
-    d.add_argument("-o", "--output", help="output directory (default: results/METHOD)")
+    d.add_argument("--seed", type=int, default=0, help="seed of the bootstrap (0 to 2**64 - 1)")
+    d.add_argument("-o", "--output", help="output directory (default: results/METHOD); "
+                   "must not exist, or be empty")
+    d.add_argument("--overwrite", action="store_true",
+                   help="replace the output directory if it holds r2rsim diagnose results "
+                   "(never a directory holding other files)")
     d.add_argument("--no-verify", action="store_true",
                    help="use datasets whose files differ from their manifest.json checksums")
     d.set_defaults(func=_cmd_diagnose)
@@ -676,7 +692,11 @@ def _add_bench_parser(sub) -> None:
     b.add_argument("spec")
     b.add_argument("--workdir", help="keep (and reuse) the simulated datasets here")
     b.add_argument("--update", action="store_true", help="write the baseline file")
-    b.add_argument("-o", "--output", help="write results.parquet/.csv here")
+    b.add_argument("-o", "--output", help="write results.parquet/.csv into this directory; "
+                   "it must not exist, or be empty")
+    b.add_argument("--overwrite", action="store_true",
+                   help="replace the -o directory if it holds r2rsim bench results (never a "
+                   "directory holding other files)")
     b.add_argument("--no-verify", action="store_true",
                    help="reuse --workdir datasets without checking their checksums")
     b.set_defaults(func=_cmd_bench)

@@ -123,3 +123,16 @@ MAX_LOCAL_WORKERS = 1024
 #: memory (replicates x runs), and 10 000 already puts a 95 % interval's ends within a few
 #: tenths of a percent of their limit.
 MAX_BOOTSTRAP = 100_000
+
+#: Longest VUS-PR buffer (``vus_buffer``) [s]: 60 s. The buffer is a tolerance on when an alarm
+#: comes (one this long before a logged onset or after a fault's end still counts); a few
+#: seconds is typical for the thesis lines (docs/diagnostics.md §5.4), and a minute is longer
+#: than any loop of physics.md takes to settle. Checked before any dataset is read or simulated.
+MAX_VUS_BUFFER_S = 60.0
+
+#: Most VUS-PR buffer lengths [samples]: 10 000 (60 s at 166 Hz). ``metrics.vus_pr`` computes
+#: one range-based PR-AUC over every pooled sample of a stratum per buffer length, about 0.1 µs
+#: per sample each: 10 000 lengths over 10^5 samples take about 1.5 min per stratum. A
+#: ``--vus-buffer 1e9`` (10^11 lengths) ran for hours. Checked once the test runs' sample
+#: period is known, before the plug-in is fitted, and by ``vus_pr`` itself.
+MAX_VUS_BUFFER_SAMPLES = 10_000

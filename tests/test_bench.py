@@ -121,6 +121,22 @@ def test_a_missing_result_is_a_regression(bench, capsys):
      "not found"),
     ("base.csv", "missing.csv", "compare.baseline", "--update"),
     ("n_boot: 20", "n_boot: 20, window: ramp", "evaluation.window", "'fault' or 'steady'"),
+    # refused when the spec is loaded, not after every run is simulated
+    ("n_boot: 20", "n_boot: 20, vus_buffer: 1e9 s", "evaluation.vus_buffer", "<= 60"),
+    ("n_boot: 20", "n_boot: 20, seed: -1", "evaluation.seed", "must be >= 0"),
+    ("n_boot: 20", "n_boot: 20, seed: 18446744073709551616", "evaluation.seed",
+     "must be <= 18446744073709551615"),
+    # a run set's seeds: the YAML path, not a --seed the user never gave
+    ("seeds: [4]", "seeds: [-4]", "studies[0].test[0].seeds[0]", "must be >= 0"),
+    ("seeds: [4]", "seeds: [18446744073709551616]", "studies[0].test[0].seeds[0]",
+     "must be <= 18446744073709551615"),
+    ("seeds: [1, 2]", "seeds: [1, 2, 1]", "studies[0].train[0].seeds[2]",
+     "seed 1 is listed twice"),
+    # there, but not a file to read
+    ("oc1_nominal.yaml, seeds: [4]", "., seeds: [4]", "studies[0].test[0].scenario",
+     "is not a regular file"),
+    ("baseline: base.csv", "baseline: .", "compare.baseline", "is not a regular file"),
+    ("baseline: base.csv", "baseline: /dev/zero", "compare.baseline", "is not a regular file"),
 ])
 def test_bad_specs_are_refused(tmp_path, capsys, old, new, path, message):
     spec = write_spec(tmp_path, **{old: new})
@@ -128,6 +144,60 @@ def test_bad_specs_are_refused(tmp_path, capsys, old, new, path, message):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith(f"error: {spec}: {path}: ")
     assert message in err
+    assert not (tmp_path / "w").exists()  # before anything is simulated
+
+
+HEADER = "study,label,condition,fault,magnitude,metric,value\n"
+
+
+@pytest.mark.parametrize("text, words", [
+    ("precious notes\nroot:x:0:0:root:/root:/bin/bash\n",  # a pandas ParserError traceback
+     "is not a baseline file written by `r2rsim bench --update` (its first line is not "
+     "'study,label,condition,fault,magnitude,metric,value')"),
+    (HEADER + "reg,residual,OC1,none,,far_ff,low\n", "its value column holds text"),
+    (HEADER + 'reg,residual,OC1,none,,far_ff,"1\n', "is not a readable CSV"),
+])
+@pytest.mark.parametrize("update", [False, True])
+def test_a_baseline_that_is_not_one_is_refused_and_kept(tmp_path, capsys, text, words, update):
+    (tmp_path / "notes.csv").write_text(text)
+    spec = write_spec(tmp_path, **{"base.csv": "notes.csv"})
+    assert main(["bench", str(spec), "--workdir", str(tmp_path / "w"),
+                 *(["--update"] if update else [])]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {spec}: compare.baseline: '{tmp_path / 'notes.csv'}' ")
+    assert err.count("\n") == 1 and words in err
+    assert (tmp_path / "notes.csv").read_text() == text
+    assert not (tmp_path / "w").exists()
+
+
+@pytest.mark.parametrize("baseline, words", [
+    ("../victim.csv", "is outside the spec's directory"),  # was overwritten
+    ("{victim}", "is outside the spec's directory"),
+    ("sub/../../victim.csv", "is outside the spec's directory"),
+    ("nodir/base.csv", "no directory"),  # was found after the whole bench had run
+])
+def test_update_writes_the_baseline_only_inside_the_specs_directory(tmp_path, capsys,
+                                                                     baseline, words):
+    victim = tmp_path / "victim.csv"
+    victim.write_text(HEADER)  # reads as a baseline: only where it is stops --update
+    d = tmp_path / "specs"
+    (d / "sub").mkdir(parents=True)
+    spec = write_spec(d, **{"base.csv": baseline.format(victim=victim)})
+    assert main(["bench", str(spec), "--workdir", str(tmp_path / "w"), "--update"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {spec}: compare.baseline: ") and err.count("\n") == 1
+    assert words in err
+    assert victim.read_text() == HEADER
+    assert not (tmp_path / "w").exists()
+
+
+def test_update_replaces_its_own_baseline(bench, capsys):
+    d, spec = bench
+    before = pd.read_csv(d / "base.csv")
+    assert main(["bench", str(spec), "--update", "--workdir", str(d / "work")]) == 0
+    assert "baseline written:" in capsys.readouterr().out
+    pd.testing.assert_frame_equal(pd.read_csv(d / "base.csv"), before)  # deterministic
+    assert not [p for p in d.iterdir() if p.name.endswith(".tmp")]
 
 
 def test_thesis_options_add_metrics_and_keep_the_baseline(bench, capsys):

@@ -12,6 +12,7 @@ import sys
 import textwrap
 from importlib.metadata import EntryPoint
 
+import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -23,6 +24,7 @@ from r2rsim.dataset.read import read_runs
 from r2rsim.dataset.validate import validate_dataset
 from r2rsim.diagnostics import registry
 from r2rsim.errors import InputError, PluginError
+from r2rsim.evaluate.results import REPORT_MARKER
 
 from conftest import REPO
 
@@ -213,6 +215,30 @@ def test_unbounded_values_are_refused_before_anything_is_written(data, tmp_path,
                     method="dpca") == 2
     one_error_line(capsys, "dpca", "lags must be an integer from 0 to 50")
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("flag, value, words", [
+    ("--vus-buffer", "1e9", "vus_buffer must be from 0 to 60 s"),  # hung: 1e11 buffer lengths
+    ("--seed", "-1", "seed must be an integer from 0 to 2**64 - 1, got -1"),  # numpy traceback
+    ("--seed", str(2**64), "seed must be an integer from 0 to 2**64 - 1"),
+])
+def test_settings_are_refused_before_any_dataset_is_read(tmp_path, capsys, flag, value, words):
+    # the test dataset does not exist: a setting checked later would report that instead
+    assert main(["diagnose", "--method", "residual", "--train", str(tmp_path / "nosuch"),
+                 "--test", str(tmp_path / "nosuch"), "-o", str(tmp_path / "out"),
+                 flag, value]) == 2
+    one_error_line(capsys, *words.split(", "))
+    assert not (tmp_path / "out").exists()
+
+
+def test_iforest_seed_is_checked_before_the_fit():
+    # scikit-learn refused -1 inside the fit: a plug-in crash, exit 1, parameter not named
+    frame = pd.DataFrame({"t_s": np.arange(50.0),
+                          "meas.x": np.random.default_rng(0).normal(size=50)})
+    with pytest.raises(InputError, match="iforest: random_state must be null or an integer "
+                                         "from 0 to 4294967295, got -1"):
+        registry.get("iforest")(random_state=-1).fit([frame])
+    assert registry.get("iforest")(random_state=2**32 - 1).fit([frame]).threshold_ > 0
 
 
 def test_check_param_converts_numbers_given_as_text():
@@ -444,3 +470,60 @@ def test_bench_no_verify_uses_the_workdir_as_it_is(bench_spec, tmp_path, capsys)
     one_error_line(capsys, f"dataset {healthy}", "not a readable Parquet file")
     assert main(["bench", str(spec), "--workdir", str(work)]) == 0  # verified: re-simulated
     assert validate_dataset(healthy) == []
+
+
+# --------------------------------------------------------------------------- output directories
+
+
+def test_diagnose_output_replaces_only_its_own_results(data, tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "metrics.csv").write_text("my own notes\n")  # was replaced without a word
+    assert diagnose(data, data / "f5", out) == 2
+    one_error_line(capsys, f"output directory '{out}' exists and holds files r2rsim diagnose "
+                   "did not write (metrics.csv)", "choose another directory with -o")
+    assert [p.name for p in out.iterdir()] == ["metrics.csv"]
+    assert (out / "metrics.csv").read_text() == "my own notes\n"
+    (out / "metrics.csv").unlink()  # an empty directory is filled
+    assert diagnose(data, data / "f5", out) == 0
+    written = sorted(p.name for p in out.iterdir())
+    assert written == ["datasets.json", "metrics.csv", "metrics.parquet", "predictions.parquet"]
+    capsys.readouterr()
+    # its own results, and a report of them: replaced with --overwrite (the report too)
+    (out / "report.html").write_text(REPORT_MARKER + "\nof the earlier results")
+    assert diagnose(data, data / "f5", out) == 2
+    one_error_line(capsys, "holds earlier r2rsim diagnose results; pass --overwrite")
+    assert diagnose(data, data / "f5", out, "--overwrite") == 0
+    assert sorted(p.name for p in out.iterdir()) == written
+    capsys.readouterr()
+    # anything else there: never replaced, not even with --overwrite
+    (out / "notes.txt").write_text("mine")
+    assert diagnose(data, data / "f5", out, "--overwrite") == 2
+    one_error_line(capsys, "did not write (notes.txt)")
+    (out / "notes.txt").unlink()
+    (out / "metrics.csv").write_text("metric,value\n")  # r2rsim's name, not its table
+    assert diagnose(data, data / "f5", out, "--overwrite") == 2
+    one_error_line(capsys, "did not write (metrics.csv)")
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]  # no temporary directory left
+
+
+def test_bench_output_replaces_only_its_own_results(bench_spec, tmp_path, capsys):
+    spec, work, _ = bench_spec
+    out = tmp_path / "res"
+    out.mkdir()
+    (out / "results.csv").write_text("my own notes\n")
+    # refused before anything is simulated
+    assert main(["bench", str(spec), "--workdir", str(tmp_path / "w"), "-o", str(out)]) == 2
+    one_error_line(capsys, f"output directory '{out}' exists and holds files r2rsim bench did "
+                   "not write (results.csv)")
+    assert not (tmp_path / "w").exists()
+    assert (out / "results.csv").read_text() == "my own notes\n"
+    (out / "results.csv").unlink()
+    assert main(["bench", str(spec), "--workdir", str(work), "-o", str(out)]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["results.csv", "results.parquet"]
+    capsys.readouterr()
+    assert main(["bench", str(spec), "--workdir", str(work), "-o", str(out)]) == 2
+    one_error_line(capsys, "holds earlier r2rsim bench results; pass --overwrite")
+    assert main(["bench", str(spec), "--workdir", str(work), "-o", str(out),
+                 "--overwrite"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["results.csv", "results.parquet"]

@@ -296,10 +296,22 @@ def test_fault_normalised_relation_sees_a_fault_the_unit_norm_one_misses():
     ({"min_improvement": float("inf")}, "min_improvement"),
     ({"fault_channels": "meas.zzz"}, "fault_channels"),
     ({"partition_features": "sp.nothing"}, "no column matching sp.nothing"),
+    # failed inside the fit (numpy's seed, fnmatch) as plug-in crashes, exit 1
+    ({"random_state": -1},
+     "random_state must be null or an integer from 0 to 18446744073709551615, got -1"),
+    ({"random_state": 2**64}, "random_state must be null or an integer"),
+    ({"model_features": [1, 2]}, "model_features must be a glob pattern or a list of them"),
+    ({"partition_features": 3}, "partition_features must be a glob pattern"),
+    ({"fault_channels": [None]}, "fault_channels must be a glob pattern"),
 ])
 def test_parameters_are_validated(params, match):
     with pytest.raises(InputError, match=match):
         GSMMS(**{**PARAMS, **params}).fit([run_frame(0, 1)])
+
+
+def test_global_model_checks_its_seed():
+    with pytest.raises(InputError, match="gsmms_global: random_state must be null or an"):
+        GlobalParity(**{**PARAMS, "random_state": -1}).fit([run_frame(0, 1)])
 
 
 def test_scores_mark_missing_rows():

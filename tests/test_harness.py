@@ -200,6 +200,10 @@ def test_bad_input_is_refused(train):
         evaluate(Passthrough(), train, [f], alpha=1.5)
     with pytest.raises(InputError, match="persistence"):
         evaluate(Passthrough(), train, [f], m=0)
+    # numpy refused a negative bootstrap seed with a traceback after the fit
+    for seed in (-1, 2**64, 1.5, True):
+        with pytest.raises(InputError, match=r"seed must be an integer from 0 to 2\*\*64 - 1"):
+            evaluate(Passthrough(), train, [f], seed=seed)
     with pytest.raises(InputError, match="no test runs"):
         evaluate(Passthrough(), train, [])
 
@@ -240,6 +244,27 @@ def test_results_are_written_typed(tmp_path, train):
     assert len(p) == 20 and p.dtypes["alarm"] == np.bool_
     assert pd.read_csv(out / "metrics.csv").shape == m.shape
     assert "far_ff" in ev.format() and not math.isnan(ev.theta)
+
+
+def test_results_are_written_whole_or_not_at_all(tmp_path, train, monkeypatch):
+    ev = evaluate(Passthrough(), train, [make_run([0] * 4 + [9] * 6, onset=4, seed=2)],
+                  n_boot=0)
+    out = ev.write(tmp_path / "res")
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+
+    def disk_full(*args, **kwargs):
+        raise OSError("No space left on device")
+
+    monkeypatch.setattr(pd.DataFrame, "to_csv", disk_full)  # the third file fails
+    with pytest.raises(OSError, match="No space"):
+        ev.write(tmp_path / "new")
+    with pytest.raises(OSError, match="No space"):
+        ev.write(out, overwrite=True)
+    # no partial directory, no temporary one, the earlier results as they were
+    assert [p.name for p in tmp_path.iterdir()] == ["res"]
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    with pytest.raises(InputError, match="pass --overwrite"):
+        ev.write(out)
 
 
 class Spy(Passthrough):

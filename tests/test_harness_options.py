@@ -149,3 +149,25 @@ def test_vus_pr_in_the_table(train):
     assert value(ev, "vus_pr") != pytest.approx(M.vus_pr(s, y, 0, groups=groups))
     with pytest.raises(InputError, match="vus_buffer"):
         evaluate(Passthrough(), train, runs, vus_buffer=-1.0)
+
+
+class FitRaises(Passthrough):
+    """A plug-in whose fit fails: a setting refused with an InputError was checked first."""
+
+    def fit(self, runs):
+        raise RuntimeError("fitted")
+
+
+def test_vus_buffer_is_bounded_before_the_fit(train):
+    runs = [make_run(np.r_[np.zeros(8), np.ones(12)], onset=8, seed=1)]
+    # seconds: refused before anything is read (60 s at most, docs/security.md)
+    for bad in (60.5, 1e9, float("inf"), float("nan")):
+        with pytest.raises(InputError, match="vus_buffer must be from 0 to 60 s"):
+            evaluate(FitRaises(), train, runs, vus_buffer=bad)
+    # samples: 50 s at 1 kHz is 50 000 buffer lengths, more than 10 000
+    fast = [make_run(np.r_[np.zeros(8), np.ones(12)], onset=8, seed=2, dt=0.001)]
+    with pytest.raises(InputError, match=r"vus_buffer 50 s is 5e\+04 samples .* limit of "
+                                         r"10000 buffer lengths"):
+        evaluate(FitRaises(), [healthy(100, dt=0.001)], fast, vus_buffer=50.0)
+    ev = evaluate(Passthrough(), train, runs, n_boot=0, vus_buffer=60.0)  # 120 samples
+    assert ev.settings["vus_max_buffer_samples"] == 120

@@ -112,6 +112,11 @@ def test_models_fit_and_predict(run):
     ({"line": str(LINE), "alpha": False}, r"alpha must be a number in \(0, 1\)"),
     ({"line": str(LINE), "censor_at": "0"}, "censor_at must be a number"),
     ({"line": True}, "line must be the path"),
+    ({"line": "/dev/zero"}, "line file /dev/zero is not a regular file"),
+    ({"line": str(REPO)}, "is not a regular file"),
+    # every reading censored: no Tobit maximum (statsmodels warned, the fit went on)
+    ({"line": str(LINE), "censor_at": 1e6}, "censor_at=1e\\+06 N censors every stage-2 "
+                                             "load-cell reading of the training runs"),
 ])
 def test_plugin_parameters_are_checked(run, params, match):
     with pytest.raises(InputError, match=match):

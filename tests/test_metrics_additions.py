@@ -21,6 +21,7 @@ from r2rsim.evaluate.metrics import (
     steady_detection_rate,
     vus_pr,
 )
+from r2rsim.limits import MAX_VUS_BUFFER_SAMPLES
 
 
 def bits(s: str) -> np.ndarray:
@@ -113,6 +114,16 @@ def test_vus_pr_properties():
     assert range_pr_auc(early, y1, 1) > range_pr_auc(early, y1, 1, groups=two_runs)
     with pytest.raises(ValueError, match="max_buffer"):
         vus_pr(s, y, -1)
+
+
+def test_vus_pr_refuses_more_buffer_lengths_than_the_limit():
+    # one range-PR AUC per buffer length: 1e9 lengths ran for hours; the limit bounds it
+    y = bits("0001110000111100")
+    s = np.random.default_rng(3).random(y.size)
+    assert 0 <= vus_pr(s, y, MAX_VUS_BUFFER_SAMPLES) <= 1
+    for bad in (MAX_VUS_BUFFER_SAMPLES + 1, 10**9, math.inf, math.nan):
+        with pytest.raises(ValueError, match="max_buffer must be an integer from 0 to 10000"):
+            vus_pr(s, y, bad)
 
 
 # --------------------------------------------------------------------------- M13

@@ -145,7 +145,14 @@ def test_parameters_and_channels_are_checked(dataset):
                     ({"savgol_window_s": True}, "savgol_window_s must be a number"),
                     ({"line": True}, "line must be the path of a line file"),
                     ({"time_base": "space"}, "time_base must be one of"),
-                    ({"sensor_b": "meas.vision.pitch_m"}, "no column matching meas.vision")):
+                    ({"sensor_b": "meas.vision.pitch_m"}, "no column matching meas.vision"),
+                    # accepted, then failed inside numpy ("SVD did not converge"), exit 1
+                    ({"relaxed_pitch_m": float("inf")},
+                     "relaxed_pitch_m must be from 0.001 to 100 m or null, got inf"),
+                    ({"web_EA_N": 1e308}, r"web_EA_N must be from 0.1 to 2.7e\+10 N"),
+                    ({"web_EA_N": 1e-300}, r"web_EA_N must be from 0.1 to 2.7e\+10 N"),
+                    ({"span_length_m": 1e-300}, "span_length_m must be from 0.001 to 100 m"),
+                    ({"drive_radius_m": 1e300}, "drive_radius_m must be from 0.001 to 10 m")):
         with pytest.raises(InputError, match=msg):
             ParitySpaceDetector(**kw).fit([run])
     frame = run.visible().drop(columns=["meas.u_drive.speed_rad_s"])

@@ -487,3 +487,21 @@ def test_cli_errors(data, diagnosed, tmp_path, capsys, monkeypatch):
     assert main(["report", str(diagnosed["pca"]), "-o", str(out)]) == 2
     one_error(capsys, "matplotlib", 'pip install "r2rsim[plot]"')
     assert list(tmp_path.iterdir()) == [tmp_path / "other"]  # nothing written
+
+
+def test_damaged_results_files_are_one_line_naming_the_file(diagnosed, tmp_path, capsys):
+    # a truncated table gave an ArrowInvalid traceback; a table of the wrong shape a message
+    # that did not say which file
+    out = tmp_path / "r.html"
+    for name in ("metrics.parquet", "predictions.parquet"):
+        d = shutil.copytree(diagnosed["pca"], tmp_path / name)
+        f = d / name
+        f.write_bytes(f.read_bytes()[:100])
+        assert main(["report", str(d), "-o", str(out)]) == 2
+        one_error(capsys, f"error: {f}: not a readable Parquet file (")
+    d = shutil.copytree(diagnosed["pca"], tmp_path / "shape")
+    pd.DataFrame({"x": [1]}).to_parquet(d / "metrics.parquet")
+    assert main(["report", str(d), "-o", str(out)]) == 2
+    one_error(capsys, f"error: {d / 'metrics.parquet'}: not a results table of r2rsim",
+              "no column condition")
+    assert not out.exists()

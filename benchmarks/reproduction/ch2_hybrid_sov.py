@@ -321,7 +321,7 @@ def diagnose(method: str, train: Path, test: Path, out: Path, drive: bool) -> di
     from r2rsim.cli import main
 
     argv = ["diagnose", "--method", method, "--train", str(train), "--test", str(test),
-            "-o", str(out), "--n-boot", "0"]
+            "-o", str(out), "--overwrite", "--n-boot", "0"]  # its own results of a rerun
     if drive:
         argv.append("--drive-data")
     if method == "hybrid-sov":

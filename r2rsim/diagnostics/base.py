@@ -31,6 +31,7 @@ import pandas as pd
 from sklearn.base import BaseEstimator
 
 from ..errors import InputError
+from ..limits import MAX_SEED
 
 
 def _frame(run) -> pd.DataFrame:
@@ -113,6 +114,16 @@ class Diagnostic(BaseEstimator):
                 and low <= v <= high):
             raise InputError(f"{self.name}: {key} must be an integer from {low} to {high}, "
                              f"got {v!r}")
+
+    def _check_seed(self, key: str = "random_state", high: int = MAX_SEED):
+        """Parameter ``key``, a seed, must be null or an integer from 0 to ``high`` (numpy
+        refuses a negative seed and scikit-learn one above 2**32 - 1, each in the middle of
+        a fit)."""
+        v = getattr(self, key)
+        if v is not None and not (isinstance(v, (int, np.integer)) and not isinstance(v, bool)
+                                  and 0 <= v <= high):
+            raise InputError(f"{self.name}: {key} must be null or an integer from 0 to "
+                             f"{high}, got {v!r}")
 
     def _check_fitted(self):
         if not any(k.endswith("_") and not k.startswith("_") for k in vars(self)):

@@ -183,6 +183,7 @@ class IsolationForestDetector(Diagnostic):
         self._check_alpha()
         self._check_int("n_estimators", 1, 10_000)
         self._check_int("max_samples", 2, 10_000_000)
+        self._check_seed(high=2**32 - 1)  # scikit-learn's bound
 
         frames = self._frames(runs)
         self.columns_ = self.required_columns(frames[0])

@@ -36,7 +36,7 @@ from ..dataset.paths import SWEEP_MARKER
 from ..dataset.read import Run, is_dataset_dir, read_runs
 from ..diagnostics.registry import call
 from ..errors import InputError, PluginError
-from ..limits import MAX_BOOTSTRAP
+from ..limits import MAX_BOOTSTRAP, MAX_SEED, MAX_VUS_BUFFER_S, MAX_VUS_BUFFER_SAMPLES
 from ..schema.scenario import SplitBySeed
 from .metrics import (
     RunData,
@@ -56,9 +56,10 @@ from .metrics import (
     vus_pr,
     window_counts,
 )
+from .results import DATASETS_FILE, write_results
 
-__all__ = ["METRICS", "Evaluation", "Split", "evaluate", "read_datasets", "run_data",
-           "split_by_condition", "split_by_seed"]
+__all__ = ["METRICS", "Evaluation", "Split", "check_settings", "evaluate", "read_datasets",
+           "run_data", "split_by_condition", "split_by_seed"]
 
 
 @dataclass(frozen=True)
@@ -397,10 +398,6 @@ def _bootstrap(counts: pd.DataFrame, n_boot: int, seed: int, level: float = 0.95
 # --------------------------------------------------------------------------- evaluation
 
 
-#: the file of a diagnose results directory that names the test datasets
-DATASETS_FILE = "datasets.json"
-
-
 @dataclass
 class Evaluation:
     """What :func:`evaluate` measured.
@@ -467,17 +464,35 @@ class Evaluation:
             float_format=lambda v: f"{v:.3g}", na_rep="-")
         return head + "\n" + body
 
-    def write(self, outdir: str | Path) -> Path:
+    def write(self, outdir: str | Path, overwrite: bool = False) -> Path:
         """Write ``predictions.parquet``, ``metrics.parquet``, ``metrics.csv`` and
-        ``datasets.json`` (the test dataset directories, :data:`DATASETS_FILE`)."""
-        out = Path(outdir)
-        out.mkdir(parents=True, exist_ok=True)
-        self.predictions.to_parquet(out / "predictions.parquet", index=False)
-        self.metrics.to_parquet(out / "metrics.parquet", index=False)
-        self.metrics.to_csv(out / "metrics.csv", index=False)
-        (out / DATASETS_FILE).write_text(json.dumps({"test": self.test_datasets}, indent=1)
-                                         + "\n")
-        return out
+        ``datasets.json`` (the test dataset directories, :data:`DATASETS_FILE`).
+
+        Parameters
+        ----------
+        outdir : str or Path
+            A new or empty directory, or one holding only results of ``r2rsim diagnose``
+            (:func:`r2rsim.evaluate.results.check_results_output`).
+        overwrite : bool
+            Replace earlier diagnose results there.
+
+        Returns
+        -------
+        Path
+            ``outdir``, written completely or not at all.
+
+        Raises
+        ------
+        InputError
+            When ``outdir`` holds anything else, or earlier results without ``overwrite``.
+        """
+        datasets = json.dumps({"test": self.test_datasets}, indent=1) + "\n"
+        return write_results(outdir, "diagnose", {
+            "predictions.parquet": lambda p: self.predictions.to_parquet(p, index=False),
+            "metrics.parquet": lambda p: self.metrics.to_parquet(p, index=False),
+            "metrics.csv": lambda p: self.metrics.to_csv(p, index=False),
+            DATASETS_FILE: lambda p: p.write_text(datasets, encoding="utf-8"),
+        }, overwrite)
 
 
 def _sha(obj) -> str:
@@ -581,7 +596,7 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
     n_boot : int
         Bootstrap replicates over runs for the confidence intervals (0: none).
     seed : int
-        Seed of the bootstrap.
+        Seed of the bootstrap, from 0 to 2**64 - 1.
     split : str
         Name of the split, recorded in the table.
     drive_data : bool
@@ -599,13 +614,16 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
         against ``label.ch.*`` (``hit1``, ``hit1_samples``); nothing when it returns None.
     vus_buffer : float, optional
         Report ``vus_pr`` with buffer lengths from 0 up to this many seconds (rounded to
-        samples of the test runs' median period); None: not reported.
+        samples of the test runs' median period); None: not reported. At most
+        :data:`~r2rsim.limits.MAX_VUS_BUFFER_S` and
+        :data:`~r2rsim.limits.MAX_VUS_BUFFER_SAMPLES` samples.
 
     Returns
     -------
     Evaluation
     """
-    _check_settings(alpha, m, h, n_boot, window, vus_buffer)
+    check_settings(alpha=alpha, m=m, h=h, n_boot=n_boot, window=window,
+                   vus_buffer=vus_buffer, seed=seed)
     train, val, test = list(train), list(val), list(test)
     if not train:
         raise InputError("no training runs")
@@ -614,6 +632,7 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
     _check_healthy(train, "training")
     _check_healthy(val, "validation")
     _check_disjoint({"train": train, "val": val, "test": test})
+    max_buffer = _vus_max_buffer(vus_buffer, test)  # before the fit, which may take long
     plugin = _Scored(estimator, drive_data)
     fit_s = plugin.fit(train)
     theta = plugin.calibrate(val, alpha) if val else math.nan
@@ -629,9 +648,6 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
                                                       ("test", test)) for r in rs))
     base = {"method": plugin.name, "params_sha256": _sha(plugin.params),
             "dataset_sha256": dataset_sha, "split": split}
-    max_buffer = (None if vus_buffer is None else
-                  int(round(vus_buffer / float(np.median([r.period for r in rd if r.n > 1]
-                                                         or [1.0])))))
     table = _MetricTable(base, m, h, n_boot, seed, max_buffer)
     table.add_strata(test, rd, rd_cal)
     if mode_strata:
@@ -652,8 +668,17 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
                       list(dict.fromkeys(str(Path(r.path).resolve()) for r in test)))
 
 
-def _check_settings(alpha, m, h, n_boot, window, vus_buffer) -> None:
-    """The harness settings of :func:`evaluate`, each with one InputError."""
+def check_settings(*, alpha: float = 0.01, m: int = 1, h: float = 0.0, n_boot: int = 1000,
+                   window: str = "fault", vus_buffer: float | None = None,
+                   seed: int = 0) -> None:
+    """Check the settings of :func:`evaluate` (same names and meaning) before any data is
+    read: ``r2rsim diagnose`` calls it first, so a bad flag costs nothing.
+
+    Raises
+    ------
+    InputError
+        Naming the setting, its bounds and the value.
+    """
     if not 0.0 < alpha < 1.0:
         raise InputError(f"alpha must be in (0, 1), got {alpha!r}")
     if int(m) != m or m < 1:
@@ -665,8 +690,30 @@ def _check_settings(alpha, m, h, n_boot, window, vus_buffer) -> None:
                          f"got {n_boot!r}")
     if window not in WINDOWS:
         raise InputError(f"window must be one of {', '.join(WINDOWS)}, got {window!r}")
-    if vus_buffer is not None and not vus_buffer >= 0:
-        raise InputError(f"vus_buffer must be >= 0 s, got {vus_buffer!r}")
+    if vus_buffer is not None and not 0 <= vus_buffer <= MAX_VUS_BUFFER_S:
+        raise InputError(f"vus_buffer must be from 0 to {MAX_VUS_BUFFER_S:g} s "
+                         f"(docs/security.md), got {vus_buffer!r}")
+    # the bounds of a run's seed; numpy refuses a negative one (with a traceback)
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) \
+            or not 0 <= seed <= MAX_SEED:
+        raise InputError(f"seed must be an integer from 0 to 2**64 - 1, got {seed!r}")
+
+
+def _vus_max_buffer(vus_buffer: float | None, test: list[Run]) -> int | None:
+    """``vus_buffer`` [s] in samples of the test runs' median period (None: no VUS-PR),
+    refused above :data:`~r2rsim.limits.MAX_VUS_BUFFER_SAMPLES`."""
+    if vus_buffer is None:
+        return None
+    periods = [float(np.median(np.diff(t))) for r in test
+               if (t := r.samples["t_s"].to_numpy(float)).size > 1]
+    period = float(np.median(periods)) if periods else 1.0
+    n = vus_buffer / period
+    if not n <= MAX_VUS_BUFFER_SAMPLES:
+        raise InputError(f"vus_buffer {vus_buffer:g} s is {n:.3g} samples of the test runs "
+                         f"(period {period:g} s), more than the limit of "
+                         f"{MAX_VUS_BUFFER_SAMPLES} buffer lengths (docs/security.md): "
+                         f"lower it")
+    return int(round(n))
 
 
 class _Scored:

@@ -29,6 +29,8 @@ import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 from scipy.stats import rankdata
 
+from ..limits import MAX_VUS_BUFFER_SAMPLES
+
 __all__ = [
     "ConfidenceInterval",
     "DelayStats",
@@ -997,7 +999,8 @@ def vus_pr(score: ArrayLike, y: ArrayLike, max_buffer: int = 0,
     y : array_like of bool
         Ground truth.
     max_buffer : int, default 0
-        Largest buffer length in samples (one side of a range).
+        Largest buffer length in samples (one side of a range), at most
+        :data:`r2rsim.limits.MAX_VUS_BUFFER_SAMPLES`.
     groups : array_like, optional
         Group label per sample (runs): ranges and buffers never cross a change of group.
 
@@ -1005,7 +1008,18 @@ def vus_pr(score: ArrayLike, y: ArrayLike, max_buffer: int = 0,
     -------
     float
         VUS-PR in [0, 1]; nan without anomalous samples.
+
+    Raises
+    ------
+    ValueError
+        When ``max_buffer`` is not an integer from 0 to the limit.
     """
+    # one range-PR AUC over every sample per buffer length: a bound on the lengths is a bound
+    # on the time. Refused, not capped at the series length: the weights sqrt(1 - d/(l+1))
+    # keep changing with l beyond it, so a cap would silently change the value.
+    if not max_buffer <= MAX_VUS_BUFFER_SAMPLES:  # negative, fractional: _range_inputs
+        raise ValueError(f"max_buffer must be an integer from 0 to {MAX_VUS_BUFFER_SAMPLES} "
+                         f"(r2rsim.limits.MAX_VUS_BUFFER_SAMPLES), got {max_buffer!r}")
     prep = _range_inputs(score, y, max_buffer, groups, "max_buffer")
     if prep is None:
         return math.nan

@@ -58,21 +58,34 @@ def results_kind(path: str | Path) -> str:
                      f"`r2rsim diagnose`, no {BENCH_FILE} written by `r2rsim bench -o`)")
 
 
+def _read_table(path: Path) -> pd.DataFrame:
+    """A Parquet file of a results directory; one InputError naming it when it cannot be
+    read (truncated, not Parquet)."""
+    try:
+        return pd.read_parquet(path)
+    except Exception as exc:  # noqa: BLE001 - pyarrow raises several types on bad files
+        first = (str(exc).strip().splitlines() or [""])[0]
+        raise InputError(f"{path}: not a readable Parquet file ({type(exc).__name__}: "
+                         f"{first})") from None
+
+
 def results_table(results: Results) -> pd.DataFrame:
     """The long results table (one row per method × stratum × metric) with a ``series``
     column naming the method: the plug-in for diagnose, the bench label (with its study
     when the bench has several)."""
     if isinstance(results, Sequence) and not isinstance(results, str):
         return pd.concat([results_table(r) for r in results], ignore_index=True)
+    source = None
     if isinstance(results, pd.DataFrame):
         table = results.copy()
     else:
         d = Path(results)
-        name = DIAGNOSE_FILE if results_kind(d) == "diagnose" else BENCH_FILE
-        table = pd.read_parquet(d / name)
+        source = d / (DIAGNOSE_FILE if results_kind(d) == "diagnose" else BENCH_FILE)
+        table = _read_table(source)
     missing = {"condition", "fault", "magnitude", "metric", "value"} - set(table.columns)
     if missing or not {"method", "label"} & set(table.columns):
-        raise InputError(f"not a results table of r2rsim diagnose or bench: no column "
+        raise InputError(f"{f'{source}: ' if source else ''}not a results table of r2rsim "
+                         f"diagnose or bench: no column "
                          f"{', '.join(sorted(missing) or ['method'])}")
     if "label" in table.columns:  # bench
         several = "study" in table.columns and table["study"].nunique() > 1
@@ -93,7 +106,7 @@ def _predictions(results: Results) -> pd.DataFrame:
     if results_kind(d) != "diagnose" or not (d / PREDICTIONS_FILE).is_file():
         raise InputError(f"{d}: no {PREDICTIONS_FILE} (written by `r2rsim diagnose`; a bench "
                          f"directory has none)")
-    return pd.read_parquet(d / PREDICTIONS_FILE)
+    return _read_table(d / PREDICTIONS_FILE)
 
 
 def _test_runs(datasets: Sequence[str | Path] | str | Path, run_ids) -> dict[str, Run]:

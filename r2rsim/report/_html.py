@@ -16,7 +16,8 @@ import pandas as pd
 from .._version import __version__
 from ..dataset.paths import read_json
 from ..errors import InputError
-from ..evaluate.harness import DATASETS_FILE, METRICS, fault_key
+from ..evaluate.harness import METRICS, fault_key
+from ..evaluate.results import DATASETS_FILE, DATASETS_FILE_MAX_BYTES, REPORT_MARKER
 from ._diagnostics import (
     _metric_rows,
     _predictions,
@@ -31,7 +32,7 @@ from ._diagnostics import (
 from ._mpl import require_matplotlib
 
 #: first line of every report: an existing file without it is not overwritten
-MARKER = "<!-- written by r2rsim report -->"
+MARKER = REPORT_MARKER
 #: metrics drawn by condition and by fault, when the results have several of either
 FIGURE_METRICS = ("far_ff", "pd", "dd_median_s", "roc_auc")
 #: columns of the summary table, when present (as printed by ``r2rsim diagnose``)
@@ -109,8 +110,6 @@ def write_report(results: str | Path, output: str | Path | None = None,
     return out
 
 
-#: largest datasets.json read (a list of absolute paths; 16 MiB holds over 100 000)
-DATASETS_FILE_MAX_BYTES = 16 << 20
 
 
 def _recorded_datasets(src: Path) -> tuple[list[str] | None, str | None]:

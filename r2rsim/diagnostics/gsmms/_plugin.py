@@ -168,6 +168,16 @@ class GSMMS(Diagnostic):
                 not 0 <= self._number("min_improvement") < math.inf:
             raise InputError(f"{self.name}: min_improvement must be a finite number >= 0 or "
                              f"null, got {self.min_improvement!r}")
+        self._check_seed()
+        for key in ("partition_features", "model_features", "fault_channels"):
+            v = getattr(self, key)
+            if v is None and key == "fault_channels":
+                continue
+            pats = [v] if isinstance(v, str) else v
+            # fnmatch needs strings: [1, 2] failed in the fit with a TypeError
+            if not (isinstance(pats, (list, tuple)) and all(isinstance(p, str) for p in pats)):
+                raise InputError(f"{self.name}: {key} must be a glob pattern or a list of "
+                                 f"them (strings), got {v!r}")
         if self.initial_nodes > self.max_nodes:
             raise InputError(f"{self.name}: initial_nodes ({self.initial_nodes}) exceeds "
                              f"max_nodes ({self.max_nodes})")

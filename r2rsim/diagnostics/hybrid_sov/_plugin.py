@@ -82,8 +82,10 @@ class HybridSoV(Diagnostic):
         if not isinstance(self.line, (str, Path)):
             raise InputError(f"hybrid-sov: line must be the path of a line file, "
                              f"got {self.line!r}")
-        if not Path(self.line).is_file():
+        if not Path(self.line).exists():
             raise InputError(f"hybrid-sov: line file {self.line!s} does not exist")
+        if not Path(self.line).is_file():  # a directory, /dev/zero: there, but not a file
+            raise InputError(f"hybrid-sov: line file {self.line!s} is not a regular file")
         if self.selection not in ("LR", "F"):
             raise InputError(f"hybrid-sov: selection must be 'LR' (Tobit) or 'F' (OLS), "
                              f"got {self.selection!r}")
@@ -113,6 +115,7 @@ class HybridSoV(Diagnostic):
         self.stages_ = load_stages(self.line)
         self.columns_ = F.required_columns(self.stages_)
         sigs = [self._signals(f) for f in frames]
+        self._check_censoring(sigs)
         kind = "tobit" if self.selection == "LR" else "ols"
         self.model_ = HybridModel(self.stages_, kind, self.alpha_enter, self.censor_at).fit(
             sigs)
@@ -124,6 +127,18 @@ class HybridSoV(Diagnostic):
         stat = np.max(np.abs((resid[ok] - self.resid_mean_) / self.resid_std_), axis=1)
         self.threshold_ = float(np.quantile(stat, 1.0 - self.alpha))
         return self
+
+    def _check_censoring(self, sigs: list[F.Signals]) -> None:
+        """Refuse a ``censor_at`` at or above every stage-2 load-cell reading of the training
+        runs: with every reading censored the Tobit likelihood has no maximum (it grows as
+        the predicted tension falls without bound), and the fit ended with statsmodels'
+        warnings and a meaningless model."""
+        t2 = np.concatenate([s.T2[s.valid] for s in sigs])
+        if t2.size and not (t2 > self.censor_at).any():
+            raise InputError(f"hybrid-sov: censor_at={self.censor_at:g} N censors every "
+                             f"stage-2 load-cell reading of the training runs (the largest "
+                             f"is {t2.max():.6g} N): set it to the load cell's lower range "
+                             f"limit, below the readings of a running line")
 
     def _residuals(self, s: F.Signals):
         pred = self.model_.predict(s)

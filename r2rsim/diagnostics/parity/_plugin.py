@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 
 from ...errors import InputError
+from ...schema import plausibility as P
 from ..base import Diagnostic
 from ._design import KINDS, design_relation, sensitivity
 from ._model import NonlinearModel, registration_model
@@ -47,6 +48,23 @@ def registration_parameters(line, span: str = "registration", drive: str = "reg_
     return {"web_EA_N": ln.web.modulus * ln.web.thickness * ln.web.width,
             "span_length_m": spans[span].length, "relaxed_pitch_m": L0,
             "drive_radius_m": els[drive].radius, "downstream_radius_m": els[downstream].radius}
+
+
+#: physically plausible ranges of the reduced model's numbers (value from, to, unit): far
+#: outside them the design corners overflow or underflow and the fit failed inside numpy
+#: (EA = 1e308 N or 1e-300 N: "SVD did not converge"). EA spans the webs that
+#: r2rsim.schema.plausibility accepts without a warning (modulus x thickness x width, from
+#: elastomer tape, 0.1 N, to metal strip, 2.7e10 N); span and pitch lengths from the shortest
+#: span it accepts (1 mm) to the longest without a warning (100 m); radii from a 1 mm rod to a
+#: 10 m roll.
+_PHYSICAL_RANGES = {
+    "web_EA_N": (P.MODULUS_RANGE[0] * P.THICKNESS_RANGE[0] * P.WIDTH_RANGE[0],
+                 P.MODULUS_RANGE[1] * P.THICKNESS_RANGE[1] * P.WIDTH_RANGE[1], "N"),
+    "span_length_m": (P.SPAN_MIN, P.SPAN_RANGE[1], "m"),
+    "relaxed_pitch_m": (P.SPAN_MIN, P.SPAN_RANGE[1], "m"),
+    "drive_radius_m": (1e-3, 10.0, "m"),
+    "downstream_radius_m": (1e-3, 10.0, "m"),
+}
 
 
 class ParitySpaceDetector(Diagnostic):
@@ -185,9 +203,13 @@ class ParitySpaceDetector(Diagnostic):
             if not (np.isfinite(v := self._number(key)) and v > 0):
                 raise InputError(f"parity: {key} must be a positive number, "
                                  f"got {getattr(self, key)!r}")
-        if self.relaxed_pitch_m is not None and not self.relaxed_pitch_m > 0:
-            raise InputError(f"parity: relaxed_pitch_m must be > 0 m or null, "
-                             f"got {self.relaxed_pitch_m!r}")
+        for key, (low, high, unit) in _PHYSICAL_RANGES.items():
+            if key == "relaxed_pitch_m" and self.relaxed_pitch_m is None:
+                continue  # calibrated on the training runs
+            if not low <= self._number(key) <= high:
+                raise InputError(f"parity: {key} must be from {low:g} to {high:g} {unit}"
+                                 f"{' or null' if key == 'relaxed_pitch_m' else ''}, "
+                                 f"got {getattr(self, key)!r}")
         # upper limits: beyond them the design corners or the windows mean nothing, and
         # a fit would overflow or allocate without bound
         for key, low, high, unit in (("modulus_spread", 0.0, 0.5, ""),
