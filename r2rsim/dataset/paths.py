@@ -21,7 +21,7 @@ import re
 import shutil
 from pathlib import Path, PurePosixPath
 
-from ..errors import R2RError
+from ..errors import InputError, R2RError
 
 MANIFEST = "manifest.json"
 #: the marker of an unfinished sweep's directory (r2rsim.sweep): not a dataset until it is gone
@@ -98,6 +98,27 @@ def _relpath_problem(rel: object) -> str | None:
     if rel == MANIFEST:
         return "the manifest itself"
     return None
+
+
+def occupied_output(out: Path) -> bool:
+    """Whether an output directory of r2rsim already holds something: False when it does
+    not exist or is empty (it is filled), True when it holds entries (the caller decides
+    whether they may be replaced).
+
+    Raises
+    ------
+    InputError
+        For a symbolic link or something that is not a directory (never replaced).
+    """
+    if out.is_symlink():
+        raise InputError(f"output directory '{out}' is a symbolic link; give the directory "
+                         f"it points to, or another one, with -o")
+    if not out.exists():
+        return False
+    if not out.is_dir():
+        raise InputError(f"output '{out}' exists and is not a directory; choose another "
+                         f"with -o")
+    return any(out.iterdir())
 
 
 def read_json(path: str | Path, limit: int = MAX_JSON_BYTES) -> object:

@@ -35,6 +35,7 @@ from .paths import (
     clean_stale,
     dataset_problems,
     inside,
+    occupied_output,
     remove_dataset,
     safe_component,
     sha256_file,
@@ -100,16 +101,8 @@ def check_output(output: str | Path, overwrite: bool = False, *, hashes: bool = 
         Saying why and what to do.
     """
     out = Path(output)
-    if out.is_symlink():
-        raise InputError(f"output directory '{out}' is a symbolic link; give the directory "
-                         f"it points to, or another one, with -o")
-    if not out.exists():
-        return
-    if not out.is_dir():
-        raise InputError(f"output '{out}' exists and is not a directory; choose another "
-                         f"with -o")
-    if not any(out.iterdir()):
-        return  # an empty directory is filled
+    if not occupied_output(out):
+        return  # absent or empty: filled
     problems = dataset_problems(out, hashes=hashes)
     if problems:
         more = f" and {len(problems) - 1} more" if len(problems) > 1 else ""

@@ -19,7 +19,7 @@ import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
-from ..dataset.paths import read_json
+from ..dataset.paths import occupied_output, read_json
 from ..errors import InputError
 
 #: first line of every ``r2rsim report`` page (an existing file without it is not replaced)
@@ -100,18 +100,9 @@ def check_results_output(output: str | Path, kind: str, overwrite: bool = False)
         Saying why and what to do.
     """
     out = Path(output)
-    if out.is_symlink():
-        raise InputError(f"output directory '{out}' is a symbolic link; give the directory it "
-                         f"points to, or another one, with -o")
-    if not out.exists():
-        return
-    if not out.is_dir():
-        raise InputError(f"output '{out}' exists and is not a directory; choose another with "
-                         f"-o")
-    entries = sorted(out.iterdir())
-    if not entries:
-        return  # an empty directory is filled
-    foreign = [p.name for p in entries if not _is_own(p, kind)]
+    if not occupied_output(out):
+        return  # absent or empty: filled
+    foreign = [p.name for p in sorted(out.iterdir()) if not _is_own(p, kind)]
     if foreign:
         more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
         raise InputError(f"output directory '{out}' exists and holds files r2rsim {kind} did "
