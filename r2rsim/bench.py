@@ -231,14 +231,14 @@ def read_baseline(path: str | Path, spec_file: str | None = None) -> pd.DataFram
     if first.removeprefix("\ufeff") != header:  # (a BOM from a spreadsheet is fine)
         raise bad(f"is not a baseline file written by `r2rsim bench --update` (its first "
                   f"line is not '{header}')")
-    try:
-        table = pd.read_csv(path, encoding="utf-8-sig")
+    try:  # names as written: a label '007' is not the number 7
+        table = pd.read_csv(path, encoding="utf-8-sig", dtype=str, keep_default_na=False)
     except (OSError, ValueError) as exc:  # pandas' ParserError, UnicodeDecodeError
         first = (str(exc).strip().splitlines() or [""])[0]
         raise bad(f"is not a readable CSV ({type(exc).__name__}: {first})") from None
     for col in ("magnitude", "value"):
-        try:  # (a header-only file has text columns, and nothing in them)
-            table[col] = pd.to_numeric(table[col]).astype(float)
+        try:  # an empty cell is no value (how --update writes NaN)
+            table[col] = pd.to_numeric(table[col].where(table[col] != "")).astype(float)
         except (ValueError, TypeError):
             raise bad(f"is not a baseline file: its {col} column holds text, not "
                       f"numbers") from None

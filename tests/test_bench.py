@@ -233,3 +233,18 @@ def test_thesis_baselines_spec_is_valid():
     spec = load_spec(REPO / "benchmarks" / "thesis_baselines.yaml")
     assert {s.name for s in spec.studies} == {"registration", "dancer"}
     assert sum(len(rs.seeds) for rs in spec.studies[0].test) == 90
+
+
+def test_names_made_of_digits_stay_names_in_the_baseline(bench, capsys):
+    # a label "007" (or "1e3") reads back from the CSV as text, not as the number 7:
+    # otherwise every metric of the baseline is reported missing
+    d, _ = bench
+    spec = write_spec(d, name="digits.yaml", **{"{method: residual": "{method: residual, "
+                                                "label: '007'", "base.csv": "digits.csv"})
+    assert main(["bench", str(spec), "--update", "--workdir", str(d / "work")]) == 0
+    base = pd.read_csv(d / "digits.csv", dtype=str)
+    assert set(base.label) == {"007"}
+    capsys.readouterr()
+    code, out, err = run(spec, d, capsys)
+    assert code == 0, err
+    assert f"bench passed: {len(base)} metrics within tolerance" in out
