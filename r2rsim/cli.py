@@ -336,6 +336,15 @@ def _cmd_validate(args) -> int:
     from .schema import load_line, read_yaml
 
     status = 0
+    shown: set[str] = set()  # a line's problem once, though its scenario names it again
+
+    def problem(exc: InputError) -> None:
+        key = InputError(exc.message, file=exc.file and str(Path(exc.file).resolve()),
+                         path=exc.path).format()
+        if key not in shown:
+            shown.add(key)
+            print(exc.format(), file=sys.stderr)
+
     for f in args.files:
         path = Path(f)
         if path.is_dir():
@@ -352,7 +361,9 @@ def _cmd_validate(args) -> int:
         try:
             data = read_yaml(path)
             if "elements" in data:
-                load_line(path)
+                from .compile import compile_line
+
+                compile_line(load_line(path), file=str(path))  # the geometry it is built with
                 kind = "line"
             elif "axes" in data or ("scenario" in data and "line" not in data):
                 from .sweep import plan_sweep
@@ -367,20 +378,21 @@ def _cmd_validate(args) -> int:
                         f"{n(plan.n_combinations, 'combination')} x "
                         f"{n(len(plan.seeds), 'seed')})")
             else:
-                from .run import default_output, plan_from_file
+                from .run import check_plan, default_output, plan_from_file
 
-                default_output(plan_from_file(path))  # what `r2rsim run` checks first
+                plan = plan_from_file(path)
+                default_output(plan)  # what `r2rsim run` checks, in its order
+                for warning in check_plan(plan):
+                    print(f"warning: {warning}", file=sys.stderr)
                 kind = "scenario"
             print(f"{f}: valid {kind}")
         except InputError as exc:
             status = EXIT_INPUT
             problems = getattr(exc, "problems", None)
-            if problems:
-                for p, msg in problems:
-                    print(InputError(msg, file=exc.file, path=p or None).format(),
-                          file=sys.stderr)
-            else:
-                print(exc.format(), file=sys.stderr)
+            for p, msg in problems or []:
+                problem(InputError(msg, file=exc.file, path=p or None))
+            if not problems:
+                problem(exc)
     return status
 
 
@@ -550,17 +562,24 @@ def _duration_arg(text: str) -> float:
 def _run_command(args) -> int:
     """Run the subcommand. Plausibility warnings (:class:`r2rsim.errors.PlausibilityWarning`,
     issued while files load) are printed as ``warning: file: path: message`` on stderr, each
-    one, and the command carries on."""
+    one once (a line file read again for its scenario warns again), and the command carries
+    on."""
     import warnings
 
     from .errors import PlausibilityWarning
 
     with warnings.catch_warnings():
         show_other = warnings.showwarning
+        shown = set()
 
         def show(message, category, filename, lineno, file=None, line=None):
             if issubclass(category, PlausibilityWarning):
-                print(f"warning: {message}", file=sys.stderr)
+                where = getattr(message, "file", None)
+                key = (where and str(Path(where).resolve()), getattr(message, "path", None),
+                       getattr(message, "message", str(message)))
+                if key not in shown:
+                    shown.add(key)
+                    print(f"warning: {message}", file=sys.stderr)
             else:
                 show_other(message, category, filename, lineno, file, line)
 

@@ -174,6 +174,8 @@ class RunPlan:
         Extra keys of the dataset's manifest.json.
     line_config : str
         What runs.parquet calls the line when it has no name (the line file's stem).
+    line_source : str
+        The line file, for messages (None: not known).
     """
 
     scenario: object
@@ -184,6 +186,7 @@ class RunPlan:
     files: dict[str, str] = field(default_factory=dict)
     manifest: dict = field(default_factory=dict)
     line_config: str = ""
+    line_source: str | None = None
 
 
 def plan_from_file(scenario_path: str | Path, seed: int | None = None,
@@ -224,16 +227,38 @@ def plan_from_file(scenario_path: str | Path, seed: int | None = None,
                  yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=True)}
     sha = hashlib.sha256((scenario_text + "\0" + line_text).encode()).hexdigest()
     return RunPlan(scenario, line, name, str(scenario_path), sha, files,
-                   {"scenario": scenario_path.name, "line": line_copy}, line_path.stem)
+                   {"scenario": scenario_path.name, "line": line_copy}, line_path.stem,
+                   str(line_path))
 
 
-def sample_columns(scenario, line, file: str | None = None) -> tuple[str, ...]:
+def check_plan(plan: RunPlan) -> list[str]:
+    """Everything a run checks before it simulates, without simulating: the variability,
+    disturbances and faults drawn at the plan's seed, the compiled line (a dancer roller
+    that overlaps a neighbour, a load cell that sees no tension...) and the initial state.
+    ``r2rsim validate`` calls it, so that it refuses what ``r2rsim run`` would.
+
+    Returns
+    -------
+    list of str
+        Warnings the run would print (a steady state that cannot be found).
+
+    Raises
+    ------
+    InputError
+        For a problem ``r2rsim run`` would refuse the scenario with.
+    """
+    return _prepare(plan).warnings
+
+
+def sample_columns(scenario, line, file: str | None = None,
+                   line_file: str | None = None) -> tuple[str, ...]:
     """The columns the samples of a run of ``scenario`` on ``line`` will have, without
     simulating (compiles the line: ~1 ms once numba's kernels are loaded). A sweep checks
-    with it that all its runs fit one dataset; ``file`` names the scenario in errors."""
+    with it that all its runs fit one dataset; ``file`` and ``line_file`` name the scenario
+    and the line in errors."""
     prog = Programme.from_steps(line, scenario.programme, file=file)
     disturbances = realise_disturbances(scenario, line, np.random.SeedSequence(0))
-    cl = compile_line(line, prog, scenario.faults, disturbances)
+    cl = compile_line(line, prog, scenario.faults, disturbances, file=line_file)
     cols = []
     for s in cl.sensors:
         meas, true, _ = channel_names(cl, s)
@@ -330,14 +355,11 @@ def execute(plan: RunPlan, out: str | Path, *, run_id: str | None = None, progre
     check_output(out, overwrite)  # before the work: refuse early what commit would refuse
 
     prep = _prepare(plan)
-    cl = prep.cl
+    cl, faults, sensor_chan = prep.cl, prep.faults, prep.sensor_chan
     run_id = run_id or f"{name}__s{scenario.seed}"
     meta = {"r2rsim.schema_version": "0.1", "r2rsim.version": __version__,
             "r2rsim.scenario_sha256": plan.scenario_sha256,
             "r2rsim.root_seed": str(scenario.seed)}
-    sensor_chan = {s.id: channel_names(cl, s)[0][len("meas."):] for s in cl.sensors}
-    faults = realise_faults(scenario, prep.line, prep.ss_faults, plan.source,
-                            channel_of=lambda sid: f"meas.{sensor_chan[sid]}")
     rate = scenario.record_rate
     fault_rows = [f.record(run_id, int(math.ceil(f.onset * rate - 1e-9))) for f in faults]
     modes = [(st.at, st.mode) for st in scenario.programme if st.mode is not None]
@@ -401,11 +423,14 @@ class _Prepared:
     ss_process: np.random.SeedSequence
     ss_meas: np.random.SeedSequence
     ss_faults: np.random.SeedSequence
+    faults: list
+    sensor_chan: dict
 
 
 def _prepare(plan: RunPlan) -> _Prepared:
     """Draw the run's variability and disturbances from its process stream, compile the
-    line and find the initial state (steady, or nominal when none is found)."""
+    line, find the initial state (steady, or nominal when none is found) and draw the
+    faults from their stream."""
     scenario, line = plan.scenario, plan.line
     prog = Programme.from_steps(line, scenario.programme, file=plan.source)
     ss_process, ss_meas, ss_faults = np.random.SeedSequence(scenario.seed).spawn(3)
@@ -415,7 +440,8 @@ def _prepare(plan: RunPlan) -> _Prepared:
     pitch_var = realise_pitch_variations(line, ss_process)
     cl = compile_line(line, prog, scenario.faults, disturbances, pitch_var,
                       joint_slots_needed(scenario, line), nominal_web=declared_web,
-                      pitch_offsets=rolls.sensor_pitch_offsets if rolls else None)
+                      pitch_offsets=rolls.sensor_pitch_offsets if rolls else None,
+                      file=plan.line_source)
     init = scenario.initial
     y0 = nominal_state(cl, init.tension, init.span_tension, init.slack, init.position,
                        file=plan.source)
@@ -433,8 +459,11 @@ def _prepare(plan: RunPlan) -> _Prepared:
                 f"{plan.source}: initial.state: steady was asked for, but no steady state "
                 "was found at the t = 0 set-points (is the line at rest, or are span tensions "
                 "not held by any loop or draw?); the run starts from the nominal state")
+    sensor_chan = {s.id: channel_names(cl, s)[0][len("meas."):] for s in cl.sensors}
+    faults = realise_faults(scenario, line, ss_faults, plan.source,
+                            channel_of=lambda sid: f"meas.{sensor_chan[sid]}")
     return _Prepared(line, cl, rolls, variability_rows, y0, init_mode, warnings, ss_process,
-                     ss_meas, ss_faults)
+                     ss_meas, ss_faults, faults, sensor_chan)
 
 
 class _ChunkSink:

@@ -245,6 +245,25 @@ def test_bad_faults_are_rejected(tmp_path, faults, message):
         r2rsim.load_scenario(path)
 
 
+@pytest.mark.parametrize("change, ypath, message", [
+    ({"magnitude": "3 m"}, "faults[0].magnitude", "'3 m' has dimension [length], expected a "
+     "force"),
+    ({"onset": {"uniform": ["1 N", "3 N"]}}, "faults[0].onset", "expected a time"),
+    ({"onset": 30.0}, "faults[0].onset", "onset is 30 s, after the end of the run (12 s)"),
+    ({"onset": {"uniform": [2, 30]}}, "faults[0].onset", "onset can be 30 s, after the end"),
+    ({"onset": {"uniform": [2, 8]}, "end": 5.0}, "faults[0].end",
+     "end 5 s can come before the onset, which is drawn up to 8 s"),
+])
+def test_a_bad_fault_value_is_named_by_its_own_path(tmp_path, change, ypath, message):
+    # the message names the key at fault (magnitude or onset), not only faults[0]; a fixed
+    # onset "is", a drawn one "can be"
+    fault = {"id": "a", "type": "sensor.offset", "target": "lc_mon", "onset": 2.0,
+             "magnitude": 1.0, **change}
+    with pytest.raises(InputError) as info:
+        r2rsim.load_scenario(scenario(tmp_path, [fault]))
+    assert info.value.path == ypath and message in info.value.message, info.value.format()
+
+
 def test_validator_rederives_every_label_from_faults_parquet(tmp_path, capsys):
     import pyarrow as pa
     import pyarrow.parquet as pq

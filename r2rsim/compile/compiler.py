@@ -292,7 +292,7 @@ class CompiledLine:
 def compile_line(line: Line, programme: Programme | None = None, faults=(),
                  disturbances=(), pitch_variations=None,
                  extra_joint_slots: int = 0, nominal_web=None,
-                 pitch_offsets=None) -> CompiledLine:
+                 pitch_offsets=None, file: str | None = None) -> CompiledLine:
     """Compile a validated line.
 
     Parameters
@@ -321,20 +321,33 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
     pitch_offsets : dict, optional
         Sensor id -> relaxed-pitch offset [m] of the first roll's web (process variability,
         :class:`r2rsim.compile.variability.RollDraws`); the rolls spliced later bring theirs.
+    file : str, optional
+        The line file, named in the errors about the line's geometry and sensors.
 
     Returns
     -------
     CompiledLine
+
+    Raises
+    ------
+    InputError
+        For a line that validates but cannot be built: a dancer roller that overlaps a
+        neighbour, a load cell whose axis sees no tension.
     """
     prog = programme or Programme.constant(line)
-    pk = _Packer(line, prog, faults, disturbances, extra_joint_slots, nominal_web,
-                 pitch_offsets)
-    for k, e in enumerate(line.elements):  # states in web order: element, then its span
-        pk.element(k, e)
-        pk.element_controllers(k, e)
-        pk.element_sensors(k, e)
-        if k < pk.nS:
-            pk.span(k)
+    try:
+        pk = _Packer(line, prog, faults, disturbances, extra_joint_slots, nominal_web,
+                     pitch_offsets)
+        for k, e in enumerate(line.elements):  # states in web order: element, then its span
+            pk.element(k, e)
+            pk.element_controllers(k, e)
+            pk.element_sensors(k, e)
+            if k < pk.nS:
+                pk.span(k)
+    except InputError as exc:
+        if exc.file is not None or file is None:
+            raise
+        raise InputError(exc.message, file=file, path=exc.path) from None
     ev_I, ev_kinds, ev_comp = pk.events()
     aux_names, aux_units = pk.outputs()
     I, P = pk.pack(ev_I, len(aux_names), pitch_variations)

@@ -384,13 +384,16 @@ def check_faults(scenario, line, file: str) -> None:
                                  else None)
         try:
             lo, hi = bounds(f.onset, "time")
-            if ft.magnitude != "none":
-                mlo, mhi = bounds(f.magnitude, magnitude_dimension(f.type, rdim))
-                problem = magnitude_problem(f.type, mlo, mhi, line, f.target)
-                if problem:
-                    raise InputError(problem, file=file, path=f"{where}.magnitude")
         except QuantityError as exc:
-            raise InputError(str(exc), file=file, path=where) from None
+            raise InputError(str(exc), file=file, path=f"{where}.onset") from None
+        if ft.magnitude != "none":
+            try:
+                mlo, mhi = bounds(f.magnitude, magnitude_dimension(f.type, rdim))
+            except QuantityError as exc:
+                raise InputError(str(exc), file=file, path=f"{where}.magnitude") from None
+            problem = magnitude_problem(f.type, mlo, mhi, line, f.target)
+            if problem:
+                raise InputError(problem, file=file, path=f"{where}.magnitude")
         if f.type == "process.weak_splice":
             splicer = next(e for e in line.elements if e.id == f.target).splicer
             later = [ev for ev in scenario.events if ev.type == "splice" and ev.at >= lo
@@ -399,9 +402,13 @@ def check_faults(scenario, line, file: str) -> None:
                 raise InputError(f"no splice on '{f.target}' at or after the onset: schedule "
                                  "one (events: type splice) or give the splicer a "
                                  "trigger_radius", file=file, path=f"{where}.onset")
+        drawn = "can be" if hi > lo else "is"
         if hi > scenario.duration:
-            raise InputError(f"onset can be {hi:g} s, after the end of the run "
+            raise InputError(f"onset {drawn} {hi:g} s, after the end of the run "
                              f"({scenario.duration:g} s)", file=file, path=f"{where}.onset")
+        if f.end is not None and f.end <= hi:  # a drawn onset: refused whatever the seed
+            raise InputError(f"end {f.end:g} s can come before the onset, which is drawn up "
+                             f"to {hi:g} s", file=file, path=f"{where}.end")
         windows.append((lo, f.end if f.end is not None else math.inf))
     for i, a in enumerate(scenario.faults):
         for j in range(i):
