@@ -122,3 +122,16 @@ def test_params_reach_the_plugin(site, data, diagnosed):
     s02 = pd.read_parquet(data / "out_lam02" / "predictions.parquet")["statistic"]
     s01 = pd.read_parquet(data / "out_default" / "predictions.parquet")["statistic"]
     assert len(s01) == len(s02) and not np.allclose(s01, s02)
+
+
+def test_the_installed_plugin_passes_the_shipped_checks(site, tmp_path):
+    # what docs/diagnostics.md §2.1 tells a plug-in's author to run: r2rsim's own checks,
+    # on the built-in data, from an installed r2rsim (no checkout of r2rsim's tests needed)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        filter(None, [str(site), os.environ.get("PYTHONPATH")])))
+    code = ("from r2rsim.evaluate import check_plugin\n"
+            f"for check in check_plugin({NAME!r}):\n    print('ok:', check)\n")
+    res = subprocess.run([sys.executable, "-c", code], env=env, cwd=tmp_path,
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.count("ok: ") == 7 and "deterministic" in res.stdout, res.stdout

@@ -30,6 +30,7 @@ import numpy as np
 import pandas as pd
 from sklearn.base import BaseEstimator
 
+from ..dataset.read import DRIVE_DATA
 from ..errors import InputError
 from ..limits import MAX_SEED
 
@@ -89,8 +90,14 @@ class Diagnostic(BaseEstimator):
         missing = [p for p in self.requires if not any(fnmatch.fnmatch(c, p)
                                                         for c in frame.columns)]
         if missing:
+            drive = any(p.startswith(tuple(d.rstrip("*") for d in DRIVE_DATA)) for p in missing)
             raise InputError(f"{self.name}: the data has no column matching "
-                             f"{', '.join(missing)}")
+                             f"{', '.join(missing)}" + (
+                                 " (act.*, cmd.* and ctrl.* are drive data, shown to "
+                                 "plug-ins only under the drive-data protocol: --drive-data, "
+                                 "evaluate(..., drive_data=True) or evaluation: "
+                                 "{drive_data: true})"
+                                 if drive else ""))
         return cols
 
     def _check_alpha(self):
