@@ -235,6 +235,7 @@ def _cmd_diagnose(args) -> int:
     from .evaluate.harness import (
         check_settings,
         evaluate,
+        no_training_run,
         read_datasets,
         split_by_condition,
         split_by_seed,
@@ -257,6 +258,8 @@ def _cmd_diagnose(args) -> int:
         runs = read_datasets(args.data, verify=verify, where=where)
         if args.split == "seed":
             split = split_by_seed(runs)
+            if not split.train:
+                raise InputError(no_training_run(runs))
         else:
             split = split_by_condition(runs, train=args.train_mode, test=args.test_mode,
                                        val=args.val_fraction)
@@ -361,9 +364,7 @@ def _cmd_validate(args) -> int:
         try:
             data = read_yaml(path)
             if "elements" in data:
-                from .compile import compile_line
-
-                compile_line(load_line(path), file=str(path))  # the geometry it is built with
+                load_line(path)
                 kind = "line"
             elif "axes" in data or ("scenario" in data and "line" not in data):
                 from .sweep import plan_sweep
@@ -459,14 +460,15 @@ def _cmd_list(args) -> int:
 def _list_channels(line_path: str) -> int:
     from .compile import Programme, compile_line
     from .dataset import true_state_columns
-    from .measure.sensors import channel_names
+    from .measure.sensors import channel_names, unit_of_suffix
     from .schema import load_line
 
     line = load_line(line_path)
     cl = compile_line(line, Programme.from_steps(line, []))
     print(f"{'channel':<44} {'unit':<8} description")
     for s in cl.sensors:
-        meas, true, unit = channel_names(cl, s)
+        meas, true, suffix = channel_names(cl, s)
+        unit = unit_of_suffix(suffix)  # as channels.parquet has it
         where = getattr(s, "element", None) or s.span
         print(f"{meas:<44} {unit:<8} {s.type} '{s.id}' on {where}: measured (what "
               f"algorithms see)")

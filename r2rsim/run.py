@@ -33,7 +33,7 @@ from .dataset.writer import EVENTS_SCHEMA, FAULTS_SCHEMA, VARIABILITY_SCHEMA, ch
 from .errors import InputError, R2RError
 from .limits import MAX_SEED, run_size_problem
 from .measure import MeasurementModel
-from .measure.sensors import channel_names
+from .measure.sensors import channel_names, unit_of_suffix
 from .schema import load_scenario
 from .schema.loader import read_yaml
 from .solve import Event, nominal_state, simulate, steady_state
@@ -174,8 +174,6 @@ class RunPlan:
         Extra keys of the dataset's manifest.json.
     line_config : str
         What runs.parquet calls the line when it has no name (the line file's stem).
-    line_source : str
-        The line file, for messages (None: not known).
     """
 
     scenario: object
@@ -186,7 +184,6 @@ class RunPlan:
     files: dict[str, str] = field(default_factory=dict)
     manifest: dict = field(default_factory=dict)
     line_config: str = ""
-    line_source: str | None = None
 
 
 def plan_from_file(scenario_path: str | Path, seed: int | None = None,
@@ -227,8 +224,7 @@ def plan_from_file(scenario_path: str | Path, seed: int | None = None,
                  yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=True)}
     sha = hashlib.sha256((scenario_text + "\0" + line_text).encode()).hexdigest()
     return RunPlan(scenario, line, name, str(scenario_path), sha, files,
-                   {"scenario": scenario_path.name, "line": line_copy}, line_path.stem,
-                   str(line_path))
+                   {"scenario": scenario_path.name, "line": line_copy}, line_path.stem)
 
 
 def check_plan(plan: RunPlan) -> list[str]:
@@ -250,15 +246,13 @@ def check_plan(plan: RunPlan) -> list[str]:
     return _prepare(plan).warnings
 
 
-def sample_columns(scenario, line, file: str | None = None,
-                   line_file: str | None = None) -> tuple[str, ...]:
+def sample_columns(scenario, line, file: str | None = None) -> tuple[str, ...]:
     """The columns the samples of a run of ``scenario`` on ``line`` will have, without
     simulating (compiles the line: ~1 ms once numba's kernels are loaded). A sweep checks
-    with it that all its runs fit one dataset; ``file`` and ``line_file`` name the scenario
-    and the line in errors."""
+    with it that all its runs fit one dataset; ``file`` names the scenario in errors."""
     prog = Programme.from_steps(line, scenario.programme, file=file)
     disturbances = realise_disturbances(scenario, line, np.random.SeedSequence(0))
-    cl = compile_line(line, prog, scenario.faults, disturbances, file=line_file)
+    cl = compile_line(line, prog, scenario.faults, disturbances)
     cols = []
     for s in cl.sensors:
         meas, true, _ = channel_names(cl, s)
@@ -440,8 +434,7 @@ def _prepare(plan: RunPlan) -> _Prepared:
     pitch_var = realise_pitch_variations(line, ss_process)
     cl = compile_line(line, prog, scenario.faults, disturbances, pitch_var,
                       joint_slots_needed(scenario, line), nominal_web=declared_web,
-                      pitch_offsets=rolls.sensor_pitch_offsets if rolls else None,
-                      file=plan.line_source)
+                      pitch_offsets=rolls.sensor_pitch_offsets if rolls else None)
     init = scenario.initial
     y0 = nominal_state(cl, init.tension, init.span_tension, init.slack, init.position,
                        file=plan.source)
@@ -544,7 +537,7 @@ def _channels_table(cl, sink: _ChunkSink, sensor_chan: dict, rate: float) -> pa.
             ("t_s", "index", "s", "", "simulation time", None)]
     for mc in sink.meas.channels:  # in the order MeasurementModel.measure writes them
         s = mc["sensor"]
-        unit = channel_names(cl, s)[2].replace("rad_s", "rad/s")
+        unit = unit_of_suffix(channel_names(cl, s)[2])
         where = getattr(s, "element", None) or s.span
         rows.append((mc["name"], "measured", unit, where,
                      f"{s.type} '{s.id}' on {where}: measured (noise, sampling)", mc["rate"]))

@@ -326,6 +326,25 @@ def test_list_faults_and_channels(repo, capsys):
     assert main(["list", "channels"]) == 2
 
 
+def test_list_channels_gives_the_units_of_channels_parquet(repo, tmp_path, capsys):
+    # `r2rsim list channels` shows each sensor channel's unit as the dataset records it
+    # (rad/s, not the rad_s of the column name)
+    from r2rsim.cli import main
+
+    assert main(["list", "channels", str(repo / "lines" / "pet_film_line.yaml")]) == 0
+    listed = {}
+    for row in capsys.readouterr().out.splitlines()[1:]:
+        name, unit = row.split()[:2]
+        listed[name] = unit
+    r2rsim.run_scenario(repo / "scenarios" / "quickstart.yaml", output=tmp_path / "q",
+                        duration=0.5)
+    channels = pd.read_parquet(tmp_path / "q" / "channels.parquet")
+    sensors = channels[channels.kind.isin(["measured", "true"])]
+    assert listed["meas.enc_pull.speed_rad_s"] == "rad/s"
+    assert {n: listed[n] for n in sensors.channel} == dict(zip(sensors.channel, sensors.unit,
+                                                            strict=True))
+
+
 def test_range_clipping_is_flagged_and_channels_describe_every_column(tmp_path):
     path = scenario(tmp_path, [{"id": "o", "type": "sensor.offset", "target": "lc_mon",
                                 "onset": 4.0, "magnitude": 10.0}])

@@ -283,6 +283,26 @@ def test_sweep_groups_by_a_second_axis(sweep_ds):
         assert sorted(line.get_ydata()) == pytest.approx(sorted(rows.value))
 
 
+def test_sweep_runs_without_an_x_value_are_left_out_and_counted(sweep_ds, tmp_path):
+    # a run an axis did not apply to (a fault removed with null) has no x: it is not drawn,
+    # and the title counts it rather than claiming all runs are plotted
+    import shutil
+
+    import pyarrow.parquet as pq
+
+    ds = tmp_path / "sweep"
+    shutil.copytree(sweep_ds, ds)
+    runs = pq.read_table(ds / "runs.parquet")
+    i = runs.column_names.index("axis.offset")
+    offset = runs.column(i).to_pylist()
+    pq.write_table(runs.set_column(i, runs.field(i), [[None, None, *offset[2:]]]),
+                   ds / "runs.parquet")
+    fig = plot_sweep(ds, "meas.lc_rewind.tension_N", axis="offset")
+    (line,) = fig.axes[0].get_lines()
+    assert len(line.get_xdata()) == 6 and np.isfinite(line.get_xdata()).all()
+    assert fig._suptitle.get_text() == "sweep: 6 runs; 2 run(s) without a value of offset left out"
+
+
 def test_sweep_errors(sweep_ds, faults_ds):
     with pytest.raises(InputError, match=r"no sweep axis 'speed' \(axes: top_speed, offset\)"):
         plot_sweep(sweep_ds, "meas.lc_rewind.tension_N", axis="speed")

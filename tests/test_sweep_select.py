@@ -92,6 +92,38 @@ def test_diagnose_bad_where(dataset, tmp_path, capsys, arg, msg):
     assert code == 2 and msg in err and len(err.strip().splitlines()) == 1
 
 
+def test_a_seed_split_without_training_runs_says_why(dataset, tmp_path, capsys):
+    # only seeds the seed rule puts in val or test: the message says so and what to do
+    from r2rsim.evaluate.harness import _rule
+
+    rule = _rule(0.6, 0.2, 0.2)  # split_by_seed's default
+    seeds = [s for s in range(1, 7) if rule.assign(s) != "train"]
+    assert seeds, "the fixture's seeds all fall in train"
+    code = main(["diagnose", "--method", "residual", "--data", str(dataset), "--where",
+                 "seed=" + ",".join(map(str, seeds)), "-o", str(tmp_path / "res")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1, err
+    healthy = len(seeds)  # one healthy run per seed
+    assert (f"split 'seed': none of the {healthy} fault-free runs (seeds "
+            f"{', '.join(map(str, seeds))}) falls in train") in err, err
+    assert "--train/--val/--test" in err and not (tmp_path / "res").exists()
+    # only faulty runs: nothing to learn from
+    code = main(["diagnose", "--method", "residual", "--data", str(dataset), "--where",
+                 "magnitude=19.5 N", "-o", str(tmp_path / "res")])
+    err = capsys.readouterr().err
+    assert code == 2 and "all 6 runs have faults" in err, err
+
+
+def test_a_selection_on_a_sweep_without_axes_is_not_called_a_non_sweep(tmp_path):
+    from r2rsim.dataset.read import select_rows
+    from r2rsim.errors import InputError
+
+    with pytest.raises(InputError, match=r"\(axes: none\); a selection applies to every"):
+        select_rows([{"run_id": "a", "sweep": "seeds_only", "seed": 1}], {"size": 1}, tmp_path)
+    with pytest.raises(InputError, match=r"\(axes: none, not a sweep\)"):
+        select_rows([{"run_id": "a", "seed": 1}], {"size": 1}, tmp_path)
+
+
 def test_json_schema_of_the_sweep_file(capsys):
     """`r2rsim schema sweep` prints the sweep file's JSON Schema, whose keys are the ones
     the shipped sweeps use."""

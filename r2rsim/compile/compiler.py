@@ -14,7 +14,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError
-from ..schema.line import DANCERS, Line, draw_problem, pitch_unwind, torque_problem
+from ..schema.line import (
+    DANCERS,
+    Line,
+    dancer_centre,
+    dancer_offsets,
+    draw_problem,
+    load_cell_weights,
+    pitch_unwind,
+    torque_problem,
+)
 from . import kernels
 from .disturbances import realise_pitch_variations
 from .layout import *  # noqa: F403 - the record field names
@@ -292,7 +301,7 @@ class CompiledLine:
 def compile_line(line: Line, programme: Programme | None = None, faults=(),
                  disturbances=(), pitch_variations=None,
                  extra_joint_slots: int = 0, nominal_web=None,
-                 pitch_offsets=None, file: str | None = None) -> CompiledLine:
+                 pitch_offsets=None) -> CompiledLine:
     """Compile a validated line.
 
     Parameters
@@ -321,33 +330,20 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
     pitch_offsets : dict, optional
         Sensor id -> relaxed-pitch offset [m] of the first roll's web (process variability,
         :class:`r2rsim.compile.variability.RollDraws`); the rolls spliced later bring theirs.
-    file : str, optional
-        The line file, named in the errors about the line's geometry and sensors.
 
     Returns
     -------
     CompiledLine
-
-    Raises
-    ------
-    InputError
-        For a line that validates but cannot be built: a dancer roller that overlaps a
-        neighbour, a load cell whose axis sees no tension.
     """
     prog = programme or Programme.constant(line)
-    try:
-        pk = _Packer(line, prog, faults, disturbances, extra_joint_slots, nominal_web,
-                     pitch_offsets)
-        for k, e in enumerate(line.elements):  # states in web order: element, then its span
-            pk.element(k, e)
-            pk.element_controllers(k, e)
-            pk.element_sensors(k, e)
-            if k < pk.nS:
-                pk.span(k)
-    except InputError as exc:
-        if exc.file is not None or file is None:
-            raise
-        raise InputError(exc.message, file=file, path=exc.path) from None
+    pk = _Packer(line, prog, faults, disturbances, extra_joint_slots, nominal_web,
+                 pitch_offsets)
+    for k, e in enumerate(line.elements):  # states in web order: element, then its span
+        pk.element(k, e)
+        pk.element_controllers(k, e)
+        pk.element_sensors(k, e)
+        if k < pk.nS:
+            pk.span(k)
     ev_I, ev_kinds, ev_comp = pk.events()
     aux_names, aux_units = pk.outputs()
     I, P = pk.pack(ev_I, len(aux_names), pitch_variations)
@@ -609,13 +605,7 @@ class _Packer:
             sp[SEP_GAIN], sp[SEP_OFF], sp[SEP_TAU] = s.gain, s.offset, s.filter
             if s.type == "load_cell":
                 si[SEI_TYPE] = SE_LOADCELL
-                beta = s.wrap_angle or e.wrap_angle or math.pi
-                half = 0.5 * (math.pi - beta)
-                cin = math.cos(half - s.axis_angle) if k > 0 else 0.0
-                cout = math.cos(half + s.axis_angle) if k < self.nN - 1 else 0.0
-                if cin + cout <= 1e-9:
-                    raise InputError(f"load cell '{s.id}': its measuring axis sees no tension",
-                                     path=f"sensors[{j}].axis_angle")
+                cin, cout = load_cell_weights(self.line, k, s)  # > 0 in sum: checked at load
                 sp[SEP_CIN], sp[SEP_COUT] = cin, cout
                 sp[SEP_WIN], sp[SEP_WOUT] = cin / (cin + cout), cout / (cin + cout)
                 unit, tol = "N", 1e-4
@@ -876,23 +866,12 @@ def _attach_pattern(cl: CompiledLine) -> None:
 
 
 
-def _wrap_sign(e) -> float:
-    """+1 where the web travels counter-clockwise around the roller (it lies on the left)."""
-    return 1.0 if e.wrap == "ccw" else -1.0
-
-
-def _roller_radius(e) -> float:
-    return e.roll.outer_radius if e.type in ("unwind", "rewind") else e.radius
-
-
 def _dancer_record(line: Line, k: int):
     """Mover parameters of the dancer at element k: (record, initial q, unit of q)."""
     e = line.elements[k]
     a, b = line.elements[k - 1], line.elements[k + 1]
     mp = np.zeros(NMP)
-    sd = _wrap_sign(e)
-    mp[MP_DU] = sd * e.radius - _wrap_sign(a) * _roller_radius(a)
-    mp[MP_DD] = _wrap_sign(b) * _roller_radius(b) - sd * e.radius
+    mp[MP_DU], mp[MP_DD] = dancer_offsets(line, k)
     mp[MP_AX], mp[MP_AY] = a.position
     mp[MP_BX], mp[MP_BY] = b.position
     mp[MP_EPS] = e.smoothing_speed
@@ -928,35 +907,18 @@ def _dancer_record(line: Line, k: int):
             mp[MP_CYLA] = e.cylinder.arm_point
         kind, q0, unit = MV_PIVOT, e.arm_angle, "rad"
     # reference directions of the two spans at the initial position: there L = free length
+    # (the roller clears its neighbours over its whole range: checked at load)
     mp[MP_TUX], mp[MP_TUY], mp[MP_TDX], mp[MP_TDY] = 1.0, 0.0, 1.0, 0.0
-    for q in (mp[MP_QMIN], mp[MP_QMAX], q0):
-        for which, (dist, delta) in enumerate(_centre_distances(mp, kind, q)):
-            if dist <= abs(delta) + 1e-9:
-                side = ("upstream", "downstream")[which]
-                raise InputError(f"at position {q:g} the dancer roller overlaps its {side} "
-                                 f"neighbour (centre distance {dist:.4g} m): check positions "
-                                 f"and ranges", path=f"elements[{k}]")
-    tu, td = _tangents(mp, kind, q0)
+    tu, td = _tangents(mp, dancer_centre(e, q0))
     mp[MP_TUX], mp[MP_TUY] = tu
     mp[MP_TDX], mp[MP_TDY] = td
     return mp, kind, q0, unit
 
 
-def _centre(mp, kind, q):
-    if kind == MV_LINEAR:
-        return mp[MP_CX] + q * mp[MP_NX], mp[MP_CY] + q * mp[MP_NY]
-    return mp[MP_CX] + mp[MP_NX] * math.cos(q), mp[MP_CY] + mp[MP_NX] * math.sin(q)
-
-
-def _centre_distances(mp, kind, q):
-    cx, cy = _centre(mp, kind, q)
-    return [(math.hypot(cx - mp[MP_AX], cy - mp[MP_AY]), mp[MP_DU]),
-            (math.hypot(mp[MP_BX] - cx, mp[MP_BY] - cy), mp[MP_DD])]
-
-
-def _tangents(mp, kind, q):
-    """Unit vectors of travel along the upstream and downstream spans at position q."""
-    cx, cy = _centre(mp, kind, q)
+def _tangents(mp, centre):
+    """Unit vectors of travel along the upstream and downstream spans, the dancer roller at
+    ``centre``."""
+    cx, cy = centre
     out = []
     for (ax, ay, bx, by, delta) in ((mp[MP_AX], mp[MP_AY], cx, cy, mp[MP_DU]),
                                      (cx, cy, mp[MP_BX], mp[MP_BY], mp[MP_DD])):

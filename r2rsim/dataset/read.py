@@ -190,8 +190,11 @@ def select_rows(rows: list[dict], where: dict, dataset: Path) -> list[dict]:
             f"axis.{key}" if f"axis.{key}" in columns else key)
         if rows and col not in columns:
             axes = sorted(c[len("axis."):] for c in columns if c.startswith("axis."))
+            kind = "none" if "sweep" in columns else "none, not a sweep"
             raise InputError(f"dataset {dataset}: runs.parquet has no column '{key}' to select "
-                             f"runs by (axes: {', '.join(axes) or 'none, not a sweep'})")
+                             f"runs by (axes: {', '.join(axes) or kind}); a selection "
+                             f"applies to every dataset named (a bench spec selects per "
+                             f"run set)")
         values = wanted if isinstance(wanted, (list, tuple)) else [wanted]
         si = []
         for v in values:

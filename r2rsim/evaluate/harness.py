@@ -188,6 +188,21 @@ def split_by_seed(runs: Sequence[Run], train: float = 0.6, val: float = 0.2,
     return Split(roles["train"], roles["val"], roles["test"], name="seed")
 
 
+def no_training_run(runs: Sequence[Run]) -> str:
+    """Why :func:`split_by_seed` put none of ``runs`` in train, and what to do."""
+    healthy = [r for r in runs if not _is_faulty(r)]
+    if not healthy:
+        return (f"split 'seed': all {len(runs)} runs have faults, and plug-ins learn from "
+                f"fault-free runs only: add fault-free runs (--data), or name the roles with "
+                f"--train/--val/--test")
+    seeds = sorted({int(r.info["seed"]) for r in healthy})
+    shown = ", ".join(map(str, seeds[:8])) + (", ..." if len(seeds) > 8 else "")
+    return (f"split 'seed': none of the {len(healthy)} fault-free runs (seeds {shown}) falls "
+            f"in train. Each seed is assigned to train, val or test by a hash, 60/20/20 % only "
+            f"on average (docs/diagnostics.md §4), so a few seeds can miss train: add "
+            f"fault-free runs with more seeds, or name the roles with --train/--val/--test")
+
+
 def split_by_condition(runs: Sequence[Run], train: str = "OC1", test: str = "OC2",
                        val: float = 0.25) -> Split:
     """Train and calibrate on one operating condition, test on another.

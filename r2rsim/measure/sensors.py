@@ -44,12 +44,19 @@ def _speed_node(cl: CompiledLine, sensor) -> str:
 
 
 def channel_names(cl: CompiledLine, sensor) -> tuple[str, str, str]:
-    """(measured column, true column, unit) of a sensor."""
+    """(measured column, true column, unit suffix of the column names) of a sensor; the
+    unit as channels.parquet writes it is :func:`unit_of_suffix` of the suffix."""
     q, u = _QUANTITY[sensor.type]
     if u is None:  # dancer position: m (travel) or rad (arm angle)
         u = next(n for n in cl.aux_names
                  if n.startswith(f"{sensor.id}.{q}_") and "_seen_" not in n).rsplit("_", 1)[1]
     return f"meas.{sensor.id}.{q}_{u}", f"true.{sensor.id}.{q}_{u}", u
+
+
+def unit_of_suffix(suffix: str) -> str:
+    """The unit a column-name suffix stands for (``rad_s`` -> ``rad/s``; ``N``, ``m``, ``rad``
+    as they are)."""
+    return suffix.replace("rad_s", "rad/s")
 
 
 class MeasurementModel:

@@ -45,8 +45,9 @@ def plot_sweep(dataset, channel: str, statistic: str = "mean", axis: str | None 
     Returns
     -------
     matplotlib.figure.Figure
-        Its axes hold one marker line per group; the points are the runs with samples (a
-        failed run without samples is left out and counted in the title).
+        Its axes hold one marker line per group; the points are the runs with samples and
+        a value on the x axis (a failed run without samples, and a run the x axis did not
+        apply to, are left out and counted in the title).
 
     Raises
     ------
@@ -63,6 +64,8 @@ def plot_sweep(dataset, channel: str, statistic: str = "mean", axis: str | None 
     g_col = _axis_column(root, runs, group) if group is not None else None
     values, skipped = _per_run(root, runs["run_id"], channel, statistic, t0, t1)
     runs = runs.assign(value=values).dropna(subset=["value"])
+    no_x = int(runs[x_col].isna().sum())  # an axis that did not apply (a removed fault)
+    runs = runs[runs[x_col].notna()]
 
     fig = Figure(figsize=figsize or (7.0, 4.5), layout="constrained")
     ax = fig.subplots()
@@ -77,7 +80,8 @@ def plot_sweep(dataset, channel: str, statistic: str = "mean", axis: str | None 
     ax.grid(True, alpha=0.3)
     window = "" if t0 is None and t1 is None else \
         f", t in [{_show(t0, 'start')}, {_show(t1, 'end')}] s"
-    note = f"; {skipped} run(s) without samples left out" if skipped else ""
+    note = (f"; {skipped} run(s) without samples left out" if skipped else "") + (
+        f"; {no_x} run(s) without a value of {x_col[len('axis.'):]} left out" if no_x else "")
     fig.suptitle(f"{root.name}: {len(runs)} runs{window}{note}", fontsize="medium")
     return fig
 

@@ -16,7 +16,7 @@ from pydantic import BeforeValidator, Discriminator, Field, Tag, model_validator
 
 from ..errors import InputError
 from ..units import QuantityError, parse_quantity
-from .line import Id, Strict, pair
+from .line import Id, Strict, dancer_reading_dimension, pair
 from .quantities import Frequency, NumberOrText, Time, number_or_text
 
 
@@ -348,8 +348,7 @@ def reading_dimension(line, sensor) -> str | None:
         return None
     if sensor.type != "dancer_position":
         return READING[sensor.type]
-    el = next((e for e in line.elements if e.id == sensor.element), None)
-    return "angle" if el is not None and el.type == "pivot_dancer" else "length"
+    return dancer_reading_dimension(line, sensor)
 
 
 def bounds(value, dimension) -> tuple[float, float]:

@@ -15,6 +15,7 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, WithJsonSchema, model_validator
 
 from ..limits import MAX_LINE_ITEMS
+from ..units import QuantityError, parse_quantity
 from .materials import MATERIALS
 from .quantities import (
     Acceleration,
@@ -29,6 +30,7 @@ from .quantities import (
     InverseArea,
     Length,
     Mass,
+    NumberOrText,
     Pressure,
     Speed,
     Stiffness,
@@ -537,10 +539,12 @@ class DancerPosition(_Sensor):
     ``element`` is the dancer's id or the festoon span's id."""
 
     type: Literal["dancer_position"] = Field(description="selects a dancer-position sensor")
-    noise: Annotated[float, Field(ge=0)] = Field(
-        0.0, description="noise std of the position reading [m, or rad for a pivoted dancer's "
-        "angle]")
-    offset: float = Field(0.0, description="calibration offset b [m or rad]")
+    noise: NumberOrText = Field(
+        0.0, description="noise std of the position reading (≥ 0): a length, or an angle for "
+        "a pivoted dancer's arm; a number in m (rad) or a string with units")
+    offset: NumberOrText = Field(
+        0.0, description="calibration offset b: a length, or an angle for a pivoted dancer's "
+        "arm; a number in m (rad) or a string with units")
 
 
 class RelaxedPitchLaw(Strict):
@@ -772,12 +776,37 @@ class Line(Strict):
         for i, span in enumerate(self.spans):
             if span.id is None:
                 span.id = f"span{i + 1}"
+        _dancer_readings_in_si(self)
         return self
 
     # convenience look-ups (not used in the solver path)
     def element(self, element_id: str):
         """Return the element with this id."""
         return next(e for e in self.elements if e.id == element_id)
+
+
+def dancer_reading_dimension(line: Line, sensor) -> str:
+    """Dimension of a dancer_position sensor's reading: the arm angle of a pivoted dancer,
+    else the travel of a dancer or festoon carriage."""
+    el = next((e for e in line.elements if e.id == sensor.element), None)
+    return "angle" if el is not None and el.type == "pivot_dancer" else "length"
+
+
+def _dancer_readings_in_si(line: Line) -> None:
+    """A dancer_position sensor's noise and offset in SI, in the unit its dancer fixes (a
+    length or an angle: known only once the line is)."""
+    for j, s in enumerate(line.sensors):
+        if s.type != "dancer_position":
+            continue
+        dim = dancer_reading_dimension(line, s)
+        for key in ("noise", "offset"):
+            try:
+                value = parse_quantity(getattr(s, key), dim)
+            except QuantityError as exc:
+                raise ValueError(f"@sensors[{j}].{key}@ {exc}") from None
+            if key == "noise" and value < 0:
+                raise ValueError(f"@sensors[{j}].noise@ must be >= 0, got {value:g}")
+            setattr(s, key, value)
 
 
 def check_line(line: Line) -> list[tuple[str, str]]:
@@ -874,6 +903,10 @@ def _check_sensors(line: Line, ix: _LineIndex) -> list[tuple[str, str]]:
                         f"a roll_diameter sensor needs an unwind or rewind, '{e.id}' is {e.type}"))
         if s.type in ("encoder", "load_cell") and not hasattr(e, "friction"):
             out.append((f"sensors[{j}].element", f"'{e.id}' cannot carry a {s.type}"))
+        elif s.type == "load_cell" and sum(load_cell_weights(line, by_id[s.element][0],
+                                                             s)) <= 1e-9:
+            out.append((f"sensors[{j}].axis_angle",
+                        f"load cell '{s.id}': its measuring axis sees no tension"))
     return out
 
 
@@ -1192,12 +1225,77 @@ def _check_geometry(line: Line) -> list[tuple[str, str]]:
             elif not lo <= e.arm_angle <= hi:
                 out.append((f"{p}.arm_angle", f"{e.arm_angle:g} rad is outside the angle range "
                                               f"{[lo, hi]}"))
+        placed = True
         for j in (i - 1, i + 1):
             n = els[j]
             if n.position is None or n.wrap is None:
+                placed = False
                 out.append((f"elements[{j}].position",
                             f"'{n.id}' is next to dancer '{e.id}': give its position and wrap"))
+        problem = dancer_overlap(line, i) if placed and not out else None
+        if problem:
+            out.append((p, problem))
     return out
+
+
+def wrap_sign(e) -> float:
+    """+1 where the web travels counter-clockwise around the roller (it lies on the left)."""
+    return 1.0 if e.wrap == "ccw" else -1.0
+
+
+def roller_radius(e) -> float:
+    """Outer radius of a roller, or of a roll (full for an unwind, as declared)."""
+    return e.roll.outer_radius if e.type in ("unwind", "rewind") else e.radius
+
+
+def dancer_offsets(line: Line, k: int) -> tuple[float, float]:
+    """Signed offsets of the tangent lines of the dancer at element k from the lines
+    between roller centres: upstream (neighbour k-1 to the dancer) and downstream."""
+    e, a, b = line.elements[k], line.elements[k - 1], line.elements[k + 1]
+    sd = wrap_sign(e)
+    return (sd * e.radius - wrap_sign(a) * roller_radius(a),
+            wrap_sign(b) * roller_radius(b) - sd * e.radius)
+
+
+def dancer_centre(e, q: float) -> tuple[float, float]:
+    """Roller centre of dancer ``e`` at travel q [m] (a linear dancer) or arm angle q [rad]
+    (a pivot dancer)."""
+    if e.type == "dancer":
+        nx, ny = e.direction
+        nrm = math.hypot(nx, ny)
+        nx, ny = nx / nrm, ny / nrm  # (as the compiled record holds them)
+        return e.position[0] + q * nx, e.position[1] + q * ny
+    return (e.pivot[0] + e.arm_length * math.cos(q),
+            e.pivot[1] + e.arm_length * math.sin(q))
+
+
+def dancer_overlap(line: Line, k: int) -> str | None:
+    """Whether the dancer at element k, at either end of its range or where it starts,
+    comes so close to a neighbour that the web has no tangent between them."""
+    e = line.elements[k]
+    lo, hi = e.travel_range if e.type == "dancer" else e.angle_range
+    q0 = e.initial_travel if e.type == "dancer" else e.arm_angle
+    du, dd = dancer_offsets(line, k)
+    for q in (lo, hi, q0):
+        cx, cy = dancer_centre(e, q)
+        for side, (x, y), delta in (("upstream", line.elements[k - 1].position, du),
+                                    ("downstream", line.elements[k + 1].position, dd)):
+            dist = math.hypot(cx - x, cy - y)
+            if dist <= abs(delta) + 1e-9:
+                return (f"at position {q:g} the dancer roller overlaps its {side} neighbour "
+                        f"(centre distance {dist:.4g} m): check positions and ranges")
+    return None
+
+
+def load_cell_weights(line: Line, k: int, sensor) -> tuple[float, float]:
+    """(c_in, c_out): the components along a load cell's measuring axis of the tensions of
+    the spans entering and leaving element k (physics.md §1.3); a line end has one span."""
+    e = line.elements[k]
+    beta = sensor.wrap_angle or e.wrap_angle or math.pi
+    half = 0.5 * (math.pi - beta)
+    cin = math.cos(half - sensor.axis_angle) if k > 0 else 0.0
+    cout = math.cos(half + sensor.axis_angle) if k < len(line.elements) - 1 else 0.0
+    return cin, cout
 
 
 def _missing(what: str, name: str, known) -> str:

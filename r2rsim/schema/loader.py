@@ -542,9 +542,13 @@ def check_scenario_against_line(scenario: Scenario, line: Line, file: str) -> No
     movers = _mover_ids(line)
     for i, ev in enumerate(scenario.events):
         if ev.type == "splice":
-            if ev.element is None and len(splicers) != 1:
+            if not splicers:
+                raise InputError("no unwind of the line has a splicer: give the unwind a "
+                                 "'splicer:' (docs/keys.md) to splice onto a new roll",
+                                 file=file, path=f"events[{i}]")
+            if ev.element is None and len(splicers) > 1:
                 raise InputError(f"name the unwind to splice (unwinds with a splicer: "
-                                 f"{', '.join(splicers) or 'none'})", file=file,
+                                 f"{', '.join(splicers)})", file=file,
                                  path=f"events[{i}].element")
             if ev.element is not None and ev.element not in splicers:
                 raise InputError(f"no unwind with a splicer named '{ev.element}' (known: "

@@ -53,7 +53,7 @@ def run_one(spec, work: str) -> dict:
                                             spec.line_file)
         scenario.seed = spec.seed
         plan = RunPlan(scenario, line, spec.name, spec.source, spec.config_sha256, {},
-                       {"sweep": spec.columns["sweep"]}, spec.line_config, spec.line_file)
+                       {"sweep": spec.columns["sweep"]}, spec.line_config)
         # labels are derived once, not read back again per run (~20 ms of a 60 ms run);
         # `r2rsim validate` checks the finished dataset in full
         s = execute(plan, Path(work) / spec.run_id, run_id=spec.run_id,

@@ -402,8 +402,8 @@ class _Checker:
             from ..run import sample_columns
 
             try:
-                self.columns_of[structure] = sample_columns(
-                    scenario, line, file=self.files["scenario"], line_file=self.files["line"])
+                self.columns_of[structure] = sample_columns(scenario, line,
+                                                            file=self.files["scenario"])
             except R2RError as exc:
                 self.fail(k, [f"{self.file}: {_shown(self.sweep, combo.values)}: {exc}"])
                 return False
