@@ -301,6 +301,10 @@ def roll_wound_in_strain(P, b, R):
 
 
 # --------------------------------------------------------------------------- the kernel
+# One long function on purpose, read section by section (0. to 13.): split into one njit
+# function per section (measured 2026-11-25, pet_film_line_dancer, 33 states) it evaluated
+# the right-hand side 2x slower; with inline="always" the Jacobian and the outputs were
+# 15-20 % slower and the first compile took 40 % longer.
 @njit(cache=True)
 def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
     """Evaluate the line's ODE right-hand side into ``yd`` (and the Jacobian into ``JJ``).
