@@ -328,3 +328,54 @@ def test_nan_statistic_never_alarms_at_a_low_theta(train):
     assert ev.theta == -100.0
     assert ev.predictions["alarm_cal"].tolist() == [False, True, True, True,
                                                     False, True, True, True]
+
+
+def test_infinite_and_huge_statistics_keep_their_order(train):
+    # +inf is the most anomalous value: every faulty sample above every healthy one gives
+    # ROC-AUC = AP = 1 (it ranked lowest, with NaN, before); a NaN still ranks lowest, also
+    # when the statistics are beyond 2**53, where (smallest finite - 1) equals the smallest
+    h = healthy(1, [0.2] * 20)
+    f = make_run([0.2] * 10 + [np.inf] * 5 + [5.0] * 5, onset=10, seed=2)
+    ev = evaluate(Passthrough(level=0.5), train, [h, f], n_boot=0)
+    assert value(ev, "roc_auc") == 1.0 and value(ev, "pr_auc") == 1.0
+    assert value(ev, "dr") == 1.0  # +inf alarms at the plug-in's threshold too
+    big = 1e16
+    h = healthy(1, [big] * 20)
+    f = make_run([big] * 10 + [np.nan] * 5 + [3 * big] * 5, onset=10, seed=2)
+    ev = evaluate(Passthrough(level=2 * big), train, [h, f], n_boot=0)
+    # 5 NaN positives below all 30 negatives, 5 positives above them: AUC = 5/10
+    assert value(ev, "roc_auc") == pytest.approx(0.5)
+    f1 = make_run([1.0] * 10 + [np.nan] * 5 + [3.0] * 5, onset=10, seed=2)
+    ev1 = evaluate(Passthrough(level=2.0), train, [healthy(1, [1.0] * 20), f1], n_boot=0)
+    assert value(ev1, "roc_auc") == value(ev, "roc_auc")  # the same at any scale
+
+
+def test_infinite_validation_statistics_count_as_exceedances(train):
+    # theta keeps the validation FAR at or below alpha: +inf samples exceed any theta, so they
+    # are exceedances in the pool (they were dropped, and alarmed at theta anyway)
+    pool = np.r_[np.arange(95.0), [np.inf] * 5]
+    val = [healthy(5, pool)]
+    test = [healthy(7, [0.0] * 10), make_run([0.0] * 5 + [99.0] * 5, onset=5, seed=8)]
+    ev = evaluate(Passthrough(), train, test, val, alpha=0.05, n_boot=0)
+    # 5 of 100 may exceed: the 5 infinite ones, so theta is the largest finite value
+    assert ev.theta == 94.0 and np.mean(pool > ev.theta) == 0.05
+
+
+def test_a_fault_that_never_acted_leaves_the_run_fault_free(train):
+    # a web break ended the run before its fault's onset: its labels are all normal, and
+    # the split, the strata and the metrics all treat it as fault-free (it was named after
+    # the fault and refused for training, while the metrics counted it as fault-free)
+    broken = make_run([0.0, 9.0] + [0.0] * 8, onset=5, seed=2)
+    faults = broken.faults.assign(onset_t_s=[50.0])  # after its last sample (4.5 s)
+    samples = broken.samples.assign(**{"label.is_faulty": False,
+                                       "label.primary_type": "normal"})
+    never = Run(broken.run_id, samples, faults, broken.info, broken.path)
+    from r2rsim.evaluate.harness import acting_faults, fault_key
+
+    assert acting_faults(never).empty and fault_key(never) == "none"
+    ev = evaluate(Passthrough(), train, [healthy(1), never], n_boot=0)
+    assert "sensor.offset:s1" not in set(ev.metrics.fault), set(ev.metrics.fault)
+    assert value(ev, "far_ff", fault="none") == pytest.approx(1 / 20)
+    # and it may train: its data is healthy
+    evaluate(Passthrough(), [*train, never], [healthy(3), make_run([0] * 5 + [9] * 5, onset=5,
+                                                                   seed=4)], n_boot=0)

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy.stats import rankdata
 from sklearn.base import clone
 
 from ..dataset.paths import SWEEP_MARKER
@@ -149,8 +150,18 @@ class Split:
                 f"{len(self.test)} test ({nf} faulty)")
 
 
+def acting_faults(run: Run) -> pd.DataFrame:
+    """The run's faults that act in it: a fault whose onset comes after the run's last sample
+    (a web break ended the run first) never acted, and the run is as fault-free as its
+    labels say, for the split, the strata and the metrics alike."""
+    faults = run.faults
+    if "onset_t_s" not in faults.columns or run.samples.empty:  # (a hand-made Run)
+        return faults
+    return faults[faults["onset_t_s"].to_numpy(float) <= run.samples["t_s"].iloc[-1]]
+
+
 def _is_faulty(run: Run) -> bool:
-    return len(run.faults) > 0 or bool(run.samples["label.is_faulty"].any())
+    return len(acting_faults(run)) > 0 or bool(run.samples["label.is_faulty"].any())
 
 
 def _rule(train: float, val: float, test: float) -> SplitBySeed:
@@ -264,13 +275,15 @@ def read_datasets(paths: Sequence[str | Path], verify: bool = True,
 def fault_key(run: Run) -> str:
     """The run's fault as ``type:target`` (several joined by ``+``; ``none`` when healthy):
     the fault stratum of the results table."""
-    keys = sorted({f"{t}:{g}" for t, g in zip(run.faults["fault_type"], run.faults["target_id"],
+    faults = acting_faults(run)
+    keys = sorted({f"{t}:{g}" for t, g in zip(faults["fault_type"], faults["target_id"],
                                                strict=True)})
     return "+".join(keys) if keys else NONE
 
 
 def _magnitude(run: Run) -> float:
-    return float(run.faults["magnitude"].iloc[0]) if len(run.faults) == 1 else math.nan
+    faults = acting_faults(run)
+    return float(faults["magnitude"].iloc[0]) if len(faults) == 1 else math.nan
 
 
 def run_data(run: Run, statistic: np.ndarray, alarm: np.ndarray,
@@ -763,8 +776,8 @@ class _Scored:
         cal = [self.outputs(r) for r in val]
         pool = np.concatenate([s[r.samples["label.score_mask"].to_numpy(bool)]
                                for r, (s, *_) in zip(val, cal, strict=True)])
-        pool = pool[np.isfinite(pool)]
-        if pool.size == 0:
+        pool = pool[~np.isnan(pool)]  # +inf alarms at any theta: it counts as an exceedance
+        if not np.isfinite(pool).any():
             raise InputError(f"{self.name}: no finite statistic on the validation runs")
         return calibrate_threshold(pool, alpha)
 
@@ -800,16 +813,23 @@ class _Scored:
         return stat, alarm, diag, ranking
 
 
+def ranking_scores(statistics: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """The statistics of several runs as their ranks over all of them (ties share a rank), the
+    score ROC-AUC, AP and VUS-PR read: they depend only on the order, and a rank keeps it
+    where a value cannot (+inf ranks highest; a NaN, which the plug-in could not compute,
+    ranks lowest, with -inf; statistics beyond 2**53 stay apart from the lowest)."""
+    pooled = np.concatenate([np.where(np.isnan(s), -np.inf, s) for s in statistics])
+    ranks = rankdata(pooled, method="average")
+    return np.split(ranks, np.cumsum([len(s) for s in statistics])[:-1])
+
+
 def _run_data(test: list[Run], scored: list[tuple], theta: float | None, mode_strata: bool,
               window: str) -> tuple[list[RunData], list[RunData] | None]:
     """The test runs' RunData at the plug-in's own threshold, and (with ``theta``) the same
     runs with the alarms at theta."""
-    # a statistic the plug-in could not compute (nan) never alarms and ranks lowest
-    finite = np.concatenate([s[np.isfinite(s)] for s, *_ in scored])
-    floor = (finite.min() if finite.size else 0.0) - 1.0
-    rd = [run_data(r, np.where(np.isfinite(s), s, floor), a, d, ranking=rk,
-                   modes=mode_strata, steady=window == "steady")
-          for r, (s, a, d, rk) in zip(test, scored, strict=True)]
+    ranks = ranking_scores([s for s, *_ in scored])
+    rd = [run_data(r, rank, a, d, ranking=rk, modes=mode_strata, steady=window == "steady")
+          for r, rank, (s, a, d, rk) in zip(test, ranks, scored, strict=True)]
     # the same runs at theta: only the alarm differs (a nan statistic never exceeds theta)
     rd_cal = ([replace(x, alarm=o[0] > theta) for x, o in zip(rd, scored, strict=True)]
               if theta is not None else None)

@@ -733,7 +733,7 @@ def calibrate_threshold(scores: ArrayLike, alpha: float) -> float:
     ----------
     scores : array_like of float
         Scores of the scored samples of the validation fault-free runs
-        (:func:`fault_free_scores`).
+        (:func:`fault_free_scores`); not NaN (+inf is an exceedance).
     alpha : float
         Target false-alarm rate, 0 <= alpha < 1 (defaults in §5.2: 0.01 and 0.001).
 
@@ -745,8 +745,8 @@ def calibrate_threshold(scores: ArrayLike, alpha: float) -> float:
     s = np.sort(np.asarray(scores, dtype=float).ravel())
     if s.size == 0:
         raise ValueError("no calibration scores")
-    if not np.all(np.isfinite(s)):
-        raise ValueError("calibration scores must be finite")
+    if np.isnan(s).any():  # +inf is an exceedance at any theta (and theta inf: no alarm)
+        raise ValueError("calibration scores must not be NaN")
     if not 0.0 <= alpha < 1.0:
         raise ValueError(f"alpha must be in [0, 1), got {alpha!r}")
     n = s.size
