@@ -303,10 +303,24 @@ def test_fault_normalised_relation_sees_a_fault_the_unit_norm_one_misses():
     ({"model_features": [1, 2]}, "model_features must be a glob pattern or a list of them"),
     ({"partition_features": 3}, "partition_features must be a glob pattern"),
     ({"fault_channels": [None]}, "fault_channels must be a glob pattern"),
+    # accepted before, contradicting the method: a widening neighbourhood, a share above 1
+    # (the map never grew), truthiness deciding a switch ("no" turned derivatives on)
+    ({"sigma0": 1.0, "sigma_final": 5.0}, r"sigma_final \(5.0\) must not exceed sigma0"),
+    ({"zeta_threshold": 5.0}, r"zeta_threshold is a share of the loss, in \(0, 1\)"),
+    ({"derivatives": "no"}, "derivatives must be true or false, got 'no'"),
+    # more relations than the model features leave: a bare ValueError inside the fit
+    ({"n_relations": 10}, "n_relations = 10, but the 2 model features leave 2 dimension"),
 ])
 def test_parameters_are_validated(params, match):
     with pytest.raises(InputError, match=match):
         GSMMS(**{**PARAMS, **params}).fit([run_frame(0, 1)])
+
+
+def test_scoring_data_without_the_fitted_columns_is_an_input_error():
+    # another line's data: a KeyError of pandas before
+    est = GSMMS(**PARAMS).fit([run_frame(0, 1)])
+    with pytest.raises(InputError, match=r"gsmms: the data has no column meas.b \(fitted"):
+        est.score(run_frame(0, 2).drop(columns=["meas.b"]))
 
 
 def test_global_model_checks_its_seed():

@@ -114,6 +114,7 @@ def test_models_fit_and_predict(run):
     ({"line": True}, "line must be the path"),
     ({"line": "/dev/zero"}, "line file /dev/zero is not a regular file"),
     ({"line": str(REPO)}, "is not a regular file"),
+    ({"line": str(LINE), "random_state": -1}, "random_state must be null or an integer"),
     # every reading censored: no Tobit maximum (statsmodels warned, the fit went on)
     ({"line": str(LINE), "censor_at": 1e6}, "censor_at=1e\\+06 N censors every stage-2 "
                                              "load-cell reading of the training runs"),
@@ -121,6 +122,15 @@ def test_models_fit_and_predict(run):
 def test_plugin_parameters_are_checked(run, params, match):
     with pytest.raises(InputError, match=match):
         HybridSoV(**params).fit([run])
+
+
+def test_a_dead_sensor_in_training_is_refused(run):
+    # it was filled with zeros, and the model then alarmed on every healthy sample
+    frame = run.visible(drive_data=True)
+    col = next(c for c in frame.columns if c.startswith("meas.") and "pitch" in c)
+    with pytest.raises(InputError, match=f"hybrid-sov: training run 1 has no finite sample "
+                                         f"of {col}"):
+        HybridSoV(line=str(LINE)).fit([frame.assign(**{col: np.nan})])
 
 
 def test_torques_need_drive_data(run):

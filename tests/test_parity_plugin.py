@@ -152,12 +152,25 @@ def test_parameters_and_channels_are_checked(dataset):
                     ({"web_EA_N": 1e308}, r"web_EA_N must be from 0.1 to 2.7e\+10 N"),
                     ({"web_EA_N": 1e-300}, r"web_EA_N must be from 0.1 to 2.7e\+10 N"),
                     ({"span_length_m": 1e-300}, "span_length_m must be from 0.001 to 100 m"),
-                    ({"drive_radius_m": 1e300}, "drive_radius_m must be from 0.001 to 10 m")):
+                    ({"drive_radius_m": 1e300}, "drive_radius_m must be from 0.001 to 10 m"),
+                    # truthiness decided; a number as a column name crashed with TypeError
+                    ({"causal": "yes"}, "causal must be true or false, got 'yes'"),
+                    ({"sensor_a": 5}, "sensor_a must be a column name"),
+                    ({"line": "/nonexistent.yaml"},
+                     "parity: line: /nonexistent.yaml: file not found")):
         with pytest.raises(InputError, match=msg):
             ParitySpaceDetector(**kw).fit([run])
     frame = run.visible().drop(columns=["meas.u_drive.speed_rad_s"])
     with pytest.raises(InputError, match="meas.u_drive.speed_rad_s"):
         ParitySpaceDetector().fit([frame])
+    # a run shorter than the window, a dead sensor: messages that name the plug-in and what
+    short = run.visible().iloc[:50]
+    with pytest.raises(InputError, match=r"parity: 50 samples are fewer than the Savitzky-"
+                                         r"Golay window \(301\) \(savgol_window_s = 3.0 s\)"):
+        ParitySpaceDetector().fit([short])
+    dead = run.visible().assign(**{"meas.sensor_A.tension_N": np.nan})
+    with pytest.raises(InputError, match="parity: meas.sensor_A.tension_N has no finite sample"):
+        ParitySpaceDetector().fit([dead])
 
 
 def test_line_file_parameters():

@@ -161,6 +161,15 @@ class GSMMS(Diagnostic):
         if not 0 <= self._number("lambda2") < math.inf:
             raise InputError(f"{self.name}: lambda2 must be a finite number >= 0, "
                              f"got {self.lambda2!r}")
+        if self.sigma_final > self.sigma0:  # the neighbourhood only narrows (eq. 4.9)
+            raise InputError(f"{self.name}: sigma_final ({self.sigma_final!r}) must not exceed "
+                             f"sigma0 ({self.sigma0!r}): the neighbourhood width decays")
+        if not self._number("zeta_threshold") < 1:
+            raise InputError(f"{self.name}: zeta_threshold is a share of the loss, in (0, 1), "
+                             f"got {self.zeta_threshold!r} (1 or more never grows the map)")
+        if not isinstance(self.derivatives, bool):
+            raise InputError(f"{self.name}: derivatives must be true or false, got "
+                             f"{self.derivatives!r}")
         if not 0 <= self._number("smooth_s") < math.inf:
             raise InputError(f"{self.name}: smooth_s must be a finite number >= 0 s, "
                              f"got {self.smooth_s!r}")
@@ -192,6 +201,20 @@ class GSMMS(Diagnostic):
             batch_size=int(self.batch_size), step=self.step, eta0=float(self.eta0),
             n_epochs=float(self.n_epochs), lambda1=float(self.lambda1),
             lambda2=float(self.lambda2))
+
+    def _check_relations(self, Z: np.ndarray, constraint) -> None:
+        """n_relations fits in the space the model features leave (their number, less the
+        rank of the physics constraint)."""
+        q = Z.shape[1]
+        if callable(constraint):  # the physics gradient, per node: its shape is the same
+            constraint = constraint(np.ones(len(Z)))
+        free = q - (np.linalg.matrix_rank(np.asarray(constraint, float).reshape(q, -1))
+                    if constraint is not None else 0)
+        if self.n_relations > free:
+            raise InputError(f"{self.name}: n_relations = {self.n_relations}, but the {q} "
+                             f"model features{' (with derivatives)' if self.derivatives else ''}"
+                             f" leave {free} dimension(s) for relations; lower n_relations or "
+                             f"match more model_features")
 
     def _match(self, frame: pd.DataFrame, patterns, what: str) -> list[str]:
         patterns = [patterns] if isinstance(patterns, str) else list(patterns)
@@ -345,6 +368,7 @@ class GSMMS(Diagnostic):
         self._physics_model(frames)
         S, Z, P = self._pooled(frames)
         settings.constraint = self._constraint(P)
+        self._check_relations(Z, settings.constraint)
         self._rng = np.random.default_rng(self.random_state)
         self.history_: list[GrowthRecord] = []
         graph = initial_map(S, settings.initial_nodes, self._rng)
@@ -409,6 +433,11 @@ class GSMMS(Diagnostic):
         ``z.k`` = (P − μ_node)/σ_node."""
         self._check_fitted()
         f = _frame(run)
+        missing = [c for c in (*self.partition_columns_, *self.model_columns_)
+                   if c not in f.columns]
+        if missing:  # another line's data, or a run without a channel the fit used
+            raise InputError(f"{self.name}: the data has no column {', '.join(missing[:3])}"
+                             f"{' ...' if len(missing) > 3 else ''} (fitted on it)")
         S, Z = self._standardised(f)
         ok = np.all(np.isfinite(S), axis=1) & np.all(np.isfinite(Z), axis=1)
         k = self.node_mean_.shape[1]

@@ -104,6 +104,7 @@ class HybridSoV(Diagnostic):
         if not abs(self._number("censor_at")) <= 1e6:
             raise InputError(f"hybrid-sov: censor_at must be a finite number of newtons "
                              f"within ±1e6 N, got {self.censor_at!r}")
+        self._check_seed()  # unused by the method, but a value must be one
 
     def _signals(self, frame):
         return F.signals(frame, self.stages_, self.denoise, self.window_s, self.censor_at)
@@ -114,11 +115,24 @@ class HybridSoV(Diagnostic):
         self._check_params()
         self.stages_ = load_stages(self.line)
         self.columns_ = F.required_columns(self.stages_)
+        for i, f in enumerate(frames, start=1):  # a dead sensor would train on zeros
+            dead = [c for c in self.columns_
+                    if c in f.columns and not np.isfinite(f[c].to_numpy(float)).any()]
+            if dead:
+                raise InputError(f"hybrid-sov: training run {i} has no finite sample of "
+                                 f"{', '.join(dead)} (a dead sensor cannot train the model)")
         sigs = [self._signals(f) for f in frames]
         self._check_censoring(sigs)
         kind = "tobit" if self.selection == "LR" else "ols"
-        self.model_ = HybridModel(self.stages_, kind, self.alpha_enter, self.censor_at).fit(
-            sigs)
+        try:
+            self.model_ = HybridModel(self.stages_, kind, self.alpha_enter,
+                                      self.censor_at).fit(sigs)
+        except InputError as exc:  # the regressions' own words, with the plug-in's name
+            if exc.message.startswith("hybrid-sov"):
+                raise
+            raise InputError(f"hybrid-sov: {exc.message} (the regressions are fitted on "
+                             f"samples thinned in time: give longer or more training "
+                             f"runs)") from None
         resid = np.vstack([self._residuals(s)[0] for s in sigs])
         ok = np.all(np.isfinite(resid), axis=1)
         self.resid_mean_ = resid[ok].mean(axis=0)

@@ -119,7 +119,8 @@ class ParitySpaceDetector(Diagnostic):
     schedule_step_s : float
         Re-design interval of ``mode="scheduled"`` [s].
     signature_z : float
-        |r_j|/σ_j above which relation j counts as fired in :meth:`rank_channels`.
+        Scale of the signature match of :meth:`rank_channels`: each relation's |r_j|/σ_j
+        enters capped at 3·signature_z, so one huge residual does not outvote the others.
     alpha : float
         Fraction of healthy training samples above the threshold.
 
@@ -198,6 +199,13 @@ class ParitySpaceDetector(Diagnostic):
         if self.line is not None and not isinstance(self.line, (str, Path)):
             raise InputError(f"parity: line must be the path of a line file, "
                              f"got {self.line!r}")
+        for key in ("sensor_a", "sensor_b", "drive_speed", "downstream_speed",
+                    "upstream_tension"):
+            if not isinstance(getattr(self, key), str):
+                raise InputError(f"parity: {key} must be a column name (a string), "
+                                 f"got {getattr(self, key)!r}")
+        if not isinstance(self.causal, bool):
+            raise InputError(f"parity: causal must be true or false, got {self.causal!r}")
         for key in ("web_EA_N", "span_length_m", "drive_radius_m", "downstream_radius_m",
                     "savgol_window_s", "schedule_step_s", "signature_z"):
             if not (np.isfinite(v := self._number(key)) and v > 0):
@@ -229,14 +237,25 @@ class ParitySpaceDetector(Diagnostic):
             raise InputError(f"parity: the data has no column matching {', '.join(missing)} "
                              f"(set sensor_a, sensor_b, drive_speed, downstream_speed, "
                              f"upstream_tension)")
+        self._check_alive(frame[self.channels].to_numpy(float))
         return list(self.channels)
+
+    def _check_alive(self, X: np.ndarray) -> None:
+        """Every channel (a column of X) has a finite sample: the relations need them all."""
+        dead = [c for j, c in enumerate(self.channels) if not np.isfinite(X[:, j]).any()]
+        if dead:
+            raise InputError(f"parity: {', '.join(dead)} has no finite sample in this run (a "
+                             f"dead sensor: the relations need every channel)")
 
     def _physical(self) -> dict:
         p = {"web_EA_N": self.web_EA_N, "span_length_m": self.span_length_m,
              "relaxed_pitch_m": self.relaxed_pitch_m, "drive_radius_m": self.drive_radius_m,
              "downstream_radius_m": self.downstream_radius_m}
         if self.line is not None:
-            p.update(registration_parameters(self.line))
+            try:
+                p.update(registration_parameters(self.line))
+            except InputError as exc:
+                raise InputError(f"parity: line: {exc.format()}") from None
             if self.relaxed_pitch_m is None:
                 p["relaxed_pitch_m"] = None
         return p
@@ -277,8 +296,13 @@ class ParitySpaceDetector(Diagnostic):
         t = frame["t_s"].to_numpy(float) if "t_s" in frame else np.arange(len(frame)) * 0.01
         dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.01
         X = frame[self.channels].to_numpy(float)
+        self._check_alive(X)
         w = savgol_window_samples(self.savgol_window_s, dt, self.savgol_order)
-        D, delay = savgol_derivatives(X, dt, w, self.savgol_order, 1, self.causal)
+        try:
+            D, delay = savgol_derivatives(X, dt, w, self.savgol_order, 1, self.causal)
+        except InputError as exc:  # a run shorter than the window
+            raise InputError(f"parity: {exc.message} (savgol_window_s = "
+                             f"{self.savgol_window_s!r} s)") from None
         (yA, yB, wd, wo, tu), (dA, dB, dwd, dwo, dtu) = D[0].T, D[1].T
         bad = ~np.all(np.isfinite(X), axis=1) | ~np.isfinite(yA)
         return {"t": t, "Y": np.vstack([yA, dA, yB, dB]), "u": np.vstack([wd, wo, tu]),
