@@ -149,24 +149,36 @@ def _cmd_sweep(args) -> int:
     from .sweep import run_sweep
 
     bar = None
-    progress = None
-    if sys.stderr.isatty() and not args.quiet:
-        from tqdm import tqdm
+    started = False  # the sweep began to write (its first progress call)
 
-        def progress(n, total, rec):
-            nonlocal bar
-            if bar is None:
-                bar = tqdm(total=total, unit="run", desc="sweep", leave=False)
-            if rec is not None:
-                bar.update(1)
+    def progress(n, total, rec):
+        nonlocal bar, started
+        started = True
+        if not (sys.stderr.isatty() and not args.quiet):
+            return
+        if bar is None:
+            from tqdm import tqdm
+
+            bar = tqdm(total=total, unit="run", desc="sweep", leave=False)
+        if rec is not None:
+            bar.update(1)
     try:
         with _sigterm_as_interrupt():
             summary = run_sweep(args.sweep, output=args.output, workers=args.workers,
                                 scheduler=args.scheduler, retry_failed=args.retry_failed,
                                 overwrite=args.overwrite, progress=progress)
+    except OSError as exc:  # the disk is full, a directory read-only: the runs are kept
+        if args.debug:
+            raise
+        where = f" ({exc.filename})" if exc.filename else ""
+        print(f"error: cannot write the sweep's files: {exc.strerror or exc}{where}. The "
+              f"finished runs are kept: free space or fix the permissions, and run the same "
+              f"command again to continue", file=sys.stderr)
+        return EXIT_FAILURE
     except KeyboardInterrupt as exc:
         what = "terminated (SIGTERM)" if isinstance(exc, Terminated) else "interrupted"
-        print(f"{what}; the finished runs are kept: run the same command again to continue",
+        print(f"{what}; the finished runs are kept: run the same command again to continue"
+              if started else f"{what} before any run started; nothing was written",
               file=sys.stderr)
         return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
     finally:

@@ -5,6 +5,7 @@ dataset without r2rsim."""
 
 from __future__ import annotations
 
+import concurrent.futures
 import hashlib
 import json
 import os
@@ -845,7 +846,7 @@ def test_finished_sweep_is_left_alone_reopened_for_new_seeds_and_guarded(tmp_pat
     # the base scenario changed: its runs would not be those in the dataset
     base.write_text(base.read_text().replace("warmup: 2 s", "warmup: 1 s"))
     refused(match=f"6 run(s) in '{out}' were made from another base scenario, line, sweep "
-                  f"set: or r2rsim version")
+                  f"file `set:` or r2rsim version")
     # --overwrite starts it again
     code, stdout, _ = cli(capsys, sw, "-o", out, "--workers", "0", "--overwrite")
     assert code == 0 and "6 done" in stdout
@@ -1100,3 +1101,136 @@ def test_a_pool_worker_skips_the_collector_at_exit():
                        timeout=120)
     assert p.returncode == 0, p.stderr
     assert p.stdout.strip() == "frozen at exit: True"
+
+
+def test_a_run_that_kills_its_worker_fails_alone(tmp_path):
+    # the OOM killer takes a worker: its pool breaks and every run in flight is lost. Each
+    # then runs alone, so only the run that kills its worker is charged and recorded failed
+    # (the runs beside it were recorded failed too, and one such run stopped the sweep with
+    # advice about `if __name__ == "__main__"`)
+    from _sweep_tasks import Spec, die_on_oom
+
+    from r2rsim.sweep._execute import MAX_ATTEMPTS, run_processes
+
+    specs = [Spec(f"ok{i}") for i in range(3)] + [Spec("oom")] + [Spec(f"ok{i}")
+                                                                    for i in range(3, 6)]
+    got: dict = {}
+    run_processes(specs, str(tmp_path), lambda spec, rec: got.setdefault(spec.run_id, rec),
+                  2, task=die_on_oom)
+    assert set(got) == {s.run_id for s in specs}
+    assert all(got[f"ok{i}"]["status"] == "done" for i in range(6))
+    assert got["oom"]["status"] == "failed" and not got["oom"]["has_data"]
+    assert f"died {MAX_ATTEMPTS} times" in got["oom"]["reason"]
+
+
+class _FakeFuture:
+    def __init__(self, key, outcome):
+        self.key, self.outcome = key, outcome
+
+    def result(self):
+        if isinstance(self.outcome, BaseException):
+            raise self.outcome
+        return self.outcome
+
+    def release(self):
+        pass
+
+
+class _FakeClient:
+    """A Dask client whose runs end as ``outcomes`` says (None: never), with a status."""
+
+    def __init__(self, outcomes, status="running"):
+        self.outcomes, self.status = outcomes, status
+
+    def submit(self, fn, spec, work, key, pure):
+        return _FakeFuture(key, self.outcomes[spec.run_id])
+
+
+def _fake_as_completed():
+    class AsCompleted:
+        def __init__(self):
+            self.ready = []
+
+        def add(self, f):
+            if f.outcome is not None:
+                self.ready.append(f)
+
+        def has_ready(self):
+            return bool(self.ready)
+
+        def next_batch(self, block=True):
+            out, self.ready = self.ready, []
+            return out
+    return AsCompleted
+
+
+@pytest.mark.parametrize("outcome, status", [
+    (None, "closed"),  # the client gave up reconnecting: the loop waited for ever
+    # the runs in flight were recorded as failed
+    (concurrent.futures.CancelledError("scheduler-connection-lost"), "running"),
+])
+def test_a_lost_dask_scheduler_stops_the_sweep(outcome, status):
+    from _sweep_tasks import Spec
+
+    from r2rsim.errors import R2RError
+    from r2rsim.sweep._execute import _dask_loop
+
+    got = {}
+    client = _FakeClient({"a": {"run_id": "a", "status": "done"}, "b": outcome}, status)
+    with pytest.raises(R2RError, match="the Dask scheduler went away; the finished runs are "
+                                       "kept"):
+        _dask_loop(client, _fake_as_completed(), [Spec("a"), Spec("b")], "w",
+                   lambda spec, rec: got.setdefault(spec.run_id, rec), 2)
+    assert set(got) == {"a"}  # b is not recorded as failed: it runs again next time
+
+
+def test_a_run_lost_with_its_dask_worker_is_recorded_failed():
+    from _sweep_tasks import Spec
+
+    from r2rsim.sweep._execute import _dask_loop
+
+    got = {}
+    client = _FakeClient({"a": {"run_id": "a", "status": "done"},
+                          "b": RuntimeError("KilledWorker: b")})
+    _dask_loop(client, _fake_as_completed(), [Spec("a"), Spec("b")], "w",
+               lambda spec, rec: got.setdefault(spec.run_id, rec), 2)
+    assert got["a"]["status"] == "done" and got["b"]["status"] == "failed"
+    assert got["b"]["reason"] == "RuntimeError: KilledWorker: b"
+
+
+def test_a_sweep_finished_by_another_while_this_one_starts_is_left_finished(qs, tmp_path):
+    # sweep B inspects an unfinished sweep, then A finishes it (its marker goes) before B
+    # takes the lock: B used to re-create the marker and fail on A's removed runs, leaving a
+    # finished dataset marked unfinished. B now stops and writes nothing.
+    from r2rsim.sweep._store import MARKER, SweepStore
+
+    sw, _ = qs
+    out = tmp_path / "out"
+    out.mkdir()
+    plan = plan_sweep(sw)
+    (out / MARKER).write_text(json.dumps({"sweep": plan.sweep.name}), encoding="utf-8")
+    store = SweepStore(out, plan, False)
+    store.inspect()
+    assert store.mode == "resume"
+    (out / MARKER).unlink()  # A finished in between
+    with pytest.raises(InputError, match="another r2rsim sweep finished writing .* while "
+                                         "this one was starting; run the command again"):
+        store.begin()
+    assert not (out / MARKER).exists() and not (out / ".work").exists()
+
+
+@pytest.mark.parametrize("raised, code, words", [
+    (OSError(28, "No space left on device", "out/.work/x.parquet"), 1,
+     "error: cannot write the sweep's files: No space left on device (out/.work/x.parquet). "
+     "The finished runs are kept"),
+    (KeyboardInterrupt(), 130, "interrupted before any run started; nothing was written"),
+])
+def test_sweep_exits_that_say_what_was_kept(qs, monkeypatch, capsys, raised, code, words):
+    import r2rsim.sweep
+
+    def fail(*args, **kwargs):
+        raise raised
+
+    monkeypatch.setattr(r2rsim.sweep, "run_sweep", fail)
+    assert main(["sweep", str(qs[0]), "-q"]) == code
+    assert words in capsys.readouterr().err

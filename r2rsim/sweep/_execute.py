@@ -129,59 +129,88 @@ def _died(spec, attempts: dict) -> dict | None:
                       f"out of memory?)", "simulated_s": 0.0, "solver_s": 0.0, "wall_s": 0.0}
 
 
-def run_processes(specs, work: str, on_result, workers: int) -> None:
-    """The runs on ``workers`` local processes (spawned, one BLAS thread each)."""
+def _pool(workers: int):
     import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures import ProcessPoolExecutor
+
+    with _one_thread_each():
+        return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=_worker_init, initargs=(os.getpid(),))
+
+
+def _workers_start() -> bool:
+    """Whether a worker process starts and answers at all (a script without the
+    ``__main__`` guard makes every one die as it starts)."""
     from concurrent.futures.process import BrokenProcessPool
 
+    pool = _pool(1)
+    try:
+        pool.submit(os.getpid).result()
+        return True
+    except BrokenProcessPool:
+        return False
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def run_processes(specs, work: str, on_result, workers: int, task=None) -> None:
+    """The runs on ``workers`` local processes (spawned, one BLAS thread each).
+
+    When a worker dies (killed, out of memory), the pool breaks and every run in flight is
+    lost, with no telling whose worker died. Those runs are then suspects: each runs again
+    alone, so a death is charged to the run that caused it (``MAX_ATTEMPTS`` deaths and it
+    is recorded as failed), never to the runs beside it. ``task`` stands in for
+    :func:`run_one` (tests).
+    """
+    from concurrent.futures import FIRST_COMPLETED, wait
+    from concurrent.futures.process import BrokenProcessPool
+
+    task = task or run_one
     queue = list(reversed(specs))
+    suspects: list = []  # in flight when a pool broke: each runs alone next
     attempts: dict[str, int] = {}
-    barren = 0  # pools in a row that broke before finishing any run
-    while queue:
-        with _one_thread_each():
-            pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                                       initializer=_worker_init, initargs=(os.getpid(),))
-        pending = {}
+    while queue or suspects:
+        alone = bool(suspects)
+        pool = _pool(1 if alone else workers)
+        pending = {pool.submit(task, suspects[-1], work): suspects.pop()} if alone else {}
+        lost = []  # runs whose pool broke under them
         try:
-            broken, finished = False, 0
-            while (queue or pending) and not broken:
-                while queue and len(pending) < 2 * workers:
+            while pending or (queue and not alone):
+                while not alone and queue and len(pending) < 2 * workers:
                     spec = queue.pop()
-                    pending[pool.submit(run_one, spec, work)] = spec
+                    pending[pool.submit(task, spec, work)] = spec
                 done, _ = wait(pending, return_when=FIRST_COMPLETED)
                 for f in done:
                     spec = pending.pop(f)
                     try:
                         rec = f.result()
-                        finished += 1
                     except BrokenProcessPool:
-                        broken = True
-                        rec = _died(spec, attempts)
-                        if rec is None:
-                            queue.append(spec)
-                            continue
+                        lost.append(spec)
+                        continue
                     on_result(spec, rec)
-            barren = barren + 1 if broken and not finished else 0
-            if barren >= 2:  # not a killed worker: the workers cannot start or run at all
-                raise R2RError(
-                    "the worker processes died twice before finishing any run. From a Python "
-                    "script, call run_sweep() under `if __name__ == \"__main__\":` (each "
-                    "worker process imports the script); --workers 0 runs the sweep in this "
-                    "process. The finished runs are kept")
-            if broken:  # run again what was still in the pool
-                for spec in pending.values():
-                    rec = _died(spec, attempts)
-                    if rec is None:
-                        queue.append(spec)
-                    else:
-                        on_result(spec, rec)
-                pending = {}
+                if lost:
+                    lost += pending.values()
+                    break
         except BaseException:
             _stop(pool)
             raise
         finally:
             pool.shutdown(wait=True, cancel_futures=True)
+        if not alone:
+            suspects.extend(reversed(lost))  # which of them died is not known: no charge
+            continue
+        if lost and not _workers_start():
+            raise R2RError(
+                "the worker processes die as they start. From a Python script, call "
+                "run_sweep() under `if __name__ == \"__main__\":` (each worker process "
+                "imports the script); --workers 0 runs the sweep in this process. The "
+                "finished runs are kept")
+        for spec in lost:  # alone: its own worker died
+            rec = _died(spec, attempts)
+            if rec is None:
+                suspects.append(spec)
+            else:
+                on_result(spec, rec)
 
 
 def _stop(pool) -> None:
@@ -278,10 +307,28 @@ def _restore_environ(saved: dict) -> None:
             os.environ[k] = v
 
 
+#: seconds between checks that the Dask client still has its scheduler
+DASK_POLL_S = 0.05
+
+
+def _scheduler_lost(exc: BaseException) -> bool:
+    """An exception of a run's future that says the scheduler went away, not the run."""
+    import asyncio
+    import concurrent.futures
+
+    return isinstance(exc, (asyncio.CancelledError, concurrent.futures.CancelledError)) \
+        or type(exc).__name__ in ("CommClosedError", "FutureCancelledError")
+
+
 def _dask_loop(client, as_completed, specs, work, on_result, window: int) -> None:
+    """At most ``window`` runs on the cluster at a time, their results as they come. A lost
+    scheduler stops the sweep (it waited for ever; the runs in flight were recorded as
+    failed), and the finished runs are kept."""
     queue = list(reversed(specs))
     pending = {}
     ac = as_completed()
+    lost = R2RError("the Dask scheduler went away; the finished runs are kept: run the same "
+                    "command again to continue")
 
     def submit():
         while queue and len(pending) < window:
@@ -291,14 +338,22 @@ def _dask_loop(client, as_completed, specs, work, on_result, window: int) -> Non
             ac.add(f)
 
     submit()
-    for f in ac:
-        spec = pending.pop(f.key)
-        try:
-            rec = f.result()
-        except Exception as exc:  # noqa: BLE001 - KilledWorker and the like: recorded
-            rec = {"run_id": spec.run_id, "status": "failed", "has_data": False,
-                   "reason": f"{type(exc).__name__}: {exc}", "simulated_s": 0.0,
-                   "solver_s": 0.0, "wall_s": 0.0}
-        f.release()
-        on_result(spec, rec)
+    while pending:
+        if not ac.has_ready():
+            if client.status in ("closing", "closed"):  # it gave up reconnecting
+                raise lost
+            time.sleep(DASK_POLL_S)
+            continue
+        for f in ac.next_batch(block=False):
+            spec = pending.pop(f.key)
+            try:
+                rec = f.result()
+            except Exception as exc:  # noqa: BLE001 - KilledWorker and the like: recorded
+                if _scheduler_lost(exc):
+                    raise lost from None
+                rec = {"run_id": spec.run_id, "status": "failed", "has_data": False,
+                       "reason": f"{type(exc).__name__}: {exc}", "simulated_s": 0.0,
+                       "solver_s": 0.0, "wall_s": 0.0}
+            f.release()
+            on_result(spec, rec)
         submit()

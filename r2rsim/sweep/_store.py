@@ -213,7 +213,7 @@ class SweepStore:
                              + (" (or --overwrite)" if self.mode == "reopen" else ""))
         if changed:
             raise InputError(f"{len(changed)} run(s) in '{self.out}' were made from another "
-                             f"base scenario, line, sweep set: or r2rsim version (e.g. "
+                             f"base scenario, line, sweep file `set:` or r2rsim version (e.g. "
                              f"{changed[0]}); "
                              f"continuing would mix them: write to another directory with -o"
                              + (" (or --overwrite)" if self.mode == "reopen" else ""))
@@ -290,7 +290,8 @@ class SweepStore:
         if self.mode == "replace":
             remove_dataset(self.out)
         self.out.mkdir(parents=True, exist_ok=True)
-        if not self.marker.exists():
+        created = not self.marker.exists()
+        if created:
             tmp = self.out / f"{MARKER}.tmp-{os.getpid()}"
             tmp.write_text(json.dumps({"sweep": self.plan.sweep.name,
                                        "r2rsim_version": __version__,
@@ -308,6 +309,14 @@ class SweepStore:
             self._lock = None
             raise InputError(f"another r2rsim sweep is writing '{self.out}'; wait for it, or "
                              f"choose another directory with -o") from None
+        if created and self.mode == "resume":
+            # the unfinished sweep inspected a moment ago was finished (or removed) by
+            # another sweep before this one could lock it: what was read of it is stale
+            self._lock.close()
+            self._lock = None
+            self.marker.unlink(missing_ok=True)
+            raise InputError(f"another r2rsim sweep finished writing '{self.out}' while this "
+                             f"one was starting; run the command again")
         self.work.mkdir(exist_ok=True)
         clean_stale(self.work)
         final_tmp = self.work / ".final"
