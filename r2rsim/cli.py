@@ -173,7 +173,8 @@ def _cmd_sweep(args) -> int:
         where = f" ({exc.filename})" if exc.filename else ""
         print(f"error: cannot write the sweep's files: {exc.strerror or exc}{where}. The "
               f"finished runs are kept: free space or fix the permissions, and run the same "
-              f"command again to continue", file=sys.stderr)
+              f"command again to continue" if started
+              else f"error: {exc.strerror or exc}{where}; nothing was written", file=sys.stderr)
         return EXIT_FAILURE
     except KeyboardInterrupt as exc:
         what = "terminated (SIGTERM)" if isinstance(exc, Terminated) else "interrupted"

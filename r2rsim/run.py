@@ -228,10 +228,10 @@ def plan_from_file(scenario_path: str | Path, seed: int | None = None,
 
 
 def check_plan(plan: RunPlan) -> list[str]:
-    """Everything a run checks before it simulates, without simulating: the variability,
-    disturbances and faults drawn at the plan's seed, the compiled line (a dancer roller
-    that overlaps a neighbour, a load cell that sees no tension...) and the initial state.
-    ``r2rsim validate`` calls it, so that it refuses what ``r2rsim run`` would.
+    """Everything a run checks before it simulates, without simulating: the programme (a
+    ramp still running at the next step), the variability, disturbances and faults drawn
+    at the plan's seed, the compiled line and the initial state. ``r2rsim validate`` calls
+    it, so that it refuses what ``r2rsim run`` would.
 
     Returns
     -------
