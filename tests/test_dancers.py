@@ -277,3 +277,40 @@ def test_v13_linear_form_material_balance_with_a_moving_dancer(tmp_path):
     # the term the fix restored: without (1 - eps) the balance drifts by -sum(int eps dL)
     drift = sum(np.sum(0.5 * (eps[s][1:] + eps[s][:-1]) * np.diff(L[s])) for s in cl.span_ids)
     assert abs(drift) > 1e3 * 1e-9 * scale
+
+
+@pytest.mark.parametrize("file, old, new, noise, offset", [
+    # a translating dancer reads a length, a pivoted one an angle: units as its dancer fixes
+    ("pet_film_line_dancer.yaml", "noise: 0.0002,", "noise: 0.2 mm, offset: -3 mm,",
+     2e-4, -3e-3),
+    ("battery_foil_line.yaml", "noise: 0.0005,", "noise: 0.5 deg, offset: 1 deg,",
+     math.radians(0.5), math.radians(1.0)),
+])
+def test_dancer_position_readings_take_their_dancers_unit(tmp_path, file, old, new, noise,
+                                                         offset):
+    from conftest import REPO
+
+    text = (REPO / "lines" / file).read_text(encoding="utf-8")
+    assert old in text
+    line = r2rsim.load_line(write(tmp_path / file, text.replace(old, new, 1)))
+    s = next(s for s in line.sensors if s.type == "dancer_position")
+    assert s.noise == pytest.approx(noise, rel=1e-12)
+    assert s.offset == pytest.approx(offset, rel=1e-12)
+
+
+@pytest.mark.parametrize("value, words", [
+    ("1 deg", "expected a length"),       # an angle on a translating dancer
+    ("-1 mm", "must be >= 0, got -0.001"),
+    (".nan", "not a finite number"),
+    ("true", "got true (a boolean)"),
+])
+def test_dancer_position_noise_of_the_wrong_kind_is_refused(tmp_path, value, words):
+    from r2rsim.errors import InputError
+
+    from conftest import REPO
+
+    text = (REPO / "lines" / "pet_film_line_dancer.yaml").read_text(encoding="utf-8")
+    bad = write(tmp_path / "l.yaml", text.replace("noise: 0.0002,", f"noise: {value},", 1))
+    with pytest.raises(InputError) as info:
+        r2rsim.load_line(bad)
+    assert info.value.path == "sensors[4].noise" and words in info.value.message
