@@ -1089,6 +1089,34 @@ def test_reopened_sweep_renumbers_its_combinations_and_drops_stale_copies(tmp_pa
     assert validate_dataset(out) == []
 
 
+def test_a_renamed_axis_is_applied_with_nothing_new_to_run(tmp_path, capsys):
+    """Renaming an axis of a finished sweep runs nothing but renames its column and replaces
+    the copy of the sweep file (it was left as it was, and the summary said exit 0)."""
+    sw = sweep_file(tmp_path, f"""\
+        set: {{duration: 1 s}}
+        axes:
+          - {{name: v, path: {SPEED}, values: [1 m/s, 3 m/s]}}
+        """)
+    out = tmp_path / "out"
+    assert cli(capsys, sw, "-o", out, "--workers", "0")[0] == 0
+    before = snapshot(out)
+    sw.write_text(sw.read_text().replace("name: v,", "name: speed,"))
+    code, stdout, _ = cli(capsys, sw, "-o", out, "--workers", "0")
+    assert code == 0 and "0 done, 0 failed, 2 skipped" in stdout
+    assert "nothing to run; the changed sweep file applied" in stdout
+    runs = runs_table(out)
+    assert runs["axis.speed"] == [1.0, 3.0] and "axis.v" not in runs
+    assert "name: speed," in (out / "sweep" / "sweep.yaml").read_text()
+    after = snapshot(out)
+    samples = [k for k in before if k.endswith("part-0.parquet")]
+    assert len(samples) == 2 and all(after[k] == before[k] for k in samples)
+    assert validate_dataset(out) == []
+    # and once applied, running it again writes nothing
+    code, stdout, _ = cli(capsys, sw, "-o", out, "--workers", "0")
+    assert code == 0 and "executor     none (nothing to run)\n" in stdout
+    assert snapshot(out) == after
+
+
 def test_a_pool_worker_skips_the_collector_at_exit():
     """Each worker freezes the collector at exit (its shutdown otherwise took ~0.3 s of
     passes over numba's objects, which the sweep waited for); its runs are committed by then

@@ -143,7 +143,7 @@ def run_sweep(sweep_path: str | Path, output: str | Path | None = None, *,
     summary.skipped = len(outcomes)
     summary.skipped_failed = sum(o.status == "failed" for o in outcomes.values())
     summary.failures = [(k, o.reason) for k, o in outcomes.items() if o.status == "failed"]
-    if not todo and store.mode == "reopen":  # finished, nothing new: nothing is written
+    if not todo and store.mode == "reopen" and store.up_to_date():  # nothing is written
         summary.complete = True
         summary.executor = "none (nothing to run)"
         summary.wall_s = time.perf_counter() - t0
@@ -168,7 +168,8 @@ def run_sweep(sweep_path: str | Path, output: str | Path | None = None, *,
                 progress(summary.done + summary.failed, len(todo), rec)
 
         if not todo:
-            summary.executor = "none (nothing to run)"
+            summary.executor = "none (nothing to run" + (
+                "; the changed sweep file applied)" if store.mode == "reopen" else ")")
         elif scheduler is not None:
             _execute.run_dask(todo, work, on_result, scheduler, min(workers, len(todo)))
         elif workers == 0:

@@ -284,6 +284,26 @@ class SweepStore:
             reason = failed_reason(row)
             found[name] = Outcome("failed" if reason else "done", "work", reason)
 
+    def up_to_date(self) -> bool:
+        """Whether a finished sweep being reopened already holds what this sweep file would
+        write besides its runs: the same copies of the sweep and scenario files and the same
+        axes (a renamed axis renames a column of runs.parquet)."""
+        if self.final is None:
+            return False
+        stored = {rel for rel in self.final.get("files", {})
+                  if rel.startswith(("sweep/", "scenario/"))}
+        if stored != set(self.plan.files):
+            return False
+        for rel, text in self.plan.files.items():
+            try:
+                if (self.out / rel).read_text(encoding="utf-8") != text:
+                    return False
+            except (OSError, UnicodeDecodeError):
+                return False
+        sweep = self.final.get("sweep") or {}
+        return (sweep.get("axes") == self.plan.axes
+                and sweep.get("file") == f"sweep/{self.plan.file.name}")
+
     # ------------------------------------------------------------------ writing
     def begin(self) -> None:
         """Create the directory and the marker, and take the lock."""
