@@ -1065,10 +1065,8 @@ def test_readers_without_r2rsim(qs, capsys):
     capsys.readouterr()
 
 
-def test_reopened_sweep_renumbers_its_combinations_and_drops_stale_copies(tmp_path, capsys):
-    """A value added to an axis keeps the old runs (same ids and data) but numbers the
-    combinations anew: the old rows get the plan's numbers, not their old ones; and the
-    copy of a renamed sweep file does not stay behind."""
+def finished_speed_sweep(tmp_path: Path, capsys) -> tuple[Path, Path]:
+    """A finished serial sweep of two 1 s runs on axis ``v`` (1 and 3 m/s): (file, output)."""
     sw = sweep_file(tmp_path, f"""\
         set: {{duration: 1 s}}
         axes:
@@ -1076,6 +1074,14 @@ def test_reopened_sweep_renumbers_its_combinations_and_drops_stale_copies(tmp_pa
         """)
     out = tmp_path / "out"
     assert cli(capsys, sw, "-o", out, "--workers", "0")[0] == 0
+    return sw, out
+
+
+def test_reopened_sweep_renumbers_its_combinations_and_drops_stale_copies(tmp_path, capsys):
+    """A value added to an axis keeps the old runs (same ids and data) but numbers the
+    combinations anew: the old rows get the plan's numbers, not their old ones; and the
+    copy of a renamed sweep file does not stay behind."""
+    sw, out = finished_speed_sweep(tmp_path, capsys)
     old_ids = runs_table(out)["run_id"]
     renamed = tmp_path / "sweep2.yaml"
     renamed.write_text(sw.read_text().replace("[1 m/s, 3 m/s]", "[1 m/s, 2 m/s, 3 m/s]"))
@@ -1091,14 +1097,8 @@ def test_reopened_sweep_renumbers_its_combinations_and_drops_stale_copies(tmp_pa
 
 def test_a_renamed_axis_is_applied_with_nothing_new_to_run(tmp_path, capsys):
     """Renaming an axis of a finished sweep runs nothing but renames its column and replaces
-    the copy of the sweep file (it was left as it was, and the summary said exit 0)."""
-    sw = sweep_file(tmp_path, f"""\
-        set: {{duration: 1 s}}
-        axes:
-          - {{name: v, path: {SPEED}, values: [1 m/s, 3 m/s]}}
-        """)
-    out = tmp_path / "out"
-    assert cli(capsys, sw, "-o", out, "--workers", "0")[0] == 0
+    the copy of the sweep file (before, the dataset was left as it was, under exit 0)."""
+    sw, out = finished_speed_sweep(tmp_path, capsys)
     before = snapshot(out)
     sw.write_text(sw.read_text().replace("name: v,", "name: speed,"))
     code, stdout, _ = cli(capsys, sw, "-o", out, "--workers", "0")
