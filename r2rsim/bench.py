@@ -30,6 +30,7 @@ from .dataset.read import Run, read_runs
 from .diagnostics.registry import call, check_param, get, unknown_parameter
 from .errors import InputError
 from .evaluate.harness import METRICS, Evaluation, evaluate
+from .evaluate.metrics import DETECTION_WINDOW_S
 from .evaluate.results import write_results as _write_results
 from .limits import MAX_BOOTSTRAP, MAX_SEED, MAX_VUS_BUFFER_S
 from .schema.line import Id, Strict
@@ -92,6 +93,12 @@ class EvaluationSettings(Strict):
     alpha: Annotated[float, Field(gt=0, lt=1)] = 0.01
     persistence: Annotated[int, Field(ge=1)] = 1
     grace: Annotated[Time, Field(ge=0)] = 0.0
+    detection_window: Annotated[Time, Field(gt=0)] | None = Field(
+        DETECTION_WINDOW_S, description="W: a fault counts as detected only within W of "
+        "being fully developed; null: up to its end")
+    own_threshold: Literal["val", "fit"] = Field(
+        "val", description="the plug-ins' own thresholds: recalibrated on the val runs at "
+        "alpha, or as their fit set them")
     n_boot: Annotated[int, Field(ge=0, le=MAX_BOOTSTRAP)] = 200
     seed: Annotated[int, Field(ge=0, le=MAX_SEED)] = Field(0, description="seed of the "
                                                           "bootstrap")
@@ -406,7 +413,10 @@ def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
                               n_boot=ev_set.n_boot, seed=ev_set.seed, split=study.name,
                               drive_data=ev_set.drive_data, mode_strata=ev_set.mode_strata,
                               window=ev_set.window, isolation=ev_set.isolation,
-                              vus_buffer=ev_set.vus_buffer)
+                              vus_buffer=ev_set.vus_buffer,
+                              detection_window=(math.inf if ev_set.detection_window is None
+                                                else ev_set.detection_window),
+                              own_threshold=ev_set.own_threshold)
                 evaluations[(study.name, m.key)] = ev
                 log(ev.format())
                 frames.append(ev.metrics.assign(study=study.name, label=m.key))

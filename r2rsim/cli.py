@@ -259,7 +259,8 @@ def _cmd_diagnose(args) -> int:
     params = _parse_params(args.param, cls)
     # every flag, and the output directory, is checked before a dataset is read
     check_settings(alpha=args.alpha, m=args.persistence, h=args.grace, n_boot=args.n_boot,
-                   window=args.window, vus_buffer=args.vus_buffer, seed=args.seed)
+                   window=args.window, vus_buffer=args.vus_buffer, seed=args.seed,
+                   detection_window=args.detection_window, own_threshold=args.own_threshold)
     output = args.output or Path("results") / args.method
     check_results_output(output, "diagnose", args.overwrite)
     est = call(cls, "__init__", cls, **params)
@@ -292,7 +293,8 @@ def _cmd_diagnose(args) -> int:
                   m=args.persistence, h=args.grace, n_boot=args.n_boot, seed=args.seed,
                   split=split.name, drive_data=args.drive_data,
                   mode_strata=args.mode_strata, window=args.window, isolation=args.isolation,
-                  vus_buffer=args.vus_buffer)
+                  vus_buffer=args.vus_buffer, detection_window=args.detection_window,
+                  own_threshold=args.own_threshold)
     out = ev.write(output, overwrite=args.overwrite)
     print(ev.format())
     print(f"written: {out}/predictions.parquet, metrics.parquet, metrics.csv, datasets.json")
@@ -700,6 +702,14 @@ def _add_diagnose_parser(sub) -> None:
     d.add_argument("-m", "--persistence", type=int, default=1,
                    help="consecutive alarms that confirm a detection")
     d.add_argument("--grace", type=float, default=0.0, help="grace period after a fault [s]")
+    # the default is r2rsim.evaluate.metrics.DETECTION_WINDOW_S, written out so that the
+    # parser does not import the evaluation stage (tests/test_detection_window.py checks it)
+    d.add_argument("--detection-window", type=float, default=20.0, metavar="SECONDS",
+                   help="W: a fault counts as detected only within W of being fully "
+                   "developed (default 20 s; inf: up to its end)")
+    d.add_argument("--own-threshold", choices=("val", "fit"), default="val",
+                   help="the plug-in's own threshold: recalibrated on the val runs at "
+                   "--alpha (default) or as its fit set it")
     d.add_argument("--mode-strata", action="store_true",
                    help="also report per-regime strata from label.mode (mode:<name>)")
     d.add_argument("--window", choices=("fault", "steady"), default="fault",

@@ -66,8 +66,10 @@ def test_bench_passes_against_its_baseline(bench, capsys):
 
 def test_bench_fails_when_a_metric_regresses(bench, capsys):
     d, _ = bench
-    # a residual threshold at alpha = 0.2 raises many more false alarms than the baseline's
-    spec = write_spec(d, params=", params: {alpha: 0.2}", name="worse.yaml")
+    # a residual threshold at alpha = 0.2, kept as its fit set it (not recalibrated on the val
+    # run at the evaluation's alpha), raises many more false alarms than the baseline's
+    spec = write_spec(d, params=", params: {alpha: 0.2}", name="worse.yaml",
+                      **{"persistence: 2}": "persistence: 2, own_threshold: fit}"})
     code, out, err = run(spec, d, capsys)
     assert code == 1
     assert "REGRESSION: reg/residual OC1 sensor.offset:sensor_A far_ff: baseline" in err

@@ -55,12 +55,12 @@ def test_the_builtin_data_is_two_healthy_runs_and_a_faulty_one(runs):
 
 def test_a_correct_plugin_passes_every_check(runs):
     done = check_plugin(Zscore, *runs)
-    assert len(done) == 7 and done[0].startswith("__init__ stores its parameters"), done
+    assert len(done) == 9 and done[0].startswith("__init__ stores its parameters"), done
 
 
 def test_a_registered_name_with_the_builtin_data():
     # no data given: check_plugin simulates example_runs itself
-    assert len(check_plugin("residual")) == 7
+    assert len(check_plugin("residual")) == 9
 
 
 class Broken(Zscore):
@@ -153,7 +153,27 @@ class NoColumnsAccepted(Broken):
         return super().fit(runs)
 
 
+class ReadsTheFuture(Broken):
+    """A centred moving average: the statistic at t reads samples after t."""
+
+    def score(self, run):
+        scores = super().score(run)
+        return scores.assign(statistic=scores["statistic"].rolling(9, center=True,
+                                                                   min_periods=1).mean())
+
+
+class OfflineReadsTheFuture(ReadsTheFuture):
+    causal = False
+
+
+class IgnoresItsThreshold(Broken):
+    def decide(self, scores):
+        return scores["statistic"] > 0.5
+
+
 @pytest.mark.parametrize("cls, rule", [
+    (ReadsTheFuture, "it declares itself causal"),
+    (IgnoresItsThreshold, "calibrate must move the threshold its decide uses"),
     (ChangesItsParameter, "__init__ must store each parameter"),
     (FittedAtInit, "__init__ set fitted attributes ['ready_']"),
     (ScoresUnfitted, "score before fit returned"),
@@ -184,3 +204,22 @@ def test_data_without_the_required_channels_is_an_input_error(runs):
         check_plugin(NeedsDriveData, *runs)
     with pytest.raises(InputError, match="neither a registered plug-in name"):
         check_plugin(int, *runs)
+
+
+def test_an_offline_plugin_is_not_held_to_causality(runs):
+    done = check_plugin(OfflineReadsTheFuture, *runs)
+    assert "declares itself offline (causal False): not checked for causality" in done
+    assert len(done) == 9
+
+
+def test_the_default_calibrate_holds_alpha_exactly(runs):
+    train, test = runs
+    est = Zscore().fit(train)
+    frames = [r.visible() for r in train]
+    masks = [r.samples["label.score_mask"].to_numpy(bool) for r in train]
+    est.calibrate(frames, 0.05, masks)
+    stat = np.concatenate([est.score(f)["statistic"].to_numpy()[m]
+                           for f, m in zip(frames, masks, strict=True)])
+    # the (1 - alpha) quantile in inverted-CDF form: floor(0.05 n) samples exceed it
+    assert (stat > est.threshold_).sum() == int(np.floor(0.05 * stat.size))
+    assert est.threshold_ == np.sort(stat)[stat.size - 1 - int(np.floor(0.05 * stat.size))]

@@ -17,6 +17,7 @@ from r2rsim.evaluate import metrics as M
 from r2rsim.evaluate.harness import (
     _FROM_COUNTS,
     _counts,
+    _Rule,
     evaluate,
     run_data,
     split_by_condition,
@@ -114,14 +115,13 @@ def test_count_decomposition_equals_the_metric_functions(train):
             for i in range(6)] + [healthy(10 + i, rng.normal(size=40) * 3) for i in range(3)]
     rd = [run_data(r, r.samples["meas.x"].to_numpy(), r.samples["meas.x"].to_numpy() > 4)
           for r in runs]
-    counts = pd.DataFrame([_counts(r, 2, 0.5) for r in rd])
+    counts = pd.DataFrame([_counts(r, _Rule(2, 0.5, 7.0)) for r in rd])
     cols = {k: counts[k].to_numpy(float) for k in counts.columns}
     fr = M.far(rd)
-    dd = M.detection_delay(rd, 2, 0.5)
+    dd = M.detection_delay(rd, 2, 0.5, 7.0)
     expect = {"far_ff": fr.far_ff, "far_pre": fr.far_pre, "dr": M.detection_rate(rd),
               "fa_per_h": M.false_alarm_events(rd).per_hour,
-              "pd": M.detection_probability(rd, 2, 0.5),
-              "pd_lenient": M.detection_probability(rd, 2, 0.5, lenient=True),
+              "pd": M.detection_probability(rd, 2, 0.5, 7.0),
               "dd_median_s": dd.median, "dd_p90_s": dd.p90,
               "dd_censored_mean_s": dd.censored_mean}
     for name, want in expect.items():
@@ -133,7 +133,8 @@ def test_calibrated_threshold_and_cal_metrics(train):
     val = [healthy(50, np.arange(100.0))]
     test = [healthy(1, [0, 0, 97.5, 98.5, 0, 0, 0, 0]),
             make_run([0, 0, 0, 0, 99, 99, 0, 0], onset=4, seed=2)]
-    ev = evaluate(Passthrough(level=1000.0), train, test, val, alpha=0.01, n_boot=0)
+    ev = evaluate(Passthrough(level=1000.0), train, test, val, alpha=0.01, n_boot=0,
+                  own_threshold="fit")
     assert ev.theta == 98.0
     assert value(ev, "theta", "all", "all") == 98.0
     # the plug-in's own level (1000) never alarms; at theta one healthy sample in 8 does
@@ -309,7 +310,7 @@ def test_mdm90_is_a_magnitude_at_both_operating_points(train):
     test = [make_run([0] * 4 + [9] * 6, onset=4, seed=3, magnitude=-2.0),
             make_run([0] * 4 + [3] * 6, onset=4, seed=4, magnitude=1.0), healthy(1)]
     ev = evaluate(Passthrough(), train, test, [healthy(60, [0.0] * 10 + [2.0])], alpha=0.1,
-                  n_boot=0)
+                  n_boot=0, own_threshold="fit")
     assert ev.theta == 0.0
     assert value(ev, "mdm90") == 2.0 and value(ev, "mdm90_cal") == 1.0
 

@@ -143,7 +143,7 @@ def test_warmup_alarms_change_no_metric():
     #   fault-free run: alarms at 3 and 8 -> FAR_ff 2/7, 2 events (3 and 8, both starting at
     #   scored samples; with the raw alarm the first event would start in warm-up at 0)
     #   faulty run: tau=5, pre-onset scored samples 3,4 with alarm at 4 -> FAR_pre 1/2;
-    #   alarm event 4..5 starts before tau -> strict miss
+    #   alarm event 4..5 starts before tau and is on at tau -> detected at tau (delay 0)
     for runs in (noisy, clean):
         r = far(runs)
         assert r.far_ff == pytest.approx(2 / 7)
@@ -155,8 +155,8 @@ def test_warmup_alarms_change_no_metric():
         assert fa.n_events == 3
         assert fa.hours == pytest.approx(10 / 3600)
         assert detection_rate(runs) == pytest.approx(1 / 4)  # window 5..8: alarm at 5 only
-        assert detection_probability(runs) == 0.0
-        assert detection_probability(runs, lenient=True) == 1.0
+        assert detection_probability(runs) == 1.0
+        assert detection_delay(runs).median == 0.0
 
 
 def test_warmup_excluded_from_detection_rate():
@@ -182,22 +182,27 @@ def test_detection_rate_pooled_over_fault_windows():
 # ----------------------------------------------------------------------------- M4
 
 
-def test_alarm_on_at_onset_strict_vs_lenient():
+def test_an_alarm_on_at_the_onset_detects_with_delay_zero():
     # fault 4..7 (tau=4, eps=7)
-    # run 1: alarm 2..5 is already on at tau and no new event starts in [4, 7]
+    # run 1: the event 2..5 began before tau and is on at tau: detected at tau, delay 0
+    # (its samples 2 and 3 stay false alarms before the onset)
     on_at_onset = mk("0011110000", "0000111100")
-    strict = detect_run(on_at_onset)
-    assert not strict.detected and strict.k_star is None and math.isnan(strict.delay)
-    lenient = detect_run(on_at_onset, lenient=True)
-    assert lenient.detected and lenient.k_star == 4 and lenient.delay == 0.0
-    # run 2: the early event 2..4 ends, a new one starts at 7 inside the window
-    new_event = mk("0011100110", "0000111100")
+    d = detect_run(on_at_onset)
+    assert d.detected and d.k_star == 4 and d.delay == 0.0
+    assert far([on_at_onset]).alarms_pre == 2
+    # run 2: the early event 1..2 ended before tau; a new one starts at 7 inside the window
+    new_event = mk("0110000110", "0000111100")
     assert detect_run(new_event).k_star == 7
     assert detect_run(new_event).delay == pytest.approx(3.0)           # t7 - t4
-    assert detect_run(new_event, lenient=True).delay == 0.0
-    runs = [on_at_onset, new_event]
-    assert detection_probability(runs) == pytest.approx(1 / 2)
-    assert detection_probability(runs, lenient=True) == pytest.approx(2 / 2)
+    # run 3: nothing in the window
+    missed = mk("0110000001", "0000111100")
+    assert not detect_run(missed).detected and detect_run(missed).k_star is None
+    assert math.isnan(detect_run(missed).delay)
+    runs = [on_at_onset, new_event, missed]
+    assert detection_probability(runs) == pytest.approx(2 / 3)
+    # persistence counts the event from its start: 2..5 is four samples long
+    assert detect_run(on_at_onset, m=4).k_star == 4
+    assert not detect_run(on_at_onset, m=5).detected
 
 
 def test_persistence_m3_changes_detection():

@@ -93,7 +93,7 @@ def test_plugin_conformance(name, request):
     _, params, data = _setup(name, request)
     done = check_plugin(name, [data["h1"], data["h2"]], data["f"], params=params,
                         drive_data=name in USES_DRIVE_DATA)
-    assert len(done) == 7, done
+    assert len(done) == 9, done
 
 
 @pytest.mark.parametrize("name", ["residual", "pca"])

@@ -11,7 +11,14 @@ A plug-in is a :class:`Diagnostic` subclass:
 * ``decide(scores)`` turns them into boolean alarms (default ``statistic > threshold_``);
 * optionally ``diagnose(scores)`` names the fault type per sample (``normal`` when none);
 * ``rank_channels(scores)`` orders the measured channels most likely at fault, per sample
-  (default: ``None``, no ranking; the harness then reports no hit@1).
+  (default: ``None``, no ranking; the harness then reports no hit@1);
+* ``calibrate(runs, alpha, masks)`` moves the plug-in's own threshold so that its own alarms
+  hold a false-alarm rate ``alpha`` on held-out healthy runs (the harness calls it on the
+  validation runs; default: ``threshold_`` becomes the (1 - alpha) quantile of the statistic);
+* ``causal`` says whether the statistic at sample k uses only samples up to k (an online
+  method). A plug-in that reads later samples (a centred filter, a whole-run transform) sets
+  it False, as a class attribute or through an ``__init__`` parameter of that name; the harness
+  marks its results "offline".
 
 The harness hands a plug-in only the visible columns of each run, as a DataFrame indexed
 like the run's samples (:data:`r2rsim.dataset.read.VISIBLE`; never labels, faults or true
@@ -35,6 +42,40 @@ from ..errors import InputError
 from ..limits import MAX_SEED
 
 
+def exceedance_threshold(statistic, alpha: float, name: str = "plug-in") -> float:
+    """The threshold that at most a fraction ``alpha`` of the statistic exceeds.
+
+    The alarm rule is strict, ``statistic > threshold``. With the n finite-or-+inf values
+    sorted ascending, j = floor(alpha * n) exceedances are allowed (at most n - 1) and the
+    threshold is the (n - j)-th smallest value: the (1 - alpha) empirical quantile in its
+    inverted-CDF form. Values equal to the threshold do not alarm, so with ties the rate is at
+    or below ``alpha``. NaN values (an undefined statistic, which never alarms) are left out;
+    +inf counts as an exceedance.
+
+    Parameters
+    ----------
+    statistic : array_like of float
+    alpha : float
+        Target exceedance fraction, 0 <= alpha < 1.
+    name : str
+        Named in the error when no value is finite.
+
+    Returns
+    -------
+    float
+    """
+    s = np.asarray(statistic, dtype=float).ravel()
+    s = np.sort(s[~np.isnan(s)])
+    if not np.isfinite(s).any():
+        raise InputError(f"{name}: no finite statistic on the calibration runs")
+    if not 0.0 <= alpha < 1.0:
+        raise ValueError(f"alpha must be in [0, 1), got {alpha!r}")
+    n = s.size
+    # the small epsilon keeps e.g. 0.29 * 100 = 28.999999999999996 from losing an exceedance
+    j = min(int(np.floor(alpha * n + 1e-9)), n - 1)
+    return float(s[n - 1 - j])
+
+
 def _frame(run) -> pd.DataFrame:
     """The visible columns of a run (a :class:`r2rsim.dataset.read.Run` or a frame)."""
     return run.visible() if hasattr(run, "visible") else run
@@ -47,6 +88,9 @@ class Diagnostic(BaseEstimator):
     name: ClassVar[str] = "abstract"
     #: glob patterns of the columns the plug-in needs; each must match at least one column
     requires: ClassVar[tuple[str, ...]] = ("meas.*",)
+    #: True: the statistic at sample k depends on samples 0..k only (an online method). A
+    #: plug-in whose causality is an option has an ``__init__`` parameter ``causal`` instead.
+    causal: bool = True
 
     # ---- the contract ----------------------------------------------------------------------
     def fit(self, runs) -> Diagnostic:
@@ -61,6 +105,47 @@ class Diagnostic(BaseEstimator):
     def decide(self, scores: pd.DataFrame) -> pd.Series:
         """Boolean alarms per sample: ``statistic > threshold_``."""
         return scores["statistic"] > self.threshold_
+
+    def calibrate(self, runs, alpha: float, masks=None) -> Diagnostic:
+        """Move the plug-in's own threshold so that its alarms hold the false-alarm rate
+        ``alpha`` on held-out healthy runs.
+
+        The harness calls it after :meth:`fit` with the validation runs, so that the metrics
+        at the plug-in's own alarms (``pd``, ``far_ff``, ...) are taken at the requested
+        false-alarm rate on any line, not at a threshold tuned on other data. The default
+        sets ``threshold_`` to the (1 - alpha) empirical quantile of the statistic over the
+        samples of ``masks`` (:func:`exceedance_threshold`), which is exact for the default
+        :meth:`decide`. A plug-in whose :meth:`decide` is not ``statistic > threshold_``
+        overrides this method so that the rule holds for its own alarms;
+        :func:`r2rsim.evaluate.check_plugin` checks it.
+
+        Parameters
+        ----------
+        runs : list of runs or frames
+            Healthy runs the plug-in was not fitted on.
+        alpha : float
+            Target fraction of alarmed samples, in (0, 1).
+        masks : list of array_like of bool, optional
+            Per run, the samples that count (the harness passes ``label.score_mask``, false
+            in the warm-up); None: every sample.
+
+        Returns
+        -------
+        Diagnostic
+            ``self``.
+        """
+        self._check_fitted()
+        frames = self._frames(runs)
+        if masks is None:
+            masks = [np.ones(len(f), dtype=bool) for f in frames]
+        pool = [np.asarray(self.score(f)["statistic"], dtype=float)[np.asarray(m, dtype=bool)]
+                for f, m in zip(frames, masks, strict=True)]
+        self.threshold_ = exceedance_threshold(np.concatenate(pool), alpha, self.name)
+        return self
+
+    def is_causal(self) -> bool:
+        """Whether this instance is an online method (``causal``, as set)."""
+        return bool(getattr(self, "causal", True))
 
     def rank_channels(self, scores: pd.DataFrame) -> pd.DataFrame | None:
         """The measured channels ordered from most to least likely at fault, per sample.

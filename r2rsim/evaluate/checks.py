@@ -15,6 +15,7 @@ import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import yaml
 from sklearn.base import clone
@@ -28,6 +29,11 @@ from .harness import _Scored
 #: prefixes of the columns no plug-in may learn from (drive data is allowed only under the
 #: ``drive_data`` protocol)
 HIDDEN = ("true.", "state.", "label.")
+#: tolerance of the causality check (a statistic computed on a shorter frame may differ in
+#: the last bits, e.g. through a different summation order)
+CAUSAL_RTOL, CAUSAL_ATOL = 1e-7, 1e-9
+#: the false-alarm rates at which calibrate is checked
+CALIBRATION_ALPHAS = (0.01, 0.1)
 DRIVE = ("act.", "cmd.", "ctrl.")
 
 #: the line and scenario of :func:`example_runs`: an unwind, a load-cell idler, a pull roller
@@ -158,6 +164,8 @@ class _CheckRun:
         self.outputs_as_the_harness_checks(est)
         self.is_deterministic(scores)
         self.learns_only_visible_columns(est)
+        self.is_causal_as_declared(est, scores)
+        self.calibrates_its_own_threshold()
         self.refuses_data_without_its_columns()
         return self.done
 
@@ -248,6 +256,46 @@ class _CheckRun:
             raise _fail(self.name, f"columns_ holds columns an algorithm may not see: "
                         f"{seen[:3]}")
         self._ok("learns only visible columns")
+
+    def is_causal_as_declared(self, est, scores: pd.DataFrame) -> None:
+        """A plug-in that declares itself causal gives, on a run cut after sample k, the
+        statistic it gives on the whole run at samples 0..k."""
+        if not est.is_causal():
+            self._ok("declares itself offline (causal False): not checked for causality")
+            return
+        full = scores["statistic"].to_numpy(float)
+        n = len(self.frame)
+        for k in sorted({n // 4, n // 2, (3 * n) // 4} - {0}):
+            cut = est.score(self.frame.iloc[:k])["statistic"].to_numpy(float)
+            if cut.shape != (k,) or not np.allclose(cut, full[:k], rtol=CAUSAL_RTOL,
+                                                     atol=CAUSAL_ATOL, equal_nan=True):
+                bad = (int(np.flatnonzero(~np.isclose(cut, full[:k], rtol=CAUSAL_RTOL,
+                                                      atol=CAUSAL_ATOL,
+                                                      equal_nan=True))[0])
+                       if cut.shape == (k,) else 0)
+                raise _fail(self.name, f"it declares itself causal (its statistic at t uses "
+                            f"samples up to t only), but scoring the run cut after sample "
+                            f"{k} changes the statistic at sample {bad}: read no later "
+                            f"samples, or declare causal = False (an offline method)")
+        self._ok("causal as declared: the statistic up to t does not change when later "
+                 "samples are cut")
+
+    def calibrates_its_own_threshold(self) -> None:
+        """After ``calibrate(runs, alpha, masks)`` on healthy runs, its own alarms on those
+        runs hold the false-alarm rate alpha (the masked samples only)."""
+        est = self.cls(**copy.deepcopy(self.params)).fit(self.frames)
+        runs = [*self.frames, self.frame.iloc[: len(self.frame) // 2]]
+        masks = [np.arange(len(f)) >= len(f) // 10 for f in runs]
+        for alpha in CALIBRATION_ALPHAS:
+            if est.calibrate(runs, alpha, masks) is not est:
+                raise _fail(self.name, "calibrate must return self")
+            alarms = np.concatenate([np.asarray(est.decide(est.score(f)), dtype=bool)[m]
+                                     for f, m in zip(runs, masks, strict=True)])
+            if alarms.mean() > alpha + 1e-12:
+                raise _fail(self.name, f"after calibrate(runs, alpha={alpha}) its own alarms "
+                            f"flag {alarms.mean():.4f} of those runs' masked samples, more "
+                            f"than alpha: calibrate must move the threshold its decide uses")
+        self._ok("calibrate(runs, alpha, masks) makes its own alarms hold alpha on those runs")
 
     def refuses_data_without_its_columns(self) -> None:
         try:

@@ -19,6 +19,7 @@ samples), computed from per-run counts so that a thousand replicates cost millis
 
 from __future__ import annotations
 
+import collections
 import hashlib
 import json
 import math
@@ -40,6 +41,7 @@ from ..errors import InputError, PluginError
 from ..limits import MAX_BOOTSTRAP, MAX_SEED, MAX_VUS_BUFFER_S, MAX_VUS_BUFFER_SAMPLES
 from ..schema.scenario import SplitBySeed
 from .metrics import (
+    DETECTION_WINDOW_S,
     RunData,
     average_precision,
     calibrate_threshold,
@@ -49,6 +51,7 @@ from .metrics import (
     far,
     isolation_counts,
     localization_counts,
+    null_detection,
     restrict_to_mode,
     roc_auc,
     run_hit,
@@ -80,14 +83,15 @@ METRICS: dict[str, Metric] = {
     "fa_per_h": Metric("M2 false-alarm events per hour of fault-free time", False, "1/h"),
     "dr": Metric("M3 sample detection rate over the fault windows", True),
     "dr_steady": Metric("M3 over the steady-state samples (severity 1)", True),
-    "pd": Metric("M4 run-level detection probability (strict)", True),
-    "pd_lenient": Metric("M4 run-level detection probability (lenient)", True),
+    "pd": Metric("M4 run-level detection probability in the detection window", True),
+    "pd_null": Metric("M4 rule on fault-free test runs at pretend onsets: P_D by chance",
+                      None),
     "dd_median_s": Metric("M5 median detection delay over detected runs", False, "s"),
     "dd_mean_s": Metric("M5 mean detection delay over detected runs", False, "s"),
     "dd_p90_s": Metric("M5 90th percentile of the detection delay", False, "s"),
     "dd_censored_mean_s": Metric("M5 mean delay, a miss counting its horizon", False, "s"),
     "n_missed": Metric("M5 faulty runs not detected", False),
-    "pd_steady": Metric("M4 detection of the fully developed fault (lenient)", True),
+    "pd_steady": Metric("M4 detection of the fully developed fault", True),
     "dd_steady_median_s": Metric("M5 median delay from the first severity-1 sample", False,
                                  "s"),
     "roc_auc": Metric("M7 area under the ROC curve of the statistic", True),
@@ -96,13 +100,16 @@ METRICS: dict[str, Metric] = {
     "ia": Metric("M9 isolation accuracy over alarmed fault samples", True),
     "hit1": Metric("M13 channel hit@1 at the first detection onset", True),
     "hit1_samples": Metric("M13 channel hit@1 over alarmed sensor-fault samples", True),
-    "mdm90": Metric("M15 smallest |magnitude| with P_D >= 0.9 (plug-in alarms)", False),
-    "mdm90_cal": Metric("M15 smallest |magnitude| with P_D >= 0.9 at theta (M6)", False),
+    "mdm90": Metric("M15 smallest |magnitude| with P_D >= 0.9 and significantly above "
+                    "pd_null (plug-in alarms)", False),
+    "mdm90_cal": Metric("M15 smallest |magnitude| with P_D >= 0.9 and significantly above "
+                        "pd_null_cal, at theta (M6)", False),
     "theta": Metric("M6 threshold calibrated on the validation runs", None),
     "far_ff_cal": Metric("M1 FAR over fault-free test runs at theta (M6)", False),
     "far_pre_cal": Metric("M1 pre-onset FAR at theta (M6)", False),
     "dr_cal": Metric("M3 detection rate at theta (M6)", True),
     "pd_cal": Metric("M4 detection probability at theta (M6)", True),
+    "pd_null_cal": Metric("pd_null at theta (M6)", None),
     "dd_median_cal_s": Metric("M5 median delay at theta (M6)", False, "s"),
     "dr_steady_cal": Metric("M3 over the steady-state samples at theta (M6)", True),
     "hit1_cal": Metric("M13 channel hit@1 at the first detection onset at theta (M6)", True),
@@ -114,16 +121,19 @@ METRICS: dict[str, Metric] = {
 _META = ("fit_s", "exec_s_per_sim_h", "theta")
 
 #: metrics computed per run (not per sample): left out of the per-regime strata
-_RUN_LEVEL = frozenset({"pd", "pd_lenient", "dd_median_s", "dd_mean_s", "dd_p90_s",
+_RUN_LEVEL = frozenset({"pd", "pd_null", "dd_median_s", "dd_mean_s", "dd_p90_s",
                         "dd_censored_mean_s", "n_missed", "pd_steady", "dd_steady_median_s",
                         "hit1", "mdm90"})
 #: the metrics reported at theta, by the name of the metric at the plug-in's alarms
 _CAL = {"far_ff": "far_ff_cal", "far_pre": "far_pre_cal", "dr": "dr_cal", "pd": "pd_cal",
-        "dd_median_s": "dd_median_cal_s", "dr_steady": "dr_steady_cal", "hit1": "hit1_cal"}
+        "dd_median_s": "dd_median_cal_s", "dr_steady": "dr_steady_cal", "hit1": "hit1_cal",
+        "pd_null": "pd_null_cal"}
 #: condition label of a per-regime stratum (``label.mode`` per sample)
 MODE_PREFIX = "mode:"
 #: values of the ``window`` option
 WINDOWS = ("fault", "steady")
+#: where the plug-in's own threshold comes from: its calibrate() on the val runs, or its fit
+OWN_THRESHOLDS = ("val", "fit")
 
 #: stratum value meaning "pooled over every value"
 ALL = "all"
@@ -303,6 +313,8 @@ def run_data(run: Run, statistic: np.ndarray, alarm: np.ndarray,
         extra["mode"] = _label(run, "label.mode").astype(str).to_numpy()
     if steady:
         extra["severity"] = _label(run, "label.severity").to_numpy(float)
+    elif "label.severity" in s.columns:  # the detection window starts when fully developed
+        extra["severity"] = s["label.severity"].to_numpy(float)
     if ranking is not None:
         extra.update(_channel_data(run, ranking))
     return RunData(t=s["t_s"].to_numpy(float), faulty=s["label.is_faulty"].to_numpy(bool),
@@ -335,40 +347,51 @@ def _channel_data(run: Run, ranking: pd.DataFrame) -> dict:
 # --------------------------------------------------------------------------- per-run counts
 
 
-def _counts(r: RunData, m: int, h: float) -> dict[str, float]:
+@dataclass(frozen=True)
+class _Rule:
+    """The detection rule of an evaluation: persistence m, grace h [s], detection window w
+    [s], and whether the steady-state window is reported."""
+
+    m: int
+    h: float
+    w: float
+    steady: bool = False
+
+
+def _counts(r: RunData, rule: _Rule) -> dict[str, float]:
     """Everything the metrics of one stratum need from one run, as numbers that add up over
     runs (so a bootstrap replicate is a sum over resampled rows)."""
     f = far([r])
     ev = false_alarm_events([r])
     out = {"ff_a": f.alarms_ff, "ff_n": f.n_ff, "pre_a": f.alarms_pre, "pre_n": f.n_pre,
            "fa_ev": ev.n_events, "ok_h": ev.hours,
-           "dr_hit": 0, "dr_tot": 0, "elig": 0, "det": 0, "det_len": 0,
+           "dr_hit": 0, "dr_tot": 0, "elig": 0, "det": 0,
            "delay": math.nan, "cens": math.nan, "ia_hit": 0, "ia_tot": 0,
-           **_extra_counts(r, m, h)}
+           "t_on": math.nan, "w_len": math.nan, **_extra_counts(r, rule)}
     if r.is_faulty:
         out["dr_hit"], out["dr_tot"] = window_counts(r)
-        d = detect_run(r, m, h)
+        d = detect_run(r, rule.m, rule.h, rule.w)
         if d.eligible:
             out.update(elig=1, det=int(d.detected), delay=d.delay,
-                       cens=d.delay if d.detected else d.horizon,
-                       det_len=int(detect_run(r, m, h, lenient=True).detected))
+                       cens=d.delay if d.detected else d.horizon, t_on=d.onset_s,
+                       w_len=d.horizon)
         if r.diagnosis is not None:
             out["ia_hit"], out["ia_tot"] = isolation_counts(r)
     return out
 
 
-def _extra_counts(r: RunData, m: int, h: float) -> dict[str, float]:
-    """The counts of the optional metrics: steady-state window (with ``severity``) and
+def _extra_counts(r: RunData, rule: _Rule) -> dict[str, float]:
+    """The counts of the optional metrics: steady-state window (``rule.steady``) and
     channel isolation (with a ranking); zeros (nan delays) when the run has no such data."""
     out = {"st_hit": 0, "st_tot": 0, "st_elig": 0, "st_det": 0, "st_delay": math.nan,
            "hit_r": 0, "hit_n": 0, "loc_hit": 0, "loc_tot": 0}
-    if r.severity is not None:
+    if rule.steady and r.severity is not None:
         out["st_hit"], out["st_tot"] = steady_counts(r)
-        d = steady_detection(r, m, h) if r.is_faulty else None
+        d = steady_detection(r, rule.m, rule.h, rule.w) if r.is_faulty else None
         if d is not None and d.eligible:
             out.update(st_elig=1, st_det=int(d.detected), st_delay=d.delay)
     if r.ranking is not None:
-        out["hit_r"], out["hit_n"] = run_hit(r, 1, m, h)
+        out["hit_r"], out["hit_n"] = run_hit(r, 1, rule.m, rule.h, rule.w)
         out["loc_hit"], out["loc_tot"] = localization_counts(r)
     return out
 
@@ -385,7 +408,6 @@ _FROM_COUNTS = {
     "fa_per_h": lambda c: _ratio(c["fa_ev"].sum(-1), c["ok_h"].sum(-1)),
     "dr": lambda c: _ratio(c["dr_hit"].sum(-1), c["dr_tot"].sum(-1)),
     "pd": lambda c: _ratio(c["det"].sum(-1), c["elig"].sum(-1)),
-    "pd_lenient": lambda c: _ratio(c["det_len"].sum(-1), c["elig"].sum(-1)),
     "dd_median_s": lambda c: _nanstat(np.nanmedian, c["delay"]),
     "dd_mean_s": lambda c: _nanstat(np.nanmean, c["delay"]),
     "dd_p90_s": lambda c: _nanstat(lambda x, axis: np.nanpercentile(x, 90, axis=axis),
@@ -476,18 +498,27 @@ class Evaluation:
         """The readable table printed by ``r2rsim diagnose``."""
         t = self.table()
         show = [c for c in ("n_runs", "far_ff", "far_pre", "fa_per_h", "dr", "dr_steady",
-                            "pd", "dd_median_s", "dd_p90_s", "n_missed", "pd_steady",
-                            "dd_steady_median_s", "roc_auc", "pr_auc", "vus_pr", "ia", "hit1",
-                            "mdm90", "far_ff_cal", "dr_cal", "dr_steady_cal", "pd_cal",
-                            "dd_median_cal_s", "mdm90_cal")
+                            "pd", "pd_null", "dd_median_s", "dd_p90_s", "n_missed",
+                            "pd_steady", "dd_steady_median_s", "roc_auc", "pr_auc", "vus_pr",
+                            "ia", "hit1", "mdm90", "far_ff_cal", "dr_cal", "dr_steady_cal",
+                            "pd_cal", "pd_null_cal", "dd_median_cal_s", "mdm90_cal")
                 if c in t.columns]
+        st = self.settings
+        own = {"val": f"own threshold recalibrated on val at alpha={st.get('alpha')}",
+               "fit": "own threshold from fit"}.get(st.get("own_threshold"), "own threshold")
         head = (f"{self.method} {json.dumps(self.params, sort_keys=True, default=str)}  "
-                f"[{self.settings.get('split', '')}; m={self.settings.get('m')}, "
-                f"h={self.settings.get('h')} s, alpha={self.settings.get('alpha')}, "
-                f"theta={self.theta:.4g}, fit {self.settings.get('fit_s', math.nan):.2g} s]")
+                f"[{st.get('split', '')}; m={st.get('m')}, h={st.get('h')} s, "
+                f"W={st.get('detection_window', DETECTION_WINDOW_S):g} s, "
+                f"alpha={st.get('alpha')}, theta={self.theta:.4g}, "
+                f"fit {st.get('fit_s', math.nan):.2g} s]\n"
+                f"columns without _cal: {own}; _cal: at theta")
+        if st.get("causal") is False:
+            head += ("\nOFFLINE method: its statistic at t uses samples after t, so its "
+                     "delays (DD) and P_D are not those of an online detector")
         short = {"fa_per_h": "FA/h", "dd_median_s": "DD med s", "dd_p90_s": "DD p90 s",
                  "n_missed": "missed", "dd_median_cal_s": "DD_cal s",
-                 "dd_steady_median_s": "DD_st s"}
+                 "dd_steady_median_s": "DD_st s", "pd_null": "pd_null",
+                 "pd_null_cal": "pd_null_cal"}
         body = t[show].rename(columns=short).to_string(
             float_format=lambda v: f"{v:.3g}", na_rep="-")
         return head + "\n" + body
@@ -601,7 +632,8 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
              *, alpha: float = 0.01, m: int = 1, h: float = 0.0, n_boot: int = 1000,
              seed: int = 0, split: str = "explicit", drive_data: bool = False,
              mode_strata: bool = False, window: str = "fault", isolation: bool = False,
-             vus_buffer: float | None = None) -> Evaluation:
+             vus_buffer: float | None = None, detection_window: float = DETECTION_WINDOW_S,
+             own_threshold: str = "val") -> Evaluation:
     """Fit a plug-in on healthy runs, score the test runs and compute every metric.
 
     Parameters
@@ -621,6 +653,14 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
         Persistence for detection (P_D, delays).
     h : float
         Grace period after a fault's end, in seconds.
+    detection_window : float
+        W [s]: a fault is detected only within W of the moment it is fully developed (and
+        not after its end plus h); ``inf``: up to the fault's end plus h. Default
+        :data:`~r2rsim.evaluate.metrics.DETECTION_WINDOW_S`.
+    own_threshold : {"val", "fit"}
+        ``"val"`` (default): with validation runs, the plug-in's own threshold is moved by
+        its :meth:`~r2rsim.diagnostics.base.Diagnostic.calibrate` so that its own alarms hold
+        ``alpha`` on them; ``"fit"``: the threshold its ``fit`` set is kept.
     n_boot : int
         Bootstrap replicates over runs for the confidence intervals (0: none).
     seed : int
@@ -651,7 +691,8 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
     Evaluation
     """
     check_settings(alpha=alpha, m=m, h=h, n_boot=n_boot, window=window,
-                   vus_buffer=vus_buffer, seed=seed)
+                   vus_buffer=vus_buffer, seed=seed, detection_window=detection_window,
+                   own_threshold=own_threshold)
     train, val, test = list(train), list(val), list(test)
     if not train:
         raise InputError("no training runs")
@@ -663,7 +704,8 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
     max_buffer = _vus_max_buffer(vus_buffer, test)  # before the fit, which may take long
     plugin = _Scored(estimator, drive_data)
     fit_s = plugin.fit(train)
-    theta = plugin.calibrate(val, alpha) if val else math.nan
+    recalibrated = bool(val) and own_threshold == "val"
+    theta = plugin.calibrate(val, alpha, recalibrated) if val else math.nan
 
     t0 = time.perf_counter()
     ranks = isolation and hasattr(plugin.est, "rank_channels")
@@ -675,8 +717,9 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
                                role) for role, rs in (("train", train), ("val", val),
                                                       ("test", test)) for r in rs))
     base = {"method": plugin.name, "params_sha256": _sha(plugin.params),
-            "dataset_sha256": dataset_sha, "split": split}
-    table = _MetricTable(base, m, h, n_boot, seed, max_buffer)
+            "dataset_sha256": dataset_sha, "split": split, "causal": plugin.causal}
+    rule = _Rule(m, h, float(detection_window), steady=window == "steady")
+    table = _MetricTable(base, rule, n_boot, seed, max_buffer)
     table.add_strata(test, rd, rd_cal)
     if mode_strata:
         table.add_mode_strata(test, rd, rd_cal)
@@ -689,7 +732,9 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
     return Evaluation(plugin.name, plugin.params,
                       _predictions(test, scored, rd_cal, plugin.name, base["params_sha256"]),
                       table.frame(), theta,
-                      {"alpha": alpha, "m": m, "h": h, "n_boot": n_boot, "seed": seed,
+                      {"alpha": alpha, "m": m, "h": h, "detection_window": detection_window,
+                       "own_threshold": "val" if recalibrated else "fit",
+                       "causal": plugin.causal, "n_boot": n_boot, "seed": seed,
                        "split": split, "fit_s": fit_s, "drive_data": drive_data,
                        "mode_strata": mode_strata, "window": window, "isolation": isolation,
                        "vus_buffer": vus_buffer, "vus_max_buffer_samples": max_buffer},
@@ -698,7 +743,8 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
 
 def check_settings(*, alpha: float = 0.01, m: int = 1, h: float = 0.0, n_boot: int = 1000,
                    window: str = "fault", vus_buffer: float | None = None,
-                   seed: int = 0) -> None:
+                   seed: int = 0, detection_window: float = DETECTION_WINDOW_S,
+                   own_threshold: str = "val") -> None:
     """Check the settings of :func:`evaluate` (same names and meaning) before any data is
     read: ``r2rsim diagnose`` calls it first, so a bad flag costs nothing.
 
@@ -713,6 +759,14 @@ def check_settings(*, alpha: float = 0.01, m: int = 1, h: float = 0.0, n_boot: i
         raise InputError(f"persistence m must be an integer >= 1, got {m!r}")
     if not h >= 0:
         raise InputError(f"grace period h must be >= 0 s, got {h!r}")
+    if isinstance(detection_window, bool) or not isinstance(
+            detection_window, (int, float, np.integer, np.floating)) \
+            or not detection_window > 0:
+        raise InputError(f"detection window must be a time > 0 s (inf: up to the fault's "
+                         f"end), got {detection_window!r}")
+    if own_threshold not in OWN_THRESHOLDS:
+        raise InputError(f"own_threshold must be one of {', '.join(OWN_THRESHOLDS)}, got "
+                         f"{own_threshold!r}")
     if not 0 <= n_boot <= MAX_BOOTSTRAP:
         raise InputError(f"n_boot must be from 0 to {MAX_BOOTSTRAP} (docs/security.md), "
                          f"got {n_boot!r}")
@@ -753,6 +807,9 @@ class _Scored:
         self.name = getattr(self.est, "name", type(self.est).__name__)
         self.params = call(self.est, "get_params", self.est.get_params)
         self.drive_data = drive_data
+        is_causal = getattr(self.est, "is_causal", None)
+        self.causal = bool(is_causal() if callable(is_causal)
+                           else getattr(self.est, "causal", True))
 
     def frame(self, run: Run) -> pd.DataFrame:
         """The plug-in's view of a run: no labels, faults or true states."""
@@ -770,9 +827,17 @@ class _Scored:
         call(self.est, "fit", self.est.fit, frames)
         return time.perf_counter() - t0
 
-    def calibrate(self, val: list[Run], alpha: float) -> float:
+    def calibrate(self, val: list[Run], alpha: float, own: bool) -> float:
         """Theta at false-alarm rate ``alpha`` on the scored samples of the validation runs
-        (M6)."""
+        (M6); with ``own``, first the plug-in's own threshold through its ``calibrate``."""
+        if own:
+            frames = [self.frame(r) for r in val]
+            masks = [r.samples["label.score_mask"].to_numpy(bool) for r in val]
+            if not callable(getattr(self.est, "calibrate", None)):
+                raise PluginError(f"plug-in '{self.name}' has no calibrate(runs, alpha, "
+                                  f"masks) method: derive it from r2rsim.diagnostics."
+                                  f"Diagnostic, or evaluate with own_threshold='fit'")
+            call(self.est, "calibrate", self.est.calibrate, frames, alpha, masks)
         cal = [self.outputs(r) for r in val]
         pool = np.concatenate([s[r.samples["label.score_mask"].to_numpy(bool)]
                                for r, (s, *_) in zip(val, cal, strict=True)])
@@ -836,12 +901,57 @@ def _run_data(test: list[Run], scored: list[tuple], theta: float | None, mode_st
     return rd, rd_cal
 
 
+class _NullRates:
+    """pd_null of one set of alarms (the plug-in's, or at theta): the detection rule applied
+    to the fault-free test runs at the pretend windows of a stratum's faulty runs, with the
+    (run, window) outcomes cached across strata."""
+
+    def __init__(self, runs: list[RunData], m: int, n_boot: int, seed: int):
+        self.runs, self.m, self.n_boot, self.seed = runs, m, n_boot, seed
+        self._cache: dict[tuple[int, float, float], tuple[int, int]] = {}
+
+    def counts(self, healthy: list[int], windows: list[tuple[float, float]]) -> np.ndarray:
+        """(detected, eligible) per fault-free run of ``healthy`` over ``windows``."""
+        want = collections.Counter(windows)
+        out = np.zeros((len(healthy), 2))
+        for row, i in enumerate(healthy):
+            todo = [w for w in want if (i, *w) not in self._cache]
+            for w in todo:
+                self._cache[(i, *w)] = null_detection(self.runs[i], [w], self.m)
+            out[row] = np.sum([np.multiply(self._cache[(i, *w)], k) for w, k in want.items()],
+                              axis=0)
+        return out
+
+    def rate(self, healthy: list[int], windows: list[tuple[float, float]]
+             ) -> tuple[float, float, float]:
+        """pd_null with its percentile bootstrap CI over the fault-free runs."""
+        if not healthy or not windows:
+            return math.nan, math.nan, math.nan
+        c = self.counts(healthy, windows)
+        est = float(_ratio(c[:, 0].sum(), c[:, 1].sum()))
+        if not self.n_boot:
+            return est, math.nan, math.nan
+        idx = np.random.default_rng(self.seed).integers(0, len(c), (self.n_boot, len(c)))
+        boot = _ratio(c[idx, 0].sum(-1), c[idx, 1].sum(-1))
+        boot = boot[np.isfinite(boot)]
+        if not boot.size:
+            return est, math.nan, math.nan
+        lo, hi = np.percentile(boot, [2.5, 97.5])
+        return est, float(lo), float(hi)
+
+
+def _windows(counts: pd.DataFrame) -> list[tuple[float, float]]:
+    """The detection windows (onset time, length) of the eligible faulty runs of ``counts``."""
+    c = counts[counts["elig"] > 0]
+    return list(zip(c["t_on"].astype(float), c["w_len"].astype(float), strict=True))
+
+
 class _MetricTable:
     """The rows of the long results table, stratum by stratum."""
 
-    def __init__(self, base: dict, m: int, h: float, n_boot: int, seed: int,
+    def __init__(self, base: dict, rule: _Rule, n_boot: int, seed: int,
                  max_buffer: int | None):
-        self.base, self.m, self.h = base, m, h
+        self.base, self.rule = base, rule
         self.n_boot, self.seed, self.max_buffer = n_boot, seed, max_buffer
         self.rows: list[dict] = []
 
@@ -854,29 +964,46 @@ class _MetricTable:
 
     def _counts(self, runs: list[RunData] | None) -> pd.DataFrame | None:
         """Per-run counts, once per run; a stratum takes its runs' rows."""
-        return None if runs is None else pd.DataFrame([_counts(r, self.m, self.h)
-                                                       for r in runs])
+        return None if runs is None else pd.DataFrame([_counts(r, self.rule) for r in runs])
+
+    def _view(self, rd: list[RunData] | None):
+        """A set of runs with their per-run counts and their null rates."""
+        if rd is None:
+            return None
+        return rd, self._counts(rd), _NullRates(rd, self.rule.m, self.n_boot, self.seed)
 
     def add_strata(self, test: list[Run], rd: list[RunData], rd_cal) -> None:
         """Every condition × fault stratum, by magnitude where there are several, with the
         minimum detectable magnitude."""
-        view = (rd, self._counts(rd), self._counts(rd_cal))
+        view, view_cal = self._view(rd), self._view(rd_cal)
         for cond, ftype, idx in _strata(test):
-            counts, counts_cal = self.stratum(cond, ftype, math.nan, idx, view)
+            self.stratum(cond, ftype, math.nan, idx, view, view_cal)
             faulty_idx = [i for i in idx if rd[i].is_faulty]
+            healthy = [i for i in idx if not rd[i].is_faulty]
             mags = np.array([rd[i].magnitude for i in faulty_idx])
-            if ftype in (NONE, ALL) or np.unique(mags[np.isfinite(mags)]).size <= 1:
+            mags = np.unique(mags[np.isfinite(mags)])
+            if ftype in (NONE, ALL) or mags.size <= 1:
                 continue
-            for mag in np.unique(mags[np.isfinite(mags)]):
-                self.stratum(cond, ftype, float(mag),
-                             [i for i in faulty_idx if rd[i].magnitude == mag], view)
-            mag_all = np.array([rd[i].magnitude for i in idx])
-            for key, c in (("mdm90", counts), ("mdm90_cal", counts_cal)):
-                if c is None:
-                    continue
-                elig = c["elig"].to_numpy(bool)
-                curve = detectability(mag_all[elig], c["det"].to_numpy(bool)[elig])
-                self.add(cond, ftype, math.nan, key, abs(curve.mdm), n=int(elig.sum()))
+            by_mag = {float(mg): [i for i in faulty_idx if rd[i].magnitude == mg]
+                      for mg in mags}
+            for mg, at in by_mag.items():
+                self.stratum(cond, ftype, mg, at, view, view_cal, healthy)
+            for key, v in (("mdm90", view), ("mdm90_cal", view_cal)):
+                if v is not None:
+                    self._mdm(cond, ftype, key, v, by_mag, healthy)
+
+    def _mdm(self, cond, ftype, key, view, by_mag: dict, healthy: list[int]) -> None:
+        """M15 over the magnitudes of one stratum, each tested against its own null rate."""
+        _, counts, nulls = view
+        mag, det, null = [], [], {}
+        for mg, at in by_mag.items():
+            c = counts.iloc[at]
+            c = c[c["elig"] > 0]
+            mag += [mg] * len(c)
+            det += c["det"].astype(bool).tolist()
+            null[mg] = nulls.rate(healthy, _windows(c))[0]
+        curve = detectability(mag, det, null=null)
+        self.add(cond, ftype, math.nan, key, abs(curve.mdm), n=len(mag))
 
     def add_mode_strata(self, test: list[Run], rd: list[RunData], rd_cal) -> None:
         """The per-sample metrics of each regime (``label.mode``) × fault."""
@@ -884,26 +1011,32 @@ class _MetricTable:
             view = [restrict_to_mode(r, mode) for r in rd]
             view_cal = ([replace(r, alarm=x.alarm) for r, x in zip(view, rd_cal, strict=True)]
                         if rd_cal else None)
-            counts_of = (view, self._counts(view), self._counts(view_cal))
+            v, v_cal = self._view(view), self._view(view_cal)
             for cond, ftype, idx in _mode_strata(test, view, mode):
-                self.stratum(cond, ftype, math.nan, idx, counts_of, regime=True)
+                self.stratum(cond, ftype, math.nan, idx, v, v_cal, regime=True)
 
-    def stratum(self, cond, ftype, mag, idx, view, regime: bool = False):
-        """Add the rows of one stratum. ``view``: (runs, their counts, their counts at
-        theta); ``regime``: runs restricted to a regime, per-sample metrics only.
-        Returns the stratum's counts and counts at theta."""
-        runs_all, pr, prc = view
+    def stratum(self, cond, ftype, mag, idx, view, view_cal, healthy=None,
+                regime: bool = False) -> None:
+        """Add the rows of one stratum. ``view``/``view_cal``: (runs, their counts, their
+        null rates) at the plug-in's alarms and at theta; ``healthy``: the fault-free runs
+        whose pretend onsets give pd_null (default: those of ``idx``); ``regime``: runs
+        restricted to a regime, per-sample metrics only."""
+        runs_all, pr, nulls = view
         skip = _RUN_LEVEL if regime else frozenset()
         runs = [runs_all[i] for i in idx]
         n = len(idx)
+        if healthy is None:
+            healthy = [i for i in idx if not runs_all[i].is_faulty]
         counts = pr.iloc[idx]
         for metric, (est_, lo, hi) in _bootstrap(counts, self.n_boot, self.seed).items():
             if (metric == "ia" and runs[0].diagnosis is None) or metric in skip:
                 continue
             self.add(cond, ftype, mag, metric, est_, lo, hi, n)
         n_faulty = int(counts["elig"].sum())
-        if n_faulty and "n_missed" not in skip:
+        if n_faulty and not regime:
             self.add(cond, ftype, mag, "n_missed", float(n_faulty - counts["det"].sum()), n=n)
+            self.add(cond, ftype, mag, "pd_null", *nulls.rate(healthy, _windows(counts)),
+                     n=len(healthy))
         y = np.concatenate([r.faulty[r.scored] for r in runs])
         if y.any() and not y.all():
             s = np.concatenate([r.score[r.scored] for r in runs])
@@ -913,13 +1046,16 @@ class _MetricTable:
                 ps, py, pg = _pooled(runs)
                 self.add(cond, ftype, mag, "vus_pr", vus_pr(ps, py, self.max_buffer,
                                                             groups=pg), n=n)
-        if prc is None:
-            return counts, None
+        if view_cal is None:
+            return
+        _, prc, nulls_cal = view_cal
         cc = prc.iloc[idx]
         for metric, (est_, lo, hi) in _bootstrap(cc, self.n_boot, self.seed).items():
             if metric in _CAL and metric not in skip:
                 self.add(cond, ftype, mag, _CAL[metric], est_, lo, hi, n)
-        return counts, cc
+        if n_faulty and not regime:
+            self.add(cond, ftype, mag, "pd_null_cal", *nulls_cal.rate(healthy, _windows(cc)),
+                     n=len(healthy))
 
     def frame(self) -> pd.DataFrame:
         """The typed long table."""

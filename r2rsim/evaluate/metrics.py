@@ -21,13 +21,13 @@ Conventions shared by all metrics
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
-from scipy.stats import rankdata
+from scipy.stats import binomtest, rankdata
 
 from ..limits import MAX_VUS_BUFFER_SAMPLES
 
@@ -35,6 +35,7 @@ __all__ = [
     "ConfidenceInterval",
     "DelayStats",
     "Detectability",
+    "MDM_SIGNIFICANCE",
     "FalseAlarmEvents",
     "FarResult",
     "RunData",
@@ -44,11 +45,13 @@ __all__ = [
     "bootstrap_ci",
     "calibrate_threshold",
     "confirmed",
+    "DETECTION_WINDOW_S",
     "detect_run",
     "detectability",
     "detection_delay",
     "detection_probability",
     "detection_rate",
+    "detection_windows",
     "false_alarm_events",
     "far",
     "fault_free_scores",
@@ -56,6 +59,8 @@ __all__ = [
     "hit_at_n",
     "isolation_counts",
     "localization_counts",
+    "null_detection",
+    "null_detection_rate",
     "pooled_scores",
     "range_pr_auc",
     "restrict_to_mode",
@@ -71,6 +76,18 @@ __all__ = [
 # Relative tolerance (in sample periods) when comparing t[eps] + h with sample times, so that a
 # grace period that is a whole number of periods lands on the intended sample despite rounding.
 _TIME_RTOL = 1e-9
+
+#: Default detection window W [s]: a fault must be detected within W of the moment it is fully
+#: developed (its onset for a step; the end of its ramp for a degradation). 20 s covers five
+#: transport time constants L/v of the slowest span of the shipped lines at their slowest
+#: speed (1.5 m at 0.5 m/s: L/v = 3 s, so 15 s), by which a step has settled through the span
+#: and its tension loop, with a margin for the sensors' filters and persistence. Over a longer
+#: window a detector with a sample false-alarm rate of 1 % would "detect" most faults by
+#: chance (docs/diagnostics.md §5.1).
+DETECTION_WINDOW_S = 20.0
+
+#: severity at or above which a sample is in the steady state (label.severity is float32)
+STEADY_SEVERITY = 1.0 - 1e-6
 
 
 # --------------------------------------------------------------------------- persistence
@@ -237,28 +254,47 @@ class RunData:
         """The alarm restricted to scored samples; every metric uses this, not ``alarm``."""
         return self.alarm & self.scored
 
-    def window_end(self, h: float = 0.0) -> int | None:
-        """Last index of the detection window: min(eps + h, last sample), h in seconds.
+    def full_onset(self) -> int | None:
+        """Index of the first sample at which the fault is fully developed: the first faulty
+        sample with severity 1 (the end of a ramp), tau without ``severity`` or for a step,
+        and eps when the fault never develops fully within the run (None when fault-free)."""
+        tau = self.onset
+        if tau is None or self.severity is None:
+            return tau
+        full = np.flatnonzero(self.faulty & (self.severity >= STEADY_SEVERITY))
+        return int(full[0]) if full.size else self.end
+
+    def window_end(self, h: float = 0.0, w: float = DETECTION_WINDOW_S) -> int | None:
+        """Last index of the detection window [tau, min(t_full + w, t_eps + h, last sample)].
 
         Parameters
         ----------
         h : float, default 0
             Grace period after the fault end, in seconds (h >= 0).
+        w : float, default :data:`DETECTION_WINDOW_S`
+            Detection window in seconds after the fault is fully developed
+            (:meth:`full_onset`); ``inf`` for a window up to the fault's end (plus h).
 
         Returns
         -------
         int or None
-            The largest index k with t[k] <= t[eps] + h (None for a fault-free run).
+            The largest index k with t[k] <= min(t_full + w, t[eps] + h) (None for a
+            fault-free run).
         """
         eps = self.end
         if eps is None:
             return None
-        if h < 0:
+        if not h >= 0:
             raise ValueError(f"grace period h must be >= 0, got {h!r}")
-        if h == 0:
-            return eps
+        if not w > 0:
+            raise ValueError(f"detection window w must be > 0 s, got {w!r}")
         tol = _TIME_RTOL * (self.period if self.n > 1 else 1.0)
-        return int(np.searchsorted(self.t, self.t[eps] + h + tol, side="right") - 1)
+        end = eps if h == 0 else int(np.searchsorted(self.t, self.t[eps] + h + tol,
+                                                     side="right") - 1)
+        if math.isfinite(w):
+            limit = self.t[self.full_onset()] + w
+            end = min(end, int(np.searchsorted(self.t, limit + tol, side="right") - 1))
+        return end
 
 
 def restrict_to_mode(run: RunData, mode: str) -> RunData:
@@ -457,10 +493,6 @@ def window_counts(run: RunData) -> tuple[int, int]:
 
 # --------------------------------------------------------------------------- M3/M5, steady state
 
-#: severity at or above which a sample is in the steady state (label.severity is float32)
-STEADY_SEVERITY = 1.0 - 1e-6
-
-
 def _steady(run: RunData) -> NDArray[np.bool_]:
     if run.severity is None:
         raise ValueError("the steady-state window needs runs with a per-sample severity")
@@ -504,20 +536,21 @@ def steady_detection_rate(runs: Sequence[RunData]) -> float:
     return _pooled(steady_counts(r) for r in runs)
 
 
-def steady_detection(run: RunData, m: int = 1, h: float = 0.0) -> RunDetection | None:
+def steady_detection(run: RunData, m: int = 1, h: float = 0.0,
+                     w: float = DETECTION_WINDOW_S) -> RunDetection | None:
     """M4/M5 from the start of the steady state: detection of a fully developed fault.
 
-    The onset is tau_s, the first faulty sample with severity 1, and the window ends h after
-    the last one. Detection is lenient (:func:`detect_run`): a confirmed alarm that began
-    during the ramp and is still on at tau_s detects with delay 0, because the question is how
-    long a fully developed fault goes unflagged, not whether the ramp was caught.
+    The onset is tau_s, the first faulty sample with severity 1, and the window ends
+    ``min(t(tau_s) + w, t(eps) + h)``. As everywhere (:func:`detect_run`), an alarm event
+    that began during the ramp and is still on at tau_s detects with delay 0: the question is
+    how long a fully developed fault goes unflagged, not whether the ramp was caught.
 
     Parameters
     ----------
     run : RunData
         A faulty run with ``severity``.
-    m, h
-        Persistence and grace period in seconds, as in :func:`detect_run`.
+    m, h, w
+        Persistence, grace period and detection window in seconds, as in :func:`detect_run`.
 
     Returns
     -------
@@ -527,7 +560,7 @@ def steady_detection(run: RunData, m: int = 1, h: float = 0.0) -> RunDetection |
     steady = _steady(run)
     if not steady.any():
         return None
-    return detect_run(replace(run, faulty=steady), m, h, lenient=True)
+    return detect_run(replace(run, faulty=steady), m, h, w)
 
 
 # --------------------------------------------------------------------------- M4, M5
@@ -543,15 +576,17 @@ class RunDetection:
         False when no sample of the detection window is scored (the run is then left out of
         P_D and DD rather than counted as a miss).
     detected : bool
-        A detection onset lies in the window [tau, min(eps + h, N-1)].
+        A confirmed alarm is on somewhere in the window [tau, w] (:func:`detect_run`).
     k_star : int or None
-        Index of the first detection onset (None if missed).
+        Index of the detection (None if missed).
     delay : float
         DD = t[k*] - t[tau] in seconds (nan if missed).
     horizon : float
-        t[min(eps + h, N-1)] - t[tau]: what a miss contributes to the censored mean.
+        t[w] - t[tau]: what a miss contributes to the censored mean.
     magnitude : float
         The run's fault magnitude (copied from :class:`RunData`, for M15).
+    onset_s : float
+        t[tau], the time of the onset (the pretend onsets of :func:`null_detection`).
     """
 
     eligible: bool
@@ -560,14 +595,48 @@ class RunDetection:
     delay: float
     horizon: float
     magnitude: float
+    onset_s: float = math.nan
 
 
-def detect_run(run: RunData, m: int = 1, h: float = 0.0, *,
-               lenient: bool = False) -> RunDetection:
-    """Find the first detection onset of one faulty run (M4).
+class _Events:
+    """One run's alarm events, prepared for many detection windows: the effective alarm, the
+    start of the event each alarmed sample belongs to, and whether each event start is
+    confirmed (the event lasts at least m samples)."""
 
-    A *detection onset* is a sample k >= tau at which a confirmed alarm starts: the alarm is
-    confirmed at k (:func:`confirmed` with persistence ``m``) and the alarm at k-1 is off.
+    def __init__(self, run: RunData, m: int):
+        self.a = run.effective_alarm
+        self.conf = confirmed(self.a, m)
+        idx = np.arange(self.a.size)
+        starts = np.where(_onsets(self.a), idx, -1)
+        self.start = np.maximum.accumulate(starts) if starts.size else starts
+        # a confirmed event starts here (the onsets a detection can be taken at)
+        self.conf_onset = self.conf & _onsets(self.a)
+
+    def first_detection(self, tau: int, end: int) -> int | None:
+        """The detection in the window [tau, end]: tau itself when a confirmed event is on at
+        tau (whenever it began), else the first confirmed event starting in (tau, end]."""
+        if self.a[tau] and self.conf[self.start[tau]]:
+            return tau
+        ks = np.flatnonzero(self.conf_onset[tau: end + 1])
+        return tau + int(ks[0]) if ks.size else None
+
+
+def detect_run(run: RunData, m: int = 1, h: float = 0.0,
+               w: float = DETECTION_WINDOW_S) -> RunDetection:
+    """Find the detection of one faulty run (M4).
+
+    The detection window is [tau, min(t_full + w, t_eps + h, last sample)]
+    (:meth:`RunData.window_end`). The run is detected at the first sample of the window at
+    which a *confirmed* alarm event (one lasting at least ``m`` consecutive samples) is on:
+
+    * an event that is on at tau counts from tau (delay 0) if it is confirmed, whenever it
+      began: an alarm raised shortly before a fault and still on when it starts does not turn
+      a detected fault into a miss (its samples before tau stay false alarms in ``far_pre``
+      and ``fa_per_h``);
+    * otherwise the first confirmed event that starts inside the window detects, at its start.
+
+    The same rule, applied to fault-free runs with pretend onsets, gives the null rate
+    (:func:`null_detection`), which says how much of P_D chance alone explains.
 
     Parameters
     ----------
@@ -576,67 +645,113 @@ def detect_run(run: RunData, m: int = 1, h: float = 0.0, *,
     m : int, default 1
         Persistence: minimum number of consecutive alarmed samples.
     h : float, default 0
-        Grace period in seconds after the fault end; the window is [tau, min(eps + h, N-1)].
-    lenient : bool, default False
-        Strict (default): an alarm event that started before tau is a false alarm, even if it
-        is still on at tau, and only a new event starting inside the window detects.
-        Lenient: an alarm still on at tau, as part of an event of at least ``m`` samples,
-        is a detection at tau with delay 0.
+        Grace period in seconds after the fault end.
+    w : float, default :data:`DETECTION_WINDOW_S`
+        Detection window in seconds after the fault is fully developed (``inf``: up to the
+        fault's end plus h).
 
     Returns
     -------
     RunDetection
         Whether and where the run was detected, the delay and the censoring horizon.
     """
-    tau, end = run.onset, run.window_end(h)
+    tau, end = run.onset, run.window_end(h, w)
     if tau is None:
         raise ValueError("detect_run needs a faulty run (no faulty sample found)")
-    a = run.effective_alarm
-    conf = confirmed(a, m)
-    onset = conf & ~np.concatenate(([False], a[:-1]))
     horizon = float(run.t[end] - run.t[tau])
-    eligible = bool(run.scored[tau : end + 1].any())
-    k_star: int | None = None
-    if lenient and tau > 0 and a[tau] and a[tau - 1]:
-        # the alarm event running through tau started earlier: find its start, and accept it
-        # if that event is confirmed (long enough)
-        off = np.flatnonzero(~a[:tau])
-        start = int(off[-1]) + 1 if off.size else 0
-        if conf[start]:
-            k_star = tau
-    if k_star is None:
-        ks = np.flatnonzero(onset[tau : end + 1])
-        if ks.size:
-            k_star = tau + int(ks[0])
-    detected = eligible and k_star is not None
+    eligible = bool(run.scored[tau: end + 1].any())
+    k_star = _Events(run, m).first_detection(tau, end) if eligible else None
+    detected = k_star is not None
     delay = float(run.t[k_star] - run.t[tau]) if detected else math.nan
-    return RunDetection(eligible=eligible, detected=detected, k_star=k_star if detected else None,
-                        delay=delay, horizon=horizon, magnitude=run.magnitude)
+    return RunDetection(eligible=eligible, detected=detected, k_star=k_star, delay=delay,
+                        horizon=horizon, magnitude=run.magnitude, onset_s=float(run.t[tau]))
 
 
-def _detections(runs: Sequence[RunData], m: int, h: float, lenient: bool) -> list[RunDetection]:
-    dets = [detect_run(r, m, h, lenient=lenient) for r in _faulty_runs(runs)]
+def _detections(runs: Sequence[RunData], m: int, h: float, w: float) -> list[RunDetection]:
+    dets = [detect_run(r, m, h, w) for r in _faulty_runs(runs)]
     return [d for d in dets if d.eligible]
 
 
-def detection_probability(runs: Sequence[RunData], m: int = 1, h: float = 0.0, *,
-                          lenient: bool = False) -> float:
+def detection_probability(runs: Sequence[RunData], m: int = 1, h: float = 0.0,
+                          w: float = DETECTION_WINDOW_S) -> float:
     """M4: run-level detection probability P_D.
 
     Parameters
     ----------
     runs : sequence of RunData
         Runs; fault-free runs and runs whose window is entirely unscored are ignored.
-    m, h, lenient
-        As in :func:`detect_run` (persistence, grace period in seconds, variant).
+    m, h, w
+        As in :func:`detect_run` (persistence, grace period and detection window in seconds).
 
     Returns
     -------
     float
         Detected faulty runs / faulty runs (nan if there is none).
     """
-    dets = _detections(runs, m, h, lenient)
+    dets = _detections(runs, m, h, w)
     return _ratio(sum(d.detected for d in dets), len(dets))
+
+
+def detection_windows(runs: Sequence[RunData], h: float = 0.0,
+                      w: float = DETECTION_WINDOW_S) -> list[tuple[float, float]]:
+    """The detection windows of the eligible faulty runs as (onset time, length) in seconds:
+    the pretend windows of :func:`null_detection`, drawn like the real ones."""
+    out = []
+    for r in _faulty_runs(runs):
+        tau, end = r.onset, r.window_end(h, w)
+        if r.scored[tau: end + 1].any():
+            out.append((float(r.t[tau]), float(r.t[end] - r.t[tau])))
+    return out
+
+
+def null_detection(run: RunData, windows: Sequence[tuple[float, float]],
+                   m: int = 1) -> tuple[int, int]:
+    """The detection rule of :func:`detect_run` applied to a fault-free run at pretend onsets.
+
+    Each window (onset time t0, length L) is placed on the run as [first sample with
+    t >= t0, last sample with t <= t0 + L]; a window past the run's end or without a scored
+    sample is not eligible. The result counts how often the detector "detects" a fault that
+    is not there, with the same persistence and window lengths as the real faults.
+
+    Parameters
+    ----------
+    run : RunData
+        A fault-free run.
+    windows : sequence of (float, float)
+        Pretend windows (:func:`detection_windows` of the faulty runs), in seconds.
+    m : int, default 1
+        Persistence.
+
+    Returns
+    -------
+    tuple of int
+        (windows detected, windows eligible).
+    """
+    if run.is_faulty:
+        raise ValueError("null_detection needs a fault-free run")
+    if not windows:
+        return 0, 0
+    tol = _TIME_RTOL * (run.period if run.n > 1 else 1.0)
+    ev = _Events(run, m)
+    det = n = 0
+    for t0, length in windows:
+        tau = int(np.searchsorted(run.t, t0 - tol, side="left"))
+        if tau >= run.n:
+            continue
+        end = int(np.searchsorted(run.t, t0 + length + tol, side="right") - 1)
+        if end < tau or not run.scored[tau: end + 1].any():
+            continue
+        n += 1
+        det += ev.first_detection(tau, end) is not None
+    return det, n
+
+
+def null_detection_rate(runs: Sequence[RunData], windows: Sequence[tuple[float, float]],
+                        m: int = 1) -> float:
+    """``pd_null``: the share of pretend windows on the fault-free runs that are "detected"
+    (:func:`null_detection`, pooled over runs; nan when none is eligible). A detector that
+    alarms at random scores P_D close to this rate."""
+    return _pooled(null_detection(r, windows, m) for r in runs if not r.is_faulty)
 
 
 @dataclass(frozen=True)
@@ -649,7 +764,7 @@ class DelayStats:
         Over detected runs only (nan if none); p90 uses linear interpolation between order
         statistics (``numpy.percentile`` default).
     censored_mean : float
-        Mean over all faulty runs, a miss contributing its horizon t[min(eps+h, N-1)] - t[tau].
+        Mean over all faulty runs, a miss contributing its horizon t[w] - t[tau].
     n_detected, n_missed : int
         Run counts.
     """
@@ -662,18 +777,17 @@ class DelayStats:
     n_missed: int
 
 
-def detection_delay(runs: Sequence[RunData], m: int = 1, h: float = 0.0, *,
-                    lenient: bool = False) -> DelayStats:
+def detection_delay(runs: Sequence[RunData], m: int = 1, h: float = 0.0,
+                    w: float = DETECTION_WINDOW_S) -> DelayStats:
     """M5: detection delay DD = t[k*] - t[tau] over detected runs, with the miss count.
 
-    The delay is measured per run from the onset, never averaged over alarmed samples (the
-    pitfall of §2.1.4).
+    The delay is measured per run from the onset, never averaged over alarmed samples.
 
     Parameters
     ----------
     runs : sequence of RunData
         Runs; fault-free runs and runs whose window is entirely unscored are ignored.
-    m, h, lenient
+    m, h, w
         As in :func:`detect_run`.
 
     Returns
@@ -682,7 +796,7 @@ def detection_delay(runs: Sequence[RunData], m: int = 1, h: float = 0.0, *,
         Median, mean and 90th percentile over detected runs, censored mean over all faulty runs,
         and the detected/missed counts.
     """
-    dets = _detections(runs, m, h, lenient)
+    dets = _detections(runs, m, h, w)
     dd = np.array([d.delay for d in dets if d.detected], dtype=float)
     censored = np.array([d.delay if d.detected else d.horizon for d in dets], dtype=float)
     if dd.size:
@@ -1089,7 +1203,8 @@ def _has_channels(run: RunData) -> bool:
     return run.channel_truth is not None and run.ranking is not None
 
 
-def run_hit(run: RunData, n: int = 1, m: int = 1, h: float = 0.0) -> tuple[int, int]:
+def run_hit(run: RunData, n: int = 1, m: int = 1, h: float = 0.0,
+            w: float = DETECTION_WINDOW_S) -> tuple[int, int]:
     """M13 for one run: is a true faulty channel in the top ``n`` of the ranking at k*?
 
     Parameters
@@ -1098,8 +1213,8 @@ def run_hit(run: RunData, n: int = 1, m: int = 1, h: float = 0.0) -> tuple[int, 
         A run with ``channel_truth`` and ``ranking``.
     n : int, default 1
         List length (hit@n).
-    m, h
-        Persistence and grace period of the detection (:func:`detect_run`, strict).
+    m, h, w
+        Persistence, grace period and detection window of the detection (:func:`detect_run`).
 
     Returns
     -------
@@ -1112,14 +1227,15 @@ def run_hit(run: RunData, n: int = 1, m: int = 1, h: float = 0.0) -> tuple[int, 
     truth = run.channel_truth.any(axis=0)
     if not truth.any():
         return 0, 0
-    d = detect_run(run, m, h)
+    d = detect_run(run, m, h, w)
     if not d.detected:
         return 0, 0
     hit = _top_hit(run.ranking[[d.k_star]], truth[None, :], n)
     return int(hit[0]), 1
 
 
-def hit_at_n(runs: Sequence[RunData], n: int = 1, m: int = 1, h: float = 0.0) -> float:
+def hit_at_n(runs: Sequence[RunData], n: int = 1, m: int = 1, h: float = 0.0,
+             w: float = DETECTION_WINDOW_S) -> float:
     """M13: localisation hit@n at the first detection onset, over detected sensor-fault runs.
 
     hit@n = (1/|R|) sum_r 1[c_r in top-n of the ranking at k*_r], where R holds the detected
@@ -1132,15 +1248,15 @@ def hit_at_n(runs: Sequence[RunData], n: int = 1, m: int = 1, h: float = 0.0) ->
         Runs with ``channel_truth`` and ``ranking``; other runs are ignored.
     n : int, default 1
         List length.
-    m, h
-        As in :func:`detect_run` (strict detection).
+    m, h, w
+        As in :func:`detect_run`.
 
     Returns
     -------
     float
         hit@n in [0, 1]; nan when no run qualifies.
     """
-    return _pooled(run_hit(r, n, m, h) for r in runs)
+    return _pooled(run_hit(r, n, m, h, w) for r in runs)
 
 
 def localization_counts(run: RunData, n: int = 1) -> tuple[int, int]:
@@ -1179,10 +1295,13 @@ class Detectability:
     ----------
     table : pandas.DataFrame
         One row per magnitude value, sorted by absolute magnitude, with columns ``magnitude``,
-        ``n_runs``, ``n_detected`` and ``p_d``.
+        ``n_runs``, ``n_detected`` and ``p_d``; with a null rate also ``p_null`` (the null
+        detection rate of that magnitude's windows), ``p_value`` (one-sided binomial test of
+        ``n_detected`` out of ``n_runs`` against ``p_null``) and ``significant``.
     mdm : float
         Minimum detectable magnitude: the smallest (in absolute value) magnitude whose
-        P_D >= level, with its sign; nan if none reaches the level.
+        P_D >= level (and, with a null rate, significantly above it), with its sign; nan if
+        none qualifies.
     level : float
         The P_D level (0.9 for MDM90).
     """
@@ -1192,21 +1311,36 @@ class Detectability:
     level: float
 
 
-def detectability(magnitude: ArrayLike, detected: ArrayLike, level: float = 0.9) -> Detectability:
+#: one-sided significance level of the test P_D > pd_null behind the MDM90
+MDM_SIGNIFICANCE = 0.05
+
+
+def detectability(magnitude: ArrayLike, detected: ArrayLike, level: float = 0.9,
+                  null: Mapping[float, float] | None = None,
+                  significance: float = MDM_SIGNIFICANCE) -> Detectability:
     """M15: P_D per fault magnitude and the minimum detectable magnitude (MDM90 by default).
 
     Runs are grouped by their exact magnitude value (a sweep uses a grid of magnitudes); runs
-    with a nan magnitude are dropped. MDM is min m with P_D(m) >= level, as in §5.4; it does not
-    require P_D to stay above the level at larger magnitudes.
+    with a nan magnitude are dropped. MDM is the smallest |m| with P_D(m) >= level; it does
+    not require P_D to stay above the level at larger magnitudes. With ``null`` (the null
+    detection rate p0 of each magnitude, :func:`null_detection_rate`), a magnitude qualifies
+    only if its detections are also significantly more than chance: the one-sided exact
+    binomial test of ``n_detected`` successes in ``n_runs`` trials against p0 (alternative
+    "greater", p0 taken as known) gives a p-value below ``significance``. A magnitude whose
+    p0 is nan (no fault-free run to measure it on) never qualifies.
 
     Parameters
     ----------
     magnitude : array_like of float, shape (R,)
         Per-run fault magnitude (e.g. ``[d.magnitude for d in detections]``).
     detected : array_like of bool, shape (R,)
-        Per-run detection flag (:func:`detect_run`, at the calibrated threshold).
+        Per-run detection flag (:func:`detect_run`).
     level : float, default 0.9
         P_D level defining the minimum detectable magnitude.
+    null : mapping of float to float, optional
+        Null detection rate per magnitude value.
+    significance : float, default :data:`MDM_SIGNIFICANCE`
+        Level of the one-sided test.
 
     Returns
     -------
@@ -1227,9 +1361,25 @@ def detectability(magnitude: ArrayLike, detected: ArrayLike, level: float = 0.9)
     table = (table.assign(_abs=table["magnitude"].abs())
              .sort_values(["_abs", "magnitude"], kind="mergesort")
              .drop(columns="_abs").reset_index(drop=True))
-    hit = table.loc[table["p_d"] >= level, "magnitude"]
+    ok = table["p_d"] >= level
+    if null is not None:
+        table["p_null"] = [float(null.get(float(m), math.nan)) for m in table["magnitude"]]
+        table["p_value"] = [_binomial_p_greater(int(x), int(n), p0) for x, n, p0 in
+                            zip(table["n_detected"], table["n_runs"], table["p_null"],
+                                strict=True)]
+        table["significant"] = table["p_value"] < significance
+        ok &= table["significant"]
+    hit = table.loc[ok, "magnitude"]
     mdm = float(hit.iloc[0]) if len(hit) else math.nan
     return Detectability(table=table, mdm=mdm, level=level)
+
+
+def _binomial_p_greater(x: int, n: int, p0: float) -> float:
+    """P(X >= x) for X ~ Binomial(n, p0): the p-value of the one-sided exact binomial test
+    (nan when p0 is nan or n is 0)."""
+    if n == 0 or not 0.0 <= p0 <= 1.0:
+        return math.nan
+    return float(binomtest(x, n, p0, alternative="greater").pvalue)
 
 
 # --------------------------------------------------------------------------- statistics

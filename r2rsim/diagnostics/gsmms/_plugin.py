@@ -391,13 +391,17 @@ class GSMMS(Diagnostic):
                      S, Z, P)
         return self
 
-    def calibrate(self, runs):
+    def calibrate(self, runs, alpha: float | None = None, masks=None):
         """Re-estimate every node's residual mean and standard deviation on held-out healthy
-        runs (the map and relations stay); nodes those runs never reach keep theirs.
-        Returns ``self``."""
+        runs (the map and relations stay; nodes those runs never reach keep theirs), then,
+        with ``alpha``, set ``threshold_`` so that the alarms hold that false-alarm rate on
+        the samples of ``masks`` (the contract's :meth:`Diagnostic.calibrate`; without
+        ``alpha`` the threshold stays ``k_sigma``). Returns ``self``."""
         self._check_fitted()
         S, Z, _ = self._pooled(self._frames(runs), points=False)
         self._node_statistics(S, Z, keep_unseen=True)
+        if alpha is not None:
+            super().calibrate(runs, alpha, masks)
         return self
 
     def _node_statistics(self, S, Z, keep_unseen=False):
