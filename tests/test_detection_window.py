@@ -18,6 +18,7 @@ from r2rsim.diagnostics import Diagnostic
 from r2rsim.errors import InputError, PluginError
 from r2rsim.evaluate import metrics as M
 from r2rsim.evaluate.harness import evaluate
+from r2rsim.report._diagnostics import results_table
 
 
 def run(n, alarm_on=(), fault=None, period=1.0, severity=None, scored=None) -> M.RunData:
@@ -257,6 +258,7 @@ def test_an_offline_method_is_marked_in_every_output():
     ev = evaluate(CentredMean(), train, test, n_boot=0)
     assert ev.settings["causal"] is False and not ev.metrics["causal"].any()
     assert "OFFLINE method" in ev.format()
+    assert set(results_table(ev.metrics)["series"]) == {"centred (offline)"}
     online = evaluate(Passthrough(), train, test, n_boot=0)
     assert online.metrics["causal"].all() and "OFFLINE" not in online.format()
 

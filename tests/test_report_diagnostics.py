@@ -252,6 +252,15 @@ def test_metric_bars_by_condition_and_fault_are_the_table_values(diagnosed):
     assert ax.get_ylabel() == "dd_median_s [s]"
 
 
+def test_detection_probability_bars_carry_their_null_rate(diagnosed):
+    fig = plot_metric(diagnosed["pca"], "pd", by="fault", condition="OC1")
+    ax = fig.axes[0]
+    faults = [t.get_text() for t in ax.get_xticklabels()]
+    null = by_gid(ax, "null:pca").get_ydata()
+    assert list(null) == [value(metrics(diagnosed["pca"]), "pd_null", "OC1", f)
+                          for f in faults]
+
+
 def test_metric_by_magnitude_and_bad_arguments(diagnosed):
     table = metrics(diagnosed["residual"])
     fig = plot_metric(diagnosed["residual"], "far_pre", by="magnitude")
@@ -278,8 +287,18 @@ def test_mdm_points_are_the_detection_probabilities(diagnosed):
         np.testing.assert_array_equal(line.get_xdata(), [0.05, 0.1, 0.2])
         pds = [value(table, "pd", "all", "sensor.gain:sensor_A", m) for m in (0.05, 0.1, 0.2)]
         assert list(line.get_ydata()) == pds
-        mdm = by_gid(ax, f"mdm:{method}|sensor.gain:sensor_A").get_xdata()
-        assert mdm[0] == value(table, "mdm90", "all", "sensor.gain:sensor_A")
+        null = by_gid(ax, f"null:{method}|sensor.gain:sensor_A")
+        assert list(null.get_ydata()) == [value(table, "pd_null", "all",
+                                                "sensor.gain:sensor_A", m)
+                                          for m in (0.05, 0.1, 0.2)]
+        mdm = [li for li in ax.get_lines() if li.get_gid() == f"mdm:{method}|sensor.gain:"
+               f"sensor_A"]
+        if mdm:
+            assert mdm[0].get_xdata()[0] == value(table, "mdm90", "all",
+                                                  "sensor.gain:sensor_A")
+        else:  # no magnitude reached 0.9 significantly above chance
+            assert not ((table.metric == "mdm90") & (table.fault == "sensor.gain:sensor_A")
+                        & (table.condition == "all")).any()
     assert pds[0] < 0.9  # a real curve: the smallest gain is missed
     # ±6.5 N offsets: the MDM90 is marked on both sides
     offs = [li.get_xdata()[0] for li in fig.axes[1].get_lines()

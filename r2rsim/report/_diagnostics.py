@@ -93,6 +93,9 @@ def results_table(results: Results) -> pd.DataFrame:
                            else table["label"])
     else:
         table["series"] = table["method"]
+    if "causal" in table.columns:  # an offline method is named so in every figure
+        offline = table["causal"].astype("boolean").eq(False).fillna(False).to_numpy(bool)
+        table.loc[offline, "series"] = table.loc[offline, "series"] + " (offline)"
     return table
 
 
@@ -378,6 +381,10 @@ def plot_metric(results: Results, metric: str = "dd_median_s", by: str = "condit
             g = rows[rows["series"] == s].set_index(by).reindex(levels)
             x = np.arange(len(levels)) + (i - (len(series) - 1) / 2) * width
             ax.bar(x, g["value"], width, yerr=_ci(g), capsize=3, gid=s, label=s)
+            if metric in NULL_OF:  # a P_D is drawn with what chance alone gives
+                null = _null_rows(results, NULL_OF[metric], rows, s, by, levels)
+                ax.plot(x, null, ls="none", marker="_", markersize=14, mew=2, color="k",
+                        gid=f"null:{s}", label=NULL_OF[metric] if i == 0 else None)
         ax.set_xticks(np.arange(len(levels)), levels, rotation=20 if by == "fault" else 0,
                       ha="right" if by == "fault" else "center")
         ax.set_xlabel(by)
@@ -385,6 +392,20 @@ def plot_metric(results: Results, metric: str = "dd_median_s", by: str = "condit
     ax.set(ylabel=_ylabel(metric), title=f"{metric} by {by}: {desc}".rstrip(": "))
     ax.legend(fontsize="small")
     return fig
+
+
+#: the null rate drawn beside each detection probability
+NULL_OF = {"pd": "pd_null", "pd_cal": "pd_null_cal"}
+
+
+def _null_rows(results: Results, null: str, rows: pd.DataFrame, series: str, by: str,
+               levels: list) -> np.ndarray:
+    """The null rates of one series at the strata of ``rows`` (nan where there is none)."""
+    table = results_table(results)
+    want = rows[rows["series"] == series][["condition", "fault"]].drop_duplicates()
+    n = table[(table["metric"] == null) & (table["series"] == series)
+              & table["magnitude"].isna()].merge(want, on=["condition", "fault"])
+    return n.set_index(by)["value"].reindex(levels).to_numpy(float)
 
 
 def _ci(g: pd.DataFrame) -> np.ndarray | None:
@@ -417,7 +438,8 @@ def plot_mdm(results: Results, calibrated: bool = False, condition: str | None =
     matplotlib.figure.Figure
     """
     Figure = require_matplotlib()
-    pd_name, mdm_name = ("pd_cal", "mdm90_cal") if calibrated else ("pd", "mdm90")
+    pd_name, mdm_name, null_name = (("pd_cal", "mdm90_cal", "pd_null_cal") if calibrated
+                                    else ("pd", "mdm90", "pd_null"))
     table = results_table(results)
     if not ((table["metric"] == pd_name) & table["magnitude"].notna()).any():
         raise InputError(f"no per-magnitude {pd_name} in the results: MDM curves need a "
@@ -432,6 +454,13 @@ def plot_mdm(results: Results, calibrated: bool = False, condition: str | None =
             g = g.sort_values("magnitude")
             line, = ax.plot(g["magnitude"], g["value"], marker="o", gid=f"{series}|{f}",
                             label=series)
+            null = table[(table["series"] == series) & (table["metric"] == null_name)
+                         & (table["condition"] == cond) & (table["fault"] == f)
+                         & table["magnitude"].notna()].sort_values("magnitude")
+            if not null.empty:  # what chance alone gives in the same windows
+                ax.plot(null["magnitude"], null["value"], ls=":", marker=".",
+                        color=line.get_color(), gid=f"null:{series}|{f}",
+                        label=f"{series}: {null_name}")
             mdm = table[(table["series"] == series) & (table["metric"] == mdm_name)
                         & (table["condition"] == cond) & (table["fault"] == f)
                         & table["magnitude"].isna()]["value"]
@@ -441,8 +470,8 @@ def plot_mdm(results: Results, calibrated: bool = False, condition: str | None =
         ax.set(xlabel="fault magnitude", ylabel=pd_name, ylim=(-0.03, 1.03), title=f)
         ax.legend(fontsize="small")
     at = "at theta" if calibrated else "plug-in alarms"
-    fig.suptitle(f"detection probability by magnitude ({at}, condition {cond}); dashed: "
-                 f"{mdm_name}")
+    fig.suptitle(f"detection probability by magnitude ({at}, condition {cond}); dotted: "
+                 f"{null_name} (chance); dashed: {mdm_name}")
     return fig
 
 
