@@ -54,7 +54,8 @@ def splice_ds(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def sweep_ds(tmp_path_factory):
-    """sweeps/quickstart.yaml: 8 runs, axes top_speed x offset, 2 seeds."""
+    """sweeps/quickstart.yaml: 12 runs, axes top_speed x fault x offset, 2 seeds; the 4
+    fault-free runs have no offset."""
     out = tmp_path_factory.mktemp("plot") / "sweep"
     run_sweep(REPO / "sweeps" / "quickstart.yaml", output=out, workers=0)
     return out
@@ -265,7 +266,7 @@ def test_sweep_points_are_the_per_run_statistic(sweep_ds, stat):
     ch = "meas.lc_rewind.tension_N"
     fig = plot_sweep(sweep_ds, ch, stat, axis="offset", t0=6.0)
     (line,) = fig.axes[0].get_lines()
-    want = per_run_stat(sweep_ds, ch, stat, t0=6.0)
+    want = per_run_stat(sweep_ds, ch, stat, t0=6.0).dropna(subset=["axis.offset"])
     got = sorted(zip(line.get_xdata(), line.get_ydata(), strict=True))
     exp = sorted(zip(want["axis.offset"], want["value"], strict=True))
     assert len(got) == 8
@@ -276,35 +277,26 @@ def test_sweep_points_are_the_per_run_statistic(sweep_ds, stat):
 def test_sweep_groups_by_a_second_axis(sweep_ds):
     fig = plot_sweep(sweep_ds, "state.rewind.speed_rad_s", "mean", axis="axis.offset",
                      group="top_speed")
-    want = per_run_stat(sweep_ds, "state.rewind.speed_rad_s", "mean")
+    want = per_run_stat(sweep_ds, "state.rewind.speed_rad_s", "mean").dropna(
+        subset=["axis.offset"])
     lines = fig.axes[0].get_lines()
     assert [ln.get_label() for ln in lines] == ["top_speed = 3", "top_speed = 5"]
     for line, (_, rows) in zip(lines, want.groupby("axis.top_speed"), strict=True):
         assert sorted(line.get_ydata()) == pytest.approx(sorted(rows.value))
 
 
-def test_sweep_runs_without_an_x_value_are_left_out_and_counted(sweep_ds, tmp_path):
-    # a run an axis did not apply to (a fault removed with null) has no x: it is not drawn,
-    # and the title counts it rather than claiming all runs are plotted
-    import shutil
-
-    import pyarrow.parquet as pq
-
-    ds = tmp_path / "sweep"
-    shutil.copytree(sweep_ds, ds)
-    runs = pq.read_table(ds / "runs.parquet")
-    i = runs.column_names.index("axis.offset")
-    offset = runs.column(i).to_pylist()
-    pq.write_table(runs.set_column(i, runs.field(i), [[None, None, *offset[2:]]]),
-                   ds / "runs.parquet")
-    fig = plot_sweep(ds, "meas.lc_rewind.tension_N", axis="offset")
+def test_sweep_runs_without_an_x_value_are_left_out_and_counted(sweep_ds):
+    # a run an axis did not apply to (the fault-free runs: the fault removed with null) has
+    # no x: it is not drawn, and the title counts it rather than claiming all runs are plotted
+    fig = plot_sweep(sweep_ds, "meas.lc_rewind.tension_N", axis="offset")
     (line,) = fig.axes[0].get_lines()
-    assert len(line.get_xdata()) == 6 and np.isfinite(line.get_xdata()).all()
-    assert fig._suptitle.get_text() == "sweep: 6 runs; 2 run(s) without a value of offset left out"
+    assert len(line.get_xdata()) == 8 and np.isfinite(line.get_xdata()).all()
+    assert fig._suptitle.get_text() == "sweep: 8 runs; 4 run(s) without a value of offset left out"
 
 
 def test_sweep_errors(sweep_ds, faults_ds):
-    with pytest.raises(InputError, match=r"no sweep axis 'speed' \(axes: top_speed, offset\)"):
+    with pytest.raises(InputError,
+                       match=r"no sweep axis 'speed' \(axes: top_speed, fault, offset\)"):
         plot_sweep(sweep_ds, "meas.lc_rewind.tension_N", axis="speed")
     with pytest.raises(InputError, match="no numeric channel 'meas.lc_rewind'"):
         plot_sweep(sweep_ds, "meas.lc_rewind")

@@ -33,7 +33,8 @@ PREFIX = "runs/quickstart_sweep/"  # the page's dataset path, replaced by the te
 
 # sweeps/quickstart.yaml and its line: lc_rewind has noise 0.5 N and is read by the
 # rewind_tension loop (set-point 260 N); 10 s at 200 Hz, warm-up 2 s, onset 6 s, offsets
-# of -10 and +10 N, each at two top speeds and with seeds 0 and 1
+# of -10 and +10 N, each at two top speeds and with seeds 0 and 1, and fault-free runs at
+# both speeds with the same seeds
 NOISE_N = 0.5
 SETPOINT_N = 260.0
 RATE_HZ, WARMUP_S, ONSET_S, DURATION_S = 200, 2.0, 6.0, 10.0
@@ -103,7 +104,7 @@ def _table_under(text: str, marker: str) -> list[list[str]]:
 def dataset(tmp_path_factory):
     out = tmp_path_factory.mktemp("sweep_docs") / "quickstart_sweep"
     summary = run_sweep(REPO / "sweeps" / "quickstart.yaml", output=out, workers=0)
-    assert summary.ok and summary.done == 8, summary.format()
+    assert summary.ok and summary.done == 12, summary.format()
     return out
 
 
@@ -196,7 +197,7 @@ def _page_sweeps() -> list[dict]:
 
 
 #: the sweep files of the page: (combinations, runs) as the page says
-EXPECTED = {"quickstart_sweep": (4, 8), "offset_study": (6, 12), "baseline_demo": (6, 6)}
+EXPECTED = {"quickstart_sweep": (6, 12), "offset_study": (6, 12), "baseline_demo": (6, 6)}
 
 
 def test_the_sweep_files_on_the_page_are_valid(tmp_path):

@@ -92,26 +92,21 @@ def test_diagnose_bad_where(dataset, tmp_path, capsys, arg, msg):
     assert code == 2 and msg in err and len(err.strip().splitlines()) == 1
 
 
-def test_a_seed_split_without_training_runs_says_why(dataset, tmp_path, capsys):
-    # only seeds the seed rule puts in val or test: the message says so and what to do
-    from r2rsim.evaluate.harness import _rule
-
-    rule = _rule(0.6, 0.2, 0.2)  # split_by_seed's default
-    seeds = [s for s in range(1, 7) if rule.assign(s) != "train"]
-    assert seeds, "the fixture's seeds all fall in train"
+def test_a_seed_split_of_few_runs_serves_train_first_and_says_why_it_cannot(dataset, tmp_path,
+                                                                            capsys):
+    # two fault-free runs (seeds 4 and 5): one trains, one calibrates (docs/diagnostics.md §4)
     code = main(["diagnose", "--method", "residual", "--data", str(dataset), "--where",
-                 "seed=" + ",".join(map(str, seeds)), "-o", str(tmp_path / "res")])
-    err = capsys.readouterr().err.strip()
-    assert code == 2 and len(err.splitlines()) == 1, err
-    healthy = len(seeds)  # one healthy run per seed
-    assert (f"split 'seed': none of the {healthy} fault-free runs (seeds "
-            f"{', '.join(map(str, seeds))}) falls in train") in err, err
-    assert "--train/--val/--test" in err and not (tmp_path / "res").exists()
+                 "seed=4,5", "--where", "magnitude=null,19.5 N", "--n-boot", "0",
+                 "-o", str(tmp_path / "two")])
+    out = capsys.readouterr()
+    assert code == 0, out.err
+    assert "split 'seed': 1 train, 1 val, 2 test (2 faulty)" in out.out
     # only faulty runs: nothing to learn from
     code = main(["diagnose", "--method", "residual", "--data", str(dataset), "--where",
                  "magnitude=19.5 N", "-o", str(tmp_path / "res")])
     err = capsys.readouterr().err
     assert code == 2 and "all 6 runs have faults" in err, err
+    assert "--train/--val/--test" in err and not (tmp_path / "res").exists()
 
 
 def test_a_selection_on_a_sweep_without_axes_is_not_called_a_non_sweep(tmp_path):

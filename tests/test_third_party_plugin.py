@@ -134,4 +134,5 @@ def test_the_installed_plugin_passes_the_shipped_checks(site, tmp_path):
     res = subprocess.run([sys.executable, "-c", code], env=env, cwd=tmp_path,
                          capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr
-    assert res.stdout.count("ok: ") == 7 and "deterministic" in res.stdout, res.stdout
+    assert res.stdout.count("ok: ") == 9 and "deterministic" in res.stdout, res.stdout
+    assert "causal as declared" in res.stdout and "calibrate(runs, alpha, masks)" in res.stdout

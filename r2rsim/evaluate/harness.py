@@ -39,7 +39,6 @@ from ..dataset.read import Run, is_dataset_dir, read_runs
 from ..diagnostics.registry import call
 from ..errors import InputError, PluginError
 from ..limits import MAX_BOOTSTRAP, MAX_SEED, MAX_VUS_BUFFER_S, MAX_VUS_BUFFER_SAMPLES
-from ..schema.scenario import SplitBySeed
 from .metrics import (
     DETECTION_WINDOW_S,
     RunData,
@@ -61,9 +60,18 @@ from .metrics import (
     window_counts,
 )
 from .results import DATASETS_FILE, write_results
+from .splits import (
+    Split,
+    acting_faults,
+    is_faulty,
+    no_training_run,
+    split_by_condition,
+    split_by_seed,
+)
 
-__all__ = ["METRICS", "Evaluation", "Split", "check_settings", "evaluate", "read_datasets",
-           "run_data", "split_by_condition", "split_by_seed"]
+__all__ = ["METRICS", "Evaluation", "Split", "acting_faults", "check_settings", "evaluate",
+           "no_training_run", "read_datasets", "run_data", "split_by_condition",
+           "split_by_seed"]
 
 
 @dataclass(frozen=True)
@@ -139,120 +147,6 @@ OWN_THRESHOLDS = ("val", "fit")
 ALL = "all"
 #: fault stratum of fault-free runs
 NONE = "none"
-
-
-# --------------------------------------------------------------------------- splits
-
-
-@dataclass
-class Split:
-    """Runs by role: fit on ``train``, calibrate on ``val``, score ``test``."""
-
-    train: list[Run]
-    val: list[Run]
-    test: list[Run]
-    name: str = "explicit"
-
-    def describe(self) -> str:
-        """One line: how many runs each role has."""
-        nf = sum(_is_faulty(r) for r in self.test)
-        return (f"split '{self.name}': {len(self.train)} train, {len(self.val)} val, "
-                f"{len(self.test)} test ({nf} faulty)")
-
-
-def acting_faults(run: Run) -> pd.DataFrame:
-    """The run's faults that act in it: a fault whose onset comes after the run's last sample
-    (a web break ended the run first) never acted, and the run is as fault-free as its
-    labels say, for the split, the strata and the metrics alike."""
-    faults = run.faults
-    if "onset_t_s" not in faults.columns or run.samples.empty:  # (a hand-made Run)
-        return faults
-    return faults[faults["onset_t_s"].to_numpy(float) <= run.samples["t_s"].iloc[-1]]
-
-
-def _is_faulty(run: Run) -> bool:
-    return len(acting_faults(run)) > 0 or bool(run.samples["label.is_faulty"].any())
-
-
-def _rule(train: float, val: float, test: float) -> SplitBySeed:
-    """The seed rule of a scenario's ``split: {by: seed}``, with the fractions checked."""
-    fr = {"train": train, "val": val, "test": test}
-    bad = [f"{k}={v:g}" for k, v in fr.items() if not 0.0 <= v <= 1.0]
-    if bad or abs(train + val + test - 1.0) > 1e-9:
-        raise InputError(f"split fractions must lie in [0, 1] and sum to 1, got "
-                         f"{', '.join(bad) or ', '.join(f'{k}={v:g}' for k, v in fr.items())}")
-    return SplitBySeed(by="seed", **fr)
-
-
-def split_by_seed(runs: Sequence[Run], train: float = 0.6, val: float = 0.2,
-                  test: float = 0.2) -> Split:
-    """Assign runs to roles from their seeds, deterministically.
-
-    A run whose scenario names its split (``runs.split``) keeps it; the others are assigned
-    from the seed exactly as a scenario's ``split: {by: seed}`` would. Plug-ins learn from
-    healthy runs only, so every faulty run is a test run whatever its seed.
-
-    Parameters
-    ----------
-    runs : sequence of Run
-    train, val, test : float
-        Fractions for the fault-free runs without a split of their own (summing to 1).
-    """
-    rule = _rule(train, val, test)
-    roles: dict[str, list[Run]] = {"train": [], "val": [], "test": []}
-    for r in runs:
-        if _is_faulty(r):
-            roles["test"].append(r)
-            continue
-        s = r.info.get("split")
-        roles[s if s in roles else rule.assign(int(r.info["seed"]))].append(r)
-    return Split(roles["train"], roles["val"], roles["test"], name="seed")
-
-
-def no_training_run(runs: Sequence[Run]) -> str:
-    """Why :func:`split_by_seed` put none of ``runs`` in train, and what to do."""
-    healthy = [r for r in runs if not _is_faulty(r)]
-    if not healthy:
-        return (f"split 'seed': all {len(runs)} runs have faults, and plug-ins learn from "
-                f"fault-free runs only: add fault-free runs (--data), or name the roles with "
-                f"--train/--val/--test")
-    seeds = sorted({int(r.info["seed"]) for r in healthy})
-    shown = ", ".join(map(str, seeds[:8])) + (", ..." if len(seeds) > 8 else "")
-    return (f"split 'seed': none of the {len(healthy)} fault-free runs (seeds {shown}) falls "
-            f"in train. Each seed is assigned to train, val or test by a hash, 60/20/20 % only "
-            f"on average (docs/diagnostics.md §4), so a few seeds can miss train: add "
-            f"fault-free runs with more seeds, or name the roles with --train/--val/--test")
-
-
-def split_by_condition(runs: Sequence[Run], train: str = "OC1", test: str = "OC2",
-                       val: float = 0.25) -> Split:
-    """Train and calibrate on one operating condition, test on another.
-
-    Fault-free runs of mode ``train`` are split by seed into train and val (a fraction ``val``
-    of them calibrates the threshold); every run of mode ``test`` is a test run. Runs of other
-    modes, and faulty runs of mode ``train``, are not used.
-
-    Parameters
-    ----------
-    runs : sequence of Run
-    train, test : str
-        Operating modes as named in the scenarios' programmes (``runs.operating_mode``).
-    val : float
-        Fraction of the healthy ``train``-mode runs held out for calibration.
-    """
-    modes = sorted({r.mode for r in runs})
-    for role, mode in (("train", train), ("test", test)):
-        if mode not in modes:
-            raise InputError(f"split by condition: no run has the {role} mode '{mode}' "
-                             f"(modes present: {', '.join(m or '(none)' for m in modes)})")
-    rule = _rule(1.0 - val, val, 0.0)
-    out = Split([], [], [], name=f"condition {train}->{test}")
-    for r in runs:
-        if r.mode == test:
-            out.test.append(r)
-        elif r.mode == train and not _is_faulty(r):
-            (out.val if rule.assign(int(r.info["seed"])) == "val" else out.train).append(r)
-    return out
 
 
 def read_datasets(paths: Sequence[str | Path], verify: bool = True,
@@ -560,7 +454,7 @@ def _sha(obj) -> str:
 
 def _check_healthy(runs: Sequence[Run], role: str) -> None:
     for r in runs:
-        if _is_faulty(r):
+        if is_faulty(r):
             raise InputError(f"{r.path}: run {r.run_id} has faults; {role} runs must be "
                              f"fault-free (plug-ins learn from healthy data only)")
 
