@@ -197,16 +197,36 @@ def test_savitzky_golay_derivatives_and_group_delay():
     np.testing.assert_allclose(D[0][:, 0], X[:, 0], atol=1e-10)
     np.testing.assert_allclose(D[1][:, 0], 2 - t, atol=1e-9)
     np.testing.assert_allclose(D[1][60:-60, 1], np.cos(t[60:-60]), atol=2e-5)
-    # causal: past samples only, estimates of the instant half a window back
+    # causal: past samples only, estimates of the instant half a window back, the values
+    # and the derivatives alike (both aligned at t - delay)
     Dc, delay_c = savgol_derivatives(X, dt, w, 3, 1, causal=True)
     assert delay_c == pytest.approx(25 * dt)
-    k = np.arange(100, len(t))
-    np.testing.assert_allclose(Dc[0][k, 0], 3 + 2 * (t[k] - delay_c) - 0.5 * (t[k] - delay_c)**2,
-                               atol=1e-9)
-    assert np.all(np.isnan(Dc[0][:25]))
+    k = np.arange(w - 1, len(t))
+    td = t[k] - delay_c
+    np.testing.assert_allclose(Dc[0][k, 0], 3 + 2 * td - 0.5 * td**2, atol=1e-9)
+    np.testing.assert_allclose(Dc[1][k, 0], 2 - td, atol=1e-9)
+    np.testing.assert_allclose(Dc[1][k, 1], np.cos(td), atol=2e-5)
+    # no full window behind the first w - 1 samples: no estimate (the centred filter's
+    # edge fit there would read samples up to w - 1)
+    assert np.all(np.isnan(Dc[:, :w - 1])) and np.all(np.isfinite(Dc[:, w - 1:]))
+    # causality: the estimates from samples 0..k are those of the whole record
+    for k in (w - 1, w, 200, len(t) - 2):
+        Dk, _ = savgol_derivatives(X[:k + 1], dt, w, 3, 1, causal=True)
+        np.testing.assert_array_equal(Dk, Dc[:, :k + 1])
+    # the centred filter reads half a window ahead: cutting the record changes its end
+    Dk, _ = savgol_derivatives(X[:201], dt, w, 3, 1)
+    assert np.max(np.abs(Dk[1][-25:, 1] - D[1][175:201, 1][-25:])) > 1e-4
     # a drop-out is bridged, not propagated
     Xn = X.copy()
     Xn[200, 0] = np.nan
     assert np.all(np.isfinite(savgol_derivatives(Xn, dt, w, 3, 1)[0]))
+    # causal: the bridge reads sample 201, so the estimate at 200 itself is NaN (that
+    # channel only); from 201 on the bridged record is used, as in the centred filter
+    Dn, _ = savgol_derivatives(Xn, dt, w, 3, 1, causal=True)
+    assert np.all(np.isnan(Dn[:, 200, 0])) and np.all(np.isfinite(Dn[:, 200, 1]))
+    assert np.all(np.isfinite(Dn[:, 201:]))
+    for k in (200, 201, 230):
+        np.testing.assert_array_equal(savgol_derivatives(Xn[:k + 1], dt, w, 3, 1, True)[0],
+                                      Dn[:, :k + 1])
     with pytest.raises(InputError, match="odd"):
         savgol_derivatives(X, dt, 50, 3)

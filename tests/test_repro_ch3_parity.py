@@ -39,8 +39,10 @@ def test_sweep_subsets_are_valid_sweeps(study, tmp_path):
 
 
 def _result(**over):
-    far = pd.DataFrame({"OC1": {"model": 0.01, "literal": 0.01, "scheduled": 0.01},
-                        "OC2": {"model": 0.02, "literal": 0.95, "scheduled": 0.02}})
+    far = pd.DataFrame({"OC1": {"model": 0.001, "literal": 0.01,
+                                "model, per-second time base": 0.001},
+                        "OC2": {"model": 0.02, "literal": 0.95,
+                                "model, per-second time base": 0.15}})
     sig = pd.DataFrame(
         {"r1": [-4, -1, 1, 4, 4, 1, -1, -4], "r2": [0, 0, 0, 0, -4, -1, 1, 4],
          "r3": [-5, -2, 2, 5, 0, 0, 0, 0]},
@@ -68,6 +70,12 @@ def test_assertions_pass_and_fail_on_the_numbers(study):
     failed = [r["assertion"] for r in c.rows if r["result"] == "FAIL"]
     assert len(failed) == 3 and not c.ok
     assert any("literal" in f for f in failed) and any("sensitivity" in f for f in failed)
+    # the OC1 design's model residual at OC2: bounded like OC1 (0.02), however low the OC1
+    # FAR (0.001 here: 20 × it passes)
+    bad = _result()
+    bad["far"].loc["model", "OC2"] = 0.0201
+    failed = [r["assertion"] for r in study.check_all(bad).rows if r["result"] == "FAIL"]
+    assert failed == ["FAR OC2, model mode designed on OC1"]
     md = study.md(c.table(), index=False)
     assert md.count("\n") == len(c.rows) + 1 and "\\|z\\|" in md
 

@@ -16,7 +16,7 @@ from ._design import KINDS, design_relation, sensitivity
 from ._model import NonlinearModel, registration_model
 from ._signal import savgol_derivatives, savgol_window_samples
 
-MODES = ("literal", "model", "scheduled")
+MODES = ("literal", "model")
 TIME_BASES = ("travel", "time")
 
 
@@ -78,6 +78,23 @@ class ParitySpaceDetector(Diagnostic):
     3-2). Residuals are in newton-equivalents; ``statistic`` = max_j |r_j|/σ_j with σ_j from
     the healthy training runs.
 
+    By default the plug-in is causal (an online method): the statistic at sample k uses
+    samples 0..k only. Every channel and its derivative come from the same Savitzky-Golay
+    window ending at sample k, evaluated at the window's centre, so all the signals of a
+    residual (measured values, their derivatives, the inputs and x̂) refer to the same
+    instant t_k − (window − 1)/2·dt: the residuals are aligned and lag by that group delay
+    (``delay_s_``, 1.5 s with the default 3 s window), and the first window − 1 samples of a
+    run have no statistic (NaN). ``causal=False`` is the offline variant: the centred filter
+    uses up to half a window of future samples, so the residuals of a step fault move up to
+    half a window before its onset.
+
+    There is no operating-point scheduling of Ω: with the ``travel`` time base ∇_x O in the
+    scaled rows is [1, −v0/L, 1, −v0/L] at every steady operating point, so Ω re-solved at the
+    current point equals the design point's (r1 exactly, r2 and r3 to about 5e-5 between
+    OC1 and OC2 of the registration line). What keeps the OC1 design valid at OC2 is the
+    ``model`` residual Ω(Y − O(x̂, u)) instead of the linearised ``literal`` one, with the
+    travel time base.
+
     Parameters
     ----------
     line : str, optional
@@ -97,17 +114,18 @@ class ParitySpaceDetector(Diagnostic):
     design : {"fault_normalised", "unit_norm"}
         Normalisation of the min-max relation: ω F = 1 for unit faults on A and on B (the
         default), or the thesis's ‖ω‖ = 1, which can be blind to a sensor's faults.
-    mode : {"model", "literal", "scheduled"}
+    mode : {"model", "literal"}
         ``literal``: Ω(Y − E·U) centred on the training data (the thesis's linearised
-        residual; it fails away from the design point); ``model``: Ω(Y − O(x̂, u));
-        ``scheduled``: as ``model`` with Ω re-solved at the current operating point every
-        ``schedule_step_s``.
+        residual; it fails away from the design point); ``model``: Ω(Y − O(x̂, u)), which
+        holds at every operating point to first order in x̂ − x.
     savgol_window_s : float
         Savitzky-Golay window [s], the same on every channel.
     savgol_order : int
         Savitzky-Golay polynomial order (≥ 2).
     causal : bool
-        Use past samples only (the statistic then lags by half the window).
+        True (the default): past samples only; the residuals describe the instant half a
+        window back (``delay_s_``) and are NaN for the first window − 1 samples. False: the
+        centred filter (offline: it uses up to half a window of future samples).
     time_base : {"travel", "time"}
         ``travel``: derivative rows per metre of web, scaled to the design speed (ẏ·v0/v):
         the span's dynamics scale with L/v, so the relations hold at every speed;
@@ -116,8 +134,6 @@ class ParitySpaceDetector(Diagnostic):
         Relative spread of EA in the design corners (EA·(1 ± spread)).
     pitch_spread_m : float
         Spread of L0 in the design corners [m].
-    schedule_step_s : float
-        Re-design interval of ``mode="scheduled"`` [s].
     signature_z : float
         Scale of the signature match of :meth:`rank_channels`: each relation's |r_j|/σ_j
         enters capped at 3·signature_z, so one huge residual does not outvote the others.
@@ -137,6 +153,9 @@ class ParitySpaceDetector(Diagnostic):
         Which relation uses which sensor.
     center_, sigma_ : ndarray (3,)
         Training mean and standard deviation of each relation.
+    delay_s_ : float
+        Group delay of the residuals [s]: with ``causal=True`` the statistic at sample k
+        describes the instant t_k − delay_s_; 0 with ``causal=False``.
     threshold_ : float
     """
 
@@ -152,10 +171,10 @@ class ParitySpaceDetector(Diagnostic):
                  downstream_speed: str = "meas.u_out.speed_rad_s",
                  upstream_tension: str = "meas.lc_unwind.tension_N",
                  design: str = "fault_normalised", mode: str = "model",
-                 savgol_window_s: float = 3.0, savgol_order: int = 2, causal: bool = False,
+                 savgol_window_s: float = 3.0, savgol_order: int = 2, causal: bool = True,
                  time_base: str = "travel",
                  modulus_spread: float = 0.02, pitch_spread_m: float = 5e-6,
-                 schedule_step_s: float = 1.0, signature_z: float = 3.0,
+                 signature_z: float = 3.0,
                  alpha: float = 0.01):
         self.line = line
         self.web_EA_N = web_EA_N
@@ -176,7 +195,6 @@ class ParitySpaceDetector(Diagnostic):
         self.time_base = time_base
         self.modulus_spread = modulus_spread
         self.pitch_spread_m = pitch_spread_m
-        self.schedule_step_s = schedule_step_s
         self.signature_z = signature_z
         self.alpha = alpha
 
@@ -207,7 +225,7 @@ class ParitySpaceDetector(Diagnostic):
         if not isinstance(self.causal, bool):
             raise InputError(f"parity: causal must be true or false, got {self.causal!r}")
         for key in ("web_EA_N", "span_length_m", "drive_radius_m", "downstream_radius_m",
-                    "savgol_window_s", "schedule_step_s", "signature_z"):
+                    "savgol_window_s", "signature_z"):
             if not (np.isfinite(v := self._number(key)) and v > 0):
                 raise InputError(f"parity: {key} must be a positive number, "
                                  f"got {getattr(self, key)!r}")
@@ -222,8 +240,7 @@ class ParitySpaceDetector(Diagnostic):
         # a fit would overflow or allocate without bound
         for key, low, high, unit in (("modulus_spread", 0.0, 0.5, ""),
                                      ("pitch_spread_m", 0.0, 1e-3, " m"),
-                                     ("savgol_window_s", 0.0, 600.0, " s"),
-                                     ("schedule_step_s", 1e-3, 1e6, " s")):
+                                     ("savgol_window_s", 0.0, 600.0, " s")):
             if not low <= self._number(key) <= high:
                 raise InputError(f"parity: {key} must be from {low:g} to {high:g}{unit}, "
                                  f"got {getattr(self, key)!r}")
@@ -283,7 +300,8 @@ class ParitySpaceDetector(Diagnostic):
 
     def operating_points(self, frame: pd.DataFrame) -> np.ndarray:
         """p = [x̂, ω_d, ω_o, T_up] of every sample (T, 4), NaN where a channel is missing
-        (after :meth:`reduced_model`)."""
+        (after :meth:`reduced_model`). With ``causal=True`` the row of sample k describes the
+        instant half a Savitzky-Golay window back and the first window − 1 rows are NaN."""
         s = self._signals(frame)
         EA, L0 = float(self.physical_["web_EA_N"]), float(self.physical_["relaxed_pitch_m"])
         P = np.vstack([self._xhat(s, EA, L0)[None], s["u"]]).T
@@ -292,7 +310,14 @@ class ParitySpaceDetector(Diagnostic):
 
     # ---- signals -----------------------------------------------------------------------------
     def _signals(self, frame: pd.DataFrame) -> dict:
-        """Smoothed stack Y (4, T), inputs u (3, T), u̇ (3, T), the state estimate x̂ (T,)."""
+        """Smoothed stack Y (4, T), inputs u (3, T), u̇ (3, T), the samples without a
+        residual (``bad``) and the group delay [s] of the estimates.
+
+        Every channel goes through the same window and is evaluated at the same point of it
+        (:func:`savgol_derivatives`), so in causal mode the measured values, their
+        derivatives and the inputs of a relation all refer to the same instant, delayed by
+        the same group delay: nothing needs re-aligning.
+        """
         t = frame["t_s"].to_numpy(float) if "t_s" in frame else np.arange(len(frame)) * 0.01
         dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.01
         X = frame[self.channels].to_numpy(float)
@@ -304,7 +329,10 @@ class ParitySpaceDetector(Diagnostic):
             raise InputError(f"parity: {exc.message} (savgol_window_s = "
                              f"{self.savgol_window_s!r} s)") from None
         (yA, yB, wd, wo, tu), (dA, dB, dwd, dwo, dtu) = D[0].T, D[1].T
-        bad = ~np.all(np.isfinite(X), axis=1) | ~np.isfinite(yA)
+        # a drop-out in the raw sample k marks sample k (not the instant it describes in causal
+        # mode): the interpolation bridging it reads the next reading, which is not there yet
+        # at k; NaN estimates (the causal filter's first window - 1 samples) have no residual
+        bad = ~np.all(np.isfinite(X), axis=1) | ~np.isfinite(D).all(axis=(0, 2))
         return {"t": t, "Y": np.vstack([yA, dA, yB, dB]), "u": np.vstack([wd, wo, tu]),
                 "du": np.vstack([dwd, dwo, dtu]), "bad": bad, "delay": delay}
 
@@ -334,6 +362,7 @@ class ParitySpaceDetector(Diagnostic):
                        for s in sigs])
         self.design_point_ = P.mean(axis=1)
         self.design_speed_m_s_ = float(self._speed(self.design_point_[2]))
+        self.delay_s_ = float(sigs[0]["delay"])
         self.S_ = self._scenario_matrices(sigs, EA, L0)
         if hasattr(self, "fault_signs_"):  # a re-fit chooses the signs again
             del self.fault_signs_
@@ -393,20 +422,17 @@ class ParitySpaceDetector(Diagnostic):
             dG[2] -= G * (dsc / sc**2)[:, None]
         return G / sc[:, None], dG
 
-    def _relations(self, p, start=None, previous=None) -> np.ndarray:
+    def _relations(self, p) -> np.ndarray:
         """Ω (3 x 4, on the scaled stack) at the point p = [x, u]: the min-max mixed
         relation, then the single-sensor ones in the thesis's order (B only, A only)."""
         model = self.model_
         N, _ = self._N(p)
         single = model.sensor_relations(p[:1], p[1:], scale=self._rowscale_at(p))[::-1]
-        d = design_relation(self.S_, N, self._faults(), self.design, start=start,
+        d = design_relation(self.S_, N, self._faults(), self.design,
                             signs=getattr(self, "fault_signs_", None))
         if not hasattr(self, "fault_signs_"):
-            self.fault_signs_ = d.signs  # the design point's; kept when re-solving along data
-        W = np.vstack([d.omega, *single])
-        if previous is not None:  # keep signs continuous along data
-            W *= np.sign(np.sum(W * previous, axis=1))[:, None]
-        return W
+            self.fault_signs_ = d.signs  # the design point's; :meth:`sensitivity` keeps them
+        return np.vstack([d.omega, *single])
 
     def _signature_table(self) -> pd.DataFrame:
         """Which relation uses which sensor (True: a fault on that sensor moves it)."""
@@ -425,11 +451,8 @@ class ParitySpaceDetector(Diagnostic):
             # E(x̂, u)·u̇: the input part of the stack (eq. 3.13); zero for this model's h
             EU = self.model_.input_part(x[None], s["u"], [s["du"]])
             R = self.omega_ @ ((s["Y"] - EU) / self._rowscale(s))
-        elif self.mode == "model":
-            R = self.omega_ @ (self._errors(s, self.model_, EA, L0) / self._rowscale(s))
         else:
-            E = self._errors(s, self.model_, EA, L0) / self._rowscale(s)
-            R = np.einsum("tkn,nt->kt", self._schedule(s), E)
+            R = self.omega_ @ (self._errors(s, self.model_, EA, L0) / self._rowscale(s))
         if center:
             R = R - self.center_[:, None]
         R[:, s["bad"]] = np.nan
@@ -451,18 +474,6 @@ class ParitySpaceDetector(Diagnostic):
                 pk.append(P[:, sel].mean(axis=1))
         return np.array(tk), np.array(pk)
 
-    def _schedule(self, s) -> np.ndarray:
-        """Ω re-solved at the knots and interpolated linearly in time: (T, 3, 4)."""
-        tk, pk = self._knots(s, self.schedule_step_s)
-        Ws, prev = [], self.omega_
-        for p in pk:
-            prev = self._relations(p, start=prev[0], previous=prev)
-            Ws.append(prev)
-        Ws = np.array(Ws)
-        flat = Ws.reshape(len(Ws), -1)
-        out = np.column_stack([np.interp(s["t"], tk, flat[:, j]) for j in range(flat.shape[1])])
-        return out.reshape(len(s["t"]), *Ws.shape[1:])
-
     # ---- the contract --------------------------------------------------------------------------
     def score(self, run):
         """Residuals r1..r3 (newton-equivalents, centred on the healthy training data) and
@@ -478,15 +489,6 @@ class ParitySpaceDetector(Diagnostic):
                         np.nan)
         out.insert(0, "statistic", stat)
         return out
-
-    def calibrate_threshold(self, runs) -> ParitySpaceDetector:
-        """Set ``threshold_`` to the (1 − alpha) quantile of the statistic on held-out healthy
-        runs (the calibration seeds), instead of the training runs."""
-        self._check_fitted()
-        stat = np.concatenate([self.score(r)["statistic"].to_numpy() for r in
-                               (runs if isinstance(runs, (list, tuple)) else [runs])])
-        self.threshold_ = float(np.nanquantile(stat, 1.0 - self.alpha))
-        return self
 
     def rank_channels(self, scores: pd.DataFrame) -> pd.DataFrame:
         """Sensors A and B ordered by how well their signature explains the residuals.
@@ -506,20 +508,33 @@ class ParitySpaceDetector(Diagnostic):
         names[~np.isfinite(scores["statistic"].to_numpy(float))] = np.nan
         return pd.DataFrame(names, index=scores.index)
 
-    def sensitivity(self, run, step_s: float | None = None) -> pd.DataFrame:
+    def sensitivity(self, run, step_s: float = 1.0) -> pd.DataFrame:
         """Post-optimal sensitivity of the mixed relation along a run (thesis Figs. 3-6,
-        3-7): at knots every ``step_s`` (default ``schedule_step_s``) the min-max design is
-        re-solved at the operating point p = [x̂, ω_d, ω_o, T_up] and dJ/dp and dω/dp come
-        from its KKT system (eqs. 3.20-3.22).
+        3-7): at knots every ``step_s`` the min-max design is re-solved at the operating
+        point p = [x̂, ω_d, ω_o, T_up] averaged over the knot's interval, and dJ/dp and dω/dp
+        come from its KKT system (eqs. 3.20-3.22). An analysis of the design, not part of
+        the statistic.
+
+        Parameters
+        ----------
+        run : run or frame
+        step_s : float
+            Knot interval [s], 1 ms to 1e6 s.
 
         Returns
         -------
         pandas.DataFrame
-            ``t_s``, the point ``p.*``, ``J``, ``dJ/d<p>`` and ``domega<i>/d<p>``.
+            ``t_s`` (the mean sample time of the interval; with ``causal=True`` its p
+            describes ``delay_s_`` earlier), the point ``p.*``, ``J``, ``dJ/d<p>`` and
+            ``domega<i>/d<p>``.
         """
         self._check_fitted()
+        if isinstance(step_s, bool) or not isinstance(step_s, (int, float, np.number)) \
+                or not 1e-3 <= step_s <= 1e6:
+            raise InputError(f"parity: step_s must be a number from 0.001 to 1e+06 s, "
+                             f"got {step_s!r}")
         s = self._signals(self._frames(run)[0])
-        tk, pk = self._knots(s, self.schedule_step_s if step_s is None else step_s)
+        tk, pk = self._knots(s, step_s)
         names = ["x", "omega_d", "omega_o", "T_up"]
         rows, start = [], self.omega_[0]
         for t, p in zip(tk, pk, strict=False):

@@ -36,10 +36,24 @@ def savgol_derivatives(X, dt: float, window: int, order: int, max_deriv: int = 1
     max_deriv : int
     causal : bool
         False: the centred (zero-phase) filter of :func:`scipy.signal.savgol_filter`; each
-        estimate refers to its own sample and uses (window − 1)/2 future samples. True: only
-        past samples; the polynomial fitted to the window ending at sample k is evaluated at
-        the window's centre, so every channel and derivative refers to time
-        t_k − (window − 1)/2·dt (the returned group delay).
+        estimate refers to its own sample and uses (window − 1)/2 future samples (an offline
+        filter). True: only samples 0..k enter the estimates at sample k; the polynomial
+        fitted to the window ending at sample k is evaluated at the window's centre, so every
+        channel and every derivative refers to the same instant t_k − (window − 1)/2·dt (the
+        returned group delay): values and derivatives stay aligned with one another. The
+        first window − 1 samples, which have no full window behind them, are NaN, and so is
+        a channel's estimate at its own drop-out samples (the interpolation that bridges a
+        drop-out reads the next valid sample; later estimates read only samples up to
+        their own).
+
+    Notes
+    -----
+    The causal estimates are evaluated at the window's centre, not at its end point (which
+    would have no delay), because the end-point estimates of a quadratic fit are far noisier:
+    for white noise on a 301-sample window of order 2, 3.9 times the variance of the centre
+    value and 15.9 times that of the centre derivative. The centre estimate is the centred
+    filter's, delayed: same noise, same bias, so a relation designed on centred or causal
+    estimates sees the same statistics.
 
     Returns
     -------
@@ -55,6 +69,7 @@ def savgol_derivatives(X, dt: float, window: int, order: int, max_deriv: int = 1
         raise InputError(f"savgol window must be odd and > order ({order}), got {window}")
     if order <= max_deriv:
         raise InputError(f"savgol_order must exceed the highest derivative ({max_deriv})")
+    missing = ~np.isfinite(X)
     X = _fill(X)
     T = len(X)
     if T < window:
@@ -67,10 +82,14 @@ def savgol_derivatives(X, dt: float, window: int, order: int, max_deriv: int = 1
     half = (window - 1) // 2
     for d in range(max_deriv + 1):
         # the fit over the window ending at k evaluated at its centre = the centred filter
-        # one half-window earlier: zero-phase estimate, delayed by half a window
+        # one half-window earlier: zero-phase estimate, delayed by half a window. Only the
+        # centred filter's interior (a plain convolution over [k - half, k + half]) is used:
+        # its first `half` values come from a polynomial fitted to the whole first window,
+        # which would let samples up to window - 1 into the estimates at samples half..window-2
         full = savgol_filter(X, window, order, deriv=d, delta=dt, axis=0, mode="interp")
         out[d, half:] = full[:T - half]
-        out[d, :half] = np.nan
+        out[d, :window - 1] = np.nan
+        out[d][missing] = np.nan
     return out, half * dt
 
 
