@@ -1,6 +1,6 @@
 """hybrid-sov on simulated test-bed data: the physics regressors against r2rsim's true
-tensions (noise-free channels), the stage structure read from the line file, the model and
-the plug-in's parameter checks."""
+tensions (noise-free channels), the stage structure read from the line file, the model, the
+plug-in's parameter checks, and its causal (default) and offline preprocessing."""
 
 from __future__ import annotations
 
@@ -29,6 +29,18 @@ def run(tmp_path_factory):
     return read_runs(d)[0]
 
 
+@pytest.fixture(scope="module")
+def dancer(tmp_path_factory):
+    """80 s of the dancer-failure scenario (seed 1): the arm seizes at 40 s, the first fill
+    starts at about 67 s; returns the run and the fill's start [s]."""
+    d = tmp_path_factory.mktemp("hsov_df") / "df"
+    r2rsim.run_scenario(REPO / "scenarios" / "thesis_realistic" /
+                        "testbed_dancer_failure.yaml", output=d, seed=1, duration=80.0)
+    ev = pd.read_parquet(d / "events.parquet")
+    fill = float(ev.loc[(ev["kind"] == "splice") & (ev["state"] == "fill"), "t_s"].min())
+    return read_runs(d)[0], fill
+
+
 def _noise_free(run):
     """The visible frame with every sensor's noise-free value (``true.*``) in its place."""
     S = run.samples
@@ -54,8 +66,9 @@ def test_physics_regressors_reproduce_true_tensions(run):
     # tolerance: median |error| <= 0.5 N and RMSE <= 1 % of the ~300 N tension; the largest
     # errors are at the abrupt accelerations of the roll change, where the smoothed
     # derivative lags (the thesis's transient spikes)
+    # the thesis's offline (centred) preprocessing: each estimate refers to its own sample
     st = load_stages(LINE)
-    s = F.signals(_noise_free(run), st, "savgol", window_s=0.2)
+    s = F.signals(_noise_free(run), st, "savgol", window_s=0.2, causal=False)
     S = run.samples
     T1 = F.physics_T1(st, s)
     T2 = T1 + F.idler_sum(st, 2, s)
@@ -81,7 +94,7 @@ def test_physics_regressors_reproduce_true_tensions(run):
 def test_models_fit_and_predict(run):
     st = load_stages(LINE)
     frame = run.visible(drive_data=True)
-    s = F.signals(frame, st)
+    s = F.signals(frame, st, causal=False)        # estimates at their own sample, as the truth
     hm = HybridModel(st, kind="tobit").fit([s])
     p = hm.predict(s)
     S = run.samples
@@ -115,6 +128,12 @@ def test_models_fit_and_predict(run):
     ({"line": "/dev/zero"}, "line file /dev/zero is not a regular file"),
     ({"line": str(REPO)}, "is not a regular file"),
     ({"line": str(LINE), "random_state": -1}, "random_state must be null or an integer"),
+    ({"line": str(LINE), "causal": "yes"}, "hybrid-sov: causal must be true or false, got "
+                                           "'yes'"),
+    ({"line": str(LINE), "causal": 1}, "hybrid-sov: causal must be true or false, got 1"),
+    ({"line": str(LINE), "causal": None}, "hybrid-sov: causal must be true or false"),
+    # a whole-run transform reads later samples: refused by the causal default
+    ({"line": str(LINE), "denoise": "wavelet"}, r"denoise='wavelet' .* needs causal=False"),
     # every reading censored: no Tobit maximum (statsmodels warned, the fit went on)
     ({"line": str(LINE), "censor_at": 1e6}, "censor_at=1e\\+06 N censors every stage-2 "
                                              "load-cell reading of the training runs"),
@@ -156,19 +175,17 @@ def test_wavelet_option_without_pywavelets_names_the_extra(monkeypatch):
         F.wavelet_denoise(np.zeros(64))
 
 
-def test_plugin_detects_the_seized_dancer_at_the_roll_change(run, tmp_path):
+def test_plugin_detects_the_seized_dancer_at_the_roll_change(run, dancer):
     # the arm seizes at 40 s; nothing observable changes until the fill (about 67 s for
-    # seed 1), when the seized dancer cannot store web and the web goes slack
-    r2rsim.run_scenario(REPO / "scenarios" / "thesis_realistic" /
-                        "testbed_dancer_failure.yaml", output=tmp_path / "df", seed=1,
-                        duration=80.0)
-    bad = read_runs(tmp_path / "df")[0]
+    # seed 1), when the seized dancer cannot store web and the web goes slack. The default
+    # (causal) plug-in: its first alarm comes 0.24 s (half its window) after the offline
+    # one's (test_causal_detection_lags_the_offline_one_by_half_a_window)
+    bad, fill = dancer
     est = HybridSoV(line=str(LINE)).fit([run])
+    assert est.is_causal()
     scores = est.score(bad)
     alarm = est.decide(scores).to_numpy()
     t = bad.samples["t_s"].to_numpy()
-    ev = pd.read_parquet(tmp_path / "df" / "events.parquet")
-    fill = float(ev.loc[(ev["kind"] == "splice") & (ev["state"] == "fill"), "t_s"].min())
     assert 60.0 < fill < 75.0
     assert not alarm[(t > 5.0) & (t < fill)].any()
     first = t[alarm].min()
@@ -185,3 +202,110 @@ def test_roll_index_steps_at_roll_changes():
                         np.linspace(0.092, 0.09, 10)])
     idx = F.roll_index(R)
     assert idx[0] == 0 and idx[49] == 0 and idx[50] == 1 and idx[-1] == 2
+
+
+# ---- causal (default) and offline preprocessing --------------------------------------------
+def test_causal_preprocessing_is_the_offline_one_delayed_by_half_a_window(run):
+    # the trailing quadratic read at its window's centre is the centred filter one half
+    # window late; the targets (load cell, pitch) are delayed to match, so that every signal
+    # of a row refers to the same instant t_k - delay_s
+    st = load_stages(LINE)
+    frame = run.visible(drive_data=True)
+    c, o = F.signals(frame, st), F.signals(frame, st, causal=False)
+    lag = 12                                   # (25 - 1)/2: 0.5 s at 50 Hz is 25 samples
+    assert c.delay_s == pytest.approx(0.24, rel=1e-9) and o.delay_s == 0.0
+    for name in ("w1", "dw1", "v", "dv", "w4", "dw4", "tau1", "tau4", "alpha", "dalpha",
+                 "T2s", "T2", "Y"):
+        off = getattr(o, name)
+        np.testing.assert_allclose(getattr(c, name)[2 * lag:], off[lag:-lag], rtol=0,
+                                   atol=1e-9 * np.max(np.abs(off)), err_msg=name)
+    # the radius: a 25-sample trailing median instead of the centred 1 s one, within the
+    # reading's noise (0.13 mm per sample); its 8 mm jump at the roll change on the same
+    # instant
+    assert np.max(np.abs(c.R[2 * lag:] - o.R[lag:-lag])) < 3e-4
+    assert np.diff(o.R).max() > 5e-3
+    assert np.argmax(np.diff(c.R)) == np.argmax(np.diff(o.R)) + lag
+    # no estimate before the window has filled
+    assert not c.valid[: 2 * lag].any() and c.valid[2 * lag:].all() and o.valid.all()
+
+
+def test_causal_statistic_uses_no_later_sample(run, dancer):
+    # streaming: scoring the run up to sample k gives, at samples 0..k, what scoring the
+    # whole run gives; across the seizure's roll change and a load-cell drop-out (held at
+    # its last reading, not interpolated towards the next)
+    bad, fill = dancer
+    frame = bad.visible(drive_data=True).copy()
+    frame.loc[frame.index[1000:1040], "meas.lc_stage2.tension_N"] = np.nan   # 20.0-20.8 s
+    k_fill = int(np.searchsorted(frame["t_s"].to_numpy(), fill))
+    ks = (8, 24, 30, 1010, 1045, k_fill + 5, k_fill + 30, len(frame) - 1)
+    est = HybridSoV(line=str(LINE)).fit([run])
+    full = est.score(frame)
+    for k in ks:
+        part = est.score(frame.iloc[: k + 1])
+        assert part.index.equals(frame.index[: k + 1])
+        np.testing.assert_allclose(part.to_numpy(float), full.iloc[: k + 1].to_numpy(float),
+                                   rtol=1e-9, atol=0, equal_nan=True, err_msg=f"k={k}")
+    stat = full["statistic"].to_numpy()
+    assert np.isnan(stat[:24]).all() and np.isfinite(stat[24:1012]).all()
+    # the drop-out: no residual from 1012 (1000 + the delay) to 1051; the moving average
+    # of the residuals (25 samples) carries the earlier ones until 1035
+    assert np.isfinite(stat[1035]) and np.isnan(stat[1036:1052]).all()
+    assert np.isfinite(stat[1052:]).all()
+    # the offline (centred) statistic reads later samples: truncating the run changes it
+    off = HybridSoV(line=str(LINE), causal=False).fit([run])
+    assert not off.is_causal()
+    full_off = off.score(frame)["statistic"].to_numpy()
+    worst = 0.0
+    for k in ks[1:]:
+        part_off = off.score(frame.iloc[: k + 1])["statistic"].to_numpy()
+        ok = np.isfinite(part_off) & np.isfinite(full_off[: k + 1])
+        rel = np.abs(part_off[ok] - full_off[: k + 1][ok]) / np.abs(full_off[: k + 1][ok])
+        worst = max(worst, float(rel.max()))
+    assert worst > 0.1
+
+
+def test_causal_detection_lags_the_offline_one_by_half_a_window(run, dancer):
+    # the same model (the selection tests read the same instants of the line), the alarm
+    # half a window later: measured, the offline one 0.01 s after the fill's start, the
+    # causal one 0.25 s
+    bad, fill = dancer
+    t = bad.samples["t_s"].to_numpy()
+    est = {c: HybridSoV(line=str(LINE), causal=c).fit([run]) for c in (True, False)}
+    assert est[True].delay_s_ == pytest.approx(0.24) and est[False].delay_s_ == 0.0
+    m_c, m_o = est[True].model_, est[False].model_
+    assert m_c.stage12_.selected == m_o.stage12_.selected
+    assert m_c.stage3_.stage3.selected == m_o.stage3_.stage3.selected
+    assert est[True].threshold_ == pytest.approx(est[False].threshold_, rel=0.02)
+    first = {}
+    for c, e in est.items():
+        alarm = e.decide(e.score(bad)).to_numpy()
+        assert not alarm[(t > 5.0) & (t < fill)].any(), c
+        first[c] = t[alarm].min()
+    assert 0.0 <= first[False] - fill < 0.1
+    assert first[True] - first[False] == pytest.approx(0.24, abs=0.04)
+
+
+def test_wavelet_denoising_is_offline_only(run):
+    st = load_stages(LINE)
+    frame = run.visible(drive_data=True)
+    with pytest.raises(InputError, match=r"denoise='wavelet' .* needs causal=False"):
+        F.signals(frame, st, "wavelet")
+    est = HybridSoV(line=str(LINE), denoise="wavelet", causal=False).fit([run])
+    assert not est.is_causal() and np.isfinite(est.threshold_)
+
+
+def test_causal_scoring_needs_the_training_sample_period(run):
+    # the causal filter's coefficients come from the training period, not from the scored
+    # run's time stamps (which would read later samples)
+    frame = run.visible(drive_data=True)
+    slow = frame.assign(t_s=2.0 * frame["t_s"])
+    est = HybridSoV(line=str(LINE)).fit([run])
+    assert est.dt_ == pytest.approx(0.02)
+    with pytest.raises(InputError, match=r"sampled every 0\.04 s, the model was fitted on "
+                                         r"runs sampled every 0\.02 s"):
+        est.score(slow)
+    with pytest.raises(InputError, match=r"training run 2 is sampled every 0\.04 s"):
+        HybridSoV(line=str(LINE)).fit([frame, slow])
+    # offline, every run is filtered at its own period, as before
+    off = HybridSoV(line=str(LINE), causal=False).fit([run])
+    assert off.dt_ is None and np.isfinite(off.score(slow)["statistic"]).any()

@@ -1,4 +1,4 @@
-"""Unit oracles of the hybrid-sov estimators (thesis-methods.md §1.5): Tobit against known
+"""Unit oracles of the hybrid-sov estimators (thesis §2.5, eq. 2.10): Tobit against known
 coefficients, against OLS without censoring and against a hand-computed log-likelihood;
 forward stepwise selection on a synthetic problem."""
 

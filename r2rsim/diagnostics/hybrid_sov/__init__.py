@@ -1,5 +1,5 @@
 """The hybrid multistage stream-of-variation tension model and virtual sensor of Shui (2018)
-Ch. 2 (thesis-methods.md §1): physics regressors per stage, Tobit / OLS with forward
+Ch. 2 (docs/diagnostics.md §9): physics regressors per stage, Tobit / OLS with forward
 stepwise selection, the pitch observation, and the ``hybrid-sov`` plug-in."""
 
 from ._line import LineStages, load_stages

@@ -12,8 +12,8 @@ from . import _features as F
 from ._line import LineStages
 from ._regression import LinearFit, StepwiseResult, forward_stepwise
 
-#: stage-3 candidates offered to stepwise selection (thesis-methods.md §1.2: the union of
-#: §2.5.2, eq. 2.17 and eq. 2.23; the cylinder force is constant and unmeasured)
+#: stage-3 candidates offered to stepwise selection (the union of thesis §2.5.2, eq. 2.17
+#: and eq. 2.23; the cylinder force is constant and unmeasured)
 STAGE3_CANDIDATES = ("idlers3", "alpha", "dalpha", "w_d", "dw_d", "w1", "dw1")
 #: stage-1/2 physics regressors beyond the forced torque balance
 STAGE12_CANDIDATES = ("b1*w1/R", "idlers2", "rho*w*t*R^2*w1^2", "R", "R^2")
@@ -42,12 +42,16 @@ def _stack(dicts: list[dict]) -> dict[str, np.ndarray]:
 
 
 def _select_rows(sigs: list[F.Signals], period_s: float) -> np.ndarray:
-    """Every ``period_s`` seconds of every run, valid rows only (for the selection tests)."""
+    """Every ``period_s`` seconds of every run, valid rows only (for the selection tests).
+
+    The rows start at each run's ``delay_s``: with the causal preprocessing, row k describes
+    the line at t_k - delay_s, so the tests read the same instants of the line as offline
+    (a shifted grid of rows gave another selection on the same data)."""
     rows, start = [], 0
     for s in sigs:
         dt = float(np.median(np.diff(s.t)))
         step = max(1, int(round(period_s / dt)))
-        idx = np.arange(0, len(s.t), step)
+        idx = np.arange(int(round(s.delay_s / dt)), len(s.t), step)
         rows.append(start + idx[s.valid[idx]])
         start += len(s.t)
     return np.concatenate(rows)
@@ -78,7 +82,7 @@ class HybridModel:
     physics regressors (eq. 2.10), fitted to the stage-2 load cell by Tobit (censored at
     ``censor_at``) or OLS with forward stepwise selection. Stage 3 (dancer): T_s3 = d0 +
     d1·T_s2 + selected terms (eq. 2.23), fitted either by the alternating scheme of
-    thesis-methods.md §1.2 against the pitch observation or (``oracle``) against true
+    :meth:`_alternate` against the pitch observation or (``oracle``) against true
     tensions. Stage 4: T_s4 = T_s3 + (J·ω̇ + b·ω - τ)/R (eq. 2.18). Observation: Y = (T_s4/EA
     + 1)·L0(R), L0 = q0 + q1·R³ (eqs. 2.20, 2.24). Stage 5: T_s5 = T_s4 + idler terms.
 
@@ -208,7 +212,7 @@ class HybridModel:
         return res, l0_hat, pred
 
     def _alternate(self, cols3, x4, R3, Y, rows, valid, roll) -> Stage3Fit:
-        """thesis-methods.md §1.2: start from the physics chain (the dancer stage passes
+        """The alternating scheme: start from the physics chain (the dancer stage passes
         the tension on: T_s3 = T_s2 + idler terms), fit L0(R) from the pitch by inverting
         Hooke, back out T_s3 through eq. 2.18, refit stage 3, and iterate. The pitch cannot
         separate an offset of L0 from one of the tension (1 um of L0 reads as EA·1e-6/L0 =

@@ -1,5 +1,5 @@
 """The ``hybrid-sov`` plug-in: the hybrid multistage model as a virtual sensor and a
-residual detector (thesis Ch. 2, thesis-methods.md §1.5)."""
+residual detector (thesis Ch. 2, §2.5-2.6)."""
 
 from __future__ import annotations
 
@@ -27,6 +27,20 @@ class HybridSoV(Diagnostic):
     (``z.*``) and ``statistic`` = the larger |z|. ``decide`` alarms where the statistic
     exceeds its healthy (1 - ``alpha``) quantile.
 
+    By default the plug-in is causal (an online method): the statistic at sample k uses
+    samples 0..k only. Each channel is smoothed and differentiated by a least-squares
+    quadratic over the trailing ``window_s`` window, read at the window's centre (the
+    centred filter's noise; the window's last point would multiply the derivatives' noise
+    variance by about 15). The load cell and pitch readings (the regression targets), the
+    radius and the flags are delayed by the same half window, so every signal of a row
+    refers to one instant, ``delay_s_`` (half the window, 0.24 s at 50 Hz) before the row:
+    the model is the offline one, and the outputs lag by ``delay_s_``. The first window of
+    a run has no statistic (NaN, no alarm). ``causal=False`` is the thesis's offline
+    preprocessing: centred Savitzky-Golay filter, central differences, optional wavelet
+    de-noising of the whole run; each output refers to its own sample, but reads later
+    ones, and the harness marks the results "offline". Wavelet de-noising has no causal
+    form here and needs ``causal=False``.
+
     The model needs drive data (the unwind and driven-roller torques): run the harness with
     ``--drive-data``. Given a :class:`~r2rsim.dataset.read.Run` directly, the plug-in reads
     its visible columns with drive data.
@@ -43,13 +57,24 @@ class HybridSoV(Diagnostic):
         Entry level of forward stepwise selection.
     denoise : {"savgol", "wavelet", None}
         Preprocessing: Savitzky-Golay smoothing and differentiation, the same after wavelet
-        de-noising (needs the ``wavelet`` extra), or none.
+        de-noising (needs the ``wavelet`` extra and ``causal=False``), or none (raw values
+        and central differences, one sample late when causal).
     window_s : float
         Smoothing window [s] (also the moving average of the residuals).
     alpha : float
         False-alarm rate of the threshold on the healthy training runs.
     random_state : int or None
         Unused (the fit is deterministic); kept for the harness.
+    causal : bool
+        True: online, trailing filters with the delay compensated (above); False: the
+        offline, centred preprocessing of the thesis.
+
+    Attributes
+    ----------
+    dt_ : float or None
+        The training runs' sample period [s] (causal only: a scored run must share it).
+    delay_s_ : float
+        Age of each row's estimates [s]: 0 offline, half the smoothing window when causal.
     """
 
     name = "hybrid-sov"
@@ -58,7 +83,8 @@ class HybridSoV(Diagnostic):
     def __init__(self, line: str | None = None, censor_at: float = 0.0,
                  selection: str = "LR", alpha_enter: float = 0.05,
                  denoise: str | None = "savgol", window_s: float = 0.5,
-                 alpha: float = 0.001, random_state: int | None = None):
+                 alpha: float = 0.001, random_state: int | None = None,
+                 causal: bool = True):
         self.line = line
         self.censor_at = censor_at
         self.selection = selection
@@ -67,6 +93,7 @@ class HybridSoV(Diagnostic):
         self.window_s = window_s
         self.alpha = alpha
         self.random_state = random_state
+        self.causal = causal
 
     def _frames(self, runs):
         if not isinstance(runs, (list, tuple)):
@@ -92,6 +119,12 @@ class HybridSoV(Diagnostic):
         if self.denoise not in F.DENOISE:
             raise InputError(f"hybrid-sov: denoise must be 'savgol', 'wavelet' or None, got "
                              f"{self.denoise!r}")
+        if not isinstance(self.causal, (bool, np.bool_)):
+            raise InputError(f"hybrid-sov: causal must be true or false, got "
+                             f"{self.causal!r}")
+        if self.causal and self.denoise == "wavelet":
+            raise InputError("hybrid-sov: denoise='wavelet' de-noises each run as a whole, "
+                             "which reads later samples: it needs causal=False (offline)")
         self._check_alpha()
         if not 0 < self._number("alpha_enter") < 1:
             raise InputError(f"hybrid-sov: alpha_enter must be a number in (0, 1), "
@@ -107,7 +140,30 @@ class HybridSoV(Diagnostic):
         self._check_seed()  # unused by the method, but a value must be one
 
     def _signals(self, frame):
-        return F.signals(frame, self.stages_, self.denoise, self.window_s, self.censor_at)
+        return F.signals(frame, self.stages_, self.denoise, self.window_s, self.censor_at,
+                         causal=bool(self.causal), dt=self.dt_ if self.causal else None)
+
+    def _sample_period(self, frames) -> float:
+        """The training runs' common sample period [s] (the causal filter's coefficients
+        are fixed by it; see :meth:`_check_period`)."""
+        periods = [float(np.median(np.diff(f["t_s"].to_numpy(float)))) for f in frames]
+        for i, p in enumerate(periods, start=1):
+            if not abs(p - periods[0]) <= 1e-3 * periods[0]:
+                raise InputError(f"hybrid-sov: training run {i} is sampled every {p:.6g} s "
+                                 f"and run 1 every {periods[0]:.6g} s: the causal filter "
+                                 f"needs one sample period (or causal=False)")
+        return periods[0]
+
+    def _check_period(self, frame) -> None:
+        """A scored run must be sampled like the training runs: the causal filter uses the
+        training period rather than one estimated from the whole scored run, so that the
+        statistic at a sample depends on no later time stamp."""
+        p = float(np.median(np.diff(frame["t_s"].to_numpy(float))))
+        if not abs(p - self.dt_) <= 1e-3 * self.dt_:
+            raise InputError(f"hybrid-sov: the run is sampled every {p:.6g} s, the model "
+                             f"was fitted on runs sampled every {self.dt_:.6g} s (the "
+                             f"causal filter is fixed by it; causal=False filters each run "
+                             f"at its own period)")
 
     def fit(self, runs):
         frames = self._frames(runs)
@@ -115,6 +171,9 @@ class HybridSoV(Diagnostic):
         self._check_params()
         self.stages_ = load_stages(self.line)
         self.columns_ = F.required_columns(self.stages_)
+        for f in frames:
+            F.check_frame(f, self.stages_)
+        self.dt_ = self._sample_period(frames) if self.causal else None
         for i, f in enumerate(frames, start=1):  # a dead sensor would train on zeros
             dead = [c for c in self.columns_
                     if c in f.columns and not np.isfinite(f[c].to_numpy(float)).any()]
@@ -122,6 +181,7 @@ class HybridSoV(Diagnostic):
                 raise InputError(f"hybrid-sov: training run {i} has no finite sample of "
                                  f"{', '.join(dead)} (a dead sensor cannot train the model)")
         sigs = [self._signals(f) for f in frames]
+        self.delay_s_ = sigs[0].delay_s
         self._check_censoring(sigs)
         kind = "tobit" if self.selection == "LR" else "ols"
         try:
@@ -158,13 +218,16 @@ class HybridSoV(Diagnostic):
         pred = self.model_.predict(s)
         raw = np.column_stack([s.T2 - pred["T_s2"].to_numpy(), s.Y - pred["Y_s4"].to_numpy()])
         raw[~s.valid] = np.nan
-        n = max(1, int(round(self.window_s / float(np.median(np.diff(s.t))))))
+        n = max(1, int(round(self.window_s / s.dt)))
         smooth = pd.DataFrame(raw).rolling(n, min_periods=1).mean().to_numpy()
         return smooth, raw, pred
 
     def score(self, run):
         self._check_fitted()
         f = self._frames(run)[0]
+        if self.causal:
+            F.check_frame(f, self.stages_)
+            self._check_period(f)
         s = self._signals(f)
         smooth, raw, pred = self._residuals(s)
         z = (smooth - self.resid_mean_) / self.resid_std_
