@@ -37,7 +37,7 @@ KEEP = ("t_s", "meas.", "sp.", "label.is_faulty", "label.severity", "label.score
 CONDITIONS = {"OC1": (0.5, 130.0), "OC2": (1.0, 160.0), "OC3": (0.75, 145.0)}
 MAGNITUDES = (0.05, 0.10, 0.15, 0.20)
 #: the GSMMS configuration of the study: the thesis's A-B parity with the fault-normalised
-#: design (thesis-methods.md §3.2), partition on the set-points
+#: design (docs/diagnostics.md §11), partition on the set-points
 STUDY = dict(model_features=[A, B], fault_channels=A, partition_features=["sp.*"],
              random_state=0)
 #: the thesis-literal design: one unit-norm minimum-variance relation (eq. 4.21)
@@ -390,7 +390,7 @@ def study(root: Path, out: Path, plan: Plan) -> list[Check]:
           f"statistics, {plan.test[0]}-{plan.test[-1]} test; A degradations ramped over "
           f"{plan.ramp_s:g} s, fault seeds {plan.fault_seeds[0]}-{plan.fault_seeds[-1]}. "
           "Model: the A-B parity relation (1 s moving averages of sensor A's tension and "
-          "sensor B's pitch), fault-normalised on sensor A (thesis-methods.md §3.2), "
+          "sensor B's pitch), fault-normalised on sensor A (docs/diagnostics.md §11), "
           "partition on the set-points `sp.*`, threshold 2σ of each node's residual. "
           "FAR: alarms over the scored samples of the healthy test runs; dr: alarms over "
           "the samples where the fault is at full size (`label.severity == 1`).", ""]
@@ -438,7 +438,7 @@ def study(root: Path, out: Path, plan: Plan) -> list[Check]:
            "(eq. 4.21). Within a regime the registration loop holds sensor B still, so "
            "that relation is essentially 'B = const' and hardly sees a fault on A (its "
            "detection rate above); the fault-normalised design "
-           "(thesis-methods.md §3.2) is the study's model.", ""]
+           "(docs/diagnostics.md §11) is the study's model.", ""]
     for m in ("OC1", "OC2"):
         checks.append(Check(f"FAR at 2σ, {m}", "≤ 0.07", f"{s[f'far_{m}']:.4f}",
                             s[f"far_{m}"] <= 0.07))
