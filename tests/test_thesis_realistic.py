@@ -26,12 +26,31 @@ def _calibration():
     return module
 
 
-@pytest.mark.parametrize("sweep, n_runs", [("healthy.yaml", 80), ("faults.yaml", 210),
+@pytest.mark.parametrize("sweep, n_runs", [("healthy.yaml", 80), ("faults.yaml", 220),
                                            ("switching.yaml", 10), ("testbed_cycles.yaml", 6),
-                                           ("faults_p2.yaml", 105)])
+                                           ("faults_p2.yaml", 110),
+                                           ("testbed_dancer_failure_sweep.yaml", 6)])
 def test_the_sweeps_plan(sweep, n_runs):
     plan = plan_sweep(SET / sweep)
     assert len(plan.runs) == n_runs
+
+
+#: every sweep file shipped (a sweep names its base scenario with a top-level scenario: key)
+SWEEPS = sorted(p for p in [*SET.glob("*.yaml"), *(REPO / "sweeps").glob("*.yaml")]
+                if any(line.startswith("scenario:")
+                       for line in p.read_text(encoding="utf-8").splitlines()))
+
+
+@pytest.mark.parametrize("sweep", SWEEPS, ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_every_shipped_sweep_has_fault_free_runs(sweep):
+    # r2rsim diagnose --data DIR splits a sweep's own fault-free runs into train and val; a
+    # fault sweep's fault-free runs share the fault runs' seeds (their plants)
+    runs = plan_sweep(sweep).runs
+    healthy = {r.seed for r in runs if not r.scenario_data.get("faults")}
+    faulty = {r.seed for r in runs if r.scenario_data.get("faults")}
+    assert len([r for r in runs if not r.scenario_data.get("faults")]) >= 2
+    if sweep.name in ("faults.yaml", "faults_p2.yaml", "testbed_dancer_failure_sweep.yaml"):
+        assert healthy == faulty
 
 
 def test_local_residual_noise_is_calibrated_reduced():
