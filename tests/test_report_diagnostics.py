@@ -5,6 +5,7 @@ the faults of the datasets), the report for being readable offline and holding e
 from __future__ import annotations
 
 import base64
+import html
 import json
 import math
 import shutil
@@ -401,6 +402,9 @@ def test_report_of_a_diagnose_result(data, diagnosed, tmp_path):
         ["OC2", "sensor.gain:sensor_A"], ["all", "sensor.gain:sensor_A"],
         ["all", "sensor.offset:sensor_A"], ["all", "all"]]
     assert list(tmp_path.iterdir()) == [out]  # no temporary file left
+    # which threshold the columns use is said under the table
+    assert html.escape("Columns without _cal are at each plug-in's own threshold (pca: "
+                       "recalibrated on the val runs at alpha); _cal columns at theta") in text
 
 
 def test_report_finds_the_recorded_datasets(data, diagnosed, tmp_path):

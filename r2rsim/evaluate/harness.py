@@ -611,7 +611,8 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
                                role) for role, rs in (("train", train), ("val", val),
                                                       ("test", test)) for r in rs))
     base = {"method": plugin.name, "params_sha256": _sha(plugin.params),
-            "dataset_sha256": dataset_sha, "split": split, "causal": plugin.causal}
+            "dataset_sha256": dataset_sha, "split": split, "causal": plugin.causal,
+            "own_threshold": "val" if recalibrated else "fit"}
     rule = _Rule(m, h, float(detection_window), steady=window == "steady")
     table = _MetricTable(base, rule, n_boot, seed, max_buffer)
     table.add_strata(test, rd, rd_cal)

@@ -163,7 +163,20 @@ def _summary(table: pd.DataFrame) -> str:
     wide = wide[cols].rename_axis(columns=None).reset_index().rename(
         columns={"series": "method"})
     desc = "; ".join(f"{c}: {METRICS[c].description}" for c in cols if c in METRICS)
-    return _table(wide, table_id="summary") + f"<p class='note'>{html.escape(desc)}</p>"
+    return (_table(wide, table_id="summary") + f"<p class='note'>{html.escape(desc)}</p>"
+            + f"<p class='note'>{html.escape(_thresholds(table))}</p>")
+
+
+def _thresholds(table: pd.DataFrame) -> str:
+    """Which threshold the columns without _cal use, per method (own_threshold column)."""
+    if "own_threshold" not in table.columns:
+        return "Columns without _cal: at each plug-in's own threshold; _cal: at theta."
+    how = {"val": "recalibrated on the val runs at alpha", "fit": "as its fit set it"}
+    by = (table.dropna(subset=["own_threshold"]).groupby("series", sort=False)["own_threshold"]
+          .first())
+    parts = [f"{s}: {how.get(v, v)}" for s, v in by.items()]
+    return ("Columns without _cal are at each plug-in's own threshold (" + "; ".join(parts)
+            + "); _cal columns at theta, calibrated on the val runs at alpha.")
 
 
 def _full(table: pd.DataFrame) -> pd.DataFrame:
