@@ -30,7 +30,10 @@ def test_sweep_subsets_are_valid_sweeps(study, tmp_path):
     path = study._subset_sweep(study.SET / "faults.yaml", tmp_path / "f.yaml",
                                lambda v: v["case"] in cases, [101, 102], 60.0, 30.0)
     # r2rsim makes and validates every run of the subset
-    assert len(plan_sweep(path).runs) == len(plan.cases) * 2
+    runs = plan_sweep(path).runs
+    assert len(runs) == len(plan.cases) * 2
+    # the shorter onset reaches every run, also through the axis that sets the whole entry
+    assert {str(f["onset"]) for r in runs for f in r.scenario_data["faults"]} == {"30.0 s"}
     text = path.read_text(encoding="utf-8")
     assert "onset: 30.0 s" in text and "duration: 60.0 s" in text
     h = study._subset_sweep(study.SET / "healthy.yaml", tmp_path / "h.yaml",

@@ -86,6 +86,10 @@ def _subset_sweep(src: Path, dst: Path, keep, seeds, duration_s, onset_s=None) -
         extra["duration"] = f"{duration_s} s"
     if onset_s is not None:
         extra["faults"] = [{**spec["set"]["faults"][0], "onset": f"{onset_s} s"}]
+        for a in spec["axes"]:  # an axis that sets the whole fault entry carries its onset
+            if a["path"] == f"faults.{spec['set']['faults'][0]['id']}":
+                a["values"] = [v if v is None else {**v, "onset": f"{onset_s} s"}
+                               for v in a["values"]]
     spec["set"] = {**spec.get("set", {}), **extra}
     dst.parent.mkdir(parents=True, exist_ok=True)
     dst.write_text(yaml.safe_dump(spec, sort_keys=False), encoding="utf-8")
