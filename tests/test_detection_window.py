@@ -313,3 +313,20 @@ def test_roc_auc_and_average_precision_agree_with_scikit_learn():
         assert M.roc_auc(s, y) == pytest.approx(roc_auc_score(y, s), abs=1e-12)
         assert M.average_precision(s, y) == pytest.approx(average_precision_score(y, s),
                                                           abs=1e-12)
+
+
+def test_pd_steady_has_its_null_rate():
+    # a fault from sample 4 (2 s at dt 0.5 s) ramping to full size at sample 10 (5 s): the
+    # window of pd is [2 s, 5 s + W], that of pd_steady [5 s, 5 s + W], W = 2 s. The fault-free
+    # run alarms over samples 4..6 (2-3 s) only: chance "detects" the first window, not the
+    # steady one
+    train = [healthy(100), healthy(101)]
+    sev = np.clip((np.arange(20) - 3) / 7.0, 0.0, 1.0)
+    f = make_run([0] * 10 + [9] * 10, onset=4, seed=2)
+    f.samples["label.severity"] = np.where(np.arange(20) >= 4, sev, 0.0)
+    h = healthy(1, [0] * 4 + [9] * 3 + [0] * 13)
+    h.samples["label.severity"] = 0.0
+    ev = evaluate(Passthrough(), train, [h, f], n_boot=0, m=2, window="steady",
+                  detection_window=2.0, own_threshold="fit")
+    assert value(ev, "pd") == 1.0 and value(ev, "pd_null") == 1.0
+    assert value(ev, "pd_steady") == 1.0 and value(ev, "pd_steady_null") == 0.0

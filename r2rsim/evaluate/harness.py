@@ -50,7 +50,7 @@ from .metrics import (
     far,
     isolation_counts,
     localization_counts,
-    null_detection,
+    null_outcomes,
     restrict_to_mode,
     roc_auc,
     run_hit,
@@ -100,6 +100,8 @@ METRICS: dict[str, Metric] = {
     "dd_censored_mean_s": Metric("M5 mean delay, a miss counting its horizon", False, "s"),
     "n_missed": Metric("M5 faulty runs not detected", False),
     "pd_steady": Metric("M4 detection of the fully developed fault", True),
+    "pd_steady_null": Metric("pd_steady's rule at pretend onsets on fault-free test runs",
+                             None),
     "dd_steady_median_s": Metric("M5 median delay from the first severity-1 sample", False,
                                  "s"),
     "roc_auc": Metric("M7 area under the ROC curve of the statistic", True),
@@ -131,7 +133,7 @@ _META = ("fit_s", "exec_s_per_sim_h", "theta")
 #: metrics computed per run (not per sample): left out of the per-regime strata
 _RUN_LEVEL = frozenset({"pd", "pd_null", "dd_median_s", "dd_mean_s", "dd_p90_s",
                         "dd_censored_mean_s", "n_missed", "pd_steady", "dd_steady_median_s",
-                        "hit1", "mdm90"})
+                        "hit1", "mdm90", "pd_steady_null"})
 #: the metrics reported at theta, by the name of the metric at the plug-in's alarms
 _CAL = {"far_ff": "far_ff_cal", "far_pre": "far_pre_cal", "dr": "dr_cal", "pd": "pd_cal",
         "dd_median_s": "dd_median_cal_s", "dr_steady": "dr_steady_cal", "hit1": "hit1_cal",
@@ -278,12 +280,14 @@ def _extra_counts(r: RunData, rule: _Rule) -> dict[str, float]:
     """The counts of the optional metrics: steady-state window (``rule.steady``) and
     channel isolation (with a ranking); zeros (nan delays) when the run has no such data."""
     out = {"st_hit": 0, "st_tot": 0, "st_elig": 0, "st_det": 0, "st_delay": math.nan,
+           "st_t_on": math.nan, "st_w_len": math.nan,
            "hit_r": 0, "hit_n": 0, "loc_hit": 0, "loc_tot": 0}
     if rule.steady and r.severity is not None:
         out["st_hit"], out["st_tot"] = steady_counts(r)
         d = steady_detection(r, rule.m, rule.h, rule.w) if r.is_faulty else None
         if d is not None and d.eligible:
-            out.update(st_elig=1, st_det=int(d.detected), st_delay=d.delay)
+            out.update(st_elig=1, st_det=int(d.detected), st_delay=d.delay,
+                       st_t_on=d.onset_s, st_w_len=d.horizon)
     if r.ranking is not None:
         out["hit_r"], out["hit_n"] = run_hit(r, 1, rule.m, rule.h, rule.w)
         out["loc_hit"], out["loc_tot"] = localization_counts(r)
@@ -393,9 +397,10 @@ class Evaluation:
         t = self.table()
         show = [c for c in ("n_runs", "far_ff", "far_pre", "fa_per_h", "dr", "dr_steady",
                             "pd", "pd_null", "dd_median_s", "dd_p90_s", "n_missed",
-                            "pd_steady", "dd_steady_median_s", "roc_auc", "pr_auc", "vus_pr",
-                            "ia", "hit1", "mdm90", "far_ff_cal", "dr_cal", "dr_steady_cal",
-                            "pd_cal", "pd_null_cal", "dd_median_cal_s", "mdm90_cal")
+                            "pd_steady", "pd_steady_null", "dd_steady_median_s", "roc_auc",
+                            "pr_auc", "vus_pr", "ia", "hit1", "mdm90", "far_ff_cal", "dr_cal",
+                            "dr_steady_cal", "pd_cal", "pd_null_cal", "dd_median_cal_s",
+                            "mdm90_cal")
                 if c in t.columns]
         st = self.settings
         own = {"val": f"own threshold recalibrated on val at alpha={st.get('alpha')}",
@@ -811,8 +816,8 @@ class _NullRates:
         out = np.zeros((len(healthy), 2))
         for row, i in enumerate(healthy):
             todo = [w for w in want if (i, *w) not in self._cache]
-            for w in todo:
-                self._cache[(i, *w)] = null_detection(self.runs[i], [w], self.m)
+            for w, o in zip(todo, null_outcomes(self.runs[i], todo, self.m), strict=True):
+                self._cache[(i, *w)] = (int(o is True), int(o is not None))
             out[row] = np.sum([np.multiply(self._cache[(i, *w)], k) for w, k in want.items()],
                               axis=0)
         return out
@@ -835,10 +840,12 @@ class _NullRates:
         return est, float(lo), float(hi)
 
 
-def _windows(counts: pd.DataFrame) -> list[tuple[float, float]]:
-    """The detection windows (onset time, length) of the eligible faulty runs of ``counts``."""
-    c = counts[counts["elig"] > 0]
-    return list(zip(c["t_on"].astype(float), c["w_len"].astype(float), strict=True))
+def _windows(counts: pd.DataFrame, steady: bool = False) -> list[tuple[float, float]]:
+    """The detection windows (onset time, length) of the eligible faulty runs of ``counts``
+    (``steady``: the windows of ``pd_steady``, from the first severity-1 sample)."""
+    p = "st_" if steady else ""
+    c = counts[counts[f"{p}elig"] > 0]
+    return list(zip(c[f"{p}t_on"].astype(float), c[f"{p}w_len"].astype(float), strict=True))
 
 
 class _MetricTable:
@@ -932,6 +939,9 @@ class _MetricTable:
             self.add(cond, ftype, mag, "n_missed", float(n_faulty - counts["det"].sum()), n=n)
             self.add(cond, ftype, mag, "pd_null", *nulls.rate(healthy, _windows(counts)),
                      n=len(healthy))
+        if counts["st_elig"].sum() and not regime:
+            self.add(cond, ftype, mag, "pd_steady_null",
+                     *nulls.rate(healthy, _windows(counts, steady=True)), n=len(healthy))
         y = np.concatenate([r.faulty[r.scored] for r in runs])
         if y.any() and not y.all():
             s = np.concatenate([r.score[r.scored] for r in runs])

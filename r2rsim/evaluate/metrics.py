@@ -61,6 +61,7 @@ __all__ = [
     "localization_counts",
     "null_detection",
     "null_detection_rate",
+    "null_outcomes",
     "pooled_scores",
     "range_pr_auc",
     "restrict_to_mode",
@@ -727,23 +728,29 @@ def null_detection(run: RunData, windows: Sequence[tuple[float, float]],
     tuple of int
         (windows detected, windows eligible).
     """
+    outcomes = null_outcomes(run, windows, m)
+    return (sum(o is True for o in outcomes), sum(o is not None for o in outcomes))
+
+
+def null_outcomes(run: RunData, windows: Sequence[tuple[float, float]],
+                  m: int = 1) -> list[bool | None]:
+    """Per pretend window of :func:`null_detection`: True ("detected"), False, or None when
+    the window is not eligible (past the run's end, or without a scored sample)."""
     if run.is_faulty:
         raise ValueError("null_detection needs a fault-free run")
     if not windows:
-        return 0, 0
+        return []
     tol = _TIME_RTOL * (run.period if run.n > 1 else 1.0)
     ev = _Events(run, m)
-    det = n = 0
+    out: list[bool | None] = []
     for t0, length in windows:
         tau = int(np.searchsorted(run.t, t0 - tol, side="left"))
-        if tau >= run.n:
-            continue
         end = int(np.searchsorted(run.t, t0 + length + tol, side="right") - 1)
-        if end < tau or not run.scored[tau: end + 1].any():
-            continue
-        n += 1
-        det += ev.first_detection(tau, end) is not None
-    return det, n
+        if tau >= run.n or end < tau or not run.scored[tau: end + 1].any():
+            out.append(None)
+        else:
+            out.append(ev.first_detection(tau, end) is not None)
+    return out
 
 
 def null_detection_rate(runs: Sequence[RunData], windows: Sequence[tuple[float, float]],

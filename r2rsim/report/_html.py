@@ -37,9 +37,9 @@ MARKER = REPORT_MARKER
 FIGURE_METRICS = ("far_ff", "pd", "dd_median_s", "roc_auc")
 #: columns of the summary table, when present (as printed by ``r2rsim diagnose``)
 SUMMARY_METRICS = ("far_ff", "far_pre", "fa_per_h", "dr", "dr_steady", "pd", "pd_null",
-                   "dd_median_s", "dd_p90_s", "n_missed", "pd_steady", "roc_auc", "pr_auc",
-                   "vus_pr", "ia", "hit1", "mdm90", "far_ff_cal", "dr_cal", "pd_cal",
-                   "pd_null_cal", "dd_median_cal_s", "mdm90_cal")
+                   "dd_median_s", "dd_p90_s", "n_missed", "pd_steady", "pd_steady_null",
+                   "roc_auc", "pr_auc", "vus_pr", "ia", "hit1", "mdm90", "far_ff_cal", "dr_cal",
+                   "pd_cal", "pd_null_cal", "dd_median_cal_s", "mdm90_cal")
 #: at most this many runs get a statistic plot (one per fault stratum)
 STATISTIC_RUNS = 6
 #: columns of the full table (the hashes go in the header)
