@@ -132,6 +132,11 @@ def test_models_fit_and_predict(run):
                                            "'yes'"),
     ({"line": str(LINE), "causal": 1}, "hybrid-sov: causal must be true or false, got 1"),
     ({"line": str(LINE), "causal": None}, "hybrid-sov: causal must be true or false"),
+    # a role named by a wrong id: the parameter and the line's candidates
+    ({"line": str(LINE), "load_cell": "lc9"}, r"hybrid-sov: load_cell 'lc9' is not a load "
+                                              r"cell of the line \(load cells: lc_stage2\)"),
+    ({"line": str(LINE), "pitch_sensor": 3}, "hybrid-sov: pitch_sensor must be null or the "
+                                             "id of a sensor of the line, got 3"),
     # a whole-run transform reads later samples: refused by the causal default
     ({"line": str(LINE), "denoise": "wavelet"}, r"denoise='wavelet' .* needs causal=False"),
     # every reading censored: no Tobit maximum (statsmodels warned, the fit went on)

@@ -2,7 +2,7 @@
 Ch. 2 (docs/diagnostics.md §9): physics regressors per stage, Tobit / OLS with forward
 stepwise selection, the pitch observation, and the ``hybrid-sov`` plug-in."""
 
-from ._line import LineStages, load_stages
+from ._line import ROLES, LineStages, load_stages
 from ._model import DataDrivenModel, HybridModel
 from ._plugin import HybridSoV
 from ._regression import (
@@ -15,6 +15,6 @@ from ._regression import (
                           tobit_loglike,
 )
 
-__all__ = ["DataDrivenModel", "HybridModel", "HybridSoV", "LineStages", "load_stages",
+__all__ = ["ROLES", "DataDrivenModel", "HybridModel", "HybridSoV", "LineStages",
            "LinearFit", "StepwiseResult", "fit_defect_classifier", "fit_ols", "fit_tobit",
-           "forward_stepwise", "tobit_loglike"]
+           "forward_stepwise", "load_stages", "tobit_loglike"]

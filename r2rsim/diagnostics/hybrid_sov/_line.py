@@ -1,6 +1,7 @@
-"""The stage structure of a line file (``stage:`` attributes) and the physical constants the
-hybrid model needs (thesis §2.6: unwind, splice idlers, dancer, driven roller,
-registration idlers)."""
+"""The stage structure of a line file and the physical constants the hybrid model needs
+(thesis §2.6: unwind, splice idlers, dancer, driven roller, registration idlers): each role
+found from the elements' ``stage:`` keys and the sensors' types and positions, or named by
+id (the plug-in's role parameters)."""
 
 from __future__ import annotations
 
@@ -25,7 +26,8 @@ class Roller:
 
 @dataclass(frozen=True)
 class LineStages:
-    """The five thesis stages of a line and the channels that observe them.
+    """The five thesis stages of a line and the channels that observe them
+    (:func:`load_stages`).
 
     Attributes
     ----------
@@ -47,6 +49,9 @@ class LineStages:
         ``speed_driven``, ``tension`` (the stage-2 load cell), ``angle`` (dancer), ``pitch``.
     relaxed_pitch : float
         The pitch sensor's nominal relaxed pitch [m] (a starting value only).
+    dancer_position_unit : {"rad", "m"}
+        Unit of the dancer-position reading: the arm angle of a pivoted dancer, the travel
+        of a translating one.
     """
 
     name: str
@@ -63,12 +68,14 @@ class LineStages:
     dancer: str
     sensor_ids: dict
     relaxed_pitch: float
+    dancer_position_unit: str = "rad"
 
     def column(self, key: str) -> str:
         """The visible column of a sensor role (e.g. ``"tension"``)."""
         unit = {"diameter": "diameter_m", "speed_unwind": "speed_rad_s",
                 "speed_idler": "speed_rad_s", "speed_driven": "speed_rad_s",
-                "tension": "tension_N", "angle": "position_rad", "pitch": "pitch_m"}[key]
+                "tension": "tension_N", "angle": f"position_{self.dancer_position_unit}",
+                "pitch": "pitch_m"}[key]
         return f"meas.{self.sensor_ids[key]}.{unit}"
 
     def torque_column(self, element: str) -> str:
@@ -85,74 +92,211 @@ def _roller(e) -> Roller:
     return Roller(e.id, float(e.radius), float(e.inertia), float(e.friction.viscous))
 
 
-def load_stages(path: str | Path) -> LineStages:
-    """Read a line file's stages (thesis §2.6) and sensors.
+#: the role parameters of the plug-in and of :func:`load_stages`: what each names, and what
+#: the model uses it for (docs/diagnostics.md §9.1, "What a line needs")
+ROLES = {
+    "unwind": "the stage-1 unwind (its torque balance, eqs. 2.6, 2.15)",
+    "dancer": "the stage-3 dancer (eq. 2.23)",
+    "driven": "the stage-4 driven roller (its torque balance, eq. 2.18)",
+    "diameter_sensor": "the roll-diameter sensor on the unwind (the radius R)",
+    "unwind_encoder": "the encoder on the unwind (ω1)",
+    "idler_encoder": "the encoder on a stage-2 idler (the web speed v)",
+    "driven_encoder": "the encoder on the driven roller (ω4)",
+    "load_cell": "the load cell on a stage-2 idler (the stage-2 tension T_s2)",
+    "dancer_sensor": "the dancer-position sensor on the dancer (α)",
+    "pitch_sensor": "the pitch-length sensor on the span leaving the driven roller (Y)",
+}
+
+#: the dancer element types (translating, pivoted) of the line schema
+_DANCERS = ("dancer", "pivot_dancer")
+
+#: element roles: (element types, "a ...", plural, stage, what the model needs it for)
+_ELEMENT_ROLES = {
+    "unwind": (("unwind",), "an unwind", "unwinds", 1, "stage 1 (the unwind's torque balance)"),
+    "dancer": (_DANCERS, "a dancer", "dancers", 3, "stage 3 (the dancer stage)"),
+    "driven": (("driven",), "a driven roller", "driven rollers", 4,
+               "stage 4 (the driven roller's torque balance)"),
+}
+
+#: sensor roles: (sensor type, "a ...", plural, the key in LineStages.sensor_ids, what the
+#: model needs the reading for)
+_SENSOR_ROLES = {
+    "diameter_sensor": ("roll_diameter", "a roll-diameter sensor", "roll-diameter sensors",
+                        "diameter", "the unwind radius R"),
+    "unwind_encoder": ("encoder", "an encoder", "encoders", "speed_unwind",
+                       "the unwind speed ω1"),
+    "idler_encoder": ("encoder", "an encoder", "encoders", "speed_idler", "the web speed v"),
+    "driven_encoder": ("encoder", "an encoder", "encoders", "speed_driven",
+                       "the driven roller's speed ω4"),
+    "load_cell": ("load_cell", "a load cell", "load cells", "tension",
+                  "the stage-2 tension T_s2"),
+    "dancer_sensor": ("dancer_position", "a dancer-position sensor",
+                      "dancer-position sensors", "angle", "the dancer position α"),
+    "pitch_sensor": ("pitch_length", "a pitch-length sensor", "pitch-length sensors", "pitch",
+                     "the pitch Y"),
+}
+
+
+def _ids(items) -> str:
+    return ", ".join(x.id for x in items) or "none"
+
+
+def _find_element(line, role: str, given: str | None):
+    """The element of an element role: the one named ``given`` (of the role's type), else
+    the only one of the role's type with the role's ``stage:``."""
+    types, a, plural, stage, need = _ELEMENT_ROLES[role]
+    cands = [e for e in line.elements if e.type in types]
+    if given is not None:
+        for e in cands:
+            if e.id == given:
+                return e
+        raise InputError(f"hybrid-sov: {role} '{given}' is not {a} of the line "
+                         f"({plural}: {_ids(cands)})")
+    if not cands:
+        raise InputError(f"hybrid-sov: {role}: the line has no {a.split(' ', 1)[1]}, needed "
+                         f"for {need}")
+    staged = [e for e in cands if e.stage == stage]
+    if not staged:
+        raise InputError(f"hybrid-sov: {role}: no {a.split(' ', 1)[1]} of the line has stage: "
+                         f"{stage} ({plural}: {_ids(cands)}); mark one stage: {stage} or name "
+                         f"it with {role}=<id>")
+    if len(staged) > 1:
+        raise InputError(f"hybrid-sov: {role}: {len(staged)} {plural} have stage: {stage} "
+                         f"({_ids(staged)}); name one with {role}=<id>")
+    return staged[0]
+
+
+def _find_sensor(line, role: str, given: str | None, places: list[str], where: str,
+                 loc=lambda s: getattr(s, "element", None)):
+    """The sensor of a sensor role: of the role's type, at one of ``places`` (element or
+    span ids; ``where`` says so in words); the one named ``given``, else the only one."""
+    typ, a, plural, _key, need = _SENSOR_ROLES[role]
+    cands = [s for s in line.sensors if s.type == typ]
+    if given is not None:
+        hit = [s for s in cands if s.id == given]
+        if not hit:
+            raise InputError(f"hybrid-sov: {role} '{given}' is not {a} of the line "
+                             f"({plural}: {_ids(cands)})")
+        if loc(hit[0]) not in places:
+            raise InputError(f"hybrid-sov: {role} '{given}' is on {loc(hit[0])}, not {where}")
+        return hit[0]
+    here = [s for s in cands if loc(s) in places]
+    if not here:
+        raise InputError(f"hybrid-sov: {role}: the line has no {a.split(' ', 1)[1]} {where}, "
+                         f"needed for {need} ({plural}: {_ids(cands)})")
+    if len(here) > 1:
+        listed = ", ".join(f"{s.id} on {loc(s)}" for s in here)
+        raise InputError(f"hybrid-sov: {role}: the line has {len(here)} {plural} {where}: "
+                         f"{listed}; name one with {role}=<id>")
+    return here[0]
+
+
+def _idlers(line, index: dict, uw, dancer, drv) -> dict[int, list]:
+    """The idlers of stages 2, 3 and 5: the idlers with ``stage: k``; for a stage no element
+    is marked with, the idlers on the web path: between the unwind and the dancer (2),
+    between the dancer and the driven roller (3), and those right after the driven roller
+    (5). The dancer's roller is always one of stage 3 (it spins like an idler)."""
+    els = line.elements
+    path = {2: [e for e in els[index[uw.id] + 1:index[dancer.id]] if e.type == "idler"],
+            3: [e for e in els[index[dancer.id] + 1:index[drv.id]] if e.type == "idler"],
+            5: []}
+    for e in els[index[drv.id] + 1:]:
+        if e.type != "idler":
+            break
+        path[5].append(e)
+    marked = {e.stage for e in els}
+    out = {}
+    for k in (2, 3, 5):
+        if k in marked:
+            out[k] = [e for e in els if e.stage == k and e.type == "idler"]
+        else:
+            out[k] = path[k]
+    if dancer.id not in {e.id for e in out[3]}:
+        out[3] = sorted(out[3] + [dancer], key=lambda e: index[e.id])
+    return {k: [_roller(e) for e in v] for k, v in out.items()}
+
+
+def load_stages(path: str | Path, roles: dict | None = None) -> LineStages:
+    """Read a line file's stages (thesis §2.6) and the sensors the hybrid model reads.
+
+    Every role is found from the elements' ``stage:`` keys and the sensors' types and
+    positions, unless ``roles`` names it by id (docs/diagnostics.md §9.1, "What a line
+    needs"):
+
+    * ``unwind``, ``dancer``, ``driven``: the only unwind with ``stage: 1``, dancer
+      (translating or pivoted) with ``stage: 3``, driven roller with ``stage: 4``; a given
+      id must be an element of that type. The dancer must lie between the unwind and the
+      driven roller along the web.
+    * the idlers of stages 2, 3 and 5: the idlers with ``stage: k``; a stage no element is
+      marked with takes the idlers on the web path between the unwind and the dancer (2),
+      the dancer and the driven roller (3), and those right after the driven roller (5).
+      The dancer's roller is always one of stage 3.
+    * ``diameter_sensor``, ``unwind_encoder``: the roll-diameter sensor, the encoder on the
+      unwind; ``driven_encoder``: the encoder on the driven roller; ``idler_encoder``,
+      ``load_cell``: the encoder, the load cell on a stage-2 idler; ``dancer_sensor``: the
+      dancer-position sensor on the dancer; ``pitch_sensor``: the pitch-length sensor on
+      the span leaving the driven roller. Found when exactly one sensor of the type is at
+      that place; a given id must be a sensor of the type at that place.
 
     Parameters
     ----------
     path : str or Path
-        A line YAML whose elements carry ``stage: 1..5``: stage 1 an unwind, 2 idlers, 3 a
-        dancer (and idlers), 4 a driven roller, 5 idlers; with a roll-diameter sensor and an
-        encoder on the unwind, an encoder on a stage-2 idler and on the driven roller, a load
-        cell on the last stage-2 idler, a dancer-position sensor and a pitch-length sensor on
-        the span after the driven roller.
+        A line YAML.
+    roles : dict, optional
+        Role name (a key of :data:`ROLES`) -> id in the line, or None to search.
 
     Raises
     ------
     InputError
-        When the file cannot be read or lacks one of these.
+        When the file cannot be read, a given id is not of the role's kind (the message
+        names the parameter and lists the line's candidates), or a role has no candidate or
+        several (the message says what is missing, or asks for the parameter).
     """
     from ...schema.loader import load_line
 
+    roles = dict(roles or {})
+    unknown = sorted(set(roles) - set(ROLES))
+    if unknown:
+        raise InputError(f"hybrid-sov: unknown role {', '.join(unknown)} (roles: "
+                         f"{', '.join(ROLES)})")
     line = load_line(Path(path))
-    by_stage: dict[int, list] = {}
-    for e in line.elements:
-        if e.stage is not None:
-            by_stage.setdefault(int(e.stage), []).append(e)
-    where = f"hybrid-sov: line {Path(path).name}"
-    missing = [k for k in range(1, 6) if k not in by_stage]
-    if missing:
-        raise InputError(f"{where}: no element has stage {missing} (the model needs "
-                         f"stage: attributes 1..5)")
-    unwinds = [e for e in by_stage[1] if e.type == "unwind"]
-    dancers = [e for e in by_stage[3] if "dancer" in e.type]
-    driven = [e for e in by_stage[4] if e.type == "driven"]
-    if not (unwinds and dancers and driven):
-        raise InputError(f"{where}: needs an unwind in stage 1, a dancer in stage 3 and a "
-                         f"driven roller in stage 4")
-    uw, dancer, drv = unwinds[0], dancers[0], driven[0]
-    idlers = {k: [_roller(e) for e in by_stage[k] if e.type in ("idler", "pivot_dancer",
-                                                                 "linear_dancer")]
-              for k in (2, 3, 5)}
+    index = {e.id: i for i, e in enumerate(line.elements)}
+    uw = _find_element(line, "unwind", roles.get("unwind"))
+    dancer = _find_element(line, "dancer", roles.get("dancer"))
+    drv = _find_element(line, "driven", roles.get("driven"))
+    if not index[uw.id] < index[dancer.id] < index[drv.id]:
+        raise InputError(f"hybrid-sov: dancer '{dancer.id}' is not between the unwind "
+                         f"'{uw.id}' and the driven roller '{drv.id}' along the web: the "
+                         f"model needs unwind (stage 1), dancer (stage 3) and driven roller "
+                         f"(stage 4) in this order")
+    idlers = _idlers(line, index, uw, dancer, drv)
+    stage2 = [r.id for r in idlers[2]]
+    on2 = f"on a stage-2 idler ({', '.join(stage2) or 'there is none'})"
+    span = line.spans[index[drv.id]].id   # the span leaving the driven roller
+    found = {
+        "diameter_sensor": ([uw.id], f"on the unwind '{uw.id}'"),
+        "unwind_encoder": ([uw.id], f"on the unwind '{uw.id}'"),
+        "idler_encoder": (stage2, on2),
+        "driven_encoder": ([drv.id], f"on the driven roller '{drv.id}'"),
+        "load_cell": (stage2, on2),
+        "dancer_sensor": ([dancer.id], f"on the dancer '{dancer.id}'"),
+    }
     sensors = {}
-    stage2_ids = [r.id for r in idlers[2]]
-    for s in line.sensors:
-        el = getattr(s, "element", None)
-        if s.type == "roll_diameter" and el == uw.id:
-            sensors["diameter"] = s.id
-        elif s.type == "encoder" and el == uw.id:
-            sensors["speed_unwind"] = s.id
-        elif s.type == "encoder" and el == drv.id:
-            sensors["speed_driven"] = s.id
-        elif s.type == "encoder" and el in stage2_ids and "speed_idler" not in sensors:
-            sensors["speed_idler"] = s.id
-            sensors["speed_idler_radius"] = next(r.radius for r in idlers[2] if r.id == el)
-        elif s.type == "load_cell" and el == stage2_ids[-1]:
-            sensors["tension"] = s.id
-        elif s.type == "dancer_position" and el == dancer.id:
-            sensors["angle"] = s.id
-        elif s.type == "pitch_length":
-            sensors["pitch"] = s.id
-            law = s.relaxed_pitch_law
-            relaxed = float(law.q0) if law is not None else float(s.relaxed_pitch or 0.0)
-    need = ["diameter", "speed_unwind", "speed_idler", "speed_driven", "tension", "angle",
-            "pitch"]
-    absent = [k for k in need if k not in sensors]
-    if absent:
-        raise InputError(f"{where}: no sensor for {', '.join(absent)}")
+    for role, (places, where) in found.items():
+        sensors[_SENSOR_ROLES[role][3]] = _find_sensor(line, role, roles.get(role), places,
+                                                       where).id
+    pitch = _find_sensor(line, "pitch_sensor", roles.get("pitch_sensor"), [span],
+                         f"on the span leaving the driven roller '{drv.id}' ({span})",
+                         loc=lambda s: s.span)
+    sensors["pitch"] = pitch.id
+    enc = next(s for s in line.sensors if s.id == sensors["speed_idler"])
+    sensors["speed_idler_radius"] = next(r.radius for r in idlers[2] if r.id == enc.element)
+    law = pitch.relaxed_pitch_law
+    relaxed = float(law.q0) if law is not None else float(pitch.relaxed_pitch or 0.0)
     w = line.web
     return LineStages(line.name, uw.id, float(uw.roll.core_radius),
                       float(uw.roll.core_inertia), float(uw.friction.viscous),
                       float(w.density), float(w.width), float(w.thickness),
                       float(w.modulus * w.width * w.thickness), idlers, _roller(drv),
-                      dancer.id, sensors, relaxed)
+                      dancer.id, sensors, relaxed,
+                      "rad" if dancer.type == "pivot_dancer" else "m")

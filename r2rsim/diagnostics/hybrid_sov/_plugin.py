@@ -11,7 +11,7 @@ import pandas as pd
 from ...errors import InputError
 from ..base import Diagnostic
 from . import _features as F
-from ._line import load_stages
+from ._line import ROLES, load_stages
 from ._model import HybridModel
 
 _RESIDUALS = ("tension_N", "pitch_m")
@@ -45,10 +45,22 @@ class HybridSoV(Diagnostic):
     ``--drive-data``. Given a :class:`~r2rsim.dataset.read.Run` directly, the plug-in reads
     its visible columns with drive data.
 
+    **What a line needs** (docs/diagnostics.md §9.1): an unwind (stage 1), a dancer (stage
+    3) and a driven roller (stage 4) in this order along the web, at least one idler
+    between the unwind and the dancer (stage 2), and seven sensors: a roll-diameter sensor
+    and an encoder on the unwind, an encoder and a load cell on stage-2 idlers, an encoder
+    on the driven roller, a dancer-position sensor on the dancer and a pitch-length sensor
+    on the span leaving the driven roller. Each role is found from the elements' ``stage:``
+    keys and the sensors' types and positions (one candidate each); a role parameter below
+    names it by id instead, which overrides the search. A stage no element is marked with
+    takes its idlers from the web path (:func:`load_stages`). A wrong id, a missing
+    role or an ambiguous one is refused by ``fit`` with one ``InputError`` naming the
+    parameter and the line's candidates.
+
     Parameters
     ----------
     line : str or None
-        Path of the line file whose ``stage:`` attributes define the stages (required).
+        Path of the line file whose stages and sensors the model reads (required).
     censor_at : float
         Lower range limit of the stage-2 load cell [N]: readings at or below are censored.
     selection : {"LR", "F"}
@@ -68,6 +80,22 @@ class HybridSoV(Diagnostic):
     causal : bool
         True: online, trailing filters with the delay compensated (above); False: the
         offline, centred preprocessing of the thesis.
+    unwind, dancer, driven : str or None
+        Ids of the stage-1 unwind, the stage-3 dancer (translating or pivoted) and the
+        stage-4 driven roller. None: the only element of that type with ``stage:`` 1, 3, 4.
+    diameter_sensor, unwind_encoder : str or None
+        Ids of the roll-diameter sensor and the encoder on the unwind. None: the only one
+        there.
+    idler_encoder, load_cell : str or None
+        Ids of the encoder (the web speed) and of the load cell (the stage-2 tension the
+        model is fitted to) on stage-2 idlers. None: the only one on a stage-2 idler.
+    driven_encoder : str or None
+        Id of the encoder on the driven roller. None: the only one there.
+    dancer_sensor : str or None
+        Id of the dancer-position sensor on the dancer. None: the only one there.
+    pitch_sensor : str or None
+        Id of the pitch-length sensor on the span leaving the driven roller. None: the only
+        one there.
 
     Attributes
     ----------
@@ -84,7 +112,11 @@ class HybridSoV(Diagnostic):
                  selection: str = "LR", alpha_enter: float = 0.05,
                  denoise: str | None = "savgol", window_s: float = 0.5,
                  alpha: float = 0.001, random_state: int | None = None,
-                 causal: bool = True):
+                 causal: bool = True, unwind: str | None = None, dancer: str | None = None,
+                 driven: str | None = None, diameter_sensor: str | None = None,
+                 unwind_encoder: str | None = None, idler_encoder: str | None = None,
+                 driven_encoder: str | None = None, load_cell: str | None = None,
+                 dancer_sensor: str | None = None, pitch_sensor: str | None = None):
         self.line = line
         self.censor_at = censor_at
         self.selection = selection
@@ -94,6 +126,16 @@ class HybridSoV(Diagnostic):
         self.alpha = alpha
         self.random_state = random_state
         self.causal = causal
+        self.unwind = unwind
+        self.dancer = dancer
+        self.driven = driven
+        self.diameter_sensor = diameter_sensor
+        self.unwind_encoder = unwind_encoder
+        self.idler_encoder = idler_encoder
+        self.driven_encoder = driven_encoder
+        self.load_cell = load_cell
+        self.dancer_sensor = dancer_sensor
+        self.pitch_sensor = pitch_sensor
 
     def _frames(self, runs):
         if not isinstance(runs, (list, tuple)):
@@ -105,7 +147,7 @@ class HybridSoV(Diagnostic):
     def _check_params(self):
         if self.line is None:
             raise InputError("hybrid-sov needs line=<path of the line file> (its stage: "
-                             "attributes define the model)")
+                             "keys, or the role parameters, define the model)")
         if not isinstance(self.line, (str, Path)):
             raise InputError(f"hybrid-sov: line must be the path of a line file, "
                              f"got {self.line!r}")
@@ -138,6 +180,16 @@ class HybridSoV(Diagnostic):
             raise InputError(f"hybrid-sov: censor_at must be a finite number of newtons "
                              f"within ±1e6 N, got {self.censor_at!r}")
         self._check_seed()  # unused by the method, but a value must be one
+        for role in ROLES:
+            value = getattr(self, role)
+            if value is not None and not isinstance(value, str):
+                kind = "an element" if role in ("unwind", "dancer", "driven") else "a sensor"
+                raise InputError(f"hybrid-sov: {role} must be null or the id of {kind} of "
+                                 f"the line, got {value!r}")
+
+    def _roles(self) -> dict:
+        """The role parameters given (role -> id; None: found from the line)."""
+        return {role: getattr(self, role) for role in ROLES}
 
     def _signals(self, frame):
         return F.signals(frame, self.stages_, self.denoise, self.window_s, self.censor_at,
@@ -169,7 +221,7 @@ class HybridSoV(Diagnostic):
         frames = self._frames(runs)
         self.required_columns(frames[0])
         self._check_params()
-        self.stages_ = load_stages(self.line)
+        self.stages_ = load_stages(self.line, self._roles())
         self.columns_ = F.required_columns(self.stages_)
         for f in frames:
             F.check_frame(f, self.stages_)
