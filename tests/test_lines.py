@@ -19,7 +19,7 @@ from conftest import REPO, write
 SPEEDS = {"pet_film_line": 5.0, "pet_film_line_dancer": 5.0, "newsprint_line": 12.0,
           "battery_foil_line": 1.0, "thesis_testbed": 0.5, "registration": 0.5,
           "pet_film_line_torque_modes": 5.0, "registration_realistic": 0.5,
-          "thesis_testbed_realistic": 0.5}
+          "thesis_testbed_realistic": 0.5, "second_registration_line": 1.5}
 
 
 def test_every_shipped_line_is_listed():
