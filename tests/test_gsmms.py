@@ -1,5 +1,6 @@
 """GSMMS (thesis Ch. 4): the growing map's stopping criteria, local relations by SGD against
-the exact oracle, per-node detection, online growth, and the plug-in's parameter checks,
+the exact oracle, per-node detection, online growth, the default's response to a fault on
+every model channel, and the plug-in's parameter checks,
 on synthetic data with known regimes; the physics term of eq. 4.21 also on two short runs
 of the calibrated registration line."""
 
@@ -268,12 +269,82 @@ def test_fault_normalised_relation_sees_a_fault_the_unit_norm_one_misses():
                              "meas.b": level / 2 + r.standard_normal(n)})
 
     train = [frame(s, lv) for s in (1, 2) for lv in (100.0, 130.0)]
-    unit = GSMMS(**PARAMS).fit(train)
+    unit = GSMMS(fault_channels=None, **PARAMS).fit(train)  # the thesis's relation
     fn = GSMMS(fault_channels="meas.a", **PARAMS).fit(train)
     assert unit.n_nodes_ >= 2 and fn.n_nodes_ == 2
+    assert unit.models_.omega[0].shape == (2, 1)
     faulty = [frame(9, 100.0, fault=15.0)]
     assert alarm_rate(unit, faulty) < 0.1
     assert alarm_rate(fn, faulty) > 0.9
+    # the old unit-norm design still takes several relations
+    two = GSMMS(fault_channels=None, n_relations=2, **PARAMS).fit(train)
+    assert two.models_.omega[0].shape == (2, 2)
+
+
+def held_frame(seed, level, fault_a=0.0, fault_b=0.0, n=3000):
+    """meas.b held still within a regime (noise 1), meas.a free (noise 3), both following
+    the set-point: the case where one unit-norm relation is blind to a."""
+    r = np.random.default_rng(seed)
+    return pd.DataFrame({"t_s": np.arange(n) * 0.01, "sp.level": level,
+                         "meas.a": level + 3 * r.standard_normal(n) + fault_a,
+                         "meas.b": level / 2 + r.standard_normal(n) + fault_b})
+
+
+def test_default_sees_a_fault_on_every_model_channel():
+    # the default (fault_channels="all"): one relation per model channel with unit response
+    # to that channel's fault, so a step on either channel moves the statistic by its size
+    # in node σ; the unit-norm relation of the same data moves by less than 1σ for a
+    train = [held_frame(s, lv) for s in (1, 2, 3) for lv in (100.0, 130.0)]
+    est = GSMMS(**PARAMS).fit(train)
+    est.calibrate([held_frame(s, lv) for s in (4, 5) for lv in (100.0, 130.0)])
+    assert est.fault_channels == "all"
+    for om in est.models_.omega:  # e_j·Ω_j = 1 for every node and channel
+        np.testing.assert_allclose(np.diag(om), 1.0, atol=1e-9)
+    unit = GSMMS(fault_channels=None, **PARAMS).fit(train)
+    unit.calibrate([held_frame(s, lv) for s in (4, 5) for lv in (100.0, 130.0)])
+
+    def shift(e, **fault):  # mean statistic, faulty minus healthy (same noise, seed 9)
+        return float(np.mean(e.score(held_frame(9, 100.0, **fault))["statistic"])
+                     - np.mean(e.score(held_frame(9, 100.0))["statistic"]))
+
+    k = 3.0
+    # steps of 5σ of each channel's own noise (a: 15, b: 5)
+    assert shift(est, fault_a=15.0) > k and shift(est, fault_b=5.0) > k
+    assert alarm_rate(est, [held_frame(9, 100.0, fault_a=15.0)]) > 0.9
+    assert alarm_rate(est, [held_frame(9, 100.0, fault_b=5.0)]) > 0.9
+    # the unit-norm relation of the same map is "b = const", blind to a
+    assert shift(unit, fault_a=15.0) < 1.0
+
+
+def test_default_sees_both_sensors_of_the_registration_line(registration_runs):
+    # 20 s of OC1 and OC2, relations over sensor A and sensor B by default (fault_channels
+    # "all"; their residual σ here: about 2 N and 3 µm): a step offset of 15 N on A (12 % of
+    # OC1's 130 N) and of 20 µm on B's 0.25 m pitch (a gain of 8e-5) from t = 10 s each
+    # move the statistic by more than 3 node σ on average over the faulty samples
+    est = GSMMS(model_features=[A_COL, B_COL], random_state=0).fit(registration_runs)
+    assert len(est.models_.omega[0].T) == 2
+    for run in registration_runs:
+        f = run.visible()
+        late = (f["t_s"] >= 12.0).to_numpy()  # 2 s after the step (1 s smoothing)
+        base = est.score(f)["statistic"].to_numpy()[late]
+        for col, step in ((A_COL, 15.0), (B_COL, 20e-6)):
+            g = f.copy()
+            g.loc[g["t_s"] >= 10.0, col] += step
+            moved = est.score(g)["statistic"].to_numpy()[late]
+            assert np.mean(moved) - np.mean(base) > 3.0, (run.mode, col)
+
+
+def test_fault_normalised_oracle_with_a_constant_channel():
+    # a channel the node's data never move: its relation is that channel alone (zero
+    # variance, unit response) instead of C⁺f/(fᵀC⁺f) = 0/0
+    Z, w = node_data(seed=3, n=2000)
+    Z = np.c_[Z, np.full(len(Z), 0.7)]
+    om = fault_normalised_oracle(Z, w, np.eye(4))
+    assert np.all(np.isfinite(om))
+    np.testing.assert_allclose(np.diag(om), 1.0, atol=1e-12)
+    np.testing.assert_allclose(om[:, 3], [0, 0, 0, 1], atol=1e-12)
+    for j in range(3):  # the others ignore the constant channel's (null) direction
+        assert abs(om[3, j]) < 1e-9
 
 
 @pytest.mark.parametrize("params, match", [
@@ -303,13 +374,20 @@ def test_fault_normalised_relation_sees_a_fault_the_unit_norm_one_misses():
     ({"model_features": [1, 2]}, "model_features must be a glob pattern or a list of them"),
     ({"partition_features": 3}, "partition_features must be a glob pattern"),
     ({"fault_channels": [None]}, "fault_channels must be a glob pattern"),
+    ({"fault_channels": 3}, "fault_channels must be a glob pattern or a list of them"),
+    ({"fault_channels": []}, "fault_channels"),
+    # several unit-norm relations need the unit-norm design (the default is fault-normalised)
+    ({"n_relations": 2}, r"n_relations = 2 applies to the unit-norm relations \(fault_channels:"
+                         r" null\); with fault_channels 'all' there is one"),
+    ({"n_relations": 2, "fault_channels": "meas.a"}, "n_relations = 2 applies to the unit"),
     # accepted before, contradicting the method: a widening neighbourhood, a share above 1
     # (the map never grew), truthiness deciding a switch ("no" turned derivatives on)
     ({"sigma0": 1.0, "sigma_final": 5.0}, r"sigma_final \(5.0\) must not exceed sigma0"),
     ({"zeta_threshold": 5.0}, r"zeta_threshold is a share of the loss, in \(0, 1\)"),
     ({"derivatives": "no"}, "derivatives must be true or false, got 'no'"),
     # more relations than the model features leave: a bare ValueError inside the fit
-    ({"n_relations": 10}, "n_relations = 10, but the 2 model features leave 2 dimension"),
+    ({"n_relations": 10, "fault_channels": None},
+     "n_relations = 10, but the 2 model features leave 2 dimension"),
 ])
 def test_parameters_are_validated(params, match):
     with pytest.raises(InputError, match=match):
@@ -458,7 +536,8 @@ def test_physics_parameters_are_validated(registration_runs, params, match):
 def test_training_arrays_are_what_the_fit_used():
     # refitting each node's relation on them with the exact solver gives the fitted one
     runs = [run_frame(0, 1), run_frame(1, 2)]
-    est = GSMMS(**{**PARAMS, "solver": "eigh", "max_samples": 4000}).fit(runs)
+    est = GSMMS(**{**PARAMS, "solver": "eigh", "max_samples": 4000,
+                   "fault_channels": None}).fit(runs)
     S, Z = est.training_arrays(runs)
     assert S.shape == (4000, len(est.partition_columns_))
     assert Z.shape == (4000, len(est.model_columns_))

@@ -60,3 +60,19 @@ def test_data_directory_without_the_datasets_is_refused(ch4, tmp_path):
     with pytest.raises(SystemExit) as e:
         ch4.main(["-o", str(tmp_path / "out"), "--data", str(tmp_path)])
     assert e.value.code == 2
+
+
+def test_configurations_are_pinned_and_fault_groups_parse(ch4):
+    # the study's configurations do not follow the plug-in's defaults
+    assert ch4.STUDY["fault_channels"] == ch4.A and ch4.LITERAL["fault_channels"] is None
+    assert ch4.STUDY["model_features"] == ch4.LITERAL["model_features"] == [ch4.A, ch4.B]
+
+    class R:
+        def __init__(self, case):
+            self.info = {"axis.case": case}
+
+    assert [ch4._group(R(c)) for c in (
+        "A offset -15 % OC1", "A degradation P05 over 120 s OC2", "A drift 0.02 N/s OC1",
+        "B gain -5 % in loop OC2", "B gain +15 % record-only OC1", "fault-free OC2",
+        "something else")] == ["A offset", "A degradation", "A drift", "B gain in loop",
+                               "B gain record-only", "fault-free", None]

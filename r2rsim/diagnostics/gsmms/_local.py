@@ -11,10 +11,10 @@ so that λ1 and the step size mean the same in a tight regime as in a wide one (
 standardised units a regime can be a hundred times tighter than the pooled data, and the
 penalty would then swamp the data term); :func:`objective` and the oracles use the same
 scaling. The intercept is the exact minimiser b = −μ_w·Ω (μ_w the weighted mean): the
-thesis's P is
-uncentred, so without it the loss would mix each regime's level into the relation
-(thesis-methods.md §3.2). Several relations are fitted one after the other, each orthogonal
-to the previous ones (deflation).
+thesis's P is uncentred, so without it the loss would mix each regime's level into the
+relation. Several unit-norm relations are fitted one after the other, each orthogonal to the
+previous ones (deflation); fault-normalised relations (one per fault direction, the plug-in's
+default) are fitted independently.
 
 Solvers: mini-batch SGD (the thesis's, batch 128), single-sample SGD, full-batch gradient
 descent, and the exact oracle: the smallest eigenvectors of the weighted covariance within
@@ -99,6 +99,10 @@ def fault_normalised_oracle(Z: np.ndarray, w: np.ndarray, F: np.ndarray,
     relations also satisfy GᵀΩ = 0 (Ω = N·a over a basis N of that null space, the same
     formula for NᵀCN and Nᵀf_j). Returns (q, k).
 
+    A fault direction with a component that the node's data never move (a channel constant
+    in the node) gets a zero-variance relation along that component instead: the limit of
+    the formula, which C⁺ alone would turn into 0/0.
+
     Raises
     ------
     ValueError
@@ -108,7 +112,10 @@ def fault_normalised_oracle(Z: np.ndarray, w: np.ndarray, F: np.ndarray,
     _, C = weighted_moments(Z, w)
     q = len(C)
     N = np.eye(q) if G is None else linalg.null_space(np.asarray(G, float).reshape(q, -1).T)
-    M = linalg.pinvh(N.T @ C @ N)
+    vals, vecs = linalg.eigh(N.T @ C @ N)
+    still = vals <= 1e-12 * max(float(vals.max(initial=0.0)), 1e-300)
+    M = (vecs[:, ~still] / vals[~still]) @ vecs[:, ~still].T  # the pseudo-inverse
+    V0 = vecs[:, still]  # directions the node's data never move (a constant channel)
     F = np.asarray(F, float).reshape(q, -1)
     out = []
     for f in F.T:
@@ -116,7 +123,11 @@ def fault_normalised_oracle(Z: np.ndarray, w: np.ndarray, F: np.ndarray,
         if g @ g <= 1e-24 * max(f @ f, 1e-300):
             raise ValueError("a fault direction lies in the span of the constraint G: no "
                              "relation that cancels the state can see it")
-        out.append(N @ (M @ g) / (g @ M @ g))
+        h = V0 @ (V0.T @ g)
+        if h @ h > 1e-12 * (g @ g):  # a zero-variance relation with h·g = h·h > 0 exists
+            out.append(N @ h / (g @ h))
+        else:  # C⁺f/(fᵀC⁺f) (with a constant channel C⁺f alone would be 0/0)
+            out.append(N @ (M @ g) / (g @ M @ g))
     return np.column_stack(out)
 
 

@@ -15,6 +15,8 @@ from ..base import Diagnostic, _frame
 from . import _local
 from ._model import GrowthRecord, GrowthSettings, grow, initial_map
 
+#: ``fault_channels`` sentinel: a fault-normalised relation for every model channel
+ALL_CHANNELS = "all"
 _CHOICES = {"solver": _local.SOLVERS, "step": _local.STEPS, "weighting": ("soft", "hard")}
 #: allowed ranges of the integer parameters: they bound a fit's memory and time (a mini-batch
 #: fit draws at least 3000 × batch_size samples; k_max updates per growth step)
@@ -46,13 +48,26 @@ class GSMMS(Diagnostic):
         Causal moving-average window [s] applied to every feature (0: none).
     n_relations : int
         Unit-norm relations per node (the smallest eigen-directions, fitted one after the
-        other, as eq. 4.21); used when ``fault_channels`` is None.
-    fault_channels : str, list of str or None
-        Fault-normalised design instead (thesis-methods.md §2.2, §3.2): one relation per
-        model channel matching these patterns, the minimum-variance one with unit response
-        to a fault on that channel. The thesis's unit-norm minimum-variance relation can be
-        blind to a sensor's fault (on the registration line it picks sensor B, which the
-        loop holds still); this one cannot.
+        other, as eq. 4.21); only with ``fault_channels=None`` (anything but 1 otherwise is
+        an error: the fault-normalised design has one relation per fault channel).
+    fault_channels : "all", str, list of str or None
+        The channels whose faults the relations are built to see. Default ``"all"``: every
+        model channel. Per node there is one relation per matching model channel j, the
+        minimum-variance relation with unit response to a fault on it:
+        Ω_j = C⁻¹e_j / (e_jᵀC⁻¹e_j), C the node's covariance of the standardised model
+        features, so that e_j·Ω_j = 1 (the fault-normalised design, ``docs/diagnostics.md``
+        §11). A fault of size δ on channel j moves relation j's residual by exactly δ, by
+        construction, whatever the healthy data look like: the statistic cannot be blind to
+        a channel it monitors. Ω_j ∝ C⁻¹e_j is also the direction that maximises the
+        ratio of that shift to the residual's spread (the matched filter of a step on
+        channel j), and its spread is at most the channel's own spread within the node
+        (Ω = e_j is admissible), so each relation sees its channel's faults at least as
+        well as a per-node limit check on that channel. A glob pattern or list of them: only
+        the matching model channels (the Ch. 4 study normalises on sensor A alone; such a
+        map is blind to faults that only move the other channels). None: the thesis's
+        ``n_relations`` unit-norm minimum-variance relations (eq. 4.21), which can be blind
+        to a channel: on the registration line the one relation is essentially "sensor B
+        = const", B being what the tension loop holds still, and it hardly sees sensor A.
     solver : {"minibatch", "sgd", "batch", "eigh"}
         Mini-batch SGD (thesis), single-sample SGD, full-batch gradient descent, or the exact
         eigenvector oracle.
@@ -108,7 +123,7 @@ class GSMMS(Diagnostic):
     def __init__(self, partition_features: str | list | tuple = ("sp.*",),
                  model_features: str | list | tuple = ("meas.*",), derivatives: bool = False,
                  smooth_s: float = 1.0, n_relations: int = 1,
-                 fault_channels: str | list | tuple | None = None, solver: str = "minibatch",
+                 fault_channels: str | list | tuple | None = "all", solver: str = "minibatch",
                  batch_size: int = 128, step: str = "inv_sqrt", eta0: float = 1.0,
                  n_epochs: float = 1.0, lambda1: float = 1.0,
                  physics: dict | None = None, lambda2: float = 1.0, initial_nodes: int = 2,
@@ -187,6 +202,11 @@ class GSMMS(Diagnostic):
             if not (isinstance(pats, (list, tuple)) and all(isinstance(p, str) for p in pats)):
                 raise InputError(f"{self.name}: {key} must be a glob pattern or a list of "
                                  f"them (strings), got {v!r}")
+        if self.fault_channels is not None and self.n_relations != 1:
+            raise InputError(f"{self.name}: n_relations = {self.n_relations} applies to the "
+                             f"unit-norm relations (fault_channels: null); with fault_channels "
+                             f"{self.fault_channels!r} there is one fault-normalised relation "
+                             f"per matching model channel")
         if self.initial_nodes > self.max_nodes:
             raise InputError(f"{self.name}: initial_nodes ({self.initial_nodes}) exceeds "
                              f"max_nodes ({self.max_nodes})")
@@ -229,10 +249,12 @@ class GSMMS(Diagnostic):
         return cols
 
     def _fault_directions(self) -> np.ndarray | None:
-        """Unit columns of the standardised model features for each fault channel."""
+        """Unit columns of the standardised model features for each fault channel (every
+        model channel with ``fault_channels="all"``; None: unit-norm relations)."""
         if self.fault_channels is None:
             return None
-        pats = [self.fault_channels] if isinstance(self.fault_channels, str) \
+        pats = ["*"] if self.fault_channels == ALL_CHANNELS else \
+            [self.fault_channels] if isinstance(self.fault_channels, str) \
             else list(self.fault_channels)
         idx = [j for j, c in enumerate(self.model_columns_)
                if any(fnmatch.fnmatch(c, p) for p in pats)]
@@ -472,7 +494,7 @@ class GlobalParity(GSMMS):
     def __init__(self, partition_features: str | list | tuple = ("sp.*",),
                  model_features: str | list | tuple = ("meas.*",), derivatives: bool = False,
                  smooth_s: float = 1.0, n_relations: int = 1,
-                 fault_channels: str | list | tuple | None = None, solver: str = "minibatch",
+                 fault_channels: str | list | tuple | None = "all", solver: str = "minibatch",
                  batch_size: int = 128, step: str = "inv_sqrt", eta0: float = 1.0,
                  n_epochs: float = 1.0, lambda1: float = 1.0,
                  physics: dict | None = None, lambda2: float = 1.0, initial_nodes: int = 1,
