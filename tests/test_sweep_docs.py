@@ -21,8 +21,9 @@ import re
 import pytest
 import yaml
 
+from r2rsim.schema import paths as _paths
 from r2rsim.schema.sweep import Axis, Range, Sweep
-from r2rsim.sweep import _paths, plan_sweep, run_sweep
+from r2rsim.sweep import plan_sweep, run_sweep
 
 from conftest import REPO
 

@@ -15,6 +15,8 @@ A plug-in is a :class:`Diagnostic` subclass:
 * ``calibrate(runs, alpha, masks)`` moves the plug-in's own threshold so that its own alarms
   hold a false-alarm rate ``alpha`` on held-out healthy runs (the harness calls it on the
   validation runs; default: ``threshold_`` becomes the (1 - alpha) quantile of the statistic);
+* every frame carries its run's line: :func:`r2rsim.diagnostics.line.frame_line` (None for
+  data without one), so a physical model can read the line it is applied to;
 * ``causal`` says whether the statistic at sample k uses only samples up to k (an online
   method). A plug-in that reads later samples (a centred filter, a whole-run transform) sets
   it False, as a class attribute or through an ``__init__`` parameter of that name; the harness
@@ -40,6 +42,7 @@ from sklearn.base import BaseEstimator
 from ..dataset.read import DRIVE_DATA
 from ..errors import InputError
 from ..limits import MAX_SEED
+from .line import attach_line
 
 
 def exceedance_threshold(statistic, alpha: float, name: str = "plug-in") -> float:
@@ -78,7 +81,7 @@ def exceedance_threshold(statistic, alpha: float, name: str = "plug-in") -> floa
 
 def _frame(run) -> pd.DataFrame:
     """The visible columns of a run (a :class:`r2rsim.dataset.read.Run` or a frame)."""
-    return run.visible() if hasattr(run, "visible") else run
+    return attach_line(run.visible(), run) if hasattr(run, "visible") else run
 
 
 class Diagnostic(BaseEstimator):

@@ -22,6 +22,7 @@ from sklearn.base import clone
 
 from ..dataset.read import Run, read_runs
 from ..diagnostics.base import Diagnostic
+from ..diagnostics.line import attach_line
 from ..diagnostics.registry import get
 from ..errors import InputError
 from .harness import _Scored
@@ -152,8 +153,8 @@ class _CheckRun:
     def __init__(self, cls, name, params, train, test, drive_data):
         self.cls, self.name, self.params = cls, name, params
         self.train, self.test, self.drive_data = train, test, drive_data
-        self.frames = [r.visible(drive_data) for r in train]
-        self.frame = test.visible(drive_data)
+        self.frames = [attach_line(r.visible(drive_data), r) for r in train]
+        self.frame = attach_line(test.visible(drive_data), test)
         self.done: list[str] = []
 
     def all(self) -> list[str]:

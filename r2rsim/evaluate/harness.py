@@ -36,6 +36,7 @@ from sklearn.base import clone
 
 from ..dataset.paths import SWEEP_MARKER
 from ..dataset.read import Run, is_dataset_dir, read_runs
+from ..diagnostics.line import attach_line
 from ..diagnostics.registry import call
 from ..errors import InputError, PluginError
 from ..limits import MAX_BOOTSTRAP, MAX_SEED, MAX_VUS_BUFFER_S, MAX_VUS_BUFFER_SAMPLES
@@ -712,8 +713,9 @@ class _Scored:
                            else getattr(self.est, "causal", True))
 
     def frame(self, run: Run) -> pd.DataFrame:
-        """The plug-in's view of a run: no labels, faults or true states."""
-        f = run.visible(self.drive_data)
+        """The plug-in's view of a run: no labels, faults or true states; the run's line in
+        ``attrs`` (:func:`r2rsim.diagnostics.line.frame_line`)."""
+        f = attach_line(run.visible(self.drive_data), run)
         try:
             self.est.required_columns(f)
         except InputError as exc:

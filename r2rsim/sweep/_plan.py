@@ -17,10 +17,10 @@ import numpy as np
 from .. import limits
 from .._version import __version__
 from ..errors import InputError, PlausibilityWarning, R2RError
+from ..schema import paths as _paths
 from ..schema.loader import _validate, build_scenario, line_path_of, load_line, read_yaml
 from ..schema.sweep import Axis, Sweep
 from ..units import QuantityError, parse_any
-from . import _paths
 
 #: scenario keys a sweep sets itself (run ids, seeds, where the data goes)
 _RESERVED = {"name": "the base scenario's name is kept as scenario_id",

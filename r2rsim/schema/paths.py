@@ -1,5 +1,5 @@
-"""Axis paths: find, set and remove a value of a scenario (or, under ``line.``, of its line)
-by its YAML path.
+"""YAML paths (the axes of a sweep): find, set and remove a value of a scenario (or, under
+``line.``, of its line) by its YAML path.
 
 ``programme[1].line_speed`` and ``programme.1.line_speed`` index a list;
 ``faults.my_fault.magnitude`` picks the list element whose ``id`` is ``my_fault``. Mappings
