@@ -109,7 +109,6 @@ def test_models_fit_and_predict(run):
 
 
 @pytest.mark.parametrize("params, match", [
-    ({}, "needs line"),
     ({"line": "nope.yaml"}, "does not exist"),
     ({"line": str(LINE), "selection": "t"}, "selection"),
     ({"line": str(LINE), "denoise": "fft"}, "denoise"),

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import json
 
 import numpy as np
 import pandas as pd
@@ -17,6 +18,7 @@ import yaml
 import r2rsim
 from r2rsim.dataset.read import read_runs
 from r2rsim.diagnostics.hybrid_sov import ROLES, HybridSoV, load_stages
+from r2rsim.diagnostics.line import LINE_ATTR, attach_line
 from r2rsim.errors import InputError
 
 from conftest import REPO
@@ -316,3 +318,27 @@ def test_a_renamed_unstaged_line_scores_as_the_original(tmp_path):
     pd.testing.assert_frame_equal(a, b)
     assert est.rank_channels(b).iloc[-1].tolist()[0] in ("meas.force1.tension_N",
                                                          "meas.vision1.pitch_m")
+
+
+def test_the_runs_own_line_configures_the_model_and_a_different_one_is_refused(tmp_path):
+    # no line=: the stages come from the line the dataset recorded, the same as from the file
+    d = tmp_path / "tb"
+    r2rsim.run_scenario(REPO / "scenarios" / "thesis_realistic" / "testbed.yaml", output=d,
+                        seed=1, duration=30.0)
+    run = read_runs(d)[0]
+    own = HybridSoV().fit([run])
+    ref = HybridSoV(line=str(LINE)).fit([run.visible(drive_data=True)])
+    assert own.stages_ == ref.stages_
+    pd.testing.assert_frame_equal(own.score(run), ref.score(run.visible(drive_data=True)))
+    # the same samples said to come from a line with another web: refused, naming it
+    frame = attach_line(run.visible(drive_data=True), run)
+    other = json.loads(frame.attrs[LINE_ATTR])
+    other["web"]["thickness"] = "60 um"
+    frame.attrs[LINE_ATTR] = json.dumps(other)
+    with pytest.raises(InputError, match=r"^hybrid-sov: the scored run's line differs from "
+                       r"the one the model was fitted on in web_thickness \(6e-05 here, "
+                       r"0.000125 in the model\): fit on data of this line$"):
+        own.score(frame)
+    # a frame with no line and no line= cannot say which line it is
+    with pytest.raises(InputError, match="the data carries no line"):
+        HybridSoV().fit([run.visible(drive_data=True)])

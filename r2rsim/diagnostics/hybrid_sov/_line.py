@@ -216,7 +216,7 @@ def _idlers(line, index: dict, uw, dancer, drv) -> dict[int, list]:
     return {k: [_roller(e) for e in v] for k, v in out.items()}
 
 
-def load_stages(path: str | Path, roles: dict | None = None) -> LineStages:
+def load_stages(path, roles: dict | None = None) -> LineStages:
     """Read a line file's stages (thesis §2.6) and the sensors the hybrid model reads.
 
     Every role is found from the elements' ``stage:`` keys and the sensors' types and
@@ -259,7 +259,8 @@ def load_stages(path: str | Path, roles: dict | None = None) -> LineStages:
     if unknown:
         raise InputError(f"hybrid-sov: unknown role {', '.join(unknown)} (roles: "
                          f"{', '.join(ROLES)})")
-    line = load_line(Path(path))
+    # a line file, or a loaded line (the run's, r2rsim.diagnostics.line.frame_line)
+    line = path if hasattr(path, "elements") else load_line(Path(path))
     index = {e.id: i for i, e in enumerate(line.elements)}
     uw = _find_element(line, "unwind", roles.get("unwind"))
     dancer = _find_element(line, "dancer", roles.get("dancer"))

@@ -3,6 +3,7 @@ residual detector (thesis Ch. 2, §2.5-2.6)."""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +11,7 @@ import pandas as pd
 
 from ...errors import InputError
 from ..base import Diagnostic
+from ..line import attach_line, frame_line
 from . import _features as F
 from ._line import ROLES, load_stages
 from ._model import HybridModel
@@ -60,7 +62,10 @@ class HybridSoV(Diagnostic):
     Parameters
     ----------
     line : str or None
-        Path of the line file whose stages and sensors the model reads (required).
+        Path of the line file whose stages and sensors the model reads. None (the default):
+        the line each run was simulated on, which the harness hands the plug-in with the
+        data (:func:`r2rsim.diagnostics.line.frame_line`); a run scored on a line that
+        differs from the fitted one in what the model uses is then refused.
     censor_at : float
         Lower range limit of the stage-2 load cell [N]: readings at or below are censored.
     selection : {"LR", "F"}
@@ -142,18 +147,17 @@ class HybridSoV(Diagnostic):
             runs = [runs]
         if not runs:
             raise InputError(f"{self.name}: fit needs at least one healthy run")
-        return [r.visible(True) if hasattr(r, "visible") else r for r in runs]
+        return [attach_line(r.visible(True), r) if hasattr(r, "visible") else r for r in runs]
 
     def _check_params(self):
         if self.line is None:
-            raise InputError("hybrid-sov needs line=<path of the line file> (its stage: "
-                             "keys, or the role parameters, define the model)")
-        if not isinstance(self.line, (str, Path)):
+            pass  # the run's own line (frame_line), checked in fit
+        elif not isinstance(self.line, (str, Path)):
             raise InputError(f"hybrid-sov: line must be the path of a line file, "
                              f"got {self.line!r}")
-        if not Path(self.line).exists():
+        elif not Path(self.line).exists():
             raise InputError(f"hybrid-sov: line file {self.line!s} does not exist")
-        if not Path(self.line).is_file():  # a directory, /dev/zero: there, but not a file
+        elif not Path(self.line).is_file():  # a directory, /dev/zero: there, not a file
             raise InputError(f"hybrid-sov: line file {self.line!s} is not a regular file")
         if self.selection not in ("LR", "F"):
             raise InputError(f"hybrid-sov: selection must be 'LR' (Tobit) or 'F' (OLS), "
@@ -217,11 +221,41 @@ class HybridSoV(Diagnostic):
                              f"causal filter is fixed by it; causal=False filters each run "
                              f"at its own period)")
 
+    def _line(self, frame):
+        """The line the model is built from: ``line=`` when given, else the run's own."""
+        if self.line is not None:
+            return self.line
+        line = frame_line(frame)
+        if line is None:
+            raise InputError("hybrid-sov: the data carries no line (a frame made by hand, or "
+                             "a dataset without its scenario/ copy): give line=<path of the "
+                             "line file>")
+        return line
+
+    def _check_line(self, frame) -> None:
+        """Refuse a run whose own line differs from the fitted model's in what the model
+        uses (the stages' constants and sensors), naming what differs."""
+        line = frame_line(frame)
+        if line is None or self.line is not None:
+            return
+        now = load_stages(line, self._roles())
+        for field in dataclasses.fields(now):
+            if field.name == "name":
+                continue
+            a, b = getattr(now, field.name), getattr(self.stages_, field.name)
+            if a != b:
+                def shown(v):
+                    return f"{v:.6g}" if isinstance(v, float) else repr(v)
+
+                raise InputError(f"hybrid-sov: the scored run's line differs from the one "
+                                 f"the model was fitted on in {field.name} ({shown(a)} here, "
+                                 f"{shown(b)} in the model): fit on data of this line")
+
     def fit(self, runs):
         frames = self._frames(runs)
         self.required_columns(frames[0])
         self._check_params()
-        self.stages_ = load_stages(self.line, self._roles())
+        self.stages_ = load_stages(self._line(frames[0]), self._roles())
         self.columns_ = F.required_columns(self.stages_)
         for f in frames:
             F.check_frame(f, self.stages_)
@@ -277,6 +311,7 @@ class HybridSoV(Diagnostic):
     def score(self, run):
         self._check_fitted()
         f = self._frames(run)[0]
+        self._check_line(f)
         if self.causal:
             F.check_frame(f, self.stages_)
             self._check_period(f)
