@@ -17,6 +17,8 @@ from r2rsim.sweep import run_sweep
 
 from conftest import REPO
 
+REG_LINE = str(REPO / "lines" / "registration_realistic.yaml")
+
 SWEEP = f"""\
 name: parity_small
 scenario: {REPO / "scenarios/thesis_realistic/registration.yaml"}
@@ -249,26 +251,31 @@ def test_parameters_and_channels_are_checked(dataset):
                      "parity: line: /nonexistent.yaml: file not found")):
         with pytest.raises(InputError, match=msg):
             ParitySpaceDetector(**kw).fit([run])
+    # frames without their run's line: the line= file gives the model
     frame = run.visible().drop(columns=["meas.u_drive.speed_rad_s"])
     with pytest.raises(InputError, match="meas.u_drive.speed_rad_s"):
-        ParitySpaceDetector().fit([frame])
+        ParitySpaceDetector(line=REG_LINE).fit([frame])
     # a run shorter than the window, a dead sensor: messages that name the plug-in and what
     short = run.visible().iloc[:50]
     with pytest.raises(InputError, match=r"parity: 50 samples are fewer than the Savitzky-"
                                          r"Golay window \(301\) \(savgol_window_s = 3.0 s\)"):
-        ParitySpaceDetector().fit([short])
+        ParitySpaceDetector(line=REG_LINE).fit([short])
     dead = run.visible().assign(**{"meas.sensor_A.tension_N": np.nan})
     with pytest.raises(InputError, match="parity: meas.sensor_A.tension_N has no finite sample"):
-        ParitySpaceDetector().fit([dead])
+        ParitySpaceDetector(line=REG_LINE).fit([dead])
 
 
 def test_line_file_parameters():
-    p = registration_parameters(REPO / "lines" / "registration_realistic.yaml")
+    ids = {"span": "registration", "drive": "reg_drive", "downstream": "reg_idler",
+           "pitch_sensor": "sensor_B"}
+    p = registration_parameters(REG_LINE, **ids)
     assert p == pytest.approx({"web_EA_N": 112.5e3, "span_length_m": 1.5,
                                "relaxed_pitch_m": 0.25, "drive_radius_m": 0.10,
                                "downstream_radius_m": 0.05})
-    with pytest.raises(InputError, match="no span 'reg'"):
-        registration_parameters(REPO / "lines" / "registration_realistic.yaml", span="reg")
+    with pytest.raises(InputError, match="span 'reg' is not a span of the line"):
+        registration_parameters(REG_LINE, **{**ids, "span": "reg"})
+    with pytest.raises(TypeError):  # no thesis ids by default
+        registration_parameters(REG_LINE)
 
 
 def test_diagnose_cli_on_a_sweep(dataset, tmp_path, capsys):

@@ -280,12 +280,12 @@ class GSMMS(Diagnostic):
         if unknown:
             raise InputError(f"{self.name}: physics has no parameter {', '.join(unknown)} "
                              f"(it takes the parity plug-in's: {', '.join(sorted(allowed))})")
-        det = ParitySpaceDetector(**self.physics)
-        det._validate()
-        sensors = {det.sensor_a: 0, det.sensor_b: 1}
+        det = ParitySpaceDetector(**self.physics).configure(frames)  # roles from the line
+        col_a, col_b = det.channels[:2]
+        sensors = {col_a: 0, col_b: 1}
         if sorted(self.model_columns_) != sorted(sensors):
             raise InputError(f"{self.name}: with physics the model features must be the "
-                             f"reduced model's sensors {det.sensor_a} and {det.sensor_b}, "
+                             f"reduced model's sensors {col_a} and {col_b}, "
                              f"got {', '.join(self.model_columns_)}")
         for f in frames:
             det.required_columns(f)

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import copy
+import warnings
 from functools import lru_cache
 from pathlib import Path
 
@@ -13,6 +15,7 @@ from ...errors import InputError
 from ...schema import plausibility as P
 from ..base import Diagnostic
 from ._design import KINDS, design_relation, sensitivity
+from ._line import COLUMNS, NUMBERS, PRESETS, ROLES, find_roles, line_numbers, role_columns
 from ._model import NonlinearModel, registration_model
 from ._signal import savgol_derivatives, savgol_window_samples
 
@@ -25,29 +28,35 @@ def _cached_model(EA, L, L0, Rd, Ro) -> NonlinearModel:
     return registration_model(EA, L, L0, Rd, Ro)
 
 
-def registration_parameters(line, span: str = "registration", drive: str = "reg_drive",
-                            downstream: str = "reg_idler", pitch_sensor: str = "sensor_B"):
+def registration_parameters(line, *, span: str, drive: str, downstream: str,
+                            pitch_sensor: str) -> dict[str, float]:
     """EA [N], span length [m], relaxed pitch [m] and the two roller radii [m] of the
-    reduced registration model, read from a line file (or a loaded ``Line``).
+    reduced registration model, read from a line file (or a loaded ``Line``) through the
+    ids of its span, driven and downstream rollers and pitch-length sensor (no default: see
+    :func:`find_roles` to infer them, :data:`PRESETS` for the thesis line's).
 
     The relaxed pitch is the pitch sensor's ``relaxed_pitch`` or its law's q0 (the roll-radius
-    term q1·R³ is unknown to a monitor; the plug-in can calibrate L0 on healthy data).
+    term q1·R³ is unknown to a monitor; the plug-in calibrates L0 on healthy data).
     """
     from ...schema.loader import load_line
 
     ln = load_line(line) if not hasattr(line, "elements") else line
-    els = {e.id: e for e in ln.elements}
+    roles = {"span": span, "drive": drive, "downstream": downstream,
+             "pitch_sensor": pitch_sensor}
+    for key, value in roles.items():
+        if not isinstance(value, str):
+            raise InputError(f"parity: {key} must be an id of the line, got {value!r}")
     spans = {s.id: s for s in ln.spans}
-    sens = {s.id: s for s in ln.sensors}
-    for what, key, table in (("span", span, spans), ("element", drive, els),
-                             ("element", downstream, els), ("sensor", pitch_sensor, sens)):
-        if key not in table:
-            raise InputError(f"parity: the line has no {what} '{key}'")
-    b = sens[pitch_sensor]
-    L0 = b.relaxed_pitch if b.relaxed_pitch is not None else b.relaxed_pitch_law.q0
-    return {"web_EA_N": ln.web.modulus * ln.web.thickness * ln.web.width,
-            "span_length_m": spans[span].length, "relaxed_pitch_m": L0,
-            "drive_radius_m": els[drive].radius, "downstream_radius_m": els[downstream].radius}
+    if span not in spans:
+        raise InputError(f"parity: span '{span}' is not a span of the line "
+                         f"(spans: {', '.join(map(str, spans))})")
+    # the sensor roles do not matter for the numbers: any of each kind will do
+    for role, typ in (("load_cell", "load_cell"), ("upstream_load_cell", "load_cell"),
+                      ("drive_encoder", "encoder"), ("downstream_encoder", "encoder")):
+        roles[role] = next((x.id for x in ln.sensors if x.type == typ), None)
+        if roles[role] is None:
+            raise InputError(f"parity: the line has no {typ.replace('_', ' ')}")
+    return line_numbers(ln, roles)
 
 
 #: physically plausible ranges of the reduced model's numbers (value from, to, unit): far
@@ -97,20 +106,35 @@ class ParitySpaceDetector(Diagnostic):
 
     Parameters
     ----------
+    span, drive, downstream, pitch_sensor, load_cell, upstream_load_cell, drive_encoder, \
+downstream_encoder : str, optional
+        Ids of the line's roles: the registration span, the driven roller upstream of it, the
+        roller ending it, the pitch-length sensor on it (sensor B), the load cell on the
+        downstream roller (sensor A), the load cell on the element upstream of the driven
+        roller (T_up), the encoders on the driven and the downstream rollers. None: from
+        ``preset``, else inferred from the run's line (the only sensor of the kind at that
+        place; see :func:`~r2rsim.diagnostics.parity.find_roles`). A wrong, missing or
+        ambiguous role is refused with one line listing the line's candidates.
+    preset : {"thesis_registration"}, optional
+        Fill the roles not given with the thesis line's ids (``registration``,
+        ``reg_drive``, ``reg_idler``, ``sensor_B``, ``sensor_A``, ``lc_unwind``,
+        ``u_drive``, ``u_out``).
     line : str, optional
-        A line file to read EA, the span length, the relaxed pitch and the radii from
-        (overrides the five numbers below).
-    web_EA_N : float
-        Web axial stiffness EA [N] (default: PET 50 µm × 0.5 m, 112.5 kN).
-    span_length_m : float
-        Registration span length L [m].
+        A line file, used for frames that carry no line of their own (the harness's frames
+        carry their run's: :func:`r2rsim.diagnostics.line.frame_line`).
+    web_EA_N, span_length_m, drive_radius_m, downstream_radius_m : float, optional
+        Web axial stiffness EA [N], span length L [m], radii of the driven and downstream
+        rollers [m]. None: read from the line through the roles; a value given overrides the
+        line's (a scored line that differs then warns instead of refusing). Without a line
+        they must be given.
     relaxed_pitch_m : float, optional
         Relaxed pitch L0 [m]; None calibrates it on the healthy training runs (Hooke's law
         between sensors A and B).
-    drive_radius_m, downstream_radius_m : float
-        Radii of the driven roller and the downstream idler [m].
-    sensor_a, sensor_b, drive_speed, downstream_speed, upstream_tension : str
-        The channels of y_A [N], y_B [m], ω_d [rad/s], ω_o [rad/s] and T_up [N].
+    sensor_a, sensor_b, drive_speed, downstream_speed, upstream_tension : str, optional
+        The channels of y_A [N], y_B [m], ω_d [rad/s], ω_o [rad/s] and T_up [N]; None:
+        ``meas.<load_cell>.tension_N``, ``meas.<pitch_sensor>.pitch_m``,
+        ``meas.<drive_encoder>.speed_rad_s``, ``meas.<downstream_encoder>.speed_rad_s``,
+        ``meas.<upstream_load_cell>.tension_N``.
     design : {"fault_normalised", "unit_norm"}
         Normalisation of the min-max relation: ω F = 1 for unit faults on A and on B (the
         default), or the thesis's ‖ω‖ = 1, which can be blind to a sensor's faults.
@@ -140,8 +164,25 @@ class ParitySpaceDetector(Diagnostic):
     alpha : float
         Fraction of healthy training samples above the threshold.
 
+    With a line, :meth:`score` (and :meth:`calibrate`) reads the scored run's line through
+    the fitted roles: a missing role, or an E·A, L or radius that differs from the fitted
+    model's, is refused (``fit on data of this line``); a different relaxed pitch, or a
+    differing number that was given as a parameter, only warns.
+
     Attributes
     ----------
+    roles_ : dict
+        Role -> id in the line (None for a role nothing named, without a line).
+    columns_ : dict
+        Column parameter -> the column used.
+    physical_ : dict
+        ``web_EA_N``, ``span_length_m``, ``relaxed_pitch_m``, ``drive_radius_m``,
+        ``downstream_radius_m`` of the model.
+    sources_ : dict
+        Where each of them came from: ``parameter``, ``line`` or ``calibrated``.
+    line_numbers_ : dict or None
+        The numbers the training runs' line gives (the relaxed pitch: the pitch sensor's
+        nominal value), or None without a line.
     omega_ : ndarray (3, 4)
         The relations r1-r3 on the scaled stack (sensor B rows ÷ L0/EA, derivative rows per
         web travel at the design speed with ``time_base="travel"``).
@@ -162,14 +203,17 @@ class ParitySpaceDetector(Diagnostic):
     name = "parity"
     requires = ("meas.*",)
 
-    def __init__(self, line: str | None = None, web_EA_N: float = 112.5e3,
-                 span_length_m: float = 1.5, relaxed_pitch_m: float | None = None,
-                 drive_radius_m: float = 0.10, downstream_radius_m: float = 0.05,
-                 sensor_a: str = "meas.sensor_A.tension_N",
-                 sensor_b: str = "meas.sensor_B.pitch_m",
-                 drive_speed: str = "meas.u_drive.speed_rad_s",
-                 downstream_speed: str = "meas.u_out.speed_rad_s",
-                 upstream_tension: str = "meas.lc_unwind.tension_N",
+    def __init__(self, line: str | None = None, preset: str | None = None,
+                 span: str | None = None, drive: str | None = None,
+                 downstream: str | None = None, pitch_sensor: str | None = None,
+                 load_cell: str | None = None, upstream_load_cell: str | None = None,
+                 drive_encoder: str | None = None, downstream_encoder: str | None = None,
+                 web_EA_N: float | None = None, span_length_m: float | None = None,
+                 relaxed_pitch_m: float | None = None, drive_radius_m: float | None = None,
+                 downstream_radius_m: float | None = None,
+                 sensor_a: str | None = None, sensor_b: str | None = None,
+                 drive_speed: str | None = None, downstream_speed: str | None = None,
+                 upstream_tension: str | None = None,
                  design: str = "fault_normalised", mode: str = "model",
                  savgol_window_s: float = 3.0, savgol_order: int = 2, causal: bool = True,
                  time_base: str = "travel",
@@ -177,6 +221,15 @@ class ParitySpaceDetector(Diagnostic):
                  signature_z: float = 3.0,
                  alpha: float = 0.01):
         self.line = line
+        self.preset = preset
+        self.span = span
+        self.drive = drive
+        self.downstream = downstream
+        self.pitch_sensor = pitch_sensor
+        self.load_cell = load_cell
+        self.upstream_load_cell = upstream_load_cell
+        self.drive_encoder = drive_encoder
+        self.downstream_encoder = downstream_encoder
         self.web_EA_N = web_EA_N
         self.span_length_m = span_length_m
         self.relaxed_pitch_m = relaxed_pitch_m
@@ -201,9 +254,10 @@ class ParitySpaceDetector(Diagnostic):
     # ---- parameters and channels -------------------------------------------------------------
     @property
     def channels(self) -> list[str]:
-        """y_A, y_B, ω_d, ω_o, T_up columns, in that order."""
-        return [self.sensor_a, self.sensor_b, self.drive_speed, self.downstream_speed,
-                self.upstream_tension]
+        """y_A, y_B, ω_d, ω_o, T_up columns, in that order (after :meth:`configure`: the
+        columns built from the roles where not given)."""
+        cols = getattr(self, "columns_", None) or {k: getattr(self, k) for k in COLUMNS}
+        return [cols[k] for k in COLUMNS]
 
     def _validate(self):
         if self.design not in KINDS:
@@ -217,25 +271,32 @@ class ParitySpaceDetector(Diagnostic):
         if self.line is not None and not isinstance(self.line, (str, Path)):
             raise InputError(f"parity: line must be the path of a line file, "
                              f"got {self.line!r}")
-        for key in ("sensor_a", "sensor_b", "drive_speed", "downstream_speed",
-                    "upstream_tension"):
-            if not isinstance(getattr(self, key), str):
-                raise InputError(f"parity: {key} must be a column name (a string), "
+        if self.preset is not None and self.preset not in PRESETS:
+            raise InputError(f"parity: preset must be one of {', '.join(PRESETS)} or null, "
+                             f"got {self.preset!r}")
+        for key in ROLES:
+            if getattr(self, key) is not None and not isinstance(getattr(self, key), str):
+                raise InputError(f"parity: {key} must be an id of the line (a string) or "
+                                 f"null, got {getattr(self, key)!r}")
+        for key in COLUMNS:
+            if getattr(self, key) is not None and not isinstance(getattr(self, key), str):
+                raise InputError(f"parity: {key} must be a column name (a string) or null, "
                                  f"got {getattr(self, key)!r}")
         if not isinstance(self.causal, bool):
             raise InputError(f"parity: causal must be true or false, got {self.causal!r}")
         for key in ("web_EA_N", "span_length_m", "drive_radius_m", "downstream_radius_m",
                     "savgol_window_s", "signature_z"):
+            if getattr(self, key) is None and key in NUMBERS:
+                continue  # read from the run's line
             if not (np.isfinite(v := self._number(key)) and v > 0):
                 raise InputError(f"parity: {key} must be a positive number, "
                                  f"got {getattr(self, key)!r}")
         for key, (low, high, unit) in _PHYSICAL_RANGES.items():
-            if key == "relaxed_pitch_m" and self.relaxed_pitch_m is None:
-                continue  # calibrated on the training runs
+            if getattr(self, key) is None:
+                continue  # read from the line (the relaxed pitch: calibrated)
             if not low <= self._number(key) <= high:
-                raise InputError(f"parity: {key} must be from {low:g} to {high:g} {unit}"
-                                 f"{' or null' if key == 'relaxed_pitch_m' else ''}, "
-                                 f"got {getattr(self, key)!r}")
+                raise InputError(f"parity: {key} must be from {low:g} to {high:g} {unit} "
+                                 f"or null, got {getattr(self, key)!r}")
         # upper limits: beyond them the design corners or the windows mean nothing, and
         # a fit would overflow or allocate without bound
         for key, low, high, unit in (("modulus_spread", 0.0, 0.5, ""),
@@ -247,15 +308,133 @@ class ParitySpaceDetector(Diagnostic):
         self._check_int("savgol_order", 2, 10)
         self._check_alpha()
 
+    # ---- the line: roles, numbers, columns ---------------------------------------------------
+    def _given_roles(self) -> dict:
+        """The role ids given as parameters, completed by the preset's."""
+        given = dict(PRESETS.get(self.preset) or {})
+        given.update({k: getattr(self, k) for k in ROLES if getattr(self, k) is not None})
+        return given
+
+    def _fallback_line(self):
+        """The ``line=`` file, loaded (None without one)."""
+        if self.line is None:
+            return None
+        from ...schema.loader import load_line
+        try:
+            return load_line(Path(self.line))
+        except InputError as exc:
+            raise InputError(f"parity: line: {exc.format()}") from None
+
+    def configure(self, frames) -> ParitySpaceDetector:
+        """Find the roles, the numbers and the columns of the reduced model (before
+        :meth:`fit`; the GSMMS plug-in's physics term uses it too): sets ``roles_``,
+        ``columns_``, ``physical_`` (the relaxed pitch None until calibrated),
+        ``sources_`` (where each number came from: ``parameter``, ``line`` or
+        ``calibrated``) and ``line_numbers_`` (the numbers the line gives, or None).
+
+        The line is the frames' (``frame.attrs``, :func:`r2rsim.diagnostics.line.frame_line`),
+        else the ``line=`` file. Every frame's line must give the same E·A, L and radii."""
+        from ..line import frame_line
+
+        self._validate()
+        fallback = self._fallback_line()
+        given = self._given_roles()
+        lines = [frame_line(f) for f in frames]
+        lines = [ln for ln in lines if ln is not None] or ([fallback] if fallback else [])
+        roles = {k: given.get(k) for k in ROLES}
+        numbers = None
+        if lines:
+            roles = find_roles(lines[0], given)
+            numbers = line_numbers(lines[0], roles)
+            for ln in lines[1:]:
+                self._line_check(ln, roles, numbers, "a training run's line",
+                                 "fit on runs of one line", explicit_ok=True)
+        self.roles_ = roles
+        self.line_numbers_ = numbers
+        self.physical_, self.sources_ = {}, {}
+        missing = []
+        for key in NUMBERS:
+            if getattr(self, key) is not None:
+                self.physical_[key], self.sources_[key] = float(getattr(self, key)), "parameter"
+            elif key == "relaxed_pitch_m":
+                self.physical_[key], self.sources_[key] = None, "calibrated"
+            elif numbers is not None:
+                self.physical_[key], self.sources_[key] = numbers[key], "line"
+            else:
+                missing.append(key)
+        built = role_columns(roles)
+        self.columns_ = {k: getattr(self, k) if getattr(self, k) is not None else built[k]
+                         for k in COLUMNS}
+        missing += [k for k, v in self.columns_.items() if v is None]
+        if missing:
+            raise InputError(
+                f"parity: the frames carry no line and line= is not given, so nothing gives "
+                f"{', '.join(missing)}: give line=<line file>, or preset=thesis_registration "
+                f"with web_EA_N, span_length_m, drive_radius_m and downstream_radius_m, or "
+                f"those numbers with the columns sensor_a, sensor_b, drive_speed, "
+                f"downstream_speed and upstream_tension")
+        return self
+
+    def _line_check(self, line, roles, numbers, what: str, advice: str,
+                    explicit_ok: bool = False) -> dict:
+        """The numbers of ``line`` through ``roles``, compared with ``numbers``: a missing
+        role or a different E·A, L or radius is refused (warned instead for a number given
+        as a parameter), a different relaxed pitch warned. Returns the line's numbers."""
+        try:
+            mine = line_numbers(line, roles)
+        except InputError as exc:
+            raise InputError(f"parity: {what} does not have the fitted roles: "
+                             f"{exc.message.removeprefix('parity: ')}: {advice}") from None
+        where = {"span_length_m": f"span '{roles['span']}'",
+                 "drive_radius_m": f"drive '{roles['drive']}'",
+                 "downstream_radius_m": f"downstream '{roles['downstream']}'",
+                 "relaxed_pitch_m": f"pitch_sensor '{roles['pitch_sensor']}'",
+                 "web_EA_N": "the web's modulus x thickness x width"}
+        for key in NUMBERS:
+            a, b = mine[key], numbers[key]
+            if abs(a - b) <= 1e-9 * max(abs(a), abs(b)):
+                continue
+            unit = _PHYSICAL_RANGES[key][2]
+            msg = (f"parity: {what} has {key} {a:g} {unit} where the model was fitted with "
+                   f"{b:g} {unit} ({where[key]})")
+            if key == "relaxed_pitch_m":
+                warnings.warn(f"{msg}: the relaxed pitch is calibrated on the training runs",
+                              stacklevel=3)
+            elif getattr(self, key) is not None and not explicit_ok:
+                warnings.warn(f"{msg}; {key} was given as a parameter, which is used",
+                              stacklevel=3)
+            elif getattr(self, key) is None:
+                raise InputError(f"{msg}: {advice}")
+        return mine
+
+    def _scored_frame(self, run) -> pd.DataFrame:
+        """The frame of a run to score, its line (if it carries one) checked against the
+        fitted model's."""
+        from ..line import frame_line
+
+        f = self._frames(run)[0]
+        line = frame_line(f)
+        if line is not None and getattr(self, "line_numbers_", None) is not None:
+            self._line_check(line, self.roles_, self.line_numbers_, "the scored run's line",
+                             "fit on data of this line")
+        return f
+
     def required_columns(self, frame: pd.DataFrame) -> list[str]:
         super().required_columns(frame)
-        missing = [c for c in self.channels if c not in frame.columns]
+        # before a fit: the columns of the roles in this frame's line
+        cols = self.channels if getattr(self, "columns_", None) else \
+            copy.copy(self).configure([frame]).channels
+        missing = [c for c in cols if c not in frame.columns]
         if missing:
             raise InputError(f"parity: the data has no column matching {', '.join(missing)} "
                              f"(set sensor_a, sensor_b, drive_speed, downstream_speed, "
                              f"upstream_tension)")
-        self._check_alive(frame[self.channels].to_numpy(float))
-        return list(self.channels)
+        X = frame[cols].to_numpy(float)
+        dead = [c for j, c in enumerate(cols) if not np.isfinite(X[:, j]).any()]
+        if dead:
+            raise InputError(f"parity: {', '.join(dead)} has no finite sample in this run (a "
+                             f"dead sensor: the relations need every channel)")
+        return list(cols)
 
     def _check_alive(self, X: np.ndarray) -> None:
         """Every channel (a column of X) has a finite sample: the relations need them all."""
@@ -264,19 +443,6 @@ class ParitySpaceDetector(Diagnostic):
             raise InputError(f"parity: {', '.join(dead)} has no finite sample in this run (a "
                              f"dead sensor: the relations need every channel)")
 
-    def _physical(self) -> dict:
-        p = {"web_EA_N": self.web_EA_N, "span_length_m": self.span_length_m,
-             "relaxed_pitch_m": self.relaxed_pitch_m, "drive_radius_m": self.drive_radius_m,
-             "downstream_radius_m": self.downstream_radius_m}
-        if self.line is not None:
-            try:
-                p.update(registration_parameters(self.line))
-            except InputError as exc:
-                raise InputError(f"parity: line: {exc.format()}") from None
-            if self.relaxed_pitch_m is None:
-                p["relaxed_pitch_m"] = None
-        return p
-
     def _model(self, EA=None, L0=None) -> NonlinearModel:
         ph = self.physical_
         return _cached_model(float(EA or ph["web_EA_N"]), float(ph["span_length_m"]),
@@ -284,15 +450,16 @@ class ParitySpaceDetector(Diagnostic):
                              float(ph["downstream_radius_m"]))
 
     def reduced_model(self, frames) -> tuple[NonlinearModel, float, float]:
-        """The reduced registration model with its EA [N] and L0 [m]; sets ``physical_`` and
-        ``model_``. L0 not given (nor by the line) is calibrated on ``frames`` (healthy
-        visible frames) by Hooke's law between the sensors, y_B = (y_A/EA + 1)·L0.
+        """The reduced registration model with its EA [N] and L0 [m]; :meth:`configure`s the
+        plug-in on ``frames`` (healthy visible frames) and sets ``model_``. L0 not given is
+        calibrated on ``frames`` by Hooke's law between the sensors, y_B = (y_A/EA + 1)·L0
+        (the pitch sensor's nominal value, ``line_numbers_``, ignores the roll-radius term).
         The GSMMS plug-in's physics constraint uses it too."""
-        self.physical_ = self._physical()
+        self.configure(frames)
         EA = float(self.physical_["web_EA_N"])
         if self.physical_["relaxed_pitch_m"] is None:
-            ratio = np.concatenate([f[self.sensor_b].to_numpy(float)
-                                    / (1 + f[self.sensor_a].to_numpy(float) / EA)
+            a, b = self.columns_["sensor_a"], self.columns_["sensor_b"]
+            ratio = np.concatenate([f[b].to_numpy(float) / (1 + f[a].to_numpy(float) / EA)
                                     for f in frames])
             self.physical_["relaxed_pitch_m"] = float(np.nanmedian(ratio))
         self.model_ = self._model()
@@ -349,8 +516,8 @@ class ParitySpaceDetector(Diagnostic):
     # ---- fit -----------------------------------------------------------------------------------
     def fit(self, runs):
         """Design the relations on healthy runs and set the threshold (see the class doc)."""
-        self._validate()
         frames = self._frames(runs)
+        self.configure(frames)
         for f in frames:
             self.required_columns(f)
         model, EA, L0 = self.reduced_model(frames)
@@ -440,7 +607,7 @@ class ParitySpaceDetector(Diagnostic):
         W = np.abs(self.omega_)
         tab = np.array([[W[k, sensor_of_row == j].max() > 1e-9 * W[k].max()
                          for k in range(len(W))] for j in range(2)])
-        return pd.DataFrame(tab, index=[self.sensor_a, self.sensor_b],
+        return pd.DataFrame(tab, index=self.channels[:2],
                             columns=[f"r{k + 1}" for k in range(len(W))])
 
     # ---- residuals -----------------------------------------------------------------------------
@@ -479,7 +646,7 @@ class ParitySpaceDetector(Diagnostic):
         """Residuals r1..r3 (newton-equivalents, centred on the healthy training data) and
         ``statistic`` = max_j |r_j|/σ_j, indexed like the run's samples."""
         self._check_fitted()
-        f = self._frames(run)[0]
+        f = self._scored_frame(run)
         self.required_columns(f)
         R = self._residuals(self._signals(f))
         out = pd.DataFrame(R.T, index=f.index, columns=[f"r{k + 1}" for k in range(len(R))])
@@ -533,7 +700,7 @@ class ParitySpaceDetector(Diagnostic):
                 or not 1e-3 <= step_s <= 1e6:
             raise InputError(f"parity: step_s must be a number from 0.001 to 1e+06 s, "
                              f"got {step_s!r}")
-        s = self._signals(self._frames(run)[0])
+        s = self._signals(self._scored_frame(run))
         tk, pk = self._knots(s, step_s)
         names = ["x", "omega_d", "omega_o", "T_up"]
         rows, start = [], self.omega_[0]
