@@ -54,9 +54,13 @@ def test_the_line_differs_from_the_thesis_lines():
     assert kinds["dancer"] == "dancer" and kinds["infeed"] == "driven"
     sensors = {s.id: s.type for s in new.sensors}
     assert sensors["sensor_A"] == "load_cell" and sensors["sensor_B"] == "pitch_length"
-    # encoders on the driven roller and the idlers around it (the parity model's inputs)
+    # encoders on the driven roller and the idlers around it (the parity model's inputs), and
+    # on the reel and the guide roller (with the reel's diameter and the guide's load cell:
+    # what the hybrid stage model adds)
     assert {s.element for s in new.sensors if s.type == "encoder"} == \
-        {"infeed", "lc_roll", "print_idler"}
+        {"infeed", "lc_roll", "print_idler", "unwind", "guide_in"}
+    assert {e.id: e.stage for e in new.elements if e.stage is not None} == {
+        "unwind": 1, "guide_in": 2, "dancer": 3, "lc_roll": 3, "infeed": 4, "print_idler": 5}
     loop = next(c for c in new.controllers if c.id == "registration_loop")
     assert (loop.sensor, loop.element) == ("sensor_B", "infeed")
 
@@ -223,3 +227,24 @@ def test_every_method_fits_and_scores_on_the_line(short_runs, key):
     if key == "parity":  # its A-B relations see a 10 % offset of sensor A
         sel = (m.fault == "sensor.offset:sensor_A") & (m.metric == "pd")
         assert (m.loc[sel, "value"] == 1.0).all()
+
+
+def test_hybrid_sov_configures_itself_from_the_line_and_sees_a_seized_dancer(short_runs,
+                                                                             tmp_path):
+    # no role, no line file: the stages, sensors and constants come from the line each run
+    # carries. selection="F" (OLS): this line's load cell is never censored, and the Tobit
+    # likelihood's Hessian is singular without a censored sample
+    train, val, _ = short_runs
+    base = yaml.safe_load((SET / "production.yaml").read_text(encoding="utf-8"))
+    scen = {**base, "line": str(LINE), "seed": 8, "faults": [
+        {"id": "seized", "type": "dancer.arm_stuck", "target": "dancer", "onset": "12 s"}]}
+    (tmp_path / "s8.yaml").write_text(yaml.safe_dump(scen), encoding="utf-8")
+    out = run_scenario(tmp_path / "s8.yaml", tmp_path / "run8", duration=30.0).output
+    seized = read_runs(out, verify=False)[0]
+    ev = evaluate(get("hybrid-sov")(selection="F"), train, [val[0], seized], [], m=3,
+                  n_boot=0, drive_data=True)
+    m = ev.metrics
+    pd_ = m[(m.fault == "dancer.arm_stuck:dancer") & (m.metric == "pd")]["value"]
+    assert pd_.tolist() == [1.0]
+    est = get("hybrid-sov")(selection="F").fit(train)
+    assert est.stages_.driven.id == "infeed" and est.stages_.sensor_ids["tension"] == "lc_guide"
