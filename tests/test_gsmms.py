@@ -6,6 +6,8 @@ of the calibrated registration line."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -15,6 +17,7 @@ from r2rsim.dataset.read import read_runs
 from r2rsim.diagnostics.gsmms import GSMMS, GlobalParity, fit_relations, objective, oracle_relations
 from r2rsim.diagnostics.gsmms._local import fault_normalised_oracle, weighted_moments
 from r2rsim.diagnostics.gsmms._model import GrowthSettings, grow, initial_map
+from r2rsim.diagnostics.line import LINE_ATTR, attach_line
 from r2rsim.errors import InputError
 
 from conftest import REPO
@@ -548,3 +551,18 @@ def test_training_arrays_are_what_the_fit_used():
         assert cosine(om[:, 0], est.models_.omega[m][:, 0]) == pytest.approx(1.0, abs=1e-12)
     with pytest.raises(RuntimeError, match="not fitted"):
         GSMMS().training_arrays(runs)
+
+
+def test_the_physics_term_refuses_a_run_of_another_line(registration_runs):
+    # fitted with the physics term configured from the runs' own line; a run said to come
+    # from a line with a longer registration span is refused, naming the number
+    est = GSMMS(model_features=[A_COL, B_COL], fault_channels=A_COL, physics={},
+                solver="eigh", random_state=0).fit(registration_runs)
+    assert est.physics_.physical_["span_length_m"] == 1.5
+    frame = attach_line(registration_runs[1].visible(), registration_runs[1])
+    other = json.loads(frame.attrs[LINE_ATTR])
+    next(s for s in other["spans"] if s.get("id") == "registration")["length"] = "2 m"
+    frame.attrs[LINE_ATTR] = json.dumps(other)
+    with pytest.raises(InputError, match=r"span_length_m 2 m where the model was fitted "
+                                         r"with 1.5 m"):
+        est.score(frame)

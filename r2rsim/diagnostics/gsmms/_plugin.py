@@ -459,6 +459,8 @@ class GSMMS(Diagnostic):
         ``z.k`` = (P − μ_node)/σ_node."""
         self._check_fitted()
         f = _frame(run)
+        if self.physics_ is not None:  # the physics term's model: the scored run's line
+            self.physics_._scored_frame(f)  # must match the fitted one (else refused)
         missing = [c for c in (*self.partition_columns_, *self.model_columns_)
                    if c not in f.columns]
         if missing:  # another line's data, or a run without a channel the fit used
