@@ -250,3 +250,20 @@ def test_names_made_of_digits_stay_names_in_the_baseline(bench, capsys):
     code, out, err = run(spec, d, capsys)
     assert code == 0, err
     assert f"bench passed: {len(base)} metrics within tolerance" in out
+
+
+def test_the_detection_window_is_a_spec_key(bench, capsys):
+    # a window of 0.5 s after the onset (the offset from 20 s of a 25 s run) and one up to
+    # the fault's end: the delays are bounded by the first, and the key reaches the harness
+    d, _ = bench
+    spec = write_spec(d, name="window.yaml",
+                      **{"n_boot: 20": "n_boot: 20, detection_window: 0.5 s"})
+    assert load_spec(spec).evaluation.detection_window == 0.5
+    code = main(["bench", str(spec), "--workdir", str(d / "work"), "-o", str(d / "win")])
+    assert code in (0, 1), capsys.readouterr().err
+    res = pd.read_csv(d / "win" / "results.csv")
+    delays = res[res.metric == "dd_median_s"]["value"]
+    assert len(delays) and (delays <= 0.5 + 1e-9).all()
+    unbounded = write_spec(d, name="nowindow.yaml",
+                           **{"n_boot: 20": "n_boot: 20, detection_window: null"})
+    assert load_spec(unbounded).evaluation.detection_window is None
