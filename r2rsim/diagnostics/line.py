@@ -19,10 +19,11 @@ from pathlib import Path
 
 import pandas as pd
 
+from ..errors import InputError
 from ..schema import paths as _paths
 from ..schema.loader import load_line, read_yaml
 
-__all__ = ["LINE_ATTR", "attach_line", "frame_line", "run_line_data"]
+__all__ = ["LINE_ATTR", "attach_line", "frame_line", "named", "run_line_data"]
 
 #: the key of a frame's ``attrs`` that holds its run's line (JSON text of the line mapping)
 LINE_ATTR = "r2rsim.line"
@@ -87,23 +88,28 @@ def run_line_data(run) -> dict | None:
         ``set:`` and the run's own ``line.`` axis values applied; None when the dataset holds
         no copy of its line (or holds several and none is named ``runs.line_config``).
     """
+    text = _run_line_text(run)
+    return None if text is None else json.loads(text)
+
+
+def _run_line_text(run) -> str | None:
+    """:func:`run_line_data` as JSON text (cached per dataset, line and overrides)."""
     root = Path(run.path)
     scen = root / "scenario"
     if not scen.is_dir():
         return None
     info = run.info or {}
     overrides = info.get("overrides_json")
-    text = _built(str(scen), str(root / "sweep"), info.get("line_config"),
+    return _built(str(scen), str(root / "sweep"), info.get("line_config"),
                   overrides if isinstance(overrides, str) else "")
-    return None if text is None else json.loads(text)
 
 
 def attach_line(frame: pd.DataFrame, run) -> pd.DataFrame:
     """Put the run's line (:func:`run_line_data`, as JSON text) in ``frame.attrs``; returns
     the frame. A run without a recorded line leaves the frame as it is."""
-    data = run_line_data(run)
-    if data is not None:
-        frame.attrs[LINE_ATTR] = json.dumps(data, default=str, sort_keys=True)
+    text = _run_line_text(run)
+    if text is not None:
+        frame.attrs[LINE_ATTR] = text
     return frame
 
 
@@ -128,3 +134,15 @@ def frame_line(frame: pd.DataFrame):
     """
     text = getattr(frame, "attrs", {}).get(LINE_ATTR)
     return _validated(text) if isinstance(text, str) else None
+
+
+def named(items, given: str, plugin: str, role: str, kind: str, plural: str):
+    """The item of ``items`` (elements, spans or sensors of a line) whose id is ``given``: a
+    role a plug-in's parameter names. Otherwise one :class:`InputError` naming the plug-in,
+    the parameter and the line's candidates, e.g. ``parity: load_cell 'lc9' is not a load
+    cell of the line (load cells: sensor_A, lc_unwind)``."""
+    for x in items:
+        if x.id == given:
+            return x
+    raise InputError(f"{plugin}: {role} '{given}' is not {kind} of the line ({plural}: "
+                     f"{', '.join(str(x.id) for x in items) or 'none'})")

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import InputError
+from ..line import named
 
 
 @dataclass(frozen=True)
@@ -147,11 +148,7 @@ def _find_element(line, role: str, given: str | None):
     types, a, plural, stage, need = _ELEMENT_ROLES[role]
     cands = [e for e in line.elements if e.type in types]
     if given is not None:
-        for e in cands:
-            if e.id == given:
-                return e
-        raise InputError(f"hybrid-sov: {role} '{given}' is not {a} of the line "
-                         f"({plural}: {_ids(cands)})")
+        return named(cands, given, "hybrid-sov", role, a, plural)
     if not cands:
         raise InputError(f"hybrid-sov: {role}: the line has no {a.split(' ', 1)[1]}, needed "
                          f"for {need}")
@@ -173,13 +170,10 @@ def _find_sensor(line, role: str, given: str | None, places: list[str], where: s
     typ, a, plural, _key, need = _SENSOR_ROLES[role]
     cands = [s for s in line.sensors if s.type == typ]
     if given is not None:
-        hit = [s for s in cands if s.id == given]
-        if not hit:
-            raise InputError(f"hybrid-sov: {role} '{given}' is not {a} of the line "
-                             f"({plural}: {_ids(cands)})")
-        if loc(hit[0]) not in places:
-            raise InputError(f"hybrid-sov: {role} '{given}' is on {loc(hit[0])}, not {where}")
-        return hit[0]
+        hit = named(cands, given, "hybrid-sov", role, a, plural)
+        if loc(hit) not in places:
+            raise InputError(f"hybrid-sov: {role} '{given}' is on {loc(hit)}, not {where}")
+        return hit
     here = [s for s in cands if loc(s) in places]
     if not here:
         raise InputError(f"hybrid-sov: {role}: the line has no {a.split(' ', 1)[1]} {where}, "

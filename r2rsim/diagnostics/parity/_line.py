@@ -6,6 +6,7 @@ positions or named by id, and the numbers of the reduced model read through them
 from __future__ import annotations
 
 from ...errors import InputError
+from ..line import named
 
 #: the role parameters of the plug-in: what each names, and what the model uses it for
 ROLES = {
@@ -63,12 +64,7 @@ def _rollers(line) -> list:
 
 
 def _element(line, role: str, given: str):
-    rollers = _rollers(line)
-    for e in rollers:
-        if e.id == given:
-            return e
-    raise InputError(f"parity: {role} '{given}' is not a roller of the line "
-                     f"(rollers: {_ids(rollers)})")
+    return named(_rollers(line), given, "parity", role, "a roller", "rollers")
 
 
 def _sensor(line, role: str, given: str | None, place: str | None, where: str, need: str):
@@ -78,11 +74,7 @@ def _sensor(line, role: str, given: str | None, place: str | None, where: str, n
     cands = [s for s in line.sensors if s.type == typ]
     loc = (lambda s: s.span) if typ == "pitch_length" else (lambda s: s.element)
     if given is not None:
-        for s in cands:
-            if s.id == given:
-                return s
-        raise InputError(f"parity: {role} '{given}' is not {a} of the line "
-                         f"({plural}: {_ids(cands)})")
+        return named(cands, given, "parity", role, a, plural)
     here = [s for s in cands if place is None or loc(s) == place]
     if not here:
         raise InputError(f"parity: {role}: the line has no {a.split(' ', 1)[1]}{where}, "
@@ -116,9 +108,8 @@ def find_roles(line, given: dict | None = None) -> dict[str, str]:
     els = line.elements
     index = {e.id: i for i, e in enumerate(els)}
     roles: dict[str, str] = {}
-    if "span" in given and given["span"] not in spans:
-        raise InputError(f"parity: span '{given['span']}' is not a span of the line "
-                         f"(spans: {', '.join(map(str, spans))})")
+    if "span" in given:
+        named(line.spans, given["span"], "parity", "span", "a span", "spans")
     span = given.get("span")
     pitch = _sensor(line, "pitch_sensor", given.get("pitch_sensor"), span,
                     f" on span '{span}'" if span else "", "the pitch y_B")
