@@ -303,9 +303,10 @@ def _dataset(workdir: Path, scenario: Path, seed: int, duration: float | None,
     the seed and the duration, so an edit to either file or a new release simulates again).
 
     The work directory is a cache that bench owns: a dataset there that is incomplete (no
-    manifest.json), or (``verify``) whose files differ from its manifest.json, is deleted and
-    simulated again, with a warning on stderr. Without ``verify`` one with a manifest.json is
-    used as it is. Anything else at that name (not a dataset) is refused, never deleted."""
+    manifest.json), or (``verify``) whose files differ from its manifest.json or whose labels
+    differ from its faults.parquet, is deleted and simulated again, with a warning on
+    stderr. Without ``verify`` one with a manifest.json is used as it is. Anything else at
+    that name (not a dataset) is refused, never deleted."""
     from .run import run_scenario
     from .schema import load_scenario
 
@@ -332,14 +333,18 @@ def _dataset(workdir: Path, scenario: Path, seed: int, duration: float | None,
               file=sys.stderr)
         shutil.rmtree(out)
     run_scenario(scenario, output=out, seed=seed, duration=duration)
-    return read_runs(out, verify=False)  # just written and validated
+    return read_runs(out, verify=False)  # just written and validated, labels included
 
 
-def _sweep_dataset(workdir: Path, sweep: Path, where: dict, log) -> list[Run]:
+def _sweep_dataset(workdir: Path, sweep: Path, where: dict, log,
+                   verify: bool = True) -> list[Run]:
     """The runs of a sweep in the work directory, selected by ``where``: the sweep is run
     (or continued; its finished runs are checked by their checksums and kept) into a
     directory named by a hash of the sweep file, its base scenario and line, and the r2rsim
-    version."""
+    version. The selected runs are read verified (``verify``: checksums and labels, as
+    ``r2rsim diagnose`` reads): a finished sweep is reopened after a check of its files'
+    sizes only, and its runs were checked without their labels as they were written. A
+    sweep that fails is an error (never deleted: it may have taken hours)."""
     from .sweep import plan_sweep, run_sweep
 
     plan = plan_sweep(sweep)
@@ -349,7 +354,7 @@ def _sweep_dataset(workdir: Path, sweep: Path, where: dict, log) -> list[Run]:
     if not summary.ok:
         log(f"warning: sweep {sweep}: {summary.failed + summary.skipped_failed} run(s) "
             f"failed; the bench uses the runs that have data")
-    return read_runs(out, verify=False, where=where or None)  # checked by run_sweep
+    return read_runs(out, verify=verify, where=where or None)
 
 
 def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
@@ -367,8 +372,10 @@ def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
     log : callable
         Receives progress and the printed tables.
     verify : bool
-        Check the datasets reused from ``workdir`` against their manifest.json; one that
-        fails is simulated again (:func:`_dataset`).
+        Check the datasets reused from ``workdir`` against their manifest.json, and their
+        runs' labels against faults.parquet (:func:`r2rsim.dataset.read.read_runs`); a
+        scenario's dataset that fails is simulated again (:func:`_dataset`), a sweep's is an
+        error (:func:`_sweep_dataset`).
     """
     spec_path = Path(spec_path)
     spec = load_spec(spec_path)
@@ -397,7 +404,7 @@ def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
                 for rs in getattr(study, role):
                     if rs.sweep is not None:
                         runs += _sweep_dataset(workdir, spec_path.parent / rs.sweep, rs.where,
-                                               log)
+                                               log, verify)
                         continue
                     for seed in rs.seeds:
                         runs += _dataset(workdir, spec_path.parent / rs.scenario, seed,

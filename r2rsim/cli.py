@@ -146,8 +146,6 @@ def _cmd_run(args) -> int:
 
 
 def _cmd_sweep(args) -> int:
-    from .sweep import run_sweep
-
     bar = None
     started = False  # the sweep began to write (its first progress call)
 
@@ -163,6 +161,8 @@ def _cmd_sweep(args) -> int:
         if rec is not None:
             bar.update(1)
     try:
+        from .sweep import run_sweep
+
         with _sigterm_as_interrupt():
             summary = run_sweep(args.sweep, output=args.output, workers=args.workers,
                                 scheduler=args.scheduler, retry_failed=args.retry_failed,
@@ -179,7 +179,8 @@ def _cmd_sweep(args) -> int:
     except KeyboardInterrupt as exc:
         what = "terminated (SIGTERM)" if isinstance(exc, Terminated) else "interrupted"
         print(f"{what}; the finished runs are kept: run the same command again to continue"
-              if started else f"{what} before any run started; nothing was written",
+              if started else f"{what} before this sweep ran a run; runs it finished before, "
+                               f"if any, are kept",
               file=sys.stderr)
         return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
     finally:
@@ -331,9 +332,27 @@ def _cmd_bench(args) -> int:
 def _cmd_report(args) -> int:
     from .report import write_report
 
-    out = write_report(args.results, output=args.output, datasets=args.data)
+    datasets = args.data
+    if args.no_verify:  # read here unchecked; write_report reads the paths it is given checked
+        datasets = _report_datasets_unverified(Path(args.results), args.data)
+    out = write_report(args.results, output=args.output, datasets=datasets)
     print(f"report written: {out}")
     return 0
+
+
+def _report_datasets_unverified(results: Path, data: list[str] | None):
+    """``report --no-verify``: the test datasets of a diagnose result (``--data``, else those
+    recorded in datasets.json) read without checking them against their manifest.json, as
+    runs for write_report; None when there are none to read (a bench result, or recorded
+    datasets that are gone: write_report says so)."""
+    from .evaluate.harness import read_datasets
+    from .report._diagnostics import results_kind
+    from .report._html import _recorded_datasets
+
+    if results_kind(results) != "diagnose":
+        return data
+    paths = data if data is not None else _recorded_datasets(results)[0]
+    return None if paths is None else read_datasets(paths, verify=False)
 
 
 def _add_report_parser(sub) -> None:
@@ -346,8 +365,27 @@ def _add_report_parser(sub) -> None:
     rp.add_argument("--data", nargs="+", metavar="DATASET",
                     help="the test datasets a diagnose result was scored on: adds ROC/PR "
                     "curves and the statistic of a few runs (default: those r2rsim "
-                    "diagnose recorded in RESULTS_DIR/datasets.json)")
+                    "diagnose recorded in RESULTS_DIR/datasets.json). They are checked as "
+                    "`r2rsim diagnose` checks them: sizes and checksums against their "
+                    "manifest.json, and each run's labels against faults.parquet")
+    rp.add_argument("--no-verify", action="store_true",
+                    help="read test datasets whose files differ from their manifest.json "
+                    "(or whose labels differ from faults.parquet) anyway")
     rp.set_defaults(func=_cmd_report)
+
+
+def _failed_runs_note(path: Path) -> str:
+    """``; an incomplete sweep: ...`` for a sweep's dataset with failed runs (it is valid, and
+    not the complete sweep)."""
+    from .dataset.outcome import sweep_failures
+
+    found = sweep_failures(path)
+    if not found or not found[0]:
+        return ""
+    failed, n_runs = found
+    return (f"; an INCOMPLETE sweep: {len(failed)} of {n_runs} runs failed (e.g. {failed[0]}; "
+            f"failures.parquet and runs.parquet termination_reason say why; `r2rsim sweep "
+            f"--retry-failed` runs them again)")
 
 
 def _cmd_validate(args) -> int:
@@ -374,7 +412,7 @@ def _cmd_validate(args) -> int:
             if problems:
                 status = EXIT_INPUT
             else:
-                print(f"{f}: valid dataset")
+                print(f"{f}: valid dataset{_failed_runs_note(path)}")
             continue
         try:
             data = read_yaml(path)
@@ -525,11 +563,13 @@ def _cmd_plot(args) -> int:
         if args.run is not None or args.channels is not None:
             raise InputError("--sweep plots every run: drop --run and --channels")
         fig = plot_sweep(args.dataset, args.sweep, args.statistic, args.axis,
-                         group=args.group, t0=args.t0, t1=args.t1)
+                         group=args.group, t0=args.t0, t1=args.t1,
+                         verify=not args.no_verify)
     else:
         if (args.axis, args.group) != (None, None):
             raise InputError("--axis and --group go with --sweep CHANNEL")
-        fig = plot_run(args.dataset, args.run, args.channels, args.t0, args.t1)
+        fig = plot_run(args.dataset, args.run, args.channels, args.t0, args.t1,
+                       verify=not args.no_verify)
     fig.savefig(out, format=out.suffix.lower()[1:])
     print(f"wrote {out}")
     return 0
@@ -542,7 +582,12 @@ def _add_plot_parser(sub) -> None:
         description="Plot one run of DATASET: the chosen channels on shared time axes, one "
         "axes per quantity, fault windows shaded, events marked. With --sweep CHANNEL: the "
         "statistic of CHANNEL per run against a sweep axis. Without -o the figure goes to "
-        "plot.png in the current directory; an existing file is kept unless --overwrite.")
+        "plot.png in the current directory; an existing file is kept unless --overwrite. "
+        "The dataset is checked against its manifest.json first, as every command that "
+        "reads one does: every listed file there with its size, and each file the figure "
+        "reads (the runs, channels, faults and events tables, the samples files it opens) "
+        "with its sha256; a dataset changed after it was written, or an unfinished sweep, "
+        "is refused (exit 2). --no-verify draws it anyway.")
     pl.add_argument("dataset", metavar="DATASET", help="dataset directory (r2rsim run or "
                     "sweep)")
     pl.add_argument("--run", metavar="ID", help="run id (default: the first run)")
@@ -563,6 +608,9 @@ def _add_plot_parser(sub) -> None:
                     help="figure file, .png, .svg or .pdf (default: plot.png)")
     pl.add_argument("--overwrite", action="store_true",
                     help="replace the figure file if it exists")
+    pl.add_argument("--no-verify", action="store_true",
+                    help="draw a dataset whose files differ from their manifest.json sizes "
+                    "or checksums (or that has none)")
     pl.set_defaults(func=_cmd_plot)
 
 
@@ -766,12 +814,41 @@ def _quick_exit() -> None:
     atexit.register(gc.freeze)
 
 
+#: what an interrupted command leaves behind, for its one line on stderr (`sweep` says it
+#: itself: whether runs were kept depends on how far it got)
+_KEPT_WHEN_STOPPED = {
+    "run": "no dataset written",
+    "sweep": "no run started; runs the sweep finished before, if any, are kept",
+    "bench": "the datasets it finished are kept (the next `r2rsim bench` reuses them); no "
+             "results or baseline written",
+}
+
+
+def _stopped(command: str | None, exc: KeyboardInterrupt) -> int:
+    """Say in one line that the command was stopped and what it kept; its exit status."""
+    what = "terminated (SIGTERM)" if isinstance(exc, Terminated) else "interrupted"
+    print(f"{what}; {_KEPT_WHEN_STOPPED.get(command or '', 'nothing written')}",
+          file=sys.stderr)
+    return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``r2rsim`` console script."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if argv is None and args.command in ("run", "sweep"):
-        _quick_exit()
+    """Entry point of the ``r2rsim`` console script.
+
+    From its first line SIGTERM stops a command the way Ctrl-C does, so every stop ends with
+    one line on stderr saying what was kept (exit 143 and 130)."""
+    args = None
+    with _sigterm_as_interrupt():
+        try:
+            args = build_parser().parse_args(argv)
+            if argv is None and args.command in ("run", "sweep"):
+                _quick_exit()
+            return _main(args)
+        except KeyboardInterrupt as exc:  # Terminated too
+            return _stopped(getattr(args, "command", None), exc)
+
+
+def _main(args) -> int:
     try:
         code = _run_command(args)
         sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
@@ -794,12 +871,6 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_FAILURE
-    except Terminated:
-        print("terminated (SIGTERM); no dataset written", file=sys.stderr)
-        return EXIT_TERMINATED
-    except KeyboardInterrupt:
-        print("interrupted; no dataset written", file=sys.stderr)
-        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -368,6 +368,14 @@ def execute(plan: RunPlan, out: str | Path, *, run_id: str | None = None, progre
                        initial_state_mode=prep.init_mode, events=scenario.events,
                        faults=faults, rolls=prep.rolls)
         sink.close(res.terminated)
+        nonfinite_t, warnings = sink.nonfinite_t, list(prep.warnings)
+        if writer.first_nonfinite is not None:  # an output (float32 as written), not a state
+            t_col, column = writer.first_nonfinite
+            if nonfinite_t is None or t_col < nonfinite_t:
+                nonfinite_t = t_col
+                warnings.append(f"{plan.source}: the samples column {column} is not finite "
+                                f"from t = {t_col:g} s (nan or inf; a value beyond float32's "
+                                "range, 3.4e38, is written as inf)")
         # the wall time and real-time factor without numba compiling (reported apart)
         wall = time.perf_counter() - wall0 - (compile_seconds() - compile_sim0)
         res.stats["compile_s"] = compile_seconds() - compile0
@@ -383,7 +391,7 @@ def execute(plan: RunPlan, out: str | Path, *, run_id: str | None = None, progre
         writer.write_table("variability", pa.Table.from_pylist(
             [{"run_id": run_id, **r} for r in variability_rows], schema=VARIABILITY_SCHEMA))
         runs = _runs_table(plan, prep, run_id, res, faults, modes, writer.n_rows, sim_end,
-                           sink.nonfinite_t, wall)
+                           nonfinite_t, wall)
         for col, arr in (run_columns or {}).items():
             runs = runs.append_column(col, arr)
         writer.write_table("runs", runs)
@@ -398,8 +406,8 @@ def execute(plan: RunPlan, out: str | Path, *, run_id: str | None = None, progre
     return RunSummary(path, run_id, float(sim_end), wall, writer.n_rows,
                       sink.tension_stats(cl.span_ids), events,
                       res.terminated, res.termination_reason, res.termination_time,
-                      prep.init_mode, res.stats, prep.warnings,
-                      list(scenario.expect.termination), sink.nonfinite_t)
+                      prep.init_mode, res.stats, warnings,
+                      list(scenario.expect.termination), nonfinite_t)
 
 
 @dataclass

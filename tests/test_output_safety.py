@@ -256,15 +256,16 @@ def test_writer_keeps_every_path_inside_its_temporary_directory(tmp_path):
             DatasetWriter(base / "ds", run_id, {})
     w = DatasetWriter(base / "ds", "x__s0", {})
     for rel in ("scenario/../../escape.yaml", "../escape.yaml", "/tmp/escape.yaml",
-                "scenario/../../../escape.normalised.yaml"):
-        with pytest.raises(R2RError, match="outside the dataset directory"):
+                "scenario/../../../escape.normalised.yaml", "scenario/leak/escape.yaml"):
+        with pytest.raises(R2RError, match="not where the dataset layout keeps"):
             w.write_text(rel, "x")
-    with pytest.raises(R2RError, match="outside the dataset directory"):
+    with pytest.raises(R2RError, match="not a table of the dataset layout"):
         w.write_table("../runs", pa.table({"a": [1]}))
+    # a path of the layout that a symbolic link leads out of: refused once resolved
     (w.tmp / "scenario").mkdir(exist_ok=True)  # made by the first write_text
-    (w.tmp / "scenario" / "leak").symlink_to(tmp_path, target_is_directory=True)
+    (w.tmp / "scenario" / "leak.yaml").symlink_to(tmp_path / "outside.yaml")
     with pytest.raises(R2RError, match="outside the dataset directory"):
-        w.write_text("scenario/leak/escape.yaml", "x")
+        w.write_text("scenario/leak.yaml", "x")
     w.abort()
     assert sorted(p.name for p in tmp_path.rglob("*")) == ["base"]
 

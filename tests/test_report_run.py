@@ -215,7 +215,10 @@ def test_long_run_streams_row_groups_and_keeps_the_spike(long_ds):
 
     part = next((root / "samples").rglob("part-0.parquet"))
     assert pq.ParquetFile(part).metadata.num_row_groups > 3
-    fig = plot_run(root, channels=["state.span3.tension_N", "meas.*"], n_buckets=300)
+    # verify=False: the synthetic dataset's tables hold only what the figure reads, so its
+    # labels cannot be checked against faults.parquet (tests/test_reader_verify.py does)
+    fig = plot_run(root, channels=["state.span3.tension_N", "meas.*"], n_buckets=300,
+                   verify=False)
     lines = lines_by_label(fig)
     s = pd.read_parquet(part, columns=["state.span3.tension_N", "meas.lc_unwind.tension_N"])
     assert lines["state.span3.tension_N"].get_ydata().max() == bench.SPIKE_N
@@ -406,15 +409,16 @@ def _damage(ds, how: str):
                                  "samples without t_s", "channels of the wrong shape",
                                  "faults of the wrong shape", "events of the wrong shape"])
 def test_a_damaged_dataset_is_one_error_naming_the_file(how, faults_ds, tmp_path, capsys):
-    """plot reads only what it draws and does not check checksums: a damaged file (it gave
-    ArrowInvalid, KeyError or StopIteration tracebacks) is one error naming it."""
+    """With --no-verify, plot reads only what it draws and does not check checksums: a
+    damaged file (it gave ArrowInvalid, KeyError or StopIteration tracebacks) is one error
+    naming it. (Verified, the manifest refuses it first: tests/test_reader_verify.py.)"""
     import shutil
 
     ds = tmp_path / "ds"
     shutil.copytree(faults_ds, ds)
     name = _damage(ds, how)
     out = tmp_path / "fig.png"
-    assert main(["plot", str(ds), "-o", str(out)]) == 2
+    assert main(["plot", str(ds), "-o", str(out), "--no-verify"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "Traceback" not in err
     assert err.startswith(f"error: dataset {ds}: {name} cannot be read (")

@@ -778,7 +778,15 @@ def test_failed_runs_are_recorded_kept_and_retried(tmp_path, capsys, monkeypatch
     assert not (out / "samples" / f"run_id={ok2}").exists()
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["sweep"]["failed_without_data"] == [ok2]
+    assert manifest["sweep"]["failed"] == [ok2, budget, budget2]
     assert manifest["run_ids"] == [ok, budget, budget2]
+    # never taken for a complete sweep: the summary, the tables and validate say so
+    assert f"dataset      {out} (incomplete: 3 of 4 runs failed)" in stdout
+    meta = pq.read_schema(out / "runs.parquet").metadata
+    assert (meta[b"r2rsim.sweep.n_runs"], meta[b"r2rsim.sweep.n_failed"]) == (b"4", b"3")
+    assert main(["validate", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "valid dataset; an INCOMPLETE sweep: 3 of 4 runs failed" in said
 
     monkeypatch.setattr(r2rsim.run, "execute", real)
     before = snapshot(out)
@@ -1251,7 +1259,8 @@ def test_a_sweep_finished_by_another_while_this_one_starts_is_left_finished(qs, 
     (OSError(28, "No space left on device", "out/.work/x.parquet"), 1,
      "error: cannot write the sweep's files: No space left on device (out/.work/x.parquet). "
      "The finished runs are kept"),
-    (KeyboardInterrupt(), 130, "interrupted before any run started; nothing was written"),
+    (KeyboardInterrupt(), 130, "interrupted before this sweep ran a run; runs it finished "
+                               "before, if any, are kept"),
 ])
 def test_sweep_exits_that_say_what_was_kept(qs, monkeypatch, capsys, raised, code, words):
     import r2rsim.sweep

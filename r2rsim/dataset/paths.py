@@ -33,9 +33,54 @@ MAX_JSON_BYTES = 256 << 20
 #: r2rsim's own temporaries next to a dataset: ``.NAME.tmp-PID`` while a run writes,
 #: ``.NAME.old-PID`` for the dataset an ``--overwrite`` run replaces, during the swap
 TEMP_RE = re.compile(r"^\.(?P<name>.+)\.(?P<kind>tmp|old)-(?P<pid>[1-9][0-9]{0,9})$")
-#: what the writer creates at the top of a temporary directory
-_TMP_TOP = {"samples", "scenario", "runs.parquet", "channels.parquet", "faults.parquet",
-            "events.parquet", MANIFEST}
+# ---------------------------------------------------------------- the dataset's layout
+# One list of what a dataset holds (docs/dataset.md §1). The run's writer, the sweep's
+# finalisation, the cleanup of dead processes' temporaries and `r2rsim validate` all use it,
+# so a file added to the layout is known to every one of them.
+
+#: ``<name>.parquet`` tables at the top of every dataset (a run's and a sweep's)
+RUN_TABLES = ("runs", "channels", "faults", "events", "variability")
+#: tables only a sweep's dataset holds
+SWEEP_TABLES = ("failures",)
+#: directory of the samples: ``samples/run_id=<id>/part-0.parquet``
+SAMPLES = "samples"
+#: directories of copies of the input files: a run's ``scenario/`` (the scenario and its
+#: line), and a sweep's ``sweep/`` (the sweep file)
+RUN_COPIES = ("scenario",)
+SWEEP_COPIES = ("scenario", "sweep")
+#: the files at the top of a dataset
+TOP_FILES = frozenset({f"{t}.parquet" for t in RUN_TABLES + SWEEP_TABLES} | {MANIFEST})
+
+
+def samples_file(run_id: str) -> str:
+    """The samples file of a run, relative to the dataset."""
+    return f"{SAMPLES}/run_id={run_id}/part-0.parquet"
+
+
+def layout_problem(rel: str, *, sweep: bool) -> str | None:
+    """Why ``rel`` (a path relative to a dataset, ``/``-separated) is not a file r2rsim
+    writes there (None: it is). ``sweep``: the layout of a sweep's dataset, else a run's
+    (the same, without ``failures.parquet`` and ``sweep/``)."""
+    parts = rel.split("/")
+    if len(parts) == 1:
+        ok = rel in TOP_FILES and (sweep or rel[: -len(".parquet")] not in SWEEP_TABLES)
+    elif parts[0] == SAMPLES:
+        ok = (len(parts) == 3 and parts[1].startswith("run_id=")
+              and safe_component(parts[1][len("run_id="):]) and parts[2] == "part-0.parquet")
+    else:
+        ok = len(parts) == 2 and parts[0] in (SWEEP_COPIES if sweep else RUN_COPIES) \
+            and safe_component(parts[1])
+    return None if ok else "not a file of the r2rsim dataset layout"
+
+
+def _layout_dir(rel: str, *, sweep: bool) -> bool:
+    """Whether ``rel`` is a directory of the dataset layout (one that holds its files)."""
+    parts = rel.split("/")
+    if parts[0] == SAMPLES:
+        return len(parts) == 1 or (len(parts) == 2 and parts[1].startswith("run_id="))
+    return len(parts) == 1 and rel in (SWEEP_COPIES if sweep else RUN_COPIES)
+
+
 #: temporary directories in use by writers of this process (a process that reuses the PID
 #: of a dead one, as the first process of a container does, must still clean its leftovers)
 ACTIVE: set[Path] = set()
@@ -119,6 +164,45 @@ def occupied_output(out: Path) -> bool:
         raise InputError(f"output '{out}' exists and is not a directory; choose another "
                          f"with -o")
     return any(out.iterdir())
+
+
+def check_writable(out: str | Path, *, inside_out: bool) -> None:
+    """Refuse, before any work, an output directory that cannot be written.
+
+    Parameters
+    ----------
+    out : str or Path
+        The dataset directory (it may not exist yet).
+    inside_out : bool
+        True for a sweep, which writes inside ``out``: ``out`` (or, when it does not exist,
+        its nearest existing ancestor) must be writable. False for a run, which writes its
+        temporary directory next to ``out`` and renames it onto ``out``: the parent must be
+        writable, and ``out`` must not be a mount point (a rename cannot replace one).
+
+    Raises
+    ------
+    InputError
+        Naming the output and the problem: a path under a file, a read-only file system, no
+        permission to write, a mount point.
+    """
+    out = Path(out)
+    start = out if inside_out else out.parent
+    anc = Path(os.path.abspath(start))
+    while not os.path.lexists(anc) and anc != anc.parent:
+        anc = anc.parent
+    if not anc.is_dir():
+        raise InputError(f"output '{out}': '{anc}' is a file, not a directory, so nothing "
+                         f"can be written under it; choose another directory with -o")
+    if not inside_out and out.is_dir() and not out.is_symlink() and os.path.ismount(out):
+        raise InputError(f"output '{out}' is a mount point: a run writes its dataset next to "
+                         f"the output and moves it into place, which cannot replace a mount "
+                         f"point; give a directory inside it (-o {out / 'NAME'})")
+    if os.access(anc, os.W_OK | os.X_OK):
+        return
+    read_only = hasattr(os, "statvfs") and bool(os.statvfs(anc).f_flag & os.ST_RDONLY)
+    why = "is on a read-only file system" if read_only else \
+        "is not writable (no permission)"
+    raise InputError(f"output '{out}': '{anc}' {why}; choose another directory with -o")
 
 
 def read_json(path: str | Path, limit: int = MAX_JSON_BYTES) -> object:
@@ -256,35 +340,60 @@ def remove_dataset(root: Path) -> None:
 
 
 def pid_alive(pid: int) -> bool:
-    """Whether a process with this id exists (one of another user counts)."""
+    """Whether a process with this id exists (one of another user counts).
+
+    On POSIX, ``os.kill(pid, 0)`` asks without sending anything; on Windows the same call
+    would *end* the process, so the Win32 API is asked instead (:func:`_pid_alive_windows`).
+    When in doubt the answer is True: a live process's files are never removed.
+    """
+    if not isinstance(pid, int) or pid <= 0:
+        return True
+    if os.name == "nt":
+        return _pid_alive_windows(pid)
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
-    except (PermissionError, OverflowError, ValueError):
+    except (PermissionError, OverflowError, ValueError, OSError):
         return True  # exists but is not ours, or no valid pid: leave its files alone
     return True
 
 
+def _pid_alive_windows(pid: int) -> bool:
+    """Windows: open the process for a query and read its exit code (STILL_ACTIVE while it
+    runs). A process that cannot be opened because access is denied exists."""
+    import ctypes
+    from ctypes import wintypes
+
+    kernel32 = ctypes.WinDLL("kernel32", use_last_error=True)
+    kernel32.OpenProcess.restype = wintypes.HANDLE
+    query_limited_information, still_active, access_denied = 0x1000, 259, 5
+    handle = kernel32.OpenProcess(query_limited_information, False, wintypes.DWORD(pid))
+    if not handle:
+        return ctypes.get_last_error() == access_denied
+    try:
+        code = wintypes.DWORD()
+        if not kernel32.GetExitCodeProcess(handle, ctypes.byref(code)):
+            return True
+        return code.value == still_active
+    finally:
+        kernel32.CloseHandle(handle)
+
+
 def _looks_like_tmp(path: Path) -> bool:
     """Whether a directory holds nothing but what the writer puts in its temporary
-    directory (so a foreign ``.x.tmp-123`` directory is never removed)."""
+    directory (:func:`layout_problem` of a run's dataset), so a foreign ``.x.tmp-123``
+    directory is never removed."""
     for dirpath, dirnames, filenames in os.walk(path):
         here = Path(dirpath)
-        rel = here.relative_to(path).parts
-        for name in [*dirnames, *filenames]:
-            p = here / name
-            if p.is_symlink():
+        for name in dirnames:
+            rel = (here / name).relative_to(path).as_posix()
+            if (here / name).is_symlink() or not _layout_dir(rel, sweep=False):
                 return False
-            if not rel:
-                ok = name in _TMP_TOP and p.is_dir() == (name in ("samples", "scenario"))
-            elif rel == ("samples",):
-                ok = name.startswith("run_id=") and p.is_dir()
-            elif rel[0] == "samples" and len(rel) == 2 or rel == ("scenario",):
-                ok = p.is_file()
-            else:
-                ok = False
-            if not ok:
+        for name in filenames:
+            p = here / name
+            if p.is_symlink() or not p.is_file() or layout_problem(
+                    p.relative_to(path).as_posix(), sweep=False) is not None:
                 return False
     return True
 

@@ -4,16 +4,18 @@ row. The diagnostics and the evaluation harness work on these."""
 from __future__ import annotations
 
 import fnmatch
-import hashlib
-import io
 import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
 
 from ..errors import InputError
-from .paths import SWEEP_MARKER, read_json
+from .labels import quick_label_problem
+from .verify import NO_VERIFY, Verifier, refuse_unfinished
 
 #: column families a diagnosis algorithm sees by default (docs/dataset.md §2): the time, the
 #: recorded readings with their clipping flags, and the set-points. Never ``true.``,
@@ -68,7 +70,6 @@ class Run:
 _NEEDED = {"runs.parquet": ("run_id",), "faults.parquet": ("run_id",),
            "samples": ("k", "t_s", "label.is_faulty", "label.score_mask",
                        "label.primary_type")}
-_NO_VERIFY = "--no-verify reads it anyway"
 
 
 def is_dataset_dir(path: Path) -> bool:
@@ -77,79 +78,58 @@ def is_dataset_dir(path: Path) -> bool:
     return (path / "runs.parquet").is_file() or (path / "manifest.json").is_file()
 
 
+def _unreadable(rel: str, exc: Exception) -> str:
+    return (f"{rel} is not a readable Parquet file ({type(exc).__name__}: "
+            f"{(str(exc).strip().splitlines() or [''])[0]})")
+
+
 class _Reader:
-    """Reads the files of one dataset, checking each against manifest.json when verifying:
-    every listed file exists with its size (all of them, at once), and a file that is read has
-    its sha256 (hashed from the same bytes that are parsed, so it is read once)."""
+    """Reads the files of one dataset through a :class:`~r2rsim.dataset.verify.Verifier`:
+    when verifying, every listed file exists with its size (all of them, at once), and a file
+    that is read has its sha256, hashed from the same bytes that are parsed (a samples file's
+    in a background thread while they are parsed), so each file is read once."""
 
     def __init__(self, root: Path, verify: bool):
         self.root = root
         self.verify = verify
-        self.files: dict | None = None
-        if verify:
-            self._check_manifest()
+        self.v = Verifier(root, verify)
 
     def fail(self, msg: str, run: str | None = None) -> InputError:
-        return InputError(f"dataset {self.root}: {f'run {run}: ' if run else ''}{msg}")
+        return self.v.fail(msg, run)
 
-    def _check_manifest(self) -> None:
-        mf = self.root / "manifest.json"
-        if not mf.is_file():
-            raise self.fail("no manifest.json, so its files cannot be checked: not a "
-                            f"complete r2rsim dataset ({_NO_VERIFY})")
-        try:
-            files = read_json(mf)["files"]
-            items = [(str(rel), str(info["sha256"]), info.get("bytes")) for rel, info in
-                     files.items()]
-        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
-            raise self.fail(f"manifest.json is not readable ({type(exc).__name__}: "
-                            f"{str(exc).splitlines()[0] if str(exc) else ''}); "
-                            f"{_NO_VERIFY}") from None
-        self.files = {rel: (sha, size) for rel, sha, size in items}
-        for rel, (_, size) in self.files.items():
-            f = self.root / rel
-            part = rel.split("/")
-            run = (part[1][len("run_id="):] if len(part) > 2 and part[0] == "samples"
-                   and part[1].startswith("run_id=") else None)
-            if not f.is_file():
-                raise self.fail(f"{rel} is missing (listed in manifest.json): the directory "
-                                f"is not a complete r2rsim dataset", run)
-            if size is not None and f.stat().st_size != size:
-                raise self.fail(f"{rel} has {f.stat().st_size} bytes, manifest.json says "
-                                f"{size}: the file was changed or truncated after it was "
-                                f"written; refusing to use it (`r2rsim validate "
-                                f"{self.root}` lists every problem; {_NO_VERIFY})", run)
-
-    def table(self, rel: str, needed: tuple[str, ...] = (), run: str | None = None
-              ) -> pd.DataFrame:
-        """A Parquet file of the dataset as a DataFrame (``run``: named in errors)."""
+    def arrow(self, rel: str, needed: tuple[str, ...] = (), run: str | None = None
+              ) -> pa.Table:
+        """A Parquet file of the dataset as an Arrow table (``run``: named in errors); the
+        checksum of a samples file (``run`` given) is begun, not waited for: call
+        ``self.v.check(rel)`` before using what it holds."""
         f = self.root / rel
         if not f.is_file():
             raise self.fail(f"{rel} is missing: the directory is not a complete r2rsim "
                             f"dataset", run)
-        source: object = f
-        if self.verify:
-            if rel not in self.files:
-                raise self.fail(f"{rel} is not listed in manifest.json: it was added after "
-                                f"the dataset was written; refusing to use it ({_NO_VERIFY})",
-                                run)
+        if run is None:
+            data = self.v.read(rel)
+        else:
+            self.v.listed(rel, run)
             data = f.read_bytes()
-            if hashlib.sha256(data).hexdigest() != self.files[rel][0]:
-                raise self.fail(f"{rel}: checksum differs from manifest.json: the file was "
-                                f"changed after it was written; refusing to use it "
-                                f"(`r2rsim validate {self.root}` lists every problem; "
-                                f"{_NO_VERIFY})", run)
-            source = io.BytesIO(data)
+            self.v.start(rel, run, data)
         try:
-            df = pd.read_parquet(source)
+            table = pq.read_table(pa.BufferReader(data))
         except Exception as exc:  # noqa: BLE001 - pyarrow raises several types on bad files
-            raise self.fail(f"{rel} is not a readable Parquet file ({type(exc).__name__}: "
-                            f"{(str(exc).strip().splitlines() or [''])[0]})", run) from None
-        missing = [c for c in needed if c not in df.columns]
+            self.v.check(rel)  # a file changed after it was written is told as such
+            raise self.fail(_unreadable(rel, exc), run) from None
+        missing = [c for c in needed if c not in table.column_names]
         if missing:
+            self.v.check(rel)
             raise self.fail(f"{rel} has no column {', '.join(missing)}: not a complete "
                             f"r2rsim dataset", run)
-        return df
+        return table
+
+    def table(self, rel: str, needed: tuple[str, ...] = (), run: str | None = None
+              ) -> pd.DataFrame:
+        """A Parquet file of the dataset as a DataFrame, checked."""
+        table = self.arrow(rel, needed, run)
+        self.v.check(rel)
+        return table.to_pandas()
 
 
 def _matches(value, wanted) -> bool:
@@ -208,7 +188,8 @@ def select_rows(rows: list[dict], where: dict, dataset: Path) -> list[dict]:
     return out
 
 
-def read_runs(path: str | Path, verify: bool = True, where: dict | None = None) -> list[Run]:
+def read_runs(path: str | Path, verify: bool = True, where: dict | None = None, *,
+              check_labels: bool | None = None) -> list[Run]:
     """Read every run of a dataset directory written by ``r2rsim run`` or ``r2rsim sweep``.
 
     Parameters
@@ -222,53 +203,106 @@ def read_runs(path: str | Path, verify: bool = True, where: dict | None = None) 
         Only the runs whose runs.parquet columns have these values (:func:`select_rows`):
         ``{"offset": [-10, 10], "seed": 1}`` selects by a sweep's axis ``axis.offset`` and
         by seed.
+    check_labels : bool, optional
+        Check each run's ``label.*`` columns against what
+        :func:`r2rsim.dataset.labels.derive_labels` derives from the run's rows of
+        faults.parquet and runs.parquet (as ``r2rsim validate`` does): a faults.parquet
+        edited after the writing, even with manifest.json re-hashed to match, is refused,
+        naming the run, the column, the first differing ``k`` and both values. Default: on
+        when ``verify`` is (``verify=False`` skips it too).
 
     Raises
     ------
     InputError
         If ``path`` is not a complete dataset, a file is unreadable, or (``verify``) a file
-        differs from the manifest; one line naming the dataset, the file and the problem.
+        differs from the manifest or a run's labels from its faults; one line naming the
+        dataset, the file or run and the problem.
     """
     path = Path(path)
     if not path.is_dir():
         raise InputError(f"{path}: no such dataset directory")
-    if (path / SWEEP_MARKER).is_file():
-        raise InputError(f"dataset {path}: an unfinished sweep (interrupted, or still "
-                         f"running): run the same `r2rsim sweep` command again to finish it")
+    refuse_unfinished(path)
     if not is_dataset_dir(path) or not (path / "samples").is_dir():
         what = "runs.parquet" if not (path / "runs.parquet").exists() else "samples/"
         raise InputError(f"dataset {path}: {what} is missing: the directory is not a "
                          f"complete r2rsim dataset")
+    labels = verify if check_labels is None else check_labels
     rd = _Reader(path, verify)
-    runs = rd.table("runs.parquet", _NEEDED["runs.parquet"])
-    faults = rd.table("faults.parquet", _NEEDED["faults.parquet"])
+    try:
+        return _read_runs(rd, path, where, labels)
+    finally:
+        rd.v.close()
+
+
+def _label_problem(t: pa.Table, run_row: dict, fault_rows: list[dict], path: Path
+                   ) -> str | None:
+    """Why a run's labels are refused (:func:`r2rsim.dataset.labels.quick_label_problem`:
+    every label faults.parquet determines), or None."""
+    try:
+        problem = quick_label_problem(t, run_row, fault_rows)
+    except Exception as exc:  # noqa: BLE001 - a table lacking a column, of another type
+        return (f"its labels cannot be checked ({type(exc).__name__}: "
+                f"{(str(exc).strip().splitlines() or [''])[0]}): not a complete r2rsim "
+                f"dataset ({NO_VERIFY})")
+    if problem is None:
+        return None
+    return (f"{problem}: the labels in the samples differ from what faults.parquet and "
+            f"runs.parquet give (edited after the writing?); refusing to use it (`r2rsim "
+            f"validate {path}` lists every problem; {NO_VERIFY})")
+
+
+def _read_runs(rd: _Reader, path: Path, where: dict | None, labels: bool) -> list[Run]:
+    runs_t = rd.arrow("runs.parquet", _NEEDED["runs.parquet"])
+    faults_t = rd.arrow("faults.parquet", _NEEDED["faults.parquet"])
+    runs, faults = runs_t.to_pandas(), faults_t.to_pandas()
+    # the label check takes the rows as validate does (pyarrow's Python values)
+    run_rows = {str(r["run_id"]): r for r in runs_t.to_pylist()} if labels else {}
+    fault_rows: dict[str, list[dict]] = {}
+    for f in faults_t.to_pylist() if labels else ():
+        fault_rows.setdefault(str(f["run_id"]), []).append(f)
     out = []
     rows = runs.to_dict("records")
     if where:
         rows = select_rows(rows, where, path)
     for row in rows:
-        rid = str(row["run_id"])
-        if rid in ("", ".", "..") or any(c in rid for c in "/\\\0"):
-            raise rd.fail(f"run id {rid!r} in runs.parquet is not a plain name (its samples "
-                          f"would lie outside samples/)")
-        part = path / "samples" / f"run_id={rid}"
-        if part.is_dir():
-            files = sorted(p for p in part.iterdir() if p.is_file() and p.suffix == ".parquet")
-        else:  # a samples/ directory without hive partitions (filtered on run_id below)
-            files = sorted(p for p in (path / "samples").iterdir()
-                           if p.is_file() and p.suffix == ".parquet")
-        if not files:
-            raise rd.fail(f"no samples file (samples/run_id={rid}/part-0.parquet is "
-                          f"missing): the directory is not a complete r2rsim dataset", rid)
-        frames = [rd.table(f.relative_to(path).as_posix(), run=rid) for f in files]
-        s = frames[0] if len(frames) == 1 else pd.concat(frames, ignore_index=True)
-        if "run_id" in s.columns:
-            s = s[s["run_id"].astype(str) == rid].drop(columns="run_id")
-        missing = [c for c in _NEEDED["samples"] if c not in s.columns]
-        if missing:
-            raise rd.fail(f"the samples have no column {', '.join(missing)}: not a "
-                          f"complete r2rsim dataset", rid)
-        s = s.set_index("k", drop=False).sort_index()
-        out.append(Run(rid, s, faults[faults.run_id.astype(str) == rid].reset_index(drop=True),
-                       row, path))
+        run, table = _read_run(rd, path, row, faults)
+        if labels:
+            problem = _label_problem(table, run_rows[run.run_id],
+                                     fault_rows.get(run.run_id, []), path)
+            if problem:
+                raise rd.fail(problem, run.run_id)
+        out.append(run)
     return out
+
+
+def _read_run(rd: _Reader, path: Path, row: dict, faults: pd.DataFrame
+              ) -> tuple[Run, pa.Table]:
+    """One run, its samples read (checked against manifest.json when verifying), and the
+    samples as Arrow (for the label check)."""
+    rid = str(row["run_id"])
+    if rid in ("", ".", "..") or any(c in rid for c in "/\\\0"):
+        raise rd.fail(f"run id {rid!r} in runs.parquet is not a plain name (its samples "
+                      f"would lie outside samples/)")
+    part = path / "samples" / f"run_id={rid}"
+    if part.is_dir():
+        files = sorted(p for p in part.iterdir() if p.is_file() and p.suffix == ".parquet")
+    else:  # a samples/ directory without hive partitions (filtered on run_id below)
+        files = sorted(p for p in (path / "samples").iterdir()
+                       if p.is_file() and p.suffix == ".parquet")
+    if not files:
+        raise rd.fail(f"no samples file (samples/run_id={rid}/part-0.parquet is "
+                      f"missing): the directory is not a complete r2rsim dataset", rid)
+    rels = [f.relative_to(path).as_posix() for f in files]
+    tables = [rd.arrow(rel, run=rid) for rel in rels]
+    t = tables[0] if len(tables) == 1 else pa.concat_tables(tables, promote_options="default")
+    if "run_id" in t.column_names:
+        t = t.filter(pc.equal(t.column("run_id").cast(pa.string()), rid)).drop_columns("run_id")
+    for rel in rels:  # a changed file is told as such, before anything else about it
+        rd.v.check(rel)
+    missing = [c for c in _NEEDED["samples"] if c not in t.column_names]
+    if missing:
+        raise rd.fail(f"the samples have no column {', '.join(missing)}: not a "
+                      f"complete r2rsim dataset", rid)
+    s = t.to_pandas().set_index("k", drop=False).sort_index()
+    return Run(rid, s, faults[faults.run_id.astype(str) == rid].reset_index(drop=True), row,
+               path), t

@@ -19,14 +19,22 @@ import json
 from pathlib import Path
 
 import numpy as np
-import pyarrow as pa
 import pyarrow.parquet as pq
 
-from .labels import derive_labels
+# the label comparison lives in labels.py: every reader checks labels with it too
+from .labels import (
+    _item,  # noqa: F401 - kept importable from here
+    derive_labels,
+)
+from .labels import check_labels as _check_labels
+from .labels import first_difference as _first_difference  # noqa: F401 - kept importable
+from .labels import first_list_difference as _first_list_difference  # noqa: F401
+from .labels import label_column as _column
 from .paths import (
     SWEEP_MARKER,
     dataset_problems,
     inside,
+    layout_problem,
     read_json,
     read_parquet_file,
     safe_component,
@@ -72,6 +80,12 @@ def validate_dataset(path: str | Path, labels: bool = True) -> list[str]:
         manifest = read_json(root / "manifest.json")
     except (OSError, ValueError):
         return problems
+    files = manifest.get("files") if isinstance(manifest, dict) else None
+    sweep = isinstance(manifest, dict) and isinstance(manifest.get("sweep"), dict)
+    for rel in files if isinstance(files, dict) else ():
+        why = layout_problem(rel, sweep=sweep) if isinstance(rel, str) else "not a path"
+        if why:
+            problems.append(f"{rel}: {why} (manifest.json lists it)")
     for name in ("runs", "faults", "channels"):
         if not (root / f"{name}.parquet").is_file():
             return [*problems, f"{name}.parquet: missing"]
@@ -136,16 +150,6 @@ def _unreadable(exc: Exception) -> str:
     """One line for a file pyarrow could not read."""
     first = (str(exc).strip().splitlines() or [""])[0]
     return f"not a readable Parquet file ({type(exc).__name__}: {first})"
-
-
-def _column(batch: pa.RecordBatch, name: str) -> np.ndarray | list:
-    """A column of a batch as numpy (strings decoded; lists stay Arrow arrays)."""
-    col = batch.column(name)
-    if pa.types.is_dictionary(col.type):
-        col = col.dictionary_decode()
-    if pa.types.is_list(col.type) or pa.types.is_large_list(col.type):
-        return col
-    return col.to_numpy(zero_copy_only=False)
 
 
 def _check_samples(part: Path, run: dict, rows: list[dict], channels: list[str],
@@ -239,62 +243,3 @@ def _check_onsets(rows: list[dict], k: np.ndarray, t: np.ndarray, seen: dict) ->
                 problems.append(f"fault {f['fault_id']} onset_k = {f['onset_k']}, but "
                                 f"the first sample at or after its onset is {k[first]}")
     return problems
-
-
-def _check_labels(batch, k: np.ndarray, want: dict, names: list[str],
-                  reported: set[str]) -> list[str]:
-    """The batch's label columns against those derived from faults.parquet: one message
-    per column, at its first difference (``reported`` holds the columns already told)."""
-    problems = []
-    for name, expected in want.items():
-        if name in reported:
-            continue
-        if name not in names:
-            problems.append(f"label column {name} missing")
-            reported.add(name)
-            continue
-        got = _column(batch, name)
-        bad = _first_difference(name, got, expected)
-        if bad is not None:
-            problems.append(f"{name} at k = {k[bad]} is {_item(got[bad])!r}; "
-                            f"faults.parquet gives {_item(expected[bad])!r}")
-            reported.add(name)
-    return problems
-
-
-def _item(v):
-    if isinstance(v, pa.Scalar):
-        return v.as_py()
-    return v.item() if isinstance(v, np.generic) else v
-
-
-def _first_list_difference(got: pa.Array, expected: pa.Array) -> int | None:
-    """Index of the first row where two Arrow list arrays differ (null lists differ)."""
-    if not (pa.types.is_list(got.type) or pa.types.is_large_list(got.type)):
-        return 0
-    n_got = got.value_lengths().fill_null(-1).to_numpy()
-    n_exp = expected.value_lengths().fill_null(-1).to_numpy()
-    diff = n_got != n_exp
-    if not diff.any():  # same lengths: compare the values, mapped back to their rows
-        v_got = got.flatten().to_numpy(zero_copy_only=False)
-        v_exp = expected.flatten().to_numpy(zero_copy_only=False)
-        row = np.repeat(np.arange(len(n_got)), np.maximum(n_got, 0))
-        diff = np.zeros(len(n_got), dtype=bool)
-        diff[row[v_got != v_exp]] = True
-    return int(np.argmax(diff)) if diff.any() else None
-
-
-def _first_difference(name: str, got, expected) -> int | None:
-    """Index of the first row where a label column differs from its derivation."""
-    if isinstance(expected, pa.Array):  # label.fault_ids: lists of ids
-        return _first_list_difference(got, expected) if isinstance(got, pa.Array) else 0
-    exp = np.asarray(expected)
-    got = np.asarray(got)
-    if name == "label.severity":
-        diff = ~np.isclose(got.astype(float), exp.astype(float), rtol=1e-5, atol=1e-6)
-    elif exp.dtype == object or got.dtype == object:
-        diff = got.astype(object) != exp.astype(object)
-    else:
-        diff = got != exp
-    diff = np.asarray(diff, dtype=bool)
-    return int(np.argmax(diff)) if diff.any() else None

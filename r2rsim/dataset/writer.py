@@ -3,15 +3,17 @@
 Layout::
 
     <dataset>/
-      runs.parquet  channels.parquet  faults.parquet  events.parquet  manifest.json
+      runs.parquet  channels.parquet  faults.parquet  events.parquet  variability.parquet
+      manifest.json
       samples/run_id=<id>/part-0.parquet
       scenario/<name>.yaml  scenario/<line>.yaml
 
-Everything is written into a temporary sibling directory ``.<dataset>.tmp-<pid>`` and moved
-into place only when the run is complete, so a failed run leaves no partial dataset. Every
-path is checked to stay inside that directory, an existing directory is replaced only if it
-is verifiably an r2rsim dataset and the caller asked for it, and the temporaries of dead
-processes are cleaned up (:mod:`r2rsim.dataset.paths`).
+The one list of these files is :mod:`r2rsim.dataset.paths`'s; the cleanup and ``r2rsim
+validate`` use it too. Everything is written into a temporary sibling directory
+``.<dataset>.tmp-<pid>`` and moved into place only when the run is complete, so a failed run
+leaves no partial dataset. Every path is checked to stay inside that directory, an existing
+directory is replaced only if it is verifiably an r2rsim dataset and the caller asked for
+it, and the temporaries of dead processes are cleaned up (:mod:`r2rsim.dataset.paths`).
 """
 
 from __future__ import annotations
@@ -32,12 +34,17 @@ from .._version import __version__
 from ..errors import InputError, R2RError
 from .paths import (
     ACTIVE,
+    RUN_COPIES,
+    RUN_TABLES,
+    check_writable,
     clean_stale,
     dataset_problems,
     inside,
+    layout_problem,
     occupied_output,
     remove_dataset,
     safe_component,
+    samples_file,
     sha256_file,
 )
 
@@ -81,7 +88,9 @@ __all__ = ["DatasetWriter", "EVENTS_SCHEMA", "FAULTS_SCHEMA", "SCHEMA_VERSION",
 def check_output(output: str | Path, overwrite: bool = False, *, hashes: bool = True) -> None:
     """Refuse an output directory that a run must not write to.
 
-    A directory that does not exist, or an empty one, is fine. An existing r2rsim dataset
+    The place must be writable (:func:`r2rsim.dataset.paths.check_writable`: not under a
+    file, not read-only, not a mount point). A directory that does not exist, or an empty
+    one, is fine. An existing r2rsim dataset
     (:func:`r2rsim.dataset.paths.dataset_problems` finds nothing) is replaced only with
     ``overwrite``. Anything else (a file, a symbolic link, a directory holding files that
     r2rsim did not write, or a dataset changed since) is never replaced.
@@ -101,6 +110,7 @@ def check_output(output: str | Path, overwrite: bool = False, *, hashes: bool = 
         Saying why and what to do.
     """
     out = Path(output)
+    check_writable(out, inside_out=False)
     if not occupied_output(out):
         return  # absent or empty: filled
     problems = dataset_problems(out, hashes=hashes)
@@ -130,19 +140,68 @@ def _signals_deferred():
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
-def _converter(arrow_type: pa.DataType, example):
+def undefined_as_null(name: str) -> bool:
+    """Whether a column's non-finite values mean "not defined here" and are written as null:
+    ``state.<element>.tension_ratio`` (T_hi/T_lo, undefined when the lower span is slack) and
+    ``state.splice_joint<n>.lead_m`` (no joint on the line). Nowhere else does a dataset hold
+    null in a ``state.`` column, and no ``true.``/``state.``/``act.``/``cmd.`` column holds a
+    non-finite value in a run that ended well (:func:`_nonfinite_finder`)."""
+    return name.startswith("state.") and (
+        name.endswith(".tension_ratio")
+        or (name.startswith("state.splice_joint") and name.endswith(".lead_m")))
+
+
+def _converter(arrow_type: pa.DataType, example, name: str = ""):
     """A function turning one chunk's column (like ``example``) into an Arrow array of
     ``arrow_type``; chosen once per file, since it runs for every column of every chunk."""
     if pa.types.is_dictionary(arrow_type):
         return lambda a: pa.array(a, type=pa.string()).dictionary_encode().cast(arrow_type)
     if isinstance(example, pa.Array):
         return lambda a: a
+    if arrow_type == pa.float32() and undefined_as_null(name):
+        def to_float32_or_null(a):
+            x = np.asarray(a).astype(np.float32, copy=False)
+            undefined = ~np.isfinite(x)
+            return pa.array(x, mask=undefined) if undefined.any() else pa.array(x)
+        return to_float32_or_null
     if arrow_type == pa.float32():
         # numpy's cast is several times faster than Arrow's checked one
         return lambda a: pa.array(np.asarray(a).astype(np.float32, copy=False))
     if pa.types.is_list(arrow_type):
         return lambda a: pa.array(a, type=arrow_type)
     return lambda a: pa.array(a, type=arrow_type, from_pandas=False)
+
+
+def _nonfinite_finder(fields):
+    """A function ``find(t, arrays)`` giving ``(t_s, column)`` of the first sample of a chunk
+    (its Arrow arrays, as written) where a ``true.``, ``state.``, ``act.`` or ``cmd.`` column
+    is not finite, or None; None instead of a function when there is no such column.
+
+    The arrays are the float32 ones written, so a value beyond float32's range (3.4e38),
+    stored as inf, counts. A null (a value that is not defined, :func:`undefined_as_null`)
+    does not. A finite chunk costs one concatenation and one ``isfinite`` over all the
+    checked columns."""
+    names = [f.name for f in fields]
+    checked = [i for i, f in enumerate(fields) if f.type == pa.float32()
+               and f.name.startswith(("true.", "state.", "act.", "cmd."))]
+    if not checked:
+        return None
+
+    def find(t, arrays):
+        joined = pa.concat_arrays([arrays[i] for i in checked])
+        flat = joined.to_numpy(zero_copy_only=False)  # nulls as NaN
+        bad = ~np.isfinite(flat)
+        if not bad.any():
+            return None
+        if joined.null_count:
+            bad &= ~joined.is_null().to_numpy(zero_copy_only=False)
+        bad = bad.reshape(len(checked), -1)
+        rows = bad.any(axis=0)
+        if not rows.any():
+            return None
+        r = int(np.argmax(rows))
+        return float(np.asarray(t)[r]), names[checked[int(np.argmax(bad[:, r]))]]
+    return find
 
 
 class DatasetWriter:
@@ -190,6 +249,9 @@ class DatasetWriter:
         self._trash: Path | None = None  # the dataset being replaced, during the swap
         self._committed = False
         self.n_rows = 0
+        #: (t_s, column) of the first sample with a true./state./act./cmd. value that is not
+        #: finite as written (float32: beyond 3.4e38 is inf); None while there is none
+        self.first_nonfinite: tuple[float, str] | None = None
         # parent directories this writer creates, removed again if the run fails
         self._made: list[Path] = []
         p = self.output.parent
@@ -205,7 +267,7 @@ class DatasetWriter:
                            f"move it away")
         self.tmp.mkdir(parents=True)
         ACTIVE.add(self.tmp.resolve())
-        self._samples = inside(self.tmp, f"samples/run_id={run_id}/part-0.parquet")
+        self._samples = inside(self.tmp, samples_file(run_id))
         self._samples.parent.mkdir(parents=True)
 
     def write_chunk(self, columns: dict[str, np.ndarray | pa.Array]) -> None:
@@ -233,7 +295,9 @@ class DatasetWriter:
             meta = {k.encode(): v.encode() for k, v in self.metadata.items()}
             self._schema = pa.schema(fields, metadata=meta)
             float_cols = [f.name for f in fields if f.type in (pa.float32(), pa.float64())]
-            self._converters = [(f.name, _converter(f.type, columns[f.name])) for f in fields]
+            self._converters = [(f.name, _converter(f.type, columns[f.name], f.name))
+                                for f in fields]
+            self._find_nonfinite = _nonfinite_finder(fields)
             self._writer = pq.ParquetWriter(
                 self._samples, self._schema, compression="zstd", compression_level=3,
                 use_dictionary=[f.name for f in fields if pa.types.is_dictionary(f.type)],
@@ -241,6 +305,9 @@ class DatasetWriter:
             )
         with np.errstate(over="ignore"):  # beyond float32's range is inf, as Arrow casts
             arrays = [convert(columns[name]) for name, convert in self._converters]
+        if self.first_nonfinite is None and self._find_nonfinite is not None:
+            # chunks come in time order: the first one found is the earliest
+            self.first_nonfinite = self._find_nonfinite(columns["t_s"], arrays)
         table = pa.Table.from_arrays(arrays, schema=self._schema)
         self._pending.append(table)
         self._pending_bytes += table.nbytes
@@ -256,14 +323,22 @@ class DatasetWriter:
         self._pending, self._pending_bytes = [], 0
 
     def write_table(self, name: str, table: pa.Table) -> None:
-        """Write ``<name>.parquet`` (runs, channels, faults, events) with the metadata."""
+        """Write ``<name>.parquet``, one of the layout's tables
+        (:data:`r2rsim.dataset.paths.RUN_TABLES`), with the metadata."""
+        if name not in RUN_TABLES:  # the cleanup and validate know only the layout's files
+            raise R2RError(f"'{name}.parquet' is not a table of the dataset layout "
+                           f"({', '.join(RUN_TABLES)})")
         meta = dict(table.schema.metadata or {})
         meta.update({k.encode(): v.encode() for k, v in self.metadata.items()})
         pq.write_table(table.replace_schema_metadata(meta),
                        inside(self.tmp, f"{name}.parquet"), compression="zstd")
 
     def write_text(self, relpath: str, text: str) -> None:
-        """Write a text file at ``relpath`` inside the dataset."""
+        """Write a text file at ``relpath`` inside the dataset: a copy of an input file,
+        ``scenario/<file>`` (:func:`r2rsim.dataset.paths.layout_problem`)."""
+        if relpath.split("/")[0] not in RUN_COPIES or layout_problem(relpath, sweep=False):
+            raise R2RError(f"'{relpath}' is not where the dataset layout keeps a copy of an "
+                           f"input file ({', '.join(d + '/' for d in RUN_COPIES)})")
         path = inside(self.tmp, relpath)
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(text, encoding="utf-8")

@@ -156,8 +156,10 @@ def read_datasets(paths: Sequence[str | Path], verify: bool = True,
                   where: dict | None = None) -> list[Run]:
     """Every run of the given dataset directories (runs or sweeps); a directory that is not
     a dataset but holds datasets (one level down) contributes all of them. ``verify``: check
-    each dataset's files against its manifest.json; ``where``: only the runs with these
-    runs.parquet values, e.g. a sweep's axis values (:func:`r2rsim.dataset.read.read_runs`)."""
+    each dataset's files against its manifest.json (sizes, and the sha256 of each file read)
+    and each run's ``label.*`` columns against faults.parquet, as ``r2rsim validate`` derives
+    them; ``where``: only the runs with these runs.parquet values, e.g. a sweep's axis values
+    (:func:`r2rsim.dataset.read.read_runs`)."""
     runs: list[Run] = []
     for p in map(Path, paths):
         if not p.is_dir():

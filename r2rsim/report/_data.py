@@ -16,7 +16,12 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from ..dataset.read import is_dataset_dir
+from ..dataset.verify import Verifier, refuse_unfinished
 from ..errors import InputError
+
+#: the dataset's tables every figure checks against manifest.json when it verifies (each is a
+#: few kB; the run figure reads faults and events, the sweep figure only their checksums)
+TABLES = ("runs.parquet", "channels.parquet", "faults.parquet", "events.parquet")
 
 
 def decimate_minmax(t, y, n_buckets: int, t_range: tuple[float, float] | None = None):
@@ -103,16 +108,21 @@ class RunData:
     columns: list[str]  # numeric sample columns, in file order
     t_start: float
     t_end: float
+    verifier: Verifier | None = None  # checks the files against manifest.json
+    data: list[bytes] | None = None  # the files' bytes, when read whole (``whole=True``)
 
 
 @contextlib.contextmanager
-def _reading(root: Path, path: Path):
+def _reading(root: Path, path: Path, verifier: Verifier | None = None):
     """A file of the dataset that cannot be read, or lacks a column a figure needs, is one
-    error naming it. Figures read only the footers, columns and row groups they draw and do
-    not check checksums (``r2rsim validate`` does), so a damaged file shows here."""
+    error naming it. When the figure verifies (``verifier``), a file that differs from
+    manifest.json is refused as such first (its checksum is waited for); without it, a
+    damaged file shows here."""
     try:
         yield
     except (pa.ArrowException, OSError, KeyError, StopIteration) as exc:
+        if verifier is not None:
+            verifier.check(path.relative_to(root).as_posix())
         text = str(exc.args[0] if isinstance(exc, KeyError) and exc.args else exc).strip()
         why = text.splitlines()[0] if text else type(exc).__name__
         raise InputError(f"dataset {root}: {path.relative_to(root)} cannot be read "
@@ -120,20 +130,42 @@ def _reading(root: Path, path: Path):
 
 
 def open_dataset(path) -> Path:
-    """The dataset directory, checked to be one (runs.parquet and samples/)."""
+    """The dataset directory, checked to be one (runs.parquet and samples/, and not an
+    unfinished sweep)."""
     root = Path(path)
     if not root.is_dir():
         raise InputError(f"{root}: no such dataset directory")
+    refuse_unfinished(root)
     if not is_dataset_dir(root) or not (root / "runs.parquet").is_file() \
             or not (root / "samples").is_dir():
         raise InputError(f"{root}: not an r2rsim dataset (no runs.parquet and samples/)")
     return root
 
 
-def runs_table(root: Path) -> pd.DataFrame:
+def verified(v: Verifier) -> None:
+    """Before a figure is returned: the dataset's tables it did not read (:data:`TABLES`)
+    are hashed too, and every checksum begun (the samples files it opened, hashed in the
+    background while it read them) is waited for; the first file that differs from
+    manifest.json is refused."""
+    if v.verify:
+        for rel in TABLES:
+            if rel in v.files:
+                v.start(rel)  # a table already read and checked is not hashed again
+    v.check()
+
+
+def _whole(root: Path, rel: str, verifier: Verifier | None):
+    """What pyarrow reads a whole table from: the path, or (verifying) the file's bytes,
+    checked against its sha256 (so what is parsed is what was hashed)."""
+    if verifier is None or not verifier.verify:
+        return root / rel
+    return pa.BufferReader(verifier.read(rel))
+
+
+def runs_table(root: Path, verifier: Verifier | None = None) -> pd.DataFrame:
     """runs.parquet of the dataset (with its run_id column)."""
-    with _reading(root, root / "runs.parquet"):
-        runs = pd.read_parquet(root / "runs.parquet")
+    with _reading(root, root / "runs.parquet", verifier):
+        runs = pq.read_table(_whole(root, "runs.parquet", verifier)).to_pandas()
         if "run_id" not in runs:
             raise KeyError("no column run_id")
     return runs
@@ -145,9 +177,9 @@ def sample_files(root: Path, run_id: str) -> list[Path]:
     return sorted(folder.glob("part-*.parquet"), key=lambda p: int(p.stem.split("-")[-1]))
 
 
-def resolve_run(root: Path, run_id: str | None) -> str:
+def resolve_run(root: Path, run_id: str | None, verifier: Verifier | None = None) -> str:
     """The run to plot: ``run_id``, checked to be in runs.parquet, or the first run."""
-    known = runs_table(root)["run_id"].tolist()
+    known = runs_table(root, verifier)["run_id"].tolist()
     if not known:
         raise InputError(f"dataset {root}: runs.parquet lists no runs")
     if run_id is None:
@@ -158,22 +190,34 @@ def resolve_run(root: Path, run_id: str | None) -> str:
     return run_id
 
 
-def open_run(root: Path, run_id: str) -> RunData:
-    """Locate the run's samples and read their footers: schema, row-group statistics."""
+def open_run(root: Path, run_id: str, verifier: Verifier | None = None, *,
+             whole: bool = False) -> RunData:
+    """Locate the run's samples and read their footers: schema, row-group statistics. With
+    a ``verifier``, each file must be listed in manifest.json, and its sha256 is computed in
+    the background while the figure reads it (``verifier.check()`` waits for it). ``whole``:
+    read each file into memory once, hashed and parsed from the same bytes (for short runs
+    of which a figure reads little: the sweep figure)."""
     files = sample_files(root, run_id)
     if not files:
         raise InputError(f"dataset {root}: run {run_id} has no samples (samples/run_id="
                          f"{run_id}/part-*.parquet)")
-    metas = []
+    metas, data = [], [] if whole else None
     for f in files:
-        with _reading(root, f):
-            metas.append(pq.read_metadata(f))
+        rel = f.relative_to(root).as_posix()
+        with _reading(root, f, verifier):
+            if whole:
+                if verifier is not None:
+                    verifier.listed(rel, run_id)
+                data.append(f.read_bytes())
+            if verifier is not None:
+                verifier.start(rel, run_id, data[-1] if whole else None)
+            metas.append(pq.read_metadata(pa.BufferReader(data[-1]) if whole else f))
             _stats(metas[-1], "t_s")  # the time column is there
     numeric = [f.name for f in metas[0].schema.to_arrow_schema()
                if f.name not in ("k", "t_s") and (pa.types.is_floating(f.type)
                                                   or pa.types.is_integer(f.type)
                                                   or pa.types.is_boolean(f.type))]
-    run = RunData(root, run_id, files, metas, numeric, np.nan, np.nan)
+    run = RunData(root, run_id, files, metas, numeric, np.nan, np.nan, verifier, data)
     # + 0.0: Parquet statistics store a float minimum of 0 as -0 (the format's rule)
     run.t_start, run.t_end = (v + 0.0 for v in _column_range(run, "t_s"))
     return run
@@ -233,23 +277,26 @@ def select_channels(run: RunData, globs) -> list[str]:
     return list(picked)
 
 
-def channel_units(root: Path) -> dict[str, str]:
+def channel_units(root: Path, verifier: Verifier | None = None) -> dict[str, str]:
     """Unit of each column from channels.parquet (empty when the file is missing)."""
     f = root / "channels.parquet"
     if not f.is_file():
         return {}
-    with _reading(root, f):
-        ch = pd.read_parquet(f, columns=["channel", "unit"])
+    with _reading(root, f, verifier):
+        ch = pq.read_table(_whole(root, f.name, verifier),
+                           columns=["channel", "unit"]).to_pandas()
     return dict(zip(ch["channel"], ch["unit"].fillna(""), strict=True))
 
 
-def run_rows(root: Path, name: str, run_id: str) -> pd.DataFrame:
+def run_rows(root: Path, name: str, run_id: str, verifier: Verifier | None = None
+             ) -> pd.DataFrame:
     """The run's rows of faults.parquet or events.parquet (empty when the file is missing)."""
     f = root / name
     if not f.is_file():
         return pd.DataFrame()
-    with _reading(root, f):
-        df = pd.read_parquet(f, filters=[("run_id", "=", run_id)])
+    with _reading(root, f, verifier):
+        df = pq.read_table(_whole(root, name, verifier),
+                           filters=[("run_id", "=", run_id)]).to_pandas()
     return df.reset_index(drop=True)
 
 
@@ -263,10 +310,11 @@ def iter_window(run: RunData, columns: list[str], t0: float, t1: float):
     """Yield ``(t, {column: values})`` per row group of the samples with t0 <= t_s <= t1,
     reading only these columns and only the row groups that overlap the window (a row
     group is about 16 MB of all columns, so a chunk is a few MB)."""
-    for path, meta in zip(run.files, run.metas, strict=True):
-        f = pq.ParquetFile(path, metadata=meta)
+    sources = run.data or [None] * len(run.files)
+    for path, meta, data in zip(run.files, run.metas, sources, strict=True):
+        f = pq.ParquetFile(path if data is None else pa.BufferReader(data), metadata=meta)
         for g in _row_groups_in(meta, t0, t1):
-            with _reading(run.root, path):
+            with _reading(run.root, path, run.verifier):
                 table = f.read_row_group(g, columns=["t_s", *columns])
             pa.default_memory_pool().release_unused()  # keep the process small on long runs
             t = table.column(0).to_numpy()
@@ -274,6 +322,57 @@ def iter_window(run: RunData, columns: list[str], t0: float, t1: float):
             if inside.any():
                 yield t[inside], {c: _floats(table.column(i + 1))[inside]
                                   for i, c in enumerate(columns)}
+
+
+def label_tables(root: Path, verifier: Verifier | None) -> tuple[list, list]:
+    """The rows of runs.parquet and faults.parquet as Python values (for the label check)."""
+    out = []
+    for name in ("runs.parquet", "faults.parquet"):
+        with _reading(root, root / name, verifier):
+            out.append(pq.read_table(_whole(root, name, verifier)).to_pylist())
+    return out[0], out[1]
+
+
+def check_run_labels(run: RunData, rows: tuple[list, list] | None = None) -> None:
+    """Refuse a run whose labels differ from what faults.parquet and runs.parquet give (an
+    edited ``faults.parquet`` with its manifest entry re-hashed), as every reader does:
+    :func:`r2rsim.dataset.labels.quick_label_problem` on the run's ``k``, ``t_s`` and the
+    label columns it compares (read apart from what the figure draws: a few small columns).
+    ``rows``: the rows of runs.parquet and faults.parquet, when read already (a figure of
+    many runs reads them once).
+
+    Raises
+    ------
+    InputError
+        Naming the run, the column, the first differing ``k`` and both values.
+    """
+    from ..dataset.labels import QUICK_LABELS, quick_label_problem
+
+    v = run.verifier
+    names = set(run.metas[0].schema.to_arrow_schema().names)
+    wanted = ["k", "t_s", *(c for c in QUICK_LABELS if c in names),
+              *sorted(c for c in names if c.startswith("label.ch."))]
+    sources = run.data or [None] * len(run.files)
+    tables = []
+    for path, meta, data in zip(run.files, run.metas, sources, strict=True):
+        with _reading(run.root, path, v):
+            f = pq.ParquetFile(path if data is None else pa.BufferReader(data), metadata=meta)
+            tables.append(f.read(columns=wanted))
+    table = pa.concat_tables(tables) if len(tables) > 1 else tables[0]
+    runs, faults = rows or label_tables(run.root, v)
+    row = [r for r in runs if r["run_id"] == run.run_id]
+    try:
+        problem = quick_label_problem(table, row[0], [f for f in faults
+                                                      if f["run_id"] == run.run_id]) \
+            if row else None
+    except (KeyError, TypeError, ValueError, pa.ArrowException) as exc:
+        problem = (f"its labels cannot be checked ({type(exc).__name__}: {exc}): not a "
+                   f"complete r2rsim dataset")
+    if problem:
+        raise InputError(f"dataset {run.root}: run {run.run_id}: {problem}: the labels in the "
+                         f"samples differ from what faults.parquet and runs.parquet give "
+                         f"(edited after the writing?); refusing to use it (`r2rsim validate "
+                         f"{run.root}` lists every problem; --no-verify reads it anyway)")
 
 
 def _floats(arr: pa.ChunkedArray) -> np.ndarray:

@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import pandas as pd
 
+from ..dataset.verify import Verifier
 from ..errors import InputError
 from ._data import (
     channel_units,
+    check_run_labels,
     constant_columns,
     open_dataset,
     open_run,
@@ -15,6 +17,7 @@ from ._data import (
     resolve_run,
     run_rows,
     select_channels,
+    verified,
 )
 from ._mpl import require_matplotlib
 
@@ -35,7 +38,8 @@ _WIDTH_IN = 10.0
 
 def plot_run(dataset, run_id: str | None = None, channels=None, t0: float | None = None,
              t1: float | None = None, *, n_buckets: int | None = None, faults: bool = True,
-             events: bool = True, figsize: tuple[float, float] | None = None):
+             events: bool = True, figsize: tuple[float, float] | None = None,
+             verify: bool = True):
     """Plot channels of one run against time.
 
     One axes per physical quantity and unit (span tensions, web speeds, positions, radii,
@@ -65,6 +69,12 @@ def plot_run(dataset, run_id: str | None = None, channels=None, t0: float | None
         Shade the fault windows, mark the events.
     figsize : (float, float), optional
         Figure size in inches (default 10 wide, 2 per axes high).
+    verify : bool
+        Check the dataset against its manifest.json, as every reader does
+        (:mod:`r2rsim.dataset.verify`): every listed file is there with its size, and the
+        files read (runs, channels, faults and events tables, the run's samples, each hashed
+        whole although only some columns are parsed) have their sha256. A dataset changed
+        after it was written is refused; ``verify=False`` (``--no-verify``) draws it anyway.
 
     Returns
     -------
@@ -73,12 +83,24 @@ def plot_run(dataset, run_id: str | None = None, channels=None, t0: float | None
     Raises
     ------
     InputError
-        For a missing dataset, an unknown run, a glob matching no column, an empty time
-        window, or when matplotlib is not installed.
+        For a missing dataset, an unfinished sweep, a file that differs from manifest.json
+        (``verify``), an unknown run, a glob matching no column, an empty time window, or
+        when matplotlib is not installed.
     """
     Figure = require_matplotlib()
     root = open_dataset(dataset)
-    run = open_run(root, resolve_run(root, run_id))
+    with Verifier(root, verify) as v:
+        fig = _plot_run(root, v, run_id, channels, t0, t1, n_buckets, faults, events,
+                        figsize, Figure)
+        verified(v)
+    return fig
+
+
+def _plot_run(root, v, run_id, channels, t0, t1, n_buckets, faults, events, figsize,
+              Figure):
+    run = open_run(root, resolve_run(root, run_id, v), v)
+    if v.verify:
+        check_run_labels(run)  # the figure shades the fault windows faults.parquet gives
     columns = _channels(run, channels)
     t0 = run.t_start if t0 is None else float(t0)
     t1 = run.t_end if t1 is None else float(t1)
@@ -86,7 +108,7 @@ def plot_run(dataset, run_id: str | None = None, channels=None, t0: float | None
         raise InputError(f"dataset {root}: run {run.run_id}: no samples between t0 = {t0:g} "
                          f"and t1 = {t1:g} s (the run spans {run.t_start:g} to "
                          f"{run.t_end:g} s)")
-    units = channel_units(root)
+    units = channel_units(root, v)
     groups = _group_by_quantity(columns, units)
     fig = Figure(figsize=figsize or (_WIDTH_IN, 1.0 + _AXES_HEIGHT_IN * len(groups)),
                  layout="constrained")
@@ -100,10 +122,11 @@ def plot_run(dataset, run_id: str | None = None, channels=None, t0: float | None
     axes[-1].set_xlabel("t [s]")
     handles = []
     if faults:
-        handles += _shade_faults(axes, run_rows(root, "faults.parquet", run.run_id),
+        handles += _shade_faults(axes, run_rows(root, "faults.parquet", run.run_id, v),
                                  run.t_end, t0, t1)
     if events:
-        handles += _mark_events(axes, run_rows(root, "events.parquet", run.run_id), t0, t1)
+        handles += _mark_events(axes, run_rows(root, "events.parquet", run.run_id, v), t0,
+                                t1)
     if handles:
         fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 4),
                    fontsize="small", frameon=False)

@@ -7,10 +7,23 @@ import difflib
 import numpy as np
 import pandas as pd
 
+from ..dataset.verify import Verifier
 from ..errors import InputError
-from ._data import channel_units, iter_window, open_dataset, open_run, runs_table
+from ._data import (
+    channel_units,
+    iter_window,
+    open_dataset,
+    open_run,
+    runs_table,
+    sample_files,
+    verified,
+)
 from ._mpl import require_matplotlib
 
+#: read each run's samples file into memory once, hash and parse it from the same bytes (the
+#: files of a sweep's runs are a few MB; False: the hash reads the file again, beside the
+#: footer and column chunk the figure reads; benchmarks/bench_verify.py compares the two)
+READ_WHOLE_FILES = True
 #: per-run statistics of a channel (NaN samples skipped, as pandas does; std with ddof = 1)
 STATISTICS = {
     "mean": pd.Series.mean,
@@ -23,7 +36,7 @@ STATISTICS = {
 
 def plot_sweep(dataset, channel: str, statistic: str = "mean", axis: str | None = None, *,
                group: str | None = None, t0: float | None = None, t1: float | None = None,
-               figsize: tuple[float, float] | None = None):
+               figsize: tuple[float, float] | None = None, verify: bool = True):
     """Plot a statistic of one channel, one point per run, against a sweep axis.
 
     Parameters
@@ -41,6 +54,12 @@ def plot_sweep(dataset, channel: str, statistic: str = "mean", axis: str | None 
     t0, t1 : float, optional
         Time window [s] of each run the statistic covers (default: the whole run).
     figsize : (float, float), optional
+    verify : bool
+        Check the dataset against its manifest.json, as every reader does
+        (:mod:`r2rsim.dataset.verify`): every listed file is there with its size, and the
+        runs, channels, faults and events tables and each run's samples (hashed whole,
+        although one column is read) have their sha256. A dataset changed after it was
+        written is refused; ``verify=False`` (``--no-verify``) draws it anyway.
 
     Returns
     -------
@@ -52,17 +71,21 @@ def plot_sweep(dataset, channel: str, statistic: str = "mean", axis: str | None 
     Raises
     ------
     InputError
-        For a missing dataset, a dataset without sweep axes, an unknown axis, channel or
-        statistic, or when matplotlib is not installed.
+        For a missing dataset, an unfinished sweep, a file that differs from manifest.json
+        (``verify``), a dataset without sweep axes, an unknown axis, channel or statistic,
+        or when matplotlib is not installed.
     """
     Figure = require_matplotlib()
     root = open_dataset(dataset)
     if statistic not in STATISTICS:
         raise InputError(f"unknown statistic '{statistic}' (one of: {', '.join(STATISTICS)})")
-    runs = runs_table(root)
-    x_col = _axis_column(root, runs, axis)
-    g_col = _axis_column(root, runs, group) if group is not None else None
-    values, skipped = _per_run(root, runs["run_id"], channel, statistic, t0, t1)
+    with Verifier(root, verify) as v:
+        runs = runs_table(root, v)
+        x_col = _axis_column(root, runs, axis)
+        g_col = _axis_column(root, runs, group) if group is not None else None
+        values, skipped = _per_run(root, runs["run_id"], channel, statistic, t0, t1, v)
+        unit = channel_units(root, v).get(channel, "")
+        verified(v)
     runs = runs.assign(value=values).dropna(subset=["value"])
     no_x = int(runs[x_col].isna().sum())  # an axis that did not apply (a removed fault)
     runs = runs[runs[x_col].notna()]
@@ -72,7 +95,6 @@ def plot_sweep(dataset, channel: str, statistic: str = "mean", axis: str | None 
     for key, rows in (runs.groupby(g_col, sort=True, dropna=False) if g_col else [(None, runs)]):
         label = None if g_col is None else f"{g_col[len('axis.'):]} = {_show(key)}"
         ax.plot(rows[x_col].to_numpy(), rows["value"].to_numpy(), "o", alpha=0.8, label=label)
-    unit = channel_units(root).get(channel, "")
     ax.set_xlabel(f"{x_col[len('axis.'):]} (SI)")
     ax.set_ylabel(f"{statistic} of {channel}" + (f" [{unit}]" if unit and unit != "1" else ""))
     if g_col:
@@ -108,17 +130,17 @@ def _axis_column(root, runs: pd.DataFrame, name: str | None) -> str:
     return col
 
 
-def _per_run(root, run_ids, channel: str, statistic: str, t0, t1) -> tuple[list, int]:
+def _per_run(root, run_ids, channel: str, statistic: str, t0, t1, v=None
+             ) -> tuple[list, int]:
     """The statistic of the channel for each run (NaN for a run without samples), and how
     many runs had no samples. Reads that one column of each run."""
     out, skipped = [], 0
     for run_id in run_ids:
-        try:
-            run = open_run(root, run_id)
-        except InputError:  # a failed run of the sweep wrote no samples
+        if not sample_files(root, run_id):  # a failed run of the sweep wrote no samples
             out.append(np.nan)
             skipped += 1
             continue
+        run = open_run(root, run_id, v, whole=READ_WHOLE_FILES and v is not None and v.verify)
         if channel not in run.columns:
             like = difflib.get_close_matches(channel, run.columns, n=4, cutoff=0.3)
             raise InputError(f"dataset {root}: no numeric channel '{channel}'"

@@ -8,7 +8,9 @@ tensions that are rounding noise, without a word. Two levels:
 * **error** (:class:`r2rsim.errors.InputError`): physically impossible, or outside what the
   model can integrate: stiffer than diamond, denser than osmium, a web that cannot wrap its
   rollers, a span shorter than 1 mm, a line faster than the web's own wave speed, a loop
-  faster than 160 kHz;
+  faster than 160 kHz; or far beyond every web line (a span longer than 10 km, a roller
+  radius outside 1 mm to 10 m, a tension above 10 MN, ...: the magnitudes below), which
+  would only make the float32 samples overflow;
 * **warning** (:class:`r2rsim.errors.PlausibilityWarning`): possible but far outside the
   ranges of ``physics.md`` §2 (the user may mean it: a 10 mm tape, a 60 m/s line), or a
   choice with a silent consequence (a web with no break stress never breaks, a set-point
@@ -21,7 +23,14 @@ Each check is a ``(level, yaml_path, message)``; :func:`line_problems` and
 
 from __future__ import annotations
 
+import functools
 import math
+import typing
+
+import annotated_types
+from pydantic import BaseModel, WithJsonSchema
+
+from ..limits import MAX_DURATION_S
 
 ERROR = "error"
 WARNING = "warning"
@@ -91,6 +100,99 @@ SPEED_OVER_TORQUE = 10.0
 #: loop faster than 2π·50 Hz would outrun the speed loops it trims.
 TRIM_RATE_WARN = 2 * math.pi * 50.0
 
+# --- magnitudes: values no web line has (errors) ---------------------------------------------
+# A value the schema accepts (a positive number, say) but that is far beyond any web line is
+# refused too: a 1e300 m span used to run, exit 0 and write inf into its float32 length column.
+# Each bound sits one or more orders of magnitude beyond the largest real line of its kind
+# (film, foil, paper, board, battery electrodes; steel strip too), so that only typos and
+# absurd values are refused, and products of the bounds stay far below float32's 3.4e38. The
+# named bounds are checked where the quantity is; MAGNITUDE_MAX bounds every other quantity of
+# a line or scenario file by its dimension. The messages give the accepted range.
+
+#: Longest free span [m]: 10 km. The longest real free spans are dryer and oven spans of
+#: ~30 m; 100 m to 10 km stays a warning (SPAN_RANGE), as before.
+SPAN_MAX = 1.0e4
+#: Radii of rolls, cores, rollers, nips and dancers, and the splice trigger radius [m]: 1 mm to
+#: 10 m. Guide rollers of narrow tape lines are ~5 mm in radius; the largest are Yankee dryers
+#: (~3.4 m) and full paper-machine reels (~1.8 m). On a roller under 1 mm the angular speed v/R
+#: of a line at its fastest (1 km/s) would pass 1e6 rad/s, and at 1e-40 m it overflowed.
+RADIUS_LIMITS = (1.0e-3, 10.0)
+#: Web thickness and radial build per wrap [m]: 10 nm to 100 mm. The thinnest webs are ~1 µm
+#: (capacitor film; metal leaf 0.1 µm), the thickest strip (hot-rolled steel) ~25 mm; 1 µm to
+#: 5 mm stays without a warning (THICKNESS_RANGE). A build per wrap far below the thickness
+#: would make the roll's web density (thickness / build) absurd.
+THICKNESS_LIMITS = (1.0e-8, 0.1)
+#: Widest web [m]: 100 m. The widest paper machines make ~11 m; above 12 m is a warning
+#: (WIDTH_RANGE).
+WIDTH_MAX = 100.0
+#: Largest web-roller friction coefficient (the capstan slip monitor's mu): 10. Rubber-covered
+#: rollers reach 1-2; the capstan factor e^(mu·beta) overflows double precision from mu ~ 113.
+FRICTION_COEFFICIENT_MAX = 10.0
+#: Fastest line [m/s]: 1 km/s, an error (SPEED_MAX warns from 50 m/s). The fastest web lines
+#: (paper machines, slitter-rewinders) run at 35-50 m/s; the line speed sets every roller's.
+LINE_SPEED_LIMIT = 1.0e3
+#: Largest tension or force [N]: 10 MN. Film and paper lines run at 0.1-20 kN, the strongest
+#: webs (steel strip in cold-rolling lines) at up to ~1 MN. A set-point above the web's break
+#: tension is a warning below this bound (tension_problems).
+FORCE_MAX = 1.0e7
+#: Travel of a dancer or festoon carriage (stops, start, spring's free travel) [m]: within
+#: ±10 km, the longest span (SPAN_MAX); real strokes are 0.1-30 m (accumulator towers).
+TRAVEL_MAX = SPAN_MAX
+#: Most rollers on a festoon carriage: 1000 (accumulators have up to a few tens); the stored
+#: web is 2n·x, so an n of 1e40 overflowed the span length.
+FESTOON_ROLLERS_MAX = 1000
+#: Shortest counting window of an edge-counting encoder [s]: 1 µs. One count in the window
+#: reads 2π/(counts_per_rev·window): a window near 1e-300 s made the readings overflow.
+ENCODER_WINDOW_MIN = 1.0e-6
+#: Every other quantity of a line or scenario file, by dimension: the largest magnitude
+#: accepted, and why. A quantity with a check of its own is not checked again here: sensor
+#: noise and offset (READING_MAX), tension set-points (FORCE_MAX), modulus, density and break
+#: stress (MODULUS_MAX, DENSITY_MAX, BREAK_STRESS_MAX), the relaxed-pitch law's q1 (the pitch
+#: it gives over the roll), frictions (TORQUE_MAX); a dimension not listed (a plain number,
+#: a fault magnitude) is not bounded here.
+MAGNITUDE_MAX: dict[str, tuple[float, str]] = {
+    # positions, arm lengths, pitch and correlation lengths
+    "length": (1.0e5, "longer than the web on any roll (a film roll holds up to ~60 km)"),
+    "speed": (LINE_SPEED_LIMIT, "faster than any web line (35-50 m/s at most)"),
+    "acceleration": (1.0e3, "100 g: lines accelerate at a few m/s^2, gravity is 9.81 m/s^2"),
+    # time constants, delays, splice phases, ramps: none outlasts the longest run
+    "time": (MAX_DURATION_S, "longer than the longest run (1e6 s)"),
+    "frequency": (1.0e6, "1 MHz: above any drive or sensor bandwidth (current loops run at "
+                  "0.5-2 kHz)"),
+    "force": (FORCE_MAX, "steel strip runs at up to ~1 MN, film and paper at 0.1-20 kN"),
+    # a spring on a dancer carriage; a steel bar of 1 cm^2 x 20 cm is 1e8 N/m
+    "stiffness": (1.0e9, "stiffer than a steel bar used as a spring (1e8 N/m)"),
+    "damping": (1.0e9, "a damper force of 1 MN at 1 mm/s"),
+    # dancer, arm and carriage masses
+    "mass": (1.0e6, "1000 t: heavier than any roll or carriage (a full paper-machine reel is "
+             "~100 t)"),
+    # (verification lines stand in for an infinitely heavy roller with 1e8 kg m^2)
+    "inertia": (1.0e10, "a full paper-machine reel is ~2e5 kg m^2, a Yankee dryer ~1e6"),
+    # drive limits, commands and ripple, dancer torques and torsion springs [N m/rad]
+    "torque": (1.0e7, "the largest drives (steel-strip coilers) deliver ~1e6 N m"),
+    "viscous torque": (TORQUE_MAX, "beyond any bearing or pivot damper"),
+    # arm angles and stops, load-cell axes: within a turn
+    "angle": (100.0, "16 turns: arm and axis angles lie within one"),
+    "angular speed": (1.0e6, "v/R of a 1 mm roller at 1 km/s"),
+    # draws, stiffness ratios, inertia-estimate factors (mu and strains have their own checks)
+    "dimensionless": (1.0e3, "a draw or ratio of a thousand"),
+}
+
+
+def _amount(x: float, unit: str) -> str:
+    """``x`` in ``unit``, a length with a metric prefix (1 mm, 10 km)."""
+    if unit == "m" and x != 0:
+        for scale, name in ((1e3, "km"), (1.0, "m"), (1e-3, "mm"), (1e-6, "µm"), (1e-9, "nm")):
+            if abs(x) >= scale:
+                return f"{x / scale:g} {name}"
+    return f"{x:g}" + ("" if unit == "1" else f" {unit}")
+
+
+def _outside(what: str, value: float, unit: str, lo: float, hi: float, why: str) -> str:
+    """The message of a value outside [lo, hi] (the value to six digits: 10.1 is not 10)."""
+    shown = f"{value:.6g}" + ("" if unit == "1" else f" {unit}")
+    return f"{what} {shown} is outside {_amount(lo, unit)} .. {_amount(hi, unit)}: {why}"
+
 
 def _roll_inertia(roll, web) -> float:
     """J(R) at the roll's starting radius (physics.md eq. 1.12), for order-of-magnitude use."""
@@ -132,12 +234,13 @@ def line_problems(line) -> list[tuple[str, str, str]]:
         out.append((WARNING, path, msg))
 
     for check in (_web_properties, _web_wraps, _web_strength, _roll_sizes, _span_lengths,
-                  _frictions, _wound_in_strains, _sensor_values):
+                  _frictions, _wound_in_strains, _sensor_values, _dancer_setpoints):
         check(line, err, warn)
     # tension set-points
     for j, c in enumerate(line.controllers):
         if c.type == "tension_pi":
             out += tension_problems(line, c.setpoint, f"controllers[{j}].setpoint")
+    out += magnitude_problems(line, {path for level, path, _ in out if level == ERROR})
     if not any(level == ERROR for level, _, _ in out):  # the loop estimates need a sane web
         out += controller_problems(line)
     return out
@@ -228,6 +331,10 @@ def _span_lengths(line, err, warn) -> None:
                 "1 mm: spans run between roller surfaces (nip and S-wrap spans are 30-300 mm, "
                 "physics.md §2.2), and the model cannot integrate a span this stiff "
                 f"(EA/L = {_fmt(web.EA / sp.length)} N/m)")
+        elif sp.length > SPAN_MAX:
+            err(f"spans[{i}].length", _outside(
+                "span length", sp.length, "m", SPAN_MIN, SPAN_MAX, "the longest free spans "
+                "(dryer and oven spans) are ~30 m"))
         elif not SPAN_RANGE[0] <= sp.length <= SPAN_RANGE[1]:
             warn(f"spans[{i}].length", f"{_fmt(sp.length)} m is outside the range of free "
                  "spans (10 mm to 100 m; physics.md §2.2: 0.03-30 m)")
@@ -285,11 +392,155 @@ def _sensor_values(line, err, warn) -> None:
             if L0 > SPAN_RANGE[1]:
                 err(f"{p}.{key}", f"a relaxed pitch of {_fmt(L0)} m is longer than any span "
                     f"({SPAN_RANGE[1]:g} m)")
+            elif s.relaxed_pitch_law is not None:
+                _pitch_law(line, s, p, err)
+
+
+def _pitch_law(line, s, p, err) -> None:
+    """The relaxed pitch L0(R) = q0 + q1·R³ stays shorter than any span over the rolls of its
+    unwind (a huge q1 passed the positivity check of the schema)."""
+    from .line import pitch_unwind  # the schema imports this module
+
+    law = s.relaxed_pitch_law
+    e = next((e for e in line.elements if e.id == pitch_unwind(line, s)), None)
+    if e is None or e.type != "unwind":
+        return  # reported by the schema
+    for roll in [e.roll] + ([e.spare_roll] if e.spare_roll is not None else []):
+        for R in (roll.core_radius, roll.outer_radius):
+            L0 = law.q0 + law.q1 * R ** 3
+            if L0 > SPAN_RANGE[1]:
+                err(f"{p}.relaxed_pitch_law.q1", f"a relaxed pitch of {_fmt(L0)} m at R = "
+                    f"{_fmt(R)} m of '{e.id}' (q0 + q1·R³) is longer than any span "
+                    f"({SPAN_RANGE[1]:g} m)")
+                return
+
+
+def _dancer_setpoints(line, err, warn) -> None:
+    """A dancer loop's position set-point within the travel a carriage or arm can have."""
+    kinds = {e.id: e.type for e in line.elements}
+    for j, c in enumerate(line.controllers):
+        if c.type != "dancer_pi" or c.setpoint is None:
+            continue
+        hi, unit = ((MAGNITUDE_MAX["angle"][0], "rad") if kinds.get(c.dancer) == "pivot_dancer"
+                    else (TRAVEL_MAX, "m"))
+        if not -hi <= c.setpoint <= hi:
+            err(f"controllers[{j}].setpoint", _outside(
+                "position set-point", c.setpoint, unit, -hi, hi, "beyond the travel of "
+                "any dancer or festoon (an arm angle within one turn, a stroke of at most "
+                "30 m)"))
+
+
+#: bounds of particular fields (by field name, in any model), before MAGNITUDE_MAX:
+#: (what, low, high, why)
+_RADIUS = ("radius", *RADIUS_LIMITS, "rollers and rolls run from ~5 mm (tape lines) to ~3.4 m "
+           "(Yankee dryers)")
+_TRAVEL = ("travel", -TRAVEL_MAX, TRAVEL_MAX, "no carriage travels further than the longest "
+           "span (real strokes are 0.1-30 m)")
+FIELD_BOUNDS: dict[str, tuple[str, float, float, str]] = {
+    "radius": _RADIUS, "core_radius": _RADIUS, "outer_radius": _RADIUS,
+    "trigger_radius": _RADIUS,
+    "thickness": ("thickness", *THICKNESS_LIMITS, "webs run from ~1 µm (capacitor film) to "
+                  "~25 mm (steel strip)"),
+    "build_per_wrap": ("build per wrap", *THICKNESS_LIMITS, "the range of web thicknesses, "
+                       "~1 µm (capacitor film) to ~25 mm (steel strip)"),
+    "width": ("width", 0.0, WIDTH_MAX, "the widest paper machines make ~11 m"),
+    "friction_coefficient": ("friction coefficient", 0.0, FRICTION_COEFFICIENT_MAX,
+                             "rubber-covered rollers reach 1-2"),
+    "travel_range": _TRAVEL, "initial_travel": _TRAVEL, "spring_free_travel": _TRAVEL,
+    "stroke": _TRAVEL, "initial_position": _TRAVEL,
+    "moving_rollers": ("moving_rollers", 1, FESTOON_ROLLERS_MAX, "festoons have up to a few "
+                       "tens"),
+    "window": ("counting window", ENCODER_WINDOW_MIN, MAX_DURATION_S, "one count in the window "
+               "reads 2π/(counts_per_rev·window)"),
+    "direction": ("direction component", -1.0e3, 1.0e3, "a direction is normalised: give a "
+                  "unit vector"),
+}
+#: fields with a bound of their own elsewhere: sensor readings (READING_MAX), calibration
+#: gains, tension set-points (tension_problems), dancer set-points, wound-in strains
+_OWN_BOUNDS = frozenset({"noise", "offset", "gain", "setpoint", "wound_in_strain"})
+
+
+@functools.cache
+def _field_info(model: type, name: str) -> tuple[str | None, str, bool]:
+    """(dimension, SI unit, non-negative) of a field of a schema model, from its annotation:
+    the ``x-dimension`` of its quantity type (:mod:`r2rsim.schema.quantities`; None for a
+    plain number) and whether a ``ge``/``gt`` bound keeps it at or above 0."""
+    found: dict = {"dim": None, "unit": "1", "nonneg": False}
+
+    def visit(ann, meta):
+        for m in meta:
+            if isinstance(m, WithJsonSchema) and "x-dimension" in (m.json_schema or {}):
+                if found["dim"] is None:
+                    found["dim"], found["unit"] = m.json_schema["x-dimension"], \
+                        m.json_schema["x-unit"]
+            elif isinstance(m, annotated_types.Gt | annotated_types.Ge):
+                bound = m.gt if isinstance(m, annotated_types.Gt) else m.ge
+                found["nonneg"] = found["nonneg"] or bound >= 0
+            elif hasattr(m, "metadata") and isinstance(m.metadata, list):  # a FieldInfo
+                visit(None, m.metadata)
+        if typing.get_origin(ann) is typing.Annotated:
+            args = typing.get_args(ann)
+            visit(args[0], args[1:])
+        elif ann is not None and typing.get_origin(ann) is not dict:
+            for a in typing.get_args(ann):
+                visit(a, ())
+        elif ann is not None:  # a mapping: its values (the keys are ids)
+            visit(typing.get_args(ann)[1], ())
+
+    f = model.model_fields[name]
+    visit(f.annotation, f.metadata)
+    return found["dim"], found["unit"], found["nonneg"]
+
+
+def _numbers(value, path: str, model: type | None = None, name: str = ""):
+    """``(yaml path, model, field name, number)`` of every number in a validated schema
+    model, recursively; the items of a list or pair are reported at the field's path, the
+    values of a mapping at ``path.key``."""
+    if isinstance(value, BaseModel):
+        for key in type(value).model_fields:
+            yield from _numbers(getattr(value, key), f"{path}.{key}" if path else key,
+                                type(value), key)
+    elif isinstance(value, dict):
+        for k, v in value.items():
+            yield from _numbers(v, f"{path}.{k}", model, name)
+    elif isinstance(value, list | tuple):
+        for i, v in enumerate(value):
+            yield from _numbers(v, f"{path}[{i}]" if isinstance(v, BaseModel) else path,
+                                model, name)
+    elif isinstance(value, int | float) and not isinstance(value, bool) and model is not None:
+        yield path, model, name, value
+
+
+def magnitude_problems(model, reported: set[str] | None = None) -> list[tuple[str, str, str]]:
+    """Errors for every number of a validated line or scenario beyond :data:`FIELD_BOUNDS`
+    (by field name) or :data:`MAGNITUDE_MAX` (by dimension); a path in ``reported`` (already
+    refused by another check) is skipped, and so are the fields of :data:`_OWN_BOUNDS`."""
+    reported = set(reported or ())
+    out = []
+    for path, cls, name, v in _numbers(model, ""):
+        if path in reported or name in _OWN_BOUNDS:
+            continue
+        dim, unit, nonneg = _field_info(cls, name)
+        if name in FIELD_BOUNDS:
+            what, lo, hi, why = FIELD_BOUNDS[name]
+        elif dim in MAGNITUDE_MAX:
+            hi, why = MAGNITUDE_MAX[dim]
+            what, lo = dim, (0.0 if nonneg else -hi)
+        else:
+            continue
+        if not lo <= v <= hi:
+            out.append((ERROR, path, _outside(what, v, unit, lo, hi, why)))
+            reported.add(path)
+    return out
 
 
 def tension_problems(line, tension: float, path: str) -> list[tuple[str, str, str]]:
     """A tension set-point or initial tension against the web's break tension and EA."""
     web = line.web
+    if tension > FORCE_MAX:
+        return [(ERROR, path, _outside("tension", tension, "N", 0.0, FORCE_MAX, "film and "
+                                       "paper lines run at 0.1-20 kN, steel strip at up to "
+                                       "~1 MN"))]
     out = []
     if tension > web.break_tension:
         out.append((WARNING, path, f"{_fmt(tension)} N is above the web's break tension "
@@ -395,6 +646,11 @@ def scenario_problems(scenario, line) -> list[tuple[str, str, str]]:
                             f"than the web's longitudinal wave speed sqrt(E/rho) = {_fmt(wave)} "
                             "m/s: the span model assumes the web moves far slower than its "
                             "strain waves (physics.md §2.1)"))
+            elif v > LINE_SPEED_LIMIT:
+                out.append((ERROR, f"{p}.line_speed", _outside(
+                    "line speed", st.line_speed, "m/s", -LINE_SPEED_LIMIT, LINE_SPEED_LIMIT,
+                    "the fastest web lines (paper machines, slitter-rewinders) run at 35-50 "
+                    "m/s")))
             elif v > SPEED_MAX:
                 out.append((WARNING, f"{p}.line_speed", f"{_fmt(st.line_speed)} m/s is faster "
                             "than any line in physics.md §2.2 (paper machines: 15-35 m/s)"))
@@ -407,7 +663,8 @@ def scenario_problems(scenario, line) -> list[tuple[str, str, str]]:
                 for lvl, path, msg in tension_problems(line, init.tension, "initial.tension")]
     for sid, T in init.span_tension.items():
         out += tension_problems(line, T, f"initial.span_tension.{sid}")
-    return out + disturbance_problems(scenario)
+    out += disturbance_problems(scenario)
+    return out + magnitude_problems(scenario, {path for level, path, _ in out if level == ERROR})
 
 
 def disturbance_problems(scenario) -> list[tuple[str, str, str]]:

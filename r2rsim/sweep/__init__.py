@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .. import limits
+from ..dataset.paths import check_writable
 from ..errors import InputError
 from ._plan import RunSpec, SweepPlan, load_sweep, plan_sweep
 from ._store import Outcome, SweepStore, write_failure
@@ -46,6 +47,7 @@ class SweepSummary:
     simulated_s: float = 0.0
     solver_s: float = 0.0
     wall_s: float = 0.0
+    #: the dataset is finalised: every run has an outcome (``ok`` says whether none failed)
     complete: bool = False
     failures: list[tuple[str, str]] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
@@ -72,7 +74,10 @@ class SweepSummary:
         return self.complete and self.failed == 0 and self.skipped_failed == 0
 
     def format(self) -> str:
-        lines = [f"dataset      {self.output}" + ("" if self.complete else " (unfinished)"),
+        n_failed = self.failed + self.skipped_failed
+        state = (" (unfinished)" if not self.complete else
+                 f" (incomplete: {n_failed} of {self.n_runs} runs failed)" if n_failed else "")
+        lines = [f"dataset      {self.output}{state}",
                  f"runs         {self.n_runs}: {self.done} done, {self.failed} failed, "
                  f"{self.skipped} skipped (already done"
                  + (f", {self.skipped_failed} of them failed before" if self.skipped_failed
@@ -121,7 +126,13 @@ def run_sweep(sweep_path: str | Path, output: str | Path | None = None, *,
     ------
     InputError
         For a bad sweep file, invalid combinations (all listed) or an output directory that
-        may not be used; nothing is written then.
+        may not be used (under a file, read-only, not writable); nothing is written then.
+    OSError
+        When the machine fails the sweep (no space left, a disk turned read-only, an I/O
+        error; :func:`r2rsim.sweep._execute.environment_error`), in this process or in a
+        worker: the sweep stops, its finished runs are kept, and calling it again with the
+        same arguments continues it. A run's own failure (the solver, its physics) does not
+        raise: it is recorded, and the sweep goes on.
     """
     from . import _execute
 
@@ -148,6 +159,7 @@ def run_sweep(sweep_path: str | Path, output: str | Path | None = None, *,
         summary.executor = "none (nothing to run)"
         summary.wall_s = time.perf_counter() - t0
         return summary
+    check_writable(out, inside_out=True)  # a full or read-only disk: before any work
     if scheduler is not None and todo:
         _execute.check_scheduler(scheduler)  # before anything is written
     store.begin()

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import atexit
 import contextlib
+import errno
 import gc
 import os
 import signal
@@ -26,11 +27,32 @@ MAX_ATTEMPTS = 3
 CONNECT_TIMEOUT_S = 30
 
 
+#: errno values that say the machine failed, not the run: no space or quota left, a
+#: read-only file system, no permission, an I/O error, no file handles left
+ENVIRONMENT_ERRNOS = frozenset(
+    e for e in (errno.ENOSPC, getattr(errno, "EDQUOT", None), errno.EROFS, errno.EACCES,
+                errno.EPERM, errno.EIO, errno.EMFILE, errno.ENFILE) if e is not None)
+
+
+def environment_error(exc: BaseException | None) -> OSError | None:
+    """The error of the environment behind ``exc`` (itself, or in its chain of causes), as a
+    plain OSError with the system's text for its errno; None when the run itself failed."""
+    seen: set[int] = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        if isinstance(exc, OSError) and exc.errno in ENVIRONMENT_ERRNOS:
+            return OSError(exc.errno, os.strerror(exc.errno), exc.filename)
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
 def run_one(spec, work: str) -> dict:
     """Run one sweep run into ``<work>/<run_id>/`` (in a worker).
 
     A run that raises is recorded as failed in ``<work>/<run_id>.failed.json`` and reported;
-    it does not stop the sweep. Returns a small record: ``run_id``, ``status`` (done or
+    it does not stop the sweep. An error of the environment (:func:`environment_error`: the
+    disk is full, read-only, ...) is not the run's: it is raised, and stops the sweep with
+    its finished runs kept. Returns a small record: ``run_id``, ``status`` (done or
     failed), ``reason``, ``simulated_s``, ``solver_s`` (the simulation's wall time, numba
     compilation excluded), ``wall_s`` (the whole run in the worker) and ``has_data``.
     """
@@ -59,6 +81,9 @@ def run_one(spec, work: str) -> dict:
         s = execute(plan, Path(work) / spec.run_id, run_id=spec.run_id,
                     run_columns=run_columns(spec), clean_stale=False, check_labels=False)
     except Exception as exc:  # noqa: BLE001 - a failed run is recorded, the sweep goes on
+        env = environment_error(exc)
+        if env is not None:  # what the writer had written is removed (DatasetWriter.abort)
+            raise env from None
         reason = f"{type(exc).__name__}: {exc}"
         write_failure(work, spec, reason, traceback.format_exc())
         return {"run_id": spec.run_id, "status": "failed", "reason": reason, "has_data": False,
@@ -351,6 +376,9 @@ def _dask_loop(client, as_completed, specs, work, on_result, window: int) -> Non
             except Exception as exc:  # noqa: BLE001 - KilledWorker and the like: recorded
                 if _scheduler_lost(exc):
                     raise lost from None
+                env = environment_error(exc)
+                if env is not None:  # a full or read-only disk: the sweep stops
+                    raise env from None
                 rec = {"run_id": spec.run_id, "status": "failed", "has_data": False,
                        "reason": f"{type(exc).__name__}: {exc}", "simulated_s": 0.0,
                        "solver_s": 0.0, "wall_s": 0.0}

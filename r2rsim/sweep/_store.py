@@ -29,11 +29,17 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from .._version import __version__
+from ..dataset.outcome import failed_reason
 from ..dataset.paths import (
     MANIFEST,
+    RUN_TABLES,
+    SAMPLES,
+    SWEEP_COPIES,
     SWEEP_MARKER,
+    TOP_FILES,
     clean_stale,
     dataset_problems,
+    pid_alive,
     read_json,
     read_manifest,
     read_parquet_file,
@@ -45,25 +51,12 @@ from ..errors import InputError, R2RError
 
 MARKER = SWEEP_MARKER
 WORK = ".work"
-TABLES = ("runs", "faults", "events", "variability")
-#: what a sweep writes at the top of its directory, besides samples/, scenario/, sweep/
-_TOP_FILES = {f"{t}.parquet" for t in (*TABLES, "channels", "failures")} | {MANIFEST}
+#: the runs' tables concatenated into the sweep's (channels.parquet is merged apart)
+TABLES = tuple(t for t in RUN_TABLES if t != "channels")
 #: the temporaries of the marker and the manifest (written, then renamed)
-_TOP_TEMP = re.compile(rf"^(?:{re.escape(MARKER)}|{re.escape(MANIFEST)})\.tmp-[0-9]+$")
+_TOP_TEMP = re.compile(rf"^(?:{re.escape(MARKER)}|{re.escape(MANIFEST)})\.tmp-(?P<pid>[0-9]+)$")
 _PYARROW_TYPES = {"string": pa.string(), "float64": pa.float64(), "bool": pa.bool_(),
                   "int64": pa.int64()}
-
-
-def failed_reason(row: dict) -> str | None:
-    """Why a run with data counts as failed in a sweep (None: it did not fail). A solver
-    failure or states that are not finite fail; a web break or an emptied roll do not."""
-    reason = row.get("termination_reason")
-    if isinstance(reason, str) and reason.startswith("solver_failure"):
-        return reason
-    t = row.get("nonfinite_from_t_s")
-    if t is not None and not (isinstance(t, float) and np.isnan(t)):
-        return f"states not finite from t = {t:g} s"
-    return None
 
 
 def run_columns(spec) -> dict[str, pa.Array]:
@@ -337,11 +330,22 @@ class SweepStore:
             self.marker.unlink(missing_ok=True)
             raise InputError(f"another r2rsim sweep finished writing '{self.out}' while this "
                              f"one was starting; run the command again")
+        self._remove_dead_top_temporaries()
         self.work.mkdir(exist_ok=True)
         clean_stale(self.work)
         final_tmp = self.work / ".final"
         if final_tmp.is_dir():
             shutil.rmtree(final_tmp)  # an interrupted finalisation's tables
+
+    def _remove_dead_top_temporaries(self) -> None:
+        """Remove the marker's and the manifest's temporaries left by a sweep process that
+        was killed while writing them (the manifest would otherwise list them)."""
+        for e in os.scandir(self.out):
+            m = _TOP_TEMP.match(e.name)
+            if m and e.is_file(follow_symlinks=False):
+                pid = int(m["pid"])
+                if pid == os.getpid() or not pid_alive(pid):
+                    Path(e.path).unlink(missing_ok=True)
 
     def clear(self, run_id: str) -> None:
         """Remove what a run left in .work/ before it runs again (--retry-failed, or a run
@@ -375,10 +379,10 @@ class SweepStore:
             if name in (WORK, MARKER) or _TOP_TEMP.match(name):
                 continue
             if top.is_symlink() or not top.is_dir():
-                if name not in _TOP_FILES or top.is_symlink():
+                if name not in TOP_FILES or top.is_symlink():
                     found.append(name)
                 continue
-            if name not in ("samples", "scenario", "sweep"):
+            if name not in (SAMPLES, *SWEEP_COPIES):
                 found.append(name + "/")
                 continue
             for p in sorted(top.rglob("*")):
@@ -410,9 +414,14 @@ class SweepStore:
         if tmp.exists():
             shutil.rmtree(tmp)
         tmp.mkdir()
+        failed = [spec.run_id for spec in self.plan.runs
+                  if outcomes[spec.run_id].status == "failed"]
         meta = {b"r2rsim.schema_version": SCHEMA_VERSION.encode(),
                 b"r2rsim.version": __version__.encode(),
-                b"r2rsim.sweep": self.plan.sweep.name.encode()}
+                b"r2rsim.sweep": self.plan.sweep.name.encode(),
+                # a sweep with failed runs is never taken for a complete one
+                b"r2rsim.sweep.n_runs": str(len(self.plan.runs)).encode(),
+                b"r2rsim.sweep.n_failed": str(len(failed)).encode()}
         run_ids, failure_rows, channels = self._merge_tables(outcomes, tmp, meta)
         pq.write_table(pa.Table.from_pylist(failure_rows, schema=failures_schema(self.plan))
                        .replace_schema_metadata(meta), tmp / "failures.parquet",
@@ -422,7 +431,7 @@ class SweepStore:
         pq.write_table(channels.replace_schema_metadata(meta), tmp / "channels.parquet",
                        compression="zstd")
         known_sha = self._place_samples(outcomes)
-        self._install(tmp, run_ids, [r["run_id"] for r in failure_rows], known_sha)
+        self._install(tmp, run_ids, [r["run_id"] for r in failure_rows], failed, known_sha)
         return self.out
 
     def _merge_tables(self, outcomes: dict[str, Outcome], tmp: Path, meta: dict):
@@ -480,8 +489,8 @@ class SweepStore:
             self.work / run_id / "channels.parquet" if where == "work"
             else self.out / "channels.parquet"))
 
-    def _install(self, tmp: Path, run_ids: list[str], failed: list[str],
-                 known_sha: dict) -> None:
+    def _install(self, tmp: Path, run_ids: list[str], without_data: list[str],
+                 failed: list[str], known_sha: dict) -> None:
         """Move the merged tables into the dataset, write the plan's files and the manifest,
         and remove the work directory and the marker: the dataset is complete."""
         # the old manifest stays until the new one replaces it: the marker already says the
@@ -495,7 +504,7 @@ class SweepStore:
             target = self.out / rel
             target.parent.mkdir(parents=True, exist_ok=True)
             target.write_text(text, encoding="utf-8")
-        self._write_manifest(run_ids, failed, known_sha)
+        self._write_manifest(run_ids, without_data, failed, known_sha)
         shutil.rmtree(self.work)
         self.close()
         self.marker.unlink()
@@ -528,8 +537,8 @@ class SweepStore:
                 shutil.copy2(src, dst)
         return known_sha
 
-    def _write_manifest(self, run_ids: list[str], failed_ids: list[str], known_sha: dict
-                        ) -> None:
+    def _write_manifest(self, run_ids: list[str], without_data: list[str],
+                        failed: list[str], known_sha: dict) -> None:
         old = (self.final or {}).get("files", {})
         files = {}
         for p in sorted(self.out.rglob("*")):
@@ -550,7 +559,8 @@ class SweepStore:
             "sweep": {"name": sw.name, "file": f"sweep/{self.plan.file.name}",
                       "combine": sw.combine, "n_combinations": self.plan.n_combinations,
                       "seeds": self.plan.seeds, "axes": self.plan.axes,
-                      "n_runs": len(self.plan.runs), "failed_without_data": failed_ids},
+                      "n_runs": len(self.plan.runs), "failed_without_data": without_data,
+                      "failed": failed},
             "files": files,
         }
         tmp = self.out / f"{MANIFEST}.tmp-{os.getpid()}"
