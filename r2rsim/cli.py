@@ -245,7 +245,9 @@ def parse_where(items: list[str]) -> dict:
 
 
 def _cmd_diagnose(args) -> int:
-    from .diagnostics.registry import call, get
+    from .diagnostics.registry import call, get, require_registered
+
+    require_registered(args.method)  # an unknown name is refused before the heavy imports
     from .evaluate.harness import (
         check_settings,
         evaluate,
@@ -470,12 +472,14 @@ def _cmd_schema(args) -> int:
     return 0
 
 
-def _cmd_list(args) -> int:
-    if args.what == "plugins":
-        from .diagnostics.registry import GROUP, discover
+def _list_plugins(load: bool) -> int:
+    """``r2rsim list plugins``: from the entry points' metadata and the plug-ins' source
+    (nothing is imported: fast), or with ``--load`` each imported and checked."""
+    from .diagnostics.registry import GROUP, discover, listing
 
-        print(f"{'name':<12} {'class':<55} first line of its docstring")
-        broken = 0
+    print(f"{'name':<12} {'class':<55} first line of its docstring")
+    broken = 0
+    if load:
         for name, e in discover().items():
             if e.cls is None:  # listed with its error; the other plug-ins still work
                 broken += 1
@@ -484,11 +488,25 @@ def _cmd_list(args) -> int:
             doc = (e.cls.__doc__ or "").strip().splitlines()
             print(f"{name:<12} {e.cls.__module__ + '.' + e.cls.__qualname__:<55} "
                   f"{doc[0] if doc else ''}")
-        print(f"(entry-point group '{GROUP}')")
-        if broken:
-            print(f"warning: {broken} registered plug-in{'s' if broken > 1 else ''} cannot be "
-                  f"loaded (marked BROKEN above); the others work", file=sys.stderr)
-        return 0
+        print(f"(entry-point group '{GROUP}'; every plug-in imported and checked)")
+    else:
+        for name, e in listing().items():
+            broken += e.problem is not None
+            cls = e.value.replace(":", ".")
+            print(f"{name:<12} {cls:<55} "
+                  + (f"BROKEN: plug-in '{name}' ({e.value}) {e.problem}" if e.problem
+                     else e.summary))
+        print(f"(entry-point group '{GROUP}'; read from the metadata and source without "
+              f"importing the plug-ins: `r2rsim list plugins --load` imports and checks each)")
+    if broken:
+        print(f"warning: {broken} registered plug-in{'s' if broken > 1 else ''} cannot be "
+              f"loaded (marked BROKEN above); the others work", file=sys.stderr)
+    return 0
+
+
+def _cmd_list(args) -> int:
+    if args.what == "plugins":
+        return _list_plugins(args.load)
     if args.what == "faults":
         from .schema.faults import CATALOGUE
 
@@ -800,6 +818,10 @@ def _add_list_parser(sub) -> None:
     ls.add_argument("what", choices=["elements", "sensors", "controllers", "faults",
                                      "plugins", "channels"])
     ls.add_argument("line", nargs="?", help="line file (for 'channels')")
+    ls.add_argument("--load", action="store_true",
+                    help="plugins: import every plug-in and check it (slower: imports "
+                    "scikit-learn and each plug-in's modules); without it they are listed "
+                    "from their metadata and source")
     ls.set_defaults(func=_cmd_list)
 
 

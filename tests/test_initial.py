@@ -9,7 +9,7 @@ import pytest
 
 import r2rsim
 from r2rsim.cli import main
-from r2rsim.solve.initial import taut_guess
+from r2rsim.solve.initial import condition_1, lu_factor, lu_solve, norm2, taut_guess
 
 from conftest import write
 
@@ -162,3 +162,23 @@ def test_position_of_a_festoon_and_a_linear_dancer(tmp_path, repo, capsys, line,
     err = capsys.readouterr().err
     assert f"initial.position.{mover}" in err and "strictly inside" in err
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("n", [1, 2, 7, 60])
+def test_the_steady_states_linear_algebra_against_lapack(n):
+    # the steady-state Newton solves without LAPACK/BLAS (their kernels round differently
+    # on different CPUs, issue 37): the same answers as numpy's LAPACK to rounding
+    rng = np.random.default_rng(n)
+    a = rng.normal(size=(n, n)) + n * np.eye(n) * (n > 2)
+    b = rng.normal(size=n)
+    factors = lu_factor(a)
+    np.testing.assert_allclose(lu_solve(factors, b), np.linalg.solve(a, b), rtol=1e-12,
+                               atol=1e-13)
+    rhs = rng.normal(size=(n, 3))
+    np.testing.assert_allclose(lu_solve(factors, rhs), np.linalg.solve(a, rhs), rtol=1e-12,
+                               atol=1e-13)
+    assert condition_1(a, factors) == pytest.approx(np.linalg.cond(a, 1), rel=1e-10)
+    assert norm2(b) == pytest.approx(float(np.linalg.norm(b)), rel=1e-15)
+    # a zero pivot column: singular, no factors
+    a[:, 0] = 0.0
+    assert lu_factor(a) is None

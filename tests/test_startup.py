@@ -48,12 +48,23 @@ def _run_cli(argv: list[str], heavy: tuple[str, ...]) -> tuple[int, list[str]]:
     (["list", "faults"], HEAVY + ("numpy", "pint")),
     # quantity strings are read by r2rsim.units' own parser; pint only for exotic unit names
     (["validate", LINE], HEAVY + ("numpy", "pint")),
+    # the plug-ins are listed from their entry points and source (issue 37)
+    (["list", "plugins"], HEAVY + ("r2rsim.diagnostics.base", "r2rsim.diagnostics.baselines",
+                                   "r2rsim.diagnostics.gsmms", "r2rsim.diagnostics.parity",
+                                   "r2rsim.diagnostics.hybrid_sov")),
+    (["--help"], HEAVY + ("numpy", "pydantic")),
 ], ids=["version", "list-elements", "schema-line", "schema-sweep", "list-faults",
-        "validate-line"])
+        "validate-line", "list-plugins", "help"])
 def test_quick_commands_do_not_import_the_numerical_stack(argv, heavy):
     rc, loaded = _run_cli(argv, heavy)
     assert rc == 0
     assert loaded == [], f"`r2rsim {' '.join(argv)}` imported {loaded}"
+
+
+def test_an_unknown_method_is_refused_before_the_heavy_imports(tmp_path):
+    rc, loaded = _run_cli(["diagnose", "--method", "no-such", "--data", str(tmp_path)],
+                          HEAVY + ("r2rsim.diagnostics.base", "r2rsim.evaluate"))
+    assert rc == 2 and loaded == []
 
 
 def test_bare_import_is_lazy_and_names_still_resolve():

@@ -1230,7 +1230,7 @@ def event_values(t, y, g, I, P, W, GI, GC, GV, yd, JJ):
     length to the next node minus the joint's lead, joint break: T_break,s - T; splice
     trigger: R - R_trigger; refill: storage short of its set-point.
     """
-    evaluate(t, y, yd, JJ, MODE_RHS, I, P, W, GI, GC, GV, yd[:0])
+    evaluate(t, y, yd, JJ, RUNTIME_MODE[MODE_RHS], I, P, W, GI, GC, GV, yd[:0])
     (oT, oEM, oL, oLD, oLP, oLPP, oEAE, oV, oR, oOM, oJ, oTRIM, oTCMD, oTM, oRAW, oYS, oU, oE,
      oMF, oMW, oXF, oRW0, oEW, oDC) = _offsets(I)
     oNI = I[H_OFF_NI]
@@ -1315,13 +1315,13 @@ def event_values_rows(T, Y, G, I, P, W, GI, GC, GV, yd, JJ):
 def outputs_rows(T, Y, AUX, I, P, W, GI, GC, GV, yd, JJ):
     """Algebraic outputs for every row of a state matrix (one row per sample)."""
     for r in range(Y.shape[0]):
-        evaluate(T[r], Y[r], yd, JJ, MODE_RHS, I, P, W, GI, GC, GV, AUX[r])
+        evaluate(T[r], Y[r], yd, JJ, RUNTIME_MODE[MODE_RHS], I, P, W, GI, GC, GV, AUX[r])
 
 
 @njit(cache=True)
 def jac_values(t, y, JJ, I, P, W, GI, GC, GV, yd, vals):
     """Jacobian at (t, y) as values on the compiled pattern (for sparse solvers)."""
-    evaluate(t, y, yd, JJ, MODE_JAC, I, P, W, GI, GC, GV, yd[:0])
+    evaluate(t, y, yd, JJ, RUNTIME_MODE[MODE_JAC], I, P, W, GI, GC, GV, yd[:0])
     npat = I[H_NPAT]
     op = I[H_OFF_PAT]
     for m in range(npat):
@@ -1333,7 +1333,7 @@ def jac_values(t, y, JJ, I, P, W, GI, GC, GV, yd, vals):
 def rhs_rows(T, Y, F, I, P, W, GI, GC, GV, JJ, aux0):
     """dy/dt for every row of a state matrix."""
     for r in range(Y.shape[0]):
-        evaluate(T[r], Y[r], F[r], JJ, MODE_RHS, I, P, W, GI, GC, GV, aux0)
+        evaluate(T[r], Y[r], F[r], JJ, RUNTIME_MODE[MODE_RHS], I, P, W, GI, GC, GV, aux0)
 
 
 @njit(cache=True)

@@ -7,6 +7,8 @@ fields; the constants below name them. Kept in one module so the compiler and th
 cannot disagree.
 """
 
+import numpy as np
+
 # ---- header of I (offsets of the record blocks and counts) ----
 H_NN, H_NS, H_NSE, H_NC, H_NY = 0, 1, 2, 3, 4          # nodes, spans, sensors, controllers, states
 H_OFF_NI, H_OFF_SI, H_OFF_SEI, H_OFF_CI = 5, 6, 7, 8    # record blocks in I
@@ -140,3 +142,8 @@ AUX_JOINT = 2     # leading-edge position (unstretched, from the unwind), span i
 
 # ---- evaluation modes ----
 MODE_RHS, MODE_JAC, MODE_TOUCH = 0, 1, 2
+#: the modes as a constant array, for compiled callers: ``evaluate(..., RUNTIME_MODE[MODE_RHS],
+#: ...)`` passes an int64, while ``MODE_RHS`` itself would be typed as the literal 0, and numba
+#: would compile the kernel once per literal mode and once more for the int64 of Python's calls
+#: (each compile of the kernel is ~20 s of CPU on a cold start)
+RUNTIME_MODE = np.array([MODE_RHS, MODE_JAC, MODE_TOUCH], dtype=np.int64)

@@ -9,11 +9,14 @@ it with its error, :func:`plugins` leaves it out, and :func:`get` raises
 
 from __future__ import annotations
 
+import ast
+import importlib.util
 import inspect
 import types
 import typing
 from dataclasses import dataclass
 from importlib.metadata import entry_points
+from pathlib import Path
 
 from ..errors import InputError, PluginError
 
@@ -64,6 +67,83 @@ def discover() -> dict[str, Entry]:
     return out
 
 
+@dataclass
+class Listing:
+    """A registered plug-in as its installed metadata and source describe it, without
+    importing it: ``summary`` is the first line of the class's docstring, ``problem`` why it
+    certainly cannot load (None: it may; only loading it, :func:`discover`, tells)."""
+
+    name: str
+    value: str
+    summary: str
+    problem: str | None
+
+
+def listing() -> dict[str, Listing]:
+    """Every registered plug-in by name, read from the entry points and the source of the
+    module each names (parsed, not imported): quick, and no plug-in code runs. A plug-in whose
+    module is not installed, or whose name is not a class in it, is listed with that
+    problem; whether the class is a :class:`~r2rsim.diagnostics.Diagnostic` that loads is
+    known only once it is loaded (:func:`discover`)."""
+    out = {}
+    for ep in sorted(entry_points(group=GROUP), key=lambda e: e.name):
+        module, _, attr = ep.value.partition(":")
+        summary, problem = _class_doc(module.strip(), attr.strip())
+        out[ep.name] = Listing(ep.name, ep.value, summary, problem)
+    return out
+
+
+def _find_spec_without_importing(module: str):
+    """The spec of a dotted module, found part by part in its parents' search paths, so that
+    no package's ``__init__`` runs (``importlib.util.find_spec`` imports the parents)."""
+    import importlib.machinery
+
+    parts = module.split(".")
+    spec = importlib.util.find_spec(parts[0])  # a top-level name: nothing is imported
+    for part in parts[1:]:
+        if spec is None or spec.submodule_search_locations is None:
+            return None
+        spec = importlib.machinery.PathFinder.find_spec(
+            f"{spec.name}.{part}", list(spec.submodule_search_locations))
+    return spec
+
+
+def _class_doc(module: str, attr: str, depth: int = 0) -> tuple[str, str | None]:
+    """(first docstring line, problem) of class ``attr`` of ``module``, from its source; it
+    follows ``from .x import attr`` re-exports a few levels deep."""
+    try:
+        spec = _find_spec_without_importing(module)
+    except (ImportError, ValueError) as exc:
+        return "", f"cannot be loaded: {one_line(exc)}"
+    if spec is None:
+        return "", f"cannot be loaded: ModuleNotFoundError: No module named '{module}'"
+    origin = spec.origin
+    if not origin or not origin.endswith(".py") or not attr or depth > 3:
+        return "", None  # a compiled module, a namespace package: only loading tells
+    try:
+        tree = ast.parse(Path(origin).read_text(encoding="utf-8"))
+    except (OSError, SyntaxError, UnicodeDecodeError, ValueError) as exc:
+        return "", f"cannot be loaded: {one_line(exc)}"
+    for node in tree.body:
+        if isinstance(node, ast.ClassDef) and node.name == attr:
+            doc = (ast.get_docstring(node) or "").strip().splitlines()
+            return (doc[0] if doc else ""), None
+        if isinstance(node, ast.ImportFrom):
+            for alias in node.names:
+                if (alias.asname or alias.name) == attr:
+                    base = importlib.util.resolve_name("." * node.level + (node.module or ""),
+                                                       spec.parent if spec.parent is not None
+                                                       else module) if node.level else \
+                        node.module
+                    return _class_doc(base or "", alias.name, depth + 1)
+        targets = (node.targets if isinstance(node, ast.Assign) else
+                   [node.target] if isinstance(node, ast.AnnAssign) else
+                   [ast.Name(node.name)] if isinstance(node, ast.FunctionDef) else [])
+        if any(isinstance(t, ast.Name) and t.id == attr for t in targets):
+            return "", None  # assigned or a function: only loading tells what it is
+    return "", f"is not defined in module '{module}'"
+
+
 def plugins() -> dict[str, type]:
     """Every registered plug-in class that loads, by name (see :func:`discover` for the
     broken ones)."""
@@ -80,11 +160,23 @@ def get(name: str) -> type:
     PluginError
         It is registered but cannot be loaded.
     """
+    return _load(require_registered(name))
+
+
+def require_registered(name: str):
+    """The entry point of the plug-in registered as ``name``, not loaded (so an unknown name
+    is refused at once).
+
+    Raises
+    ------
+    InputError
+        No plug-in of that name (the message lists the registered ones).
+    """
     found = {ep.name: ep for ep in entry_points(group=GROUP)}
     if name not in found:
         raise InputError(f"no diagnostic plug-in '{name}' (registered: "
                          f"{', '.join(sorted(found)) or 'none'}; `r2rsim list plugins`)")
-    return _load(found[name])
+    return found[name]
 
 
 def call(cls_or_est, method: str, fn, *args, **kwargs):

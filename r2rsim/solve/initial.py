@@ -203,6 +203,10 @@ def _mover_tensions(line) -> list[float]:
     return out
 
 
+#: a Newton matrix whose 1-norm condition number exceeds this is taken as singular
+MAX_CONDITION = 1e14
+
+
 def _newton(cl: CompiledLine, y_guess: np.ndarray, tol: float, max_iter: int):
     free = np.array([k not in ("roll_length", "material", "angle") for k in cl.state_kinds])
     scale = np.abs(y_guess) + 1e3 * cl.atol
@@ -215,23 +219,80 @@ def _newton(cl: CompiledLine, y_guess: np.ndarray, tol: float, max_iter: int):
             if not np.all(np.isfinite(f)):
                 return None
             Jf = cl.jacobian(0.0, y)[np.ix_(free, free)]
-            try:
-                dx = np.linalg.solve(Jf, -f)
-            except np.linalg.LinAlgError:
+            lu = lu_factor(Jf)
+            if lu is None:
                 return None
+            dx = lu_solve(lu, -f)
             if not np.all(np.isfinite(dx)):
                 return None
             lam = 1.0
-            f0 = np.linalg.norm(f)
+            f0 = norm2(f)
             for _ls in range(20):
                 y_try = y.copy()
                 y_try[free] += lam * dx
-                if np.linalg.norm(cl.rhs(0.0, y_try)[free]) <= (1 - 1e-4 * lam) * f0 or f0 == 0:
+                if norm2(cl.rhs(0.0, y_try)[free]) <= (1 - 1e-4 * lam) * f0 or f0 == 0:
                     break
                 lam *= 0.5
             y = y_try
             if np.max(np.abs(lam * dx) / scale[free]) < tol:
-                if np.linalg.cond(Jf) > 1e14:
+                if condition_1(Jf, lu) > MAX_CONDITION:
                     return None
                 return y
     return None
+
+
+# ---- dense linear algebra without LAPACK/BLAS ----------------------------------------------
+# The steady state is the initial state of a run, so every sample depends on it. LAPACK and
+# BLAS (np.linalg.solve, np.linalg.norm's dot product) pick CPU-specific kernels that round
+# differently, so the data would differ between machines. These use element-wise numpy
+# operations only (each a correctly rounded IEEE operation, in a fixed order) and math.fsum
+# (exactly rounded sums): the same bytes on every machine. n is the number of states
+# (tens to a few hundred), and this runs a few times per run.
+
+
+def norm2(x: np.ndarray) -> float:
+    """Euclidean norm, with an exactly rounded sum of squares."""
+    return math.sqrt(math.fsum(np.square(x)))
+
+
+def lu_factor(a: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """LU factors of a square matrix with partial pivoting (the first largest pivot of each
+    column): ``(lu, perm)`` with L below the diagonal (unit diagonal) and U on and above it,
+    rows permuted by ``perm``; None when a pivot is zero or not finite."""
+    lu = np.array(a, dtype=float, copy=True)
+    n = lu.shape[0]
+    perm = np.arange(n)
+    for j in range(n):
+        p = j + int(np.argmax(np.abs(lu[j:, j])))
+        if not (np.isfinite(lu[p, j]) and lu[p, j] != 0.0):
+            return None
+        if p != j:
+            lu[[j, p]] = lu[[p, j]]
+            perm[[j, p]] = perm[[p, j]]
+        lu[j + 1:, j] /= lu[j, j]
+        lu[j + 1:, j + 1:] -= np.multiply.outer(lu[j + 1:, j], lu[j, j + 1:])
+    return lu, perm
+
+
+def lu_solve(factors: tuple[np.ndarray, np.ndarray], b: np.ndarray) -> np.ndarray:
+    """Solve a x = b (b a vector, or a matrix of right-hand sides as columns) with the
+    factors of :func:`lu_factor`, column by column of the factors."""
+    lu, perm = factors
+    x = np.array(b, dtype=float)[perm]
+    n = lu.shape[0]
+    for j in range(n):  # L y = P b
+        x[j + 1:] -= np.multiply.outer(lu[j + 1:, j], x[j]) if x.ndim > 1 else lu[j + 1:, j] * x[j]
+    for j in range(n - 1, -1, -1):  # U x = y
+        x[j] /= lu[j, j]
+        x[:j] -= np.multiply.outer(lu[:j, j], x[j]) if x.ndim > 1 else lu[:j, j] * x[j]
+    return x
+
+
+def condition_1(a: np.ndarray, factors: tuple[np.ndarray, np.ndarray]) -> float:
+    """The 1-norm condition number ||a||_1 ||a^-1||_1, a^-1 from the factors."""
+    inv = lu_solve(factors, np.eye(a.shape[0]))
+
+    def norm1(m):
+        return max(math.fsum(col) for col in np.abs(m).T)
+
+    return norm1(a) * norm1(inv)

@@ -9,15 +9,17 @@ control, Jacobian reuse) written as one numba kernel: the whole integration, the
 and complex LU factorisations, the dense output at the sample times and the location of events
 run without returning to Python.
 
-The method's constants are derived below from the Butcher tableau, not typed in: the
-transformation ``T`` block-diagonalises ``A^-1`` (real eigenvalue ``gamma``, complex pair
-``alpha +- i beta``), and the dense-output matrix interpolates the collocation polynomial.
+The method's constants are derived below from the Butcher tableau, not typed in, in decimal
+arithmetic so that they are the same bytes on every machine: the transformation ``T``
+block-diagonalises ``A^-1`` (real eigenvalue ``gamma``, complex pair ``alpha +- i beta``), and
+the dense-output matrix interpolates the collocation polynomial.
 """
 
 from __future__ import annotations
 
 import hashlib
 import math
+from decimal import Decimal, localcontext
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +27,7 @@ from numba import njit
 
 from ..compile import kernels, layout
 from ..compile.kernels import evaluate, event_values, jac_values
-from ..compile.layout import MODE_RHS
+from ..compile.layout import MODE_RHS, RUNTIME_MODE
 
 # ---- the method --------------------------------------------------------------------------
 _S6 = math.sqrt(6.0)
@@ -41,28 +43,88 @@ A = np.array([
 E = np.array([-13.0 - 7.0 * _S6, -13.0 + 7.0 * _S6, -1.0]) / 3.0
 
 
-def _transformation():
-    """gamma, mu = alpha - i beta, T and T^-1 with T^-1 A^-1 T = [[g,0,0],[0,a,b],[0,-b,a]].
+# The constants below are derived in decimal arithmetic of 50 significant digits (Python's
+# `decimal`, exact software arithmetic) and rounded once to float64. LAPACK, which derived
+# them before, gives results that differ by up to ~250 ulps between its CPU-specific kernels,
+# and every simulated sample depends on them: computed this way they are the same bytes on
+# every machine (docs/dataset.md §8).
+_DIGITS = 50
 
-    Columns of T: the real eigenvector of A^-1 and the real and imaginary parts of the
-    eigenvector of alpha + i beta (beta > 0), each scaled to a last component of 1, the
-    scaling in which the Newton increments are measured (as in RADAU5).
+
+def _dec_inverse(m: list[list[Decimal]]) -> list[list[Decimal]]:
+    """Inverse of a small matrix by Gauss-Jordan elimination with partial pivoting."""
+    n = len(m)
+    a = [[*row, *(Decimal(int(i == j)) for j in range(n))] for i, row in enumerate(m)]
+    for c in range(n):
+        p = max(range(c, n), key=lambda r: abs(a[r][c]))
+        a[c], a[p] = a[p], a[c]
+        a[c] = [x / a[c][c] for x in a[c]]
+        for r in range(n):
+            if r != c:
+                a[r] = [x - a[r][c] * y for x, y in zip(a[r], a[c], strict=True)]
+    return [row[n:] for row in a]
+
+
+def _dec_eigenvector(m, lam_re: Decimal, lam_im: Decimal) -> list[tuple[Decimal, Decimal]]:
+    """The eigenvector (complex, as (re, im) pairs) of a 3x3 matrix ``m`` for the eigenvalue
+    ``lam_re + i lam_im``, scaled to a last component of 1: rows 1-2 of (m - lam I) v = 0
+    solved for v1, v2 by Cramer's rule."""
+    def mul(x, y):
+        return x[0] * y[0] - x[1] * y[1], x[0] * y[1] + x[1] * y[0]
+
+    def sub(x, y):
+        return x[0] - y[0], x[1] - y[1]
+
+    def div(x, y):
+        d = y[0] * y[0] + y[1] * y[1]
+        return (x[0] * y[0] + x[1] * y[1]) / d, (x[1] * y[0] - x[0] * y[1]) / d
+
+    zero = Decimal(0)
+    a11, a12 = (m[0][0] - lam_re, -lam_im), (m[0][1], zero)
+    a21, a22 = (m[1][0], zero), (m[1][1] - lam_re, -lam_im)
+    r1, r2 = (-m[0][2], zero), (-m[1][2], zero)
+    det = sub(mul(a11, a22), mul(a12, a21))
+    return [div(sub(mul(r1, a22), mul(a12, r2)), det),
+            div(sub(mul(a11, r2), mul(a21, r1)), det), (Decimal(1), zero)]
+
+
+def _constants():
+    """gamma, mu = alpha - i beta, T, T^-1 and the dense-output matrix P.
+
+    T^-1 A^-1 T = [[g,0,0],[0,a,b],[0,-b,a]]. The eigenvalues of A^-1 in closed form
+    (Hairer & Wanner II, §IV.8: with s = 9^(1/3), 1/gamma = (6 + s(s - 1))/30 and
+    1/(alpha + i beta) = ((12 - s(s - 1)) + i s(s + 1)sqrt(3))/60). Columns of T: the real
+    eigenvector of A^-1 and the real and imaginary parts of the eigenvector of
+    alpha + i beta (beta > 0), each scaled to a last component of 1, the scaling in which the
+    Newton increments are measured (as in RADAU5). P: y(t + x h) = y + sum_k (Z^T P)_k x^(k+1),
+    the collocation polynomial through (0, y) and (C_s, y + Z_s).
     """
-    lam, vec = np.linalg.eig(np.linalg.inv(A))
-    i_real = int(np.argmin(np.abs(lam.imag)))
-    i_cplx = int(np.argmax(lam.imag))
-    v = (vec[:, i_real] / vec[2, i_real]).real
-    w = vec[:, i_cplx] / vec[2, i_cplx]
-    T = np.column_stack([v, w.real, w.imag])
-    gamma = float(lam[i_real].real)
-    mu = complex(lam[i_cplx].real, -lam[i_cplx].imag)
-    return gamma, mu, T, np.linalg.inv(T)
+    with localcontext() as ctx:
+        ctx.prec = _DIGITS
+        s6 = Decimal(6).sqrt()
+        a = [[(88 - 7 * s6) / 360, (296 - 169 * s6) / 1800, (-2 + 3 * s6) / 225],
+             [(296 + 169 * s6) / 1800, (88 + 7 * s6) / 360, (-2 - 3 * s6) / 225],
+             [(16 - s6) / 36, (16 + s6) / 36, Decimal(1) / 9]]
+        ainv = _dec_inverse(a)
+        s = Decimal(9) ** (Decimal(1) / 3)
+        gamma = 30 / (6 + s * (s - 1))
+        re, im = (12 - s * (s - 1)) / 60, s * (s + 1) * Decimal(3).sqrt() / 60
+        alpha, beta = re / (re * re + im * im), im / (re * re + im * im)
+        v = _dec_eigenvector(ainv, gamma, Decimal(0))
+        w = _dec_eigenvector(ainv, alpha, beta)
+        t = [[v[i][0], w[i][0], w[i][1]] for i in range(3)]
+        c = [(4 - s6) / 10, (4 + s6) / 10, Decimal(1)]
+        vander = [[ci, ci * ci, ci * ci * ci] for ci in c]
+        p = [list(col) for col in zip(*_dec_inverse(vander), strict=True)]  # transposed
+
+        def as_float(m):
+            return np.array([[float(x) for x in row] for row in m])
+
+        return (float(gamma), complex(float(alpha), -float(beta)), as_float(t),
+                as_float(_dec_inverse(t)), as_float(p))
 
 
-GAMMA, MU, T, TI = _transformation()
-#: dense output: y(t + x h) = y + sum_k (Z^T P)_k x^(k+1), the collocation polynomial through
-#: (0, y) and (C_s, y + Z_s)
-P = np.linalg.inv(np.vander(C, 4, increasing=True)[:, 1:]).T
+GAMMA, MU, T, TI, P = _constants()
 
 NEWTON_MAXITER = 6
 MIN_FACTOR = 0.2
@@ -75,6 +137,27 @@ MESSAGES = {FAIL_SMALL_STEP: "Radau: step size below its minimum (the Newton ite
                              "fails or the error test cannot be met)",
             FAIL_MAX_STEPS: "Radau: maximum number of steps reached",
             FAIL_NONFINITE: "Radau: the state or its derivative is not finite (nan or inf)"}
+
+
+# ---- powers without libm --------------------------------------------------------------------
+# x ** 0.25 calls libm's pow, which glibc computes with CPU-specific code (FMA or not) that
+# differs in the last bit for some arguments; the step sizes, and so every sample, would differ
+# between machines. sqrt is exactly rounded by IEEE 754, and products are too.
+
+
+@njit(cache=True)
+def _root4(x):
+    """x ** (1/4) for x >= 0, as two exactly rounded square roots."""
+    return math.sqrt(math.sqrt(x))
+
+
+@njit(cache=True)
+def _ipow(x, k):
+    """x ** k for an integer k >= 0, by repeated multiplication (k is at most 6 here)."""
+    out = 1.0
+    for _ in range(k):
+        out *= x
+    return out
 
 
 # ---- banded LU with partial pivoting (real and complex) -----------------------------------
@@ -207,14 +290,14 @@ def _build_initial_step(stamp):
         h0 = min(h0, interval)
         for i in range(n):
             y1[i] = y[i] + h0 * f[i]
-        evaluate(t + h0, y1, f1, J1, MODE_RHS, I, Pl, W, GI, GC, GV, aux0)
+        evaluate(t + h0, y1, f1, J1, RUNTIME_MODE[MODE_RHS], I, Pl, W, GI, GC, GV, aux0)
         for i in range(n):
             df[i] = f1[i] - f[i]
         d2 = _rms(df, scale) / h0
         if d1 <= 1e-15 and d2 <= 1e-15:
             h1 = max(1e-6, h0 * 1e-3)
         else:
-            h1 = (0.01 / max(d1, d2)) ** 0.25
+            h1 = _root4(0.01 / max(d1, d2))
         return min(100.0 * h0, h1, interval)
 
     return _initial_step
@@ -307,7 +390,8 @@ def _build_integrate(stamp):
         newton_tol = max(10.0 * EPS / rtol, min(0.03, math.sqrt(rtol)))
 
         t = t0
-        evaluate(t, y, f, J1, MODE_RHS, I, Pl, W, GI, GC, GV, aux0)
+        rhs_mode = RUNTIME_MODE[MODE_RHS]  # an int64, not a literal: one compile of evaluate
+        evaluate(t, y, f, J1, rhs_mode, I, Pl, W, GI, GC, GV, aux0)
         nfev += 1
         k_out = 0
         while k_out < tq.shape[0] and tq[k_out] <= t0:
@@ -397,7 +481,7 @@ def _build_integrate(stamp):
                         for s in range(3):
                             for i in range(n):
                                 ytmp[i] = y[i] + Z[s, i]
-                            evaluate(t + Cn[s] * h, ytmp, F[s], J1, MODE_RHS, I, Pl, W, GI, GC,
+                            evaluate(t + Cn[s] * h, ytmp, F[s], J1, rhs_mode, I, Pl, W, GI, GC,
                                      GV, aux0)
                             nfev += 1
                         for i in range(n):
@@ -423,7 +507,7 @@ def _build_integrate(stamp):
                         dW_norm = math.sqrt(s2 / (3 * n))
                         if dW_norm_old >= 0.0:
                             rate = dW_norm / dW_norm_old
-                        if rate >= 0.0 and (rate >= 1.0 or rate ** (NEWTON_MAXITER - k)
+                        if rate >= 0.0 and (rate >= 1.0 or _ipow(rate, NEWTON_MAXITER - k)
                                             / (1.0 - rate) * dW_norm > newton_tol):
                             break
                         for s in range(3):
@@ -462,7 +546,7 @@ def _build_integrate(stamp):
                     # after a rejection: one more smoothing of the estimate (IV.8, p. 124)
                     for i in range(n):
                         ytmp[i] = y[i] + err[i]
-                    evaluate(t, ytmp, err, J1, MODE_RHS, I, Pl, W, GI, GC, GV, aux0)
+                    evaluate(t, ytmp, err, J1, rhs_mode, I, Pl, W, GI, GC, GV, aux0)
                     nfev += 1
                     for i in range(n):
                         err[i] += ZE[i]
@@ -487,7 +571,7 @@ def _build_integrate(stamp):
                 factor = 1.0
             else:
                 lu_valid = False
-            evaluate(t_new, y_new, f_new, J1, MODE_RHS, I, Pl, W, GI, GC, GV, aux0)
+            evaluate(t_new, y_new, f_new, J1, rhs_mode, I, Pl, W, GI, GC, GV, aux0)
             nfev += 1
             if recompute_jac:
                 jac_values(t_new, y_new, JJ, I, Pl, W, GI, GC, GV, yd, vals)
@@ -566,8 +650,8 @@ def _predict(h_abs, h_abs_old, err_norm, err_old):
     if err_old < 0.0 or h_abs_old < 0.0:
         multiplier = 1.0
     else:
-        multiplier = h_abs / h_abs_old * (err_old / err_norm) ** 0.25
-    return min(1.0, multiplier) * err_norm ** -0.25
+        multiplier = h_abs / h_abs_old * _root4(err_old / err_norm)
+    return min(1.0, multiplier) / _root4(err_norm)
 
 
 CONSTS = (C, E, T, TI, P, GAMMA, MU)
