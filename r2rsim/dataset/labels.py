@@ -44,6 +44,37 @@ def _id_lists(ids: np.ndarray, present: np.ndarray) -> pa.ListArray:
     return pa.ListArray.from_arrays(pa.array(offsets), pa.array(values, type=pa.string()))
 
 
+class _FaultsAt:
+    """The run's faults at the times ``t``: which are present, their profiles p(t), how many
+    are on, the primary one (the present fault with the largest ``magnitude_rel``, the first
+    on ties; ``len(faults)`` where none is) and its severity. What :func:`derive_labels` and
+    :func:`quick_label_problem` both derive from faults.parquet."""
+
+    def __init__(self, fault_rows: list[dict], t: np.ndarray):
+        n = len(t)
+        self.faults = faults = [from_record(r) for r in fault_rows]
+        self.present = np.array([f.present(t) for f in faults], dtype=bool).reshape(
+            len(faults), n)
+        self.prof = np.array([f.p(t) for f in faults], dtype=float).reshape(len(faults), n)
+        self.n_active = self.present.sum(axis=0)
+        self.any_on = self.n_active > 0
+        rel = np.array([f.magnitude_rel if not math.isnan(f.magnitude_rel) else -1.0
+                        for f in faults])
+        score = np.where(self.present, rel[:, None], -np.inf)
+        first = np.argmax(score, axis=0) if faults else np.zeros(n, int)
+        self.primary = np.where(self.any_on, first, len(faults))
+        self.severity = np.where(self.any_on, self.prof[first, np.arange(n)] if faults
+                                 else 0.0, 0.0)
+
+    def sensor_mask(self, sensor_id: str) -> np.ndarray:
+        """Where a sensor fault of ``sensor_id`` corrupts its channel (p > 0)."""
+        mask = np.zeros(self.present.shape[1], bool)
+        for f, p in zip(self.faults, self.prof, strict=True):
+            if f.target == sensor_id and f.type.startswith("sensor."):
+                mask |= p > 0
+        return mask
+
+
 def derive_labels(fault_rows: list[dict], k: np.ndarray, t: np.ndarray, *, warmup: float,
                   modes: list, terminated_k: int | None, sensor_channels: dict[str, str]
                   ) -> dict[str, np.ndarray | pa.Array]:
@@ -65,20 +96,10 @@ def derive_labels(fault_rows: list[dict], k: np.ndarray, t: np.ndarray, *, warmu
     sensor_channels : dict
         Sensor id -> measured channel name without the ``meas.`` prefix.
     """
-    n = len(t)
-    faults = [from_record(r) for r in fault_rows]
-    present = np.array([f.present(t) for f in faults], dtype=bool).reshape(len(faults), n)
-    prof = np.array([f.p(t) for f in faults], dtype=float).reshape(len(faults), n)
-    n_active = present.sum(axis=0)
-    rel = np.array([f.magnitude_rel if not math.isnan(f.magnitude_rel) else -1.0
-                    for f in faults])
-    # primary: the present fault with the largest magnitude_rel (first on ties)
-    score = np.where(present, rel[:, None], -np.inf)
-    primary = np.argmax(score, axis=0) if len(faults) else np.zeros(n, int)
-    any_on = n_active > 0
+    fa = _FaultsAt(fault_rows, t)
+    faults, present, any_on, n_active = fa.faults, fa.present, fa.any_on, fa.n_active
     types = np.array([f.type for f in faults] + ["normal"], dtype=object)
-    primary_type = np.where(any_on, types[np.where(any_on, primary, len(faults))], "normal")
-    severity = np.where(any_on, prof[primary, np.arange(n)] if len(faults) else 0.0, 0.0)
+    primary_type = np.where(any_on, types[fa.primary], "normal")
     ids = np.array([f.id for f in faults], dtype=object)
     fault_ids = _id_lists(ids, present)
     phase = np.where(t < warmup, "warmup", np.where(any_on, "faulty", "normal")).astype(object)
@@ -89,17 +110,13 @@ def derive_labels(fault_rows: list[dict], k: np.ndarray, t: np.ndarray, *, warmu
         "label.n_active": n_active.astype(np.int8),
         "label.fault_ids": fault_ids,
         "label.primary_type": primary_type,
-        "label.severity": severity.astype(np.float32),
+        "label.severity": fa.severity.astype(np.float32),
         "label.phase": phase,
         "label.mode": mode_at(modes, t),
         "label.score_mask": np.asarray(t) >= warmup,
     }
     for sid, chan in sensor_channels.items():
-        mask = np.zeros(n, bool)
-        for f, p in zip(faults, prof, strict=True):
-            if f.target == sid and f.type.startswith("sensor."):
-                mask |= p > 0
-        out[f"label.ch.{chan}"] = mask
+        out[f"label.ch.{chan}"] = fa.sensor_mask(sid)
     return out
 
 
@@ -216,28 +233,13 @@ def quick_label_problem(table: pa.Table, run: dict, fault_rows: list[dict]) -> s
     """
     t = table.column("t_s").to_numpy()
     k = table.column("k").to_numpy()
-    n = len(t)
-    faults = [from_record(r) for r in fault_rows]
-    present = np.array([f.present(t) for f in faults], dtype=bool).reshape(len(faults), n)
-    prof = np.array([f.p(t) for f in faults], dtype=float).reshape(len(faults), n)
-    n_active = present.sum(axis=0)
-    rel = np.array([f.magnitude_rel if not math.isnan(f.magnitude_rel) else -1.0
-                    for f in faults])
-    score = np.where(present, rel[:, None], -np.inf)
-    any_on = n_active > 0
-    primary = np.where(any_on, np.argmax(score, axis=0) if faults else 0, len(faults))
-    severity = np.where(any_on, prof[np.minimum(primary, len(faults) - 1), np.arange(n)]
-                        if faults else 0.0, 0.0).astype(np.float32)
-    want = {"label.is_faulty": any_on, "label.n_active": n_active,
-            "label.severity": severity, "label.score_mask": t >= run["warmup_s"]}
+    fa = _FaultsAt(fault_rows, t)
+    want = {"label.is_faulty": fa.any_on, "label.n_active": fa.n_active,
+            "label.severity": fa.severity.astype(np.float32),
+            "label.score_mask": t >= run["warmup_s"]}
     for name in table.column_names:
         if name.startswith("label.ch."):
-            sid = name[len("label.ch."):].split(".")[0]
-            mask = np.zeros(n, bool)
-            for f, p in zip(faults, prof, strict=True):
-                if f.target == sid and f.type.startswith("sensor."):
-                    mask |= p > 0
-            want[name] = mask
+            want[name] = fa.sensor_mask(name[len("label.ch."):].split(".")[0])
     for name, expected in want.items():
         if name not in table.column_names:
             return f"label column {name} missing"
@@ -246,7 +248,7 @@ def quick_label_problem(table: pa.Table, run: dict, fault_rows: list[dict]) -> s
         if bad is not None:
             return (f"{name} at k = {k[bad]} is {_item(got[bad])!r}; faults.parquet gives "
                     f"{_item(expected[bad])!r}")
-    return _primary_problem(table, k, primary, [f.type for f in faults])
+    return _primary_problem(table, k, fa.primary, [f.type for f in fa.faults])
 
 
 def _primary_problem(table: pa.Table, k, primary: np.ndarray, types: list[str]) -> str | None:
