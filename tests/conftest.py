@@ -93,3 +93,16 @@ def run_line(path: Path, *, duration: float, rate: float = 1000.0, steps=(), ten
 @pytest.fixture(scope="session")
 def repo() -> Path:
     return REPO
+
+
+def edited(base: dict, path, value) -> dict:
+    """A deep copy of a YAML mapping with the value at ``path`` (keys and list indices)
+    replaced."""
+    import copy
+
+    d = copy.deepcopy(base)
+    node = d
+    for p in path[:-1]:
+        node = node[p]
+    node[path[-1]] = value
+    return d

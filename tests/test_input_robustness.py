@@ -5,7 +5,6 @@ on. Each case takes milliseconds: none of them reaches the solver."""
 
 from __future__ import annotations
 
-import copy
 import math
 import os
 
@@ -20,27 +19,18 @@ from r2rsim.cli import build_parser, main
 from r2rsim.errors import InputError, PlausibilityWarning
 from r2rsim.schema.scenario import ProgrammeStep, Scenario
 
-from conftest import REPO, SMALL_LINE, SMALL_SCENARIO
+from conftest import REPO, SMALL_LINE, SMALL_SCENARIO, edited
 
 LINE, SCENARIO = SMALL_LINE, SMALL_SCENARIO
 NAN, INF = math.nan, math.inf
 
 
-def _edit(base, path, value):
-    d = copy.deepcopy(base)
-    node = d
-    for p in path[:-1]:
-        node = node[p]
-    node[path[-1]] = value
-    return d
-
-
 def L(path, value):  # noqa: N802 - a line with one value changed
-    return ("line", _edit(LINE, path, value))
+    return ("line", edited(LINE, path, value))
 
 
 def S(path, value):  # noqa: N802 - a scenario with one value changed
-    return ("scen", _edit(SCENARIO, path, value))
+    return ("scen", edited(SCENARIO, path, value))
 
 
 def _fault(**kw):
@@ -272,14 +262,14 @@ def test_bad_file_one_line_through_run_and_validate(tmp_path, capsys, case):
 
 def test_yaml_12_floats_are_numbers(tmp_path, capsys):
     # YAML 1.1 reads 1e-4 as a string; the loader reads it as the number everyone means
-    files = _write(tmp_path, "line", _edit(LINE, ["controllers", 1, "ki"], "KI"))
+    files = _write(tmp_path, "line", edited(LINE, ["controllers", 1, "ki"], "KI"))
     files["line"].write_text(files["line"].read_text().replace("KI", "1e-4"))
     assert r2rsim.load_line(files["line"]).controllers[1].ki == 1e-4
 
 
 # 11. what the line: key may name
 def test_line_file_from_dev_zero_is_refused_at_once(tmp_path, capsys):
-    _write(tmp_path, "scen", _edit(SCENARIO, ["line"], "/dev/zero"))
+    _write(tmp_path, "scen", edited(SCENARIO, ["line"], "/dev/zero"))
     _assert_one_line(*_run(tmp_path, capsys), "scen.yaml", "line", "not a regular file")
     assert main(["validate", "/dev/zero"]) == 2
     assert "is a device; line and scenario files must be regular files" in \
@@ -289,7 +279,7 @@ def test_line_file_from_dev_zero_is_refused_at_once(tmp_path, capsys):
 @pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs here")
 def test_fifo_is_refused_without_blocking(tmp_path, capsys):
     os.mkfifo(tmp_path / "pipe.yaml")  # opening it for reading would wait for a writer
-    _write(tmp_path, "scen", _edit(SCENARIO, ["line"], "pipe.yaml"))
+    _write(tmp_path, "scen", edited(SCENARIO, ["line"], "pipe.yaml"))
     _assert_one_line(*_run(tmp_path, capsys), "scen.yaml", "line", "not a regular file")
     assert main(["validate", str(tmp_path / "pipe.yaml")]) == 2
     assert "is a FIFO (named pipe)" in capsys.readouterr().err
@@ -297,7 +287,7 @@ def test_fifo_is_refused_without_blocking(tmp_path, capsys):
 
 def test_directory_as_line_file(tmp_path, capsys):
     (tmp_path / "lines").mkdir()
-    _write(tmp_path, "scen", _edit(SCENARIO, ["line"], "lines"))
+    _write(tmp_path, "scen", edited(SCENARIO, ["line"], "lines"))
     _assert_one_line(*_run(tmp_path, capsys), "scen.yaml", "line", "not a regular file")
 
 
@@ -305,7 +295,7 @@ def test_directory_as_line_file(tmp_path, capsys):
 def test_symlinked_line_file_is_fine(tmp_path, capsys):
     files = _write(tmp_path)
     (tmp_path / "link.yaml").symlink_to(files["line"])
-    files["scen"].write_text(yaml.safe_dump(_edit(SCENARIO, ["line"], "link.yaml")))
+    files["scen"].write_text(yaml.safe_dump(edited(SCENARIO, ["line"], "link.yaml")))
     assert main(["validate", str(files["scen"])]) == 0, capsys.readouterr().err
 
 
@@ -336,25 +326,25 @@ def test_bad_duration_is_an_argparse_error(capsys, value, words):
     ("--seed", "99999999999999999999999", "--seed must be at most 2**64 - 1"),
 ])
 def test_bad_override_one_line(tmp_path, capsys, flag, value, words):
-    _write(tmp_path, "scen", _edit(SCENARIO, ["record_rate"], "1 kHz"))
+    _write(tmp_path, "scen", edited(SCENARIO, ["record_rate"], "1 kHz"))
     code, err = _run(tmp_path, capsys, flag, value)
     assert code == 2 and len(err.splitlines()) == 1 and words in err, err
 
 
 # warnings: valid but unusual, printed as one line each, and the command goes on
 @pytest.mark.parametrize("which, data, ypath, words", [
-    ("line", _edit(LINE, ["web"], {"thickness": "50 um", "width": "1 m", "modulus": "4.5 GPa",
+    ("line", edited(LINE, ["web"], {"thickness": "50 um", "width": "1 m", "modulus": "4.5 GPa",
                                    "density": 1390}),
      "web.break_stress", "can never break"),
-    ("line", _edit(LINE, ["controllers", 1, "setpoint"], "20 kN"), "controllers[1].setpoint",
+    ("line", edited(LINE, ["controllers", 1, "setpoint"], "20 kN"), "controllers[1].setpoint",
      "above the web's break tension 1.05e+04 N"),
-    ("line", _edit(LINE, ["spans", 1, "length"], "2 km"), "spans[1].length",
+    ("line", edited(LINE, ["spans", 1, "length"], "2 km"), "spans[1].length",
      "outside the range of free spans"),
-    ("line", _edit(LINE, ["web", "thickness"], "8 mm"), "web.thickness",
+    ("line", edited(LINE, ["web", "thickness"], "8 mm"), "web.thickness",
      "outside the range of webs"),
-    ("scen", _edit(SCENARIO, ["programme", 0, "line_speed"], "60 m/s"),
+    ("scen", edited(SCENARIO, ["programme", 0, "line_speed"], "60 m/s"),
      "programme[0].line_speed", "faster than any line"),
-    ("scen", _edit(SCENARIO, ["initial"], {"state": "nominal", "tension": "20 kN"}),
+    ("scen", edited(SCENARIO, ["initial"], {"state": "nominal", "tension": "20 kN"}),
      "initial.tension", "the web breaks at t = 0"),
 ])
 def test_plausibility_warning_is_one_line_and_validate_passes(tmp_path, capsys, which, data,
@@ -387,7 +377,7 @@ def test_shipped_files_are_plausible(recwarn):
 # the Python API refuses the same values
 def test_api_refuses_nan_bool_and_sizes():
     with pytest.raises(InputError, match=r"controllers\[0\].kp: nan is not a finite number"):
-        r2rsim.load_line(_edit(LINE, ["controllers", 0, "kp"], NAN))
+        r2rsim.load_line(edited(LINE, ["controllers", 0, "kp"], NAN))
     with pytest.raises(InputError, match=r"disturbances\[0\].std: expected a number"):
         _write_scenario_model({"disturbances": [{"type": "bearing_drag", "element": "idler1",
                                                  "std": True, "bandwidth": 2.0}]})

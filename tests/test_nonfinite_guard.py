@@ -25,16 +25,7 @@ from r2rsim.dataset.writer import DatasetWriter
 from r2rsim.errors import InputError, PlausibilityWarning
 from r2rsim.schema.loader import build_scenario
 
-from conftest import REPO, SMALL_LINE, SMALL_SCENARIO
-
-
-def _set(base: dict, path, value) -> dict:
-    d = copy.deepcopy(base)
-    node = d
-    for p in path[:-1]:
-        node = node[p]
-    node[path[-1]] = value
-    return d
+from conftest import REPO, SMALL_LINE, SMALL_SCENARIO, edited
 
 
 def _write(tmp_path, line=SMALL_LINE, scenario=SMALL_SCENARIO):
@@ -46,7 +37,7 @@ def _write(tmp_path, line=SMALL_LINE, scenario=SMALL_SCENARIO):
 # --- (a) the 1e300 m span is refused at load --------------------------------------------------
 
 def test_a_1e300_m_span_is_refused_at_load_with_its_range(tmp_path, capsys):
-    line, scen = _write(tmp_path, _set(SMALL_LINE, ["spans", 0, "length"], "1e300 m"))
+    line, scen = _write(tmp_path, edited(SMALL_LINE, ["spans", 0, "length"], "1e300 m"))
     out = tmp_path / "out"
     assert main(["run", str(scen), "-o", str(out), "-q"]) == 2
     err = capsys.readouterr().err.strip()
@@ -253,7 +244,7 @@ PITCH = _index(REG["sensors"], "type", "pitch_length")
 
 def _thick(thickness: float) -> dict:
     """SMALL_LINE with every radius at least 0.15 m, so that a web up to 0.1 m thick wraps."""
-    d = _set(SMALL_LINE, ["web", "thickness"], thickness)
+    d = edited(SMALL_LINE, ["web", "thickness"], thickness)
     for i, r in ((0, {"core_radius": 0.15, "outer_radius": 0.5, "core_inertia": 0.5}),
                  (3, {"core_radius": 0.15, "outer_radius": 0.3, "core_inertia": 0.5})):
         d["elements"][i]["roll"] = r
@@ -282,106 +273,106 @@ def _pitch_q1(scale: float) -> dict:
 
 
 def _scen_step(**step) -> dict:
-    return _set(SMALL_SCENARIO, ["programme"], [{"at": 0, "line_speed": "1 m/s"},
+    return edited(SMALL_SCENARIO, ["programme"], [{"at": 0, "line_speed": "1 m/s"},
                                                 {"at": 0.1, **step}])
 
 
 # (name, which, build(value), inside, outside, yaml path, words of the message)
 BOUNDS = [
     # named bounds
-    ("span length", "line", lambda v: _set(SMALL_LINE, ["spans", 0, "length"], v), 1e4, 1.01e4,
+    ("span length", "line", lambda v: edited(SMALL_LINE, ["spans", 0, "length"], v), 1e4, 1.01e4,
      "spans[0].length", "span length 10100 m is outside 1 mm .. 10 km"),
-    ("roller radius, upper", "line", lambda v: _set(SMALL_LINE, ["elements", 1, "radius"], v),
+    ("roller radius, upper", "line", lambda v: edited(SMALL_LINE, ["elements", 1, "radius"], v),
      10.0, 10.1, "elements[1].radius", "radius 10.1 m is outside 1 mm .. 10 m"),
-    ("roller radius, lower", "line", lambda v: _set(SMALL_LINE, ["elements", 1, "radius"], v),
+    ("roller radius, lower", "line", lambda v: edited(SMALL_LINE, ["elements", 1, "radius"], v),
      1e-3, 0.99e-3, "elements[1].radius", "radius 0.00099 m is outside 1 mm .. 10 m"),
     ("core radius, lower", "line",
-     lambda v: _set(SMALL_LINE, ["elements", 0, "roll", "core_radius"], v), 1e-3, 0.99e-3,
+     lambda v: edited(SMALL_LINE, ["elements", 0, "roll", "core_radius"], v), 1e-3, 0.99e-3,
      "elements[0].roll.core_radius", "is outside 1 mm .. 10 m"),
     ("roll radius, upper", "line",
-     lambda v: _set(SMALL_LINE, ["elements", 0, "roll", "outer_radius"], v), 10.0, 10.1,
+     lambda v: edited(SMALL_LINE, ["elements", 0, "roll", "outer_radius"], v), 10.0, 10.1,
      "elements[0].roll.outer_radius", "radius 10.1 m is outside 1 mm .. 10 m"),
-    ("thickness, lower", "line", lambda v: _set(SMALL_LINE, ["web", "thickness"], v), 1e-8,
+    ("thickness, lower", "line", lambda v: edited(SMALL_LINE, ["web", "thickness"], v), 1e-8,
      0.99e-8, "web.thickness", "thickness 9.9e-09 m is outside 10 nm .. 100 mm"),
     ("thickness, upper", "line", _thick, 0.1, 0.101, "web.thickness",
      "thickness 0.101 m is outside 10 nm .. 100 mm"),
     ("build per wrap, lower", "line",
-     lambda v: _set(SMALL_LINE, ["elements", 0, "roll", "build_per_wrap"], v), 1e-8, 0.99e-8,
+     lambda v: edited(SMALL_LINE, ["elements", 0, "roll", "build_per_wrap"], v), 1e-8, 0.99e-8,
      "elements[0].roll.build_per_wrap", "is outside 10 nm .. 100 mm"),
     ("build per wrap, upper", "line",
-     lambda v: _set(SMALL_LINE, ["elements", 0, "roll", "build_per_wrap"], v), 0.1, 0.101,
+     lambda v: edited(SMALL_LINE, ["elements", 0, "roll", "build_per_wrap"], v), 0.1, 0.101,
      "elements[0].roll.build_per_wrap", "is outside 10 nm .. 100 mm"),
-    ("width", "line", lambda v: _set(SMALL_LINE, ["web", "width"], v), 100.0, 101.0,
+    ("width", "line", lambda v: edited(SMALL_LINE, ["web", "width"], v), 100.0, 101.0,
      "web.width", "width 101 m is outside 0 m .. 100 m"),
     ("friction coefficient", "line",
-     lambda v: _set(SMALL_LINE, ["elements", 1, "friction_coefficient"], v), 10.0, 10.1,
+     lambda v: edited(SMALL_LINE, ["elements", 1, "friction_coefficient"], v), 10.0, 10.1,
      "elements[1].friction_coefficient", "friction coefficient 10.1 is outside 0 .. 10"),
-    ("festoon stroke", "line", lambda v: _set(NEWS, ["spans", FEST, "festoon", "stroke"],
+    ("festoon stroke", "line", lambda v: edited(NEWS, ["spans", FEST, "festoon", "stroke"],
                                               [0.0, v]), 1e4, 1.01e4,
      f"spans[{FEST}].festoon.stroke", "travel 10100 m is outside -10 km .. 10 km"),
-    ("dancer travel", "line", lambda v: _set(DANCER, ["elements", DAN, "travel_range"],
+    ("dancer travel", "line", lambda v: edited(DANCER, ["elements", DAN, "travel_range"],
                                              [DANCER["elements"][DAN]["travel_range"][0], v]),
      1e4, 1.01e4, f"elements[{DAN}].travel_range", "is outside -10 km .. 10 km"),
     ("festoon rollers", "line",
-     lambda v: _set(NEWS, ["spans", FEST, "festoon", "moving_rollers"], v), 1000, 1001,
+     lambda v: edited(NEWS, ["spans", FEST, "festoon", "moving_rollers"], v), 1000, 1001,
      f"spans[{FEST}].festoon.moving_rollers", "moving_rollers 1001 is outside 1 .. 1000"),
     ("encoder window", "line", _encoder, 1e-6, 0.99e-6, "sensors[1].window",
      "counting window 9.9e-07 s is outside 1e-06 s .. 1e+06 s"),
     ("dancer direction", "line",
-     lambda v: _set(DANCER, ["elements", DAN, "direction"], [0.0, -v]), 1e3, 1.01e3,
+     lambda v: edited(DANCER, ["elements", DAN, "direction"], [0.0, -v]), 1e3, 1.01e3,
      f"elements[{DAN}].direction", "direction component -1010 is outside -1000 .. 1000"),
-    ("dancer set-point", "line", lambda v: _set(DANCER, ["controllers", LOOP, "setpoint"], v),
+    ("dancer set-point", "line", lambda v: edited(DANCER, ["controllers", LOOP, "setpoint"], v),
      1e4, 1.01e4, f"controllers[{LOOP}].setpoint",
      "position set-point 10100 m is outside -10 km .. 10 km"),
     ("tension set-point", "line",
-     lambda v: _set(SMALL_LINE, ["controllers", 1, "setpoint"], v), 1e7, 1.01e7,
+     lambda v: edited(SMALL_LINE, ["controllers", 1, "setpoint"], v), 1e7, 1.01e7,
      "controllers[1].setpoint", "tension 1.01e+07 N is outside 0 N .. 1e+07 N"),
     ("pitch law", "line", _pitch_q1, 0.999, 1.001, f"sensors[{PITCH}].relaxed_pitch_law.q1",
      "is longer than any span (100 m)"),
     ("line speed", "scen",
-     lambda v: _set(SMALL_SCENARIO, ["programme", 0, "line_speed"], v), 1e3, 1.01e3,
+     lambda v: edited(SMALL_SCENARIO, ["programme", 0, "line_speed"], v), 1e3, 1.01e3,
      "programme[0].line_speed", "line speed 1010 m/s is outside -1000 m/s .. 1000 m/s"),
     ("programme tension", "scen",
-     lambda v: _set(SMALL_SCENARIO, ["programme", 0, "tension"], {"tens": v}), 1e7, 1.01e7,
+     lambda v: edited(SMALL_SCENARIO, ["programme", 0, "tension"], {"tens": v}), 1e7, 1.01e7,
      "programme[0].tension.tens", "tension 1.01e+07 N is outside 0 N .. 1e+07 N"),
     ("initial tension", "scen",
-     lambda v: _set(SMALL_SCENARIO, ["initial"], {"state": "nominal", "tension": v}), 1e7,
+     lambda v: edited(SMALL_SCENARIO, ["initial"], {"state": "nominal", "tension": v}), 1e7,
      1.01e7, "initial.tension", "tension 1.01e+07 N is outside 0 N .. 1e+07 N"),
     # MAGNITUDE_MAX, one field of each dimension
-    ("length", "line", lambda v: _set(SMALL_LINE, ["elements", 1, "position"], [v, 0.0]), 1e5,
+    ("length", "line", lambda v: edited(SMALL_LINE, ["elements", 1, "position"], [v, 0.0]), 1e5,
      1.01e5, "elements[1].position", "length 101000 m is outside -100 km .. 100 km"),
-    ("speed", "line", lambda v: _set(DANCER, ["elements", DAN, "smoothing_speed"], v), 1e3,
+    ("speed", "line", lambda v: edited(DANCER, ["elements", DAN, "smoothing_speed"], v), 1e3,
      1.01e3, f"elements[{DAN}].smoothing_speed", "speed 1010 m/s is outside 0 m/s .. 1000"),
-    ("acceleration", "line", lambda v: _set(DANCER, ["elements", DAN, "gravity"], [0.0, -v]),
+    ("acceleration", "line", lambda v: edited(DANCER, ["elements", DAN, "gravity"], [0.0, -v]),
      1e3, 1.01e3, f"elements[{DAN}].gravity",
      "acceleration -1010 m/s^2 is outside -1000 m/s^2 .. 1000 m/s^2"),
-    ("time", "line", lambda v: _set(SMALL_LINE, ["elements", 2, "drive"], {"torque_lag": v}),
+    ("time", "line", lambda v: edited(SMALL_LINE, ["elements", 2, "drive"], {"torque_lag": v}),
      1e6, 1.01e6, "elements[2].drive.torque_lag", "time 1.01e+06 s is outside 0 s .. 1e+06 s"),
-    ("frequency", "line", lambda v: _set(SMALL_LINE, ["sensors", 0, "rate"], v), 1e6, 1.01e6,
+    ("frequency", "line", lambda v: edited(SMALL_LINE, ["sensors", 0, "rate"], v), 1e6, 1.01e6,
      "sensors[0].rate", "frequency 1.01e+06 Hz is outside 0 Hz .. 1e+06 Hz"),
-    ("force", "line", lambda v: _set(DANCER, ["elements", DAN, "load_force"], v), 1e7, 1.01e7,
+    ("force", "line", lambda v: edited(DANCER, ["elements", DAN, "load_force"], v), 1e7, 1.01e7,
      f"elements[{DAN}].load_force", "force 1.01e+07 N is outside -1e+07 N .. 1e+07 N"),
-    ("stiffness", "line", lambda v: _set(DANCER, ["elements", DAN, "spring_stiffness"], v),
+    ("stiffness", "line", lambda v: edited(DANCER, ["elements", DAN, "spring_stiffness"], v),
      1e9, 1.01e9, f"elements[{DAN}].spring_stiffness", "is outside 0 N/m .. 1e+09 N/m"),
-    ("damping", "line", lambda v: _set(DANCER, ["elements", DAN, "damping"], v), 1e9, 1.01e9,
+    ("damping", "line", lambda v: edited(DANCER, ["elements", DAN, "damping"], v), 1e9, 1.01e9,
      f"elements[{DAN}].damping", "is outside 0 N*s/m .. 1e+09 N*s/m"),
-    ("mass", "line", lambda v: _set(DANCER, ["elements", DAN, "mass"], v), 1e6, 1.01e6,
+    ("mass", "line", lambda v: edited(DANCER, ["elements", DAN, "mass"], v), 1e6, 1.01e6,
      f"elements[{DAN}].mass", "mass 1.01e+06 kg is outside 0 kg .. 1e+06 kg"),
-    ("inertia", "line", lambda v: _set(SMALL_LINE, ["elements", 1, "inertia"], v), 1e10,
+    ("inertia", "line", lambda v: edited(SMALL_LINE, ["elements", 1, "inertia"], v), 1e10,
      1.01e10, "elements[1].inertia", "inertia 1.01e+10 kg*m^2 is outside 0 kg*m^2 .. 1e+10"),
-    ("torque", "line", lambda v: _set(SMALL_LINE, ["elements", 2, "drive"], {"torque_max": v}),
+    ("torque", "line", lambda v: edited(SMALL_LINE, ["elements", 2, "drive"], {"torque_max": v}),
      1e7, 1.01e7, "elements[2].drive.torque_max", "torque 1.01e+07 N*m is outside 0 N*m .."),
-    ("viscous torque", "line", lambda v: _set(TESTBED, ["elements", PIVOT, "damping"], v), 1e6,
+    ("viscous torque", "line", lambda v: edited(TESTBED, ["elements", PIVOT, "damping"], v), 1e6,
      1.01e6, f"elements[{PIVOT}].damping", "is outside 0 N*m*s .. 1e+06 N*m*s"),
-    ("angle", "line", lambda v: _set(TESTBED, ["elements", PIVOT, "torsion_spring"],
+    ("angle", "line", lambda v: edited(TESTBED, ["elements", PIVOT, "torsion_spring"],
                                      {"stiffness": 0.0, "free_angle": v}), 100.0, 101.0,
      f"elements[{PIVOT}].torsion_spring.free_angle", "angle 101 rad is outside -100 rad .. "
      "100 rad"),
     ("angular speed", "line",
-     lambda v: _set(SMALL_LINE, ["elements", 1, "friction"], {"smoothing_speed": v}), 1e6,
+     lambda v: edited(SMALL_LINE, ["elements", 1, "friction"], {"smoothing_speed": v}), 1e6,
      1.01e6, "elements[1].friction.smoothing_speed", "is outside 0 rad/s .. 1e+06 rad/s"),
     ("dimensionless", "line",
-     lambda v: _set(NEWS, ["elements", 0, "splicer", "joint"], {"stiffness_ratio": v}), 1e3,
+     lambda v: edited(NEWS, ["elements", 0, "splicer", "joint"], {"stiffness_ratio": v}), 1e3,
      1.01e3, "elements[0].splicer.joint.stiffness_ratio", "dimensionless 1010 is "
      "outside 0 .. 1000"),
     ("a scenario's acceleration", "scen", lambda v: _scen_step(line_speed="2 m/s", rate=v),

@@ -333,13 +333,11 @@ def label_tables(root: Path, verifier: Verifier | None) -> tuple[list, list]:
     return out[0], out[1]
 
 
-def check_run_labels(run: RunData, rows: tuple[list, list] | None = None) -> None:
+def check_run_labels(run: RunData) -> None:
     """Refuse a run whose labels differ from what faults.parquet and runs.parquet give (an
     edited ``faults.parquet`` with its manifest entry re-hashed), as every reader does:
     :func:`r2rsim.dataset.labels.quick_label_problem` on the run's ``k``, ``t_s`` and the
     label columns it compares (read apart from what the figure draws: a few small columns).
-    ``rows``: the rows of runs.parquet and faults.parquet, when read already (a figure of
-    many runs reads them once).
 
     Raises
     ------
@@ -359,7 +357,7 @@ def check_run_labels(run: RunData, rows: tuple[list, list] | None = None) -> Non
             f = pq.ParquetFile(path if data is None else pa.BufferReader(data), metadata=meta)
             tables.append(f.read(columns=wanted))
     table = pa.concat_tables(tables) if len(tables) > 1 else tables[0]
-    runs, faults = rows or label_tables(run.root, v)
+    runs, faults = label_tables(run.root, v)
     row = [r for r in runs if r["run_id"] == run.run_id]
     try:
         problem = quick_label_problem(table, row[0], [f for f in faults
