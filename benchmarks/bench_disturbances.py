@@ -1,6 +1,6 @@
 """Cost of the process disturbances (issue 16, item 3): the registration line
 (lines/registration.yaml) at 0.5 m/s and 1.0 m/s for 120 s, with the disturbances of the
-"harder design" (thesis-methods.md §4.3: out_of_round on in_idler 0.05 mm and reg_drive
+calibrated thesis set (docs/dataset.md §8.2: out_of_round on in_idler 0.05 mm and reg_drive
 0.02 mm, bearing_drag 0.02 N·m at 2 Hz on both idlers, wound_in_strain std 3e-5 with a 5 m
 correlation length) and without them, side by side in one process. Prints, for each, the
 solver alone (``simulate`` with every algebraic output, median of ``--repeat``: wall time,

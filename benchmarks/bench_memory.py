@@ -1,4 +1,5 @@
-"""Peak memory of ``r2rsim run`` against run length (DESIGN.md §9: memory flat in run length).
+"""Peak memory of ``r2rsim run`` against run length (benchmarks/README.md, Memory: memory
+flat in run length).
 
 Runs a scenario at its duration (1x) and at ``--factor`` times it (10x by default), each in
 its own ``r2rsim run`` subprocess writing a dataset to a temporary directory, and prints the

@@ -14,17 +14,24 @@ save), the peak RSS growth over the process's size after its imports, the tracem
 of a second, untimed pass (numpy and Python allocations; Arrow's buffers are not traced),
 and the samples' size on disk and in memory (Arrow, uncompressed).
 
+``--cli`` measures the commands instead, as a user runs them: the CPU time (user + system,
+imports included, best of three) of ``r2rsim plot`` on the quick-start run and of ``r2rsim
+report`` on a ``r2rsim diagnose`` result of the quick-start sweep, each made first in a
+scratch directory (about 15 s).
+
 Usage::
 
     python benchmarks/bench_plot.py                  # 1 h at 1 kHz (~1 min to write)
     python benchmarks/bench_plot.py --seconds 600    # shorter
     python benchmarks/bench_plot.py --keep DIR       # keep the dataset and the PNG in DIR
+    python benchmarks/bench_plot.py --cli            # CPU time of r2rsim plot and report
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import resource
 import subprocess
 import sys
 import tempfile
@@ -177,13 +184,53 @@ def measure(root: Path, png: Path) -> dict:
             "lines": sum(len(ax.get_lines()) for ax in fig.axes), "axes": len(fig.axes)}
 
 
+def cli_cpu(args: list[str], repeat: int = 3) -> float:
+    """The least CPU time (user + system, s) of ``r2rsim <args>`` in a child process."""
+    best = float("inf")
+    for _ in range(repeat):
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        subprocess.run([sys.executable, "-m", "r2rsim.cli", *args], check=True,
+                       stdout=subprocess.DEVNULL)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        best = min(best, after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
+    return best
+
+
+def measure_cli(where: Path) -> dict:
+    """CPU time of ``r2rsim plot`` (the quick-start run, default channels) and ``r2rsim
+    report`` (pca on the quick-start sweep), the data made in ``where`` first."""
+    repo = Path(__file__).resolve().parents[1]
+    run, sweep, res = where / "quickstart", where / "quickstart_sweep", where / "pca"
+    for args in (["run", str(repo / "scenarios" / "quickstart.yaml"), "-o", str(run), "-q"],
+                 ["sweep", str(repo / "sweeps" / "quickstart.yaml"), "-o", str(sweep), "-q"],
+                 ["diagnose", "--method", "pca", "--data", str(sweep), "-o", str(res)]):
+        subprocess.run([sys.executable, "-m", "r2rsim.cli", *args], check=True,
+                       stdout=subprocess.DEVNULL)
+    return {"plot_cpu_s": cli_cpu(["plot", str(run), "-o", str(where / "run.png"),
+                                   "--overwrite"]),
+            "plot_sweep_cpu_s": cli_cpu(["plot", str(sweep), "--sweep",
+                                         "meas.lc_rewind.tension_N", "--axis", "offset",
+                                         "-o", str(where / "sweep.png"), "--overwrite"]),
+            "report_cpu_s": cli_cpu(["report", str(res), "-o", str(where / "report.html")])}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=3600.0)
     ap.add_argument("--rate", type=float, default=1000.0)
     ap.add_argument("--keep", type=Path, help="write the dataset and PNG here and keep them")
     ap.add_argument("--make", type=Path, help=argparse.SUPPRESS)  # child process: build only
+    ap.add_argument("--cli", action="store_true",
+                    help="CPU time of r2rsim plot and r2rsim report on the quick start")
     args = ap.parse_args()
+    if args.cli:
+        with tempfile.TemporaryDirectory(prefix="r2rsim-bench-cli-") as tmp:
+            r = measure_cli(args.keep or Path(tmp))
+        print(f"r2rsim plot (run)    {r['plot_cpu_s']:.2f} s CPU")
+        print(f"r2rsim plot --sweep  {r['plot_sweep_cpu_s']:.2f} s CPU")
+        print(f"r2rsim report        {r['report_cpu_s']:.2f} s CPU")
+        print(json.dumps(r))
+        return
     if args.make:
         make_dataset(args.make, args.seconds, args.rate)
         return

@@ -1,4 +1,4 @@
-"""Solver benchmark on the DESIGN.md §8 / solver.md §2 chain line: r2rsim vs scipy Radau.
+"""Solver benchmark on the docs/solver.md §2 chain line: r2rsim vs scipy Radau.
 
 For each number of spans N the script builds the chain line (unwind roll -> N-1 rollers ->
 rewind roll, PET web, random span lengths), runs the scenario (60 s of line time, 1 kHz
@@ -13,7 +13,7 @@ output, line speed ramping 1 -> 5 m/s over 0...20 s) with
   and the analytic sparse Jacobian, integrated segment by segment like ``simulate`` does,
 
 and compares all three against a tight reference (CVODE at rtol 1e-10, atol x 1e-4). It
-prints three table rows per N with PASS/FAIL against the DESIGN.md §8 targets. "Equal
+prints three table rows per N with PASS/FAIL against the targets of benchmarks/README.md. "Equal
 accuracy": each r2rsim backend is run down a ladder of tolerances until its max tension error
 is at most scipy Radau's.
 
@@ -69,7 +69,7 @@ import r2rsim  # noqa: E402
 from r2rsim.compile import kernels  # noqa: E402
 from r2rsim.schema.scenario import ProgrammeStep  # noqa: E402
 
-# ---- the scenario (solver.md §2, DESIGN.md §8) ------------------------------------------
+# ---- the scenario (docs/solver.md §2) --------------------------------------------------
 DURATION = 60.0  # s of line time
 RECORD_RATE = 1000.0  # Hz
 ERROR_RATE = 100.0  # Hz, subsample on which errors are measured
@@ -79,7 +79,7 @@ RTOL = 1e-6
 REF_RTOL, REF_ATOL_SCALE = 1e-10, 1e-4
 WARMUP_S = 0.05
 
-# ---- DESIGN.md §8 targets ---------------------------------------------------------------
+# ---- targets (benchmarks/README.md) -----------------------------------------------------
 RTF_TARGETS = {20: 200.0, 100: 100.0, 500: 50.0}
 RATIO_TARGET = 2.0
 ABS_ERR_OK = 0.05  # N; accuracy accepted if not better than Radau but below this
@@ -89,7 +89,7 @@ ABS_ERR_OK = 0.05  # N; accuracy accepted if not better than Radau but below thi
 # the line
 # =========================================================================================
 def chain_line_dict(n_spans: int, seed: int = 0) -> dict:
-    """The chain line of solver.md §2 (without the dancer) as a line-file mapping.
+    """The chain line of docs/solver.md §2 (without the dancer) as a line-file mapping.
 
     Parameters
     ----------
@@ -118,7 +118,7 @@ def chain_line_dict(n_spans: int, seed: int = 0) -> dict:
     lengths[0] = lengths[-1] = 1.0
 
     stand = {"friction": {"viscous": 0.01}, "drive": {"torque_lag": 1e-3}}
-    # solver.md 2: the unwind carries a 0.5 N m, 7 Hz torque ripple (roll eccentricity)
+    # docs/solver.md §2: the unwind carries a 0.5 N m, 7 Hz torque ripple (roll eccentricity)
     unwind_drive = {"torque_lag": 1e-3,
                     "torque_ripple": {"amplitude": 0.5, "frequency": 7.0}}
     elements: list[dict] = [{

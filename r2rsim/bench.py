@@ -357,6 +357,46 @@ def _sweep_dataset(workdir: Path, sweep: Path, where: dict, log,
     return read_runs(out, verify=verify, where=where or None)
 
 
+def study_runs(spec_path: Path, spec: BenchSpec, study: Study, workdir: Path, log=print,
+               verify: bool = True) -> dict[str, list[Run]]:
+    """The train, val and test runs of one study of a spec, simulated into ``workdir`` or
+    reused from it (:func:`_dataset`, :func:`_sweep_dataset`).
+
+    Parameters
+    ----------
+    spec_path : Path
+        The spec file (its scenario and sweep paths are relative to it).
+    spec : BenchSpec
+        The spec, as :func:`load_spec` read it.
+    study : Study
+        One of ``spec.studies``.
+    workdir : Path
+        The cache of simulated datasets.
+    log : callable
+        Receives warnings.
+    verify : bool
+        Read reused datasets checked against their manifest.json and faults.parquet.
+
+    Returns
+    -------
+    dict
+        ``{"train": [Run, ...], "val": [...], "test": [...]}``.
+    """
+    roles = {}
+    for role in ("train", "val", "test"):
+        runs = []
+        for rs in getattr(study, role):
+            if rs.sweep is not None:
+                runs += _sweep_dataset(workdir, spec_path.parent / rs.sweep, rs.where, log,
+                                       verify)
+                continue
+            for seed in rs.seeds:
+                runs += _dataset(workdir, spec_path.parent / rs.scenario, seed, spec.duration,
+                                 verify)
+        roles[role] = runs
+    return roles
+
+
 def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
               update: bool = False, log=print, verify: bool = True) -> BenchResult:
     """Run a benchmark spec and compare with its baseline file.
@@ -398,18 +438,7 @@ def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
     try:
         frames, evaluations = [], {}
         for study in spec.studies:
-            roles = {}
-            for role in ("train", "val", "test"):
-                runs = []
-                for rs in getattr(study, role):
-                    if rs.sweep is not None:
-                        runs += _sweep_dataset(workdir, spec_path.parent / rs.sweep, rs.where,
-                                               log, verify)
-                        continue
-                    for seed in rs.seeds:
-                        runs += _dataset(workdir, spec_path.parent / rs.scenario, seed,
-                                         spec.duration, verify)
-                roles[role] = runs
+            roles = study_runs(spec_path, spec, study, workdir, log, verify)
             log(f"study {study.name}: {len(roles['train'])} train, {len(roles['val'])} val, "
                 f"{len(roles['test'])} test runs")
             for m in spec.methods:

@@ -347,14 +347,14 @@ def _report_datasets_unverified(results: Path, data: list[str] | None):
     recorded in datasets.json) read without checking them against their manifest.json, as
     runs for write_report; None when there are none to read (a bench result, or recorded
     datasets that are gone: write_report says so)."""
-    from .evaluate.harness import read_datasets
+    from .report._data import label_runs
     from .report._diagnostics import results_kind
     from .report._html import _recorded_datasets
 
     if results_kind(results) != "diagnose":
         return data
     paths = data if data is not None else _recorded_datasets(results)[0]
-    return None if paths is None else read_datasets(paths, verify=False)
+    return None if paths is None else label_runs(paths, verify=False)  # the labels only
 
 
 def _add_report_parser(sub) -> None:
@@ -374,6 +374,49 @@ def _add_report_parser(sub) -> None:
                     help="read test datasets whose files differ from their manifest.json "
                     "(or whose labels differ from faults.parquet) anyway")
     rp.set_defaults(func=_cmd_report)
+
+
+def _cmd_export(args) -> int:
+    where = parse_where(args.where)  # a malformed --where is refused before the imports
+    from .evaluate.export import export_dataset
+
+    summary = export_dataset(args.dataset, args.output, args.format, channels=args.channels,
+                             label=args.label, split=args.split, where=where,
+                             drop_warmup=args.drop_warmup, verify=not args.no_verify)
+    print(summary.split)
+    print(summary.describe())
+    return 0
+
+
+def _add_export_parser(sub) -> None:
+    ex = sub.add_parser("export", help="write a dataset's runs as TimeEval or TSB-AD CSV "
+                        "files (docs/dataset.md §13)")
+    ex.add_argument("dataset", help="a run's or a sweep's dataset directory")
+    # no `choices`: a bad value is one `error:` line from export_dataset, not argparse's usage
+    ex.add_argument("--format", required=True, metavar="{timeeval,tsb-ad}",
+                    help="timeeval: datasets.csv and r2rsim/RUN.csv (timestamp, channels, "
+                    "is_anomaly); tsb-ad: NNN_R2RSIM_id_N_Sensor_tr_T_1st_F.csv (channels, "
+                    "Label) and file_list.csv")
+    ex.add_argument("-o", "--output", required=True,
+                    help="output directory; must not exist, or be empty")
+    ex.add_argument("--channels", nargs="+", metavar="PATTERN",
+                    help="glob patterns of the columns to export (default: meas.*); true.*, "
+                    "state.*, act.*, cmd.*, label.*, flag.* and ctrl.*_seen_* only when a "
+                    "pattern names that family")
+    ex.add_argument("--label", default="any",
+                    help="any (label.is_faulty, default), a fault class (sensor) or type "
+                    "(sensor.offset): 1 where such a fault is present")
+    ex.add_argument("--split", default="all", metavar="{all,train,val,test}",
+                    help="the runs of one role of the split `r2rsim diagnose --data --split "
+                    "seed` makes (every faulty run is a test run), or all (default)")
+    ex.add_argument("--where", action="append", default=[], metavar="KEY=VALUE[,VALUE]",
+                    help="only the runs with these runs.parquet values, e.g. a sweep's axis: "
+                    "offset=-10,10 (repeatable)")
+    ex.add_argument("--drop-warmup", action="store_true",
+                    help="leave out the warm-up samples (outside label.score_mask)")
+    ex.add_argument("--no-verify", action="store_true",
+                    help="use a dataset whose files differ from their manifest.json checksums")
+    ex.set_defaults(func=_cmd_export)
 
 
 def _failed_runs_note(path: Path) -> str:
@@ -520,7 +563,8 @@ def _cmd_list(args) -> int:
         return 0
     if args.what == "channels":
         if not args.line:
-            raise InputError("name the line file: r2rsim list channels LINE")
+            raise InputError("name the line or scenario file: r2rsim list channels "
+                             "LINE|SCENARIO")
         return _list_channels(args.line)
     tables = {"elements": ELEMENTS, "sensors": SENSORS, "controllers": CONTROLLERS}
     for name, desc in tables[args.what].items():
@@ -528,24 +572,32 @@ def _cmd_list(args) -> int:
     return 0
 
 
-def _list_channels(line_path: str) -> int:
-    from .compile import Programme, compile_line
-    from .dataset import true_state_columns
-    from .measure.sensors import channel_names, unit_of_suffix
-    from .schema import load_line
+def _list_channels(path: str) -> int:
+    """The columns a run writes (its channels.parquet), without simulating: of a run of a
+    scenario file (with its set-point, fault-label and other scenario-dependent columns), or
+    of a line file (as a scenario with an empty programme and the default record rate)."""
+    from .run import RunPlan, channels_table, plan_from_file
+    from .schema import load_line, read_yaml
+    from .schema.scenario import Scenario
 
-    line = load_line(line_path)
-    cl = compile_line(line, Programme.from_steps(line, []))
+    data = read_yaml(path)
+    if "line" in data:  # a scenario names its line
+        plan = plan_from_file(path)
+    elif "elements" in data or "web" in data:
+        line = load_line(path)
+        scenario = Scenario.model_validate({"line": path, "duration": 1})
+        plan = RunPlan(scenario, line, name="line", source=str(path), scenario_sha256="")
+    elif "axes" in data or "scenario" in data:
+        raise InputError("this is a sweep file: list the channels of its scenario (scenario: "
+                         "...); every run of a sweep writes the same columns", file=str(path))
+    else:
+        raise InputError("neither a line file (elements: ...) nor a scenario (line: ...): "
+                         "r2rsim list channels LINE|SCENARIO", file=str(path))
+    table = channels_table(plan).to_pydict()
     print(f"{'channel':<44} {'unit':<8} description")
-    for s in cl.sensors:
-        meas, true, suffix = channel_names(cl, s)
-        unit = unit_of_suffix(suffix)  # as channels.parquet has it
-        where = getattr(s, "element", None) or s.span
-        print(f"{meas:<44} {unit:<8} {s.type} '{s.id}' on {where}: measured (what "
-              f"algorithms see)")
-        print(f"{true:<44} {unit:<8} noise- and fault-free shadow (never for algorithms)")
-    for c in true_state_columns(cl):
-        print(f"{c['column']:<44} {c['unit']:<8} {c['description']}")
+    for name, unit, desc in zip(table["channel"], table["unit"], table["description"],
+                                strict=True):
+        print(f"{name:<44} {unit or '-':<8} {desc}")
     return 0
 
 
@@ -596,7 +648,7 @@ def _cmd_plot(args) -> int:
 def _add_plot_parser(sub) -> None:
     pl = sub.add_parser(
         "plot", help="plot a run's channels, faults and events, or a sweep statistic, to "
-        "a PNG/SVG/PDF file (needs r2rsim[plot])",
+        "a PNG/SVG/PDF file (needs matplotlib: the [plot] extra)",
         description="Plot one run of DATASET: the chosen channels on shared time axes, one "
         "axes per quantity, fault windows shaded, events marked. With --sweep CHANNEL: the "
         "statistic of CHANNEL per run against a sweep axis. Without -o the figure goes to "
@@ -678,7 +730,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--debug", action="store_true", help="show tracebacks on errors")
     sub = p.add_subparsers(dest="command", required=True)
     for add in (_add_run_parser, _add_sweep_parser, _add_file_parsers, _add_diagnose_parser,
-                _add_bench_parser, _add_report_parser, _add_list_parser, _add_plot_parser):
+                _add_bench_parser, _add_report_parser, _add_export_parser, _add_list_parser,
+                _add_plot_parser):
         add(sub)
     for sp in sub.choices.values():  # `r2rsim run X --debug` as well as `r2rsim --debug run X`
         sp.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
@@ -708,11 +761,12 @@ def _add_sweep_parser(sub) -> None:
     sw.add_argument("sweep")
     sw.add_argument("-o", "--output", help="dataset directory (default: the sweep's output, "
                     "else runs/NAME); a directory holding this sweep is continued")
-    sw.add_argument("--workers", type=int, help="worker processes (default: the number of "
-                    "cores; 0: in this process)")
+    sw.add_argument("--workers", type=int, help="worker processes (default: by the planned "
+                    "work, one per 2000 simulated seconds of runs, at most one per core; 0: in "
+                    "this process)")
     sw.add_argument("--scheduler", metavar="ADDRESS", help="run on a Dask cluster: a "
                     "scheduler address, or 'local' to start a LocalCluster of --workers "
-                    "processes (needs r2rsim[dask])")
+                    "processes (needs dask.distributed: the [dask] extra)")
     sw.add_argument("--retry-failed", action="store_true",
                     help="run again the runs that failed before")
     sw.add_argument("--overwrite", action="store_true",
@@ -814,10 +868,12 @@ def _add_bench_parser(sub) -> None:
 
 def _add_list_parser(sub) -> None:
     ls = sub.add_parser("list", help="list element, sensor, controller or fault types, "
-                        "diagnostic plug-ins, or the channels of a line")
+                        "diagnostic plug-ins, or the channels of a line or scenario")
     ls.add_argument("what", choices=["elements", "sensors", "controllers", "faults",
                                      "plugins", "channels"])
-    ls.add_argument("line", nargs="?", help="line file (for 'channels')")
+    ls.add_argument("line", nargs="?", metavar="FILE",
+                    help="line or scenario file (for 'channels': the columns a run of it "
+                    "writes; a scenario's include its set-point and fault-label columns)")
     ls.add_argument("--load", action="store_true",
                     help="plugins: import every plug-in and check it (slower: imports "
                     "scikit-learn and each plug-in's modules); without it they are listed "

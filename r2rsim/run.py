@@ -429,13 +429,11 @@ class _Prepared:
     sensor_chan: dict
 
 
-def _prepare(plan: RunPlan) -> _Prepared:
-    """Draw the run's variability and disturbances from its process stream, compile the
-    line, find the initial state (steady, or nominal when none is found) and draw the
-    faults from their stream."""
+def _compiled(plan: RunPlan, ss_process: np.random.SeedSequence):
+    """The run's line with its variability and disturbances drawn, compiled: ``(line, cl,
+    rolls, variability_rows, disturbances)``."""
     scenario, line = plan.scenario, plan.line
     prog = Programme.from_steps(line, scenario.programme, file=plan.source)
-    ss_process, ss_meas, ss_faults = np.random.SeedSequence(scenario.seed).spawn(3)
     declared_web = line.web
     line, rolls, variability_rows = realise_variability(scenario, line, ss_process)
     disturbances = realise_disturbances(scenario, line, ss_process)
@@ -443,6 +441,31 @@ def _prepare(plan: RunPlan) -> _Prepared:
     cl = compile_line(line, prog, scenario.faults, disturbances, pitch_var,
                       joint_slots_needed(scenario, line), nominal_web=declared_web,
                       pitch_offsets=rolls.sensor_pitch_offsets if rolls else None)
+    return line, cl, rolls, variability_rows, disturbances
+
+
+def channels_table(plan: RunPlan) -> pa.Table:
+    """channels.parquet of a run of ``plan`` without simulating it (``r2rsim list channels
+    SCENARIO``): every column its samples will have, in the order they are written, with
+    unit and description. The line is compiled as the run compiles it (~1 ms once numba's
+    kernels are loaded); no steady state is looked for and no fault is drawn (neither
+    changes the columns)."""
+    ss_process, ss_meas, _ = np.random.SeedSequence(plan.scenario.seed).spawn(3)
+    cl = _compiled(plan, ss_process)[1]
+    rate = plan.scenario.record_rate
+    sink = _ChunkSink.__new__(_ChunkSink)  # what _channels_table reads of one: meas, cols
+    sink.meas, sink.cols = MeasurementModel(cl, rate, ss_meas), true_state_columns(cl)
+    sensor_chan = {s.id: channel_names(cl, s)[0][len("meas."):] for s in cl.sensors}
+    return _channels_table(cl, sink, sensor_chan, rate)
+
+
+def _prepare(plan: RunPlan) -> _Prepared:
+    """Draw the run's variability and disturbances from its process stream, compile the
+    line, find the initial state (steady, or nominal when none is found) and draw the
+    faults from their stream."""
+    scenario = plan.scenario
+    ss_process, ss_meas, ss_faults = np.random.SeedSequence(scenario.seed).spawn(3)
+    line, cl, rolls, variability_rows, disturbances = _compiled(plan, ss_process)
     init = scenario.initial
     y0 = nominal_state(cl, init.tension, init.span_tension, init.slack, init.position,
                        file=plan.source)

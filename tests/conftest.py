@@ -106,3 +106,14 @@ def edited(base: dict, path, value) -> dict:
         node = node[p]
     node[path[-1]] = value
     return d
+
+
+@pytest.fixture(scope="session")
+def first_benchmark_home(tmp_path_factory) -> Path:
+    """A data home (``r2rsim.datasets``) holding the first benchmark, generated once per test
+    session (40 runs of 20 s: about 10 s of CPU) for the tests that read it."""
+    from r2rsim import datasets
+
+    home = tmp_path_factory.mktemp("r2rsim_data")
+    datasets.load_first_benchmark(data_home=home, quiet=True)
+    return home

@@ -1,4 +1,4 @@
-"""Dancers and festoons against physics.md §3.3 (V14, V15, V16), through line files."""
+"""Dancers and festoons against docs/physics.md §3.3 (V14, V15, V16), through line files."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The dataset contract (DESIGN.md §4.3): files, columns with units, provenance, streaming,
+"""The dataset contract (docs/dataset.md): files, columns with units, provenance, streaming,
 determinism, early termination, readability without r2rsim."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Fault-detection metrics (fdd-benchmarks.md §5) on small hand-computed cases.
+"""Fault-detection metrics (docs/diagnostics.md §5) on small hand-computed cases.
 
 Runs are written as strings, one character per sample: ``alarm="0011100"`` means the alarm is on
 at samples 2..4, ``fault="0000111"`` means the fault is active at samples 4..6. Sample k is at

@@ -250,7 +250,7 @@ def test_metric_bars_by_condition_and_fault_are_the_table_values(diagnosed):
     assert faults == ["sensor.gain:sensor_A", "sensor.offset:sensor_A", "all"]
     assert bars(ax)["pca"] == [value(metrics(diagnosed["pca"]), "dd_median_s", "OC1", f)
                                for f in faults]
-    assert ax.get_ylabel() == "dd_median_s [s]"
+    assert ax.get_ylabel() == "dd_median_s (s)"
 
 
 def test_detection_probability_bars_carry_their_null_rate(diagnosed):
@@ -323,7 +323,8 @@ def test_bench_results_are_plotted_per_label(benched):
 
 def test_figures_need_matplotlib(diagnosed, monkeypatch):
     monkeypatch.setitem(sys.modules, "matplotlib.figure", None)
-    with pytest.raises(InputError, match=r'pip install "r2rsim\[plot\]"'):
+    with pytest.raises(InputError,
+                       match=r"pip install matplotlib \(or pip install -e \"\.\[plot\]\""):
         plot_metric(diagnosed["pca"], "pd")
 
 
@@ -508,7 +509,7 @@ def test_cli_errors(data, diagnosed, tmp_path, capsys, monkeypatch):
     one_error(capsys, "of the predictions is in none of the datasets")
     monkeypatch.setitem(sys.modules, "matplotlib.figure", None)
     assert main(["report", str(diagnosed["pca"]), "-o", str(out)]) == 2
-    one_error(capsys, "matplotlib", 'pip install "r2rsim[plot]"')
+    one_error(capsys, "matplotlib", 'pip install matplotlib (or pip install -e ".[plot]"')
     assert list(tmp_path.iterdir()) == [tmp_path / "other"]  # nothing written
 
 

@@ -145,8 +145,8 @@ def test_chunks_sharing_bucket_edges_give_the_whole_envelope():
 def test_default_run_figure_groups_quantities_and_draws_setpoints(faults_ds):
     fig = plot_run(faults_ds)
     labels = [ax.get_ylabel() for ax in fig.axes]
-    assert labels == ["tension [N]", "speed [rad/s]", "diameter [m]", "speed [m/s]",
-                      "radius [m]", "torque [N*m]"]
+    assert labels == ["tension (N)", "angular speed (rad/s)", "diameter (mm)", "speed (m/s)",
+                      "radius (mm)", "torque (N*m)"]
     lines = lines_by_label(fig)
     # set-points are drawn (dashed), however constant; an idler's constant radius is not
     assert lines["sp.unwind_tension.tension_N"].get_linestyle() == "--"
@@ -157,7 +157,7 @@ def test_default_run_figure_groups_quantities_and_draws_setpoints(faults_ds):
 def test_axes_follow_the_globs(faults_ds):
     fig = plot_run(faults_ds, channels=["state.span*.tension_N", "meas.lc_*",
                                         "state.*.radius_m"])
-    assert [ax.get_ylabel() for ax in fig.axes] == ["tension [N]", "radius [m]"]
+    assert [ax.get_ylabel() for ax in fig.axes] == ["tension (N)", "radius (mm)"]
     assert len(fig.axes[0].get_lines()) == 5 + 2
     assert len(fig.axes[1].get_lines()) == 6  # explicit globs keep constant channels
 
@@ -202,6 +202,10 @@ def test_lines_hold_the_true_extremes_of_the_window(faults_ds):
         x, y = line.get_xdata(), line.get_ydata()
         assert x.min() >= t0 and x.max() <= t1
         assert len(x) <= 100 < len(window)  # decimated
+        if name.startswith("meas.enc_"):  # an encoder: its mean per bucket in a min-max band
+            (band,) = [c for ax in fig.axes for c in ax.collections
+                       if c.get_gid() == f"band:{name}"]
+            y = band.get_paths()[0].vertices[:, 1]
         assert np.nanmax(y) == window[name].max() and np.nanmin(y) == window[name].min()
     assert fig.axes[0].get_xlim() == (t0, t1)
     # the window leaves out the draw-error peak of span 4 (about 490 N at 15-25 s)
@@ -274,7 +278,7 @@ def test_sweep_points_are_the_per_run_statistic(sweep_ds, stat):
     exp = sorted(zip(want["axis.offset"], want["value"], strict=True))
     assert len(got) == 8
     assert np.allclose(got, exp, rtol=1e-12, atol=0)
-    assert fig.axes[0].get_ylabel() == f"{stat} of {ch} [N]"
+    assert fig.axes[0].get_ylabel() == f"{stat} of {ch} (N)"
 
 
 def test_sweep_groups_by_a_second_axis(sweep_ds):
@@ -283,7 +287,7 @@ def test_sweep_groups_by_a_second_axis(sweep_ds):
     want = per_run_stat(sweep_ds, "state.rewind.speed_rad_s", "mean").dropna(
         subset=["axis.offset"])
     lines = fig.axes[0].get_lines()
-    assert [ln.get_label() for ln in lines] == ["top_speed = 3", "top_speed = 5"]
+    assert [ln.get_label() for ln in lines] == ["top_speed = 3 m/s", "top_speed = 5 m/s"]
     for line, (_, rows) in zip(lines, want.groupby("axis.top_speed"), strict=True):
         assert sorted(line.get_ydata()) == pytest.approx(sorted(rows.value))
 
@@ -360,7 +364,8 @@ def no_matplotlib(monkeypatch):
     ("extension", "unknown figure format '.jpg' (use .png, .svg, .pdf)"),
     ("inside", "inside the dataset"),
     ("directory", "no directory"),
-    ("matplotlib", 'plotting needs matplotlib, which is not installed: pip install "r2rsim[plot]"'),
+    ("matplotlib", 'plotting needs matplotlib, which is not installed: pip install matplotlib '
+                   '(or pip install -e ".[plot]" in the r2rsim checkout)'),
 ])
 def test_cli_errors_exit_2_with_one_message_and_no_file(case, needle, faults_ds, tmp_path,
                                                         capsys, request):

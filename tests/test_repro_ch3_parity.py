@@ -65,14 +65,20 @@ def study_cases():
 
 def test_assertions_pass_and_fail_on_the_numbers(study):
     ok = study.check_all(_result())
-    assert ok.ok and len(ok.rows) == 10
+    # every check passes on these numbers, the B signatures too: those are the documented
+    # non-reproductions (EXPECTED_FAILURES), so they are XPASS, which fails the study
+    results = [r["result"] for r in ok.rows]
+    assert len(ok.rows) == 10 and results.count("PASS") == 8 and results.count("XPASS") == 2
+    assert not ok.ok
     bad = _result(sens_spread={"OC1": 1.0, "OC2": 1.9})
     bad["far"].loc["literal", "OC2"] = 0.4
     bad["signature"].loc["B gain +15 % record-only", "r2"] = 2.7
     c = study.check_all(bad)
     failed = [r["assertion"] for r in c.rows if r["result"] == "FAIL"]
-    assert len(failed) == 3 and not c.ok
+    assert len(failed) == 2 and not c.ok
     assert any("literal" in f for f in failed) and any("sensitivity" in f for f in failed)
+    assert [r["result"] for r in c.rows if "B gain +15 %" in r["assertion"]] == [
+        "XFAIL (documented)"]
     # the OC1 design's model residual at OC2: bounded like OC1 (0.02), however low the OC1
     # FAR (0.001 here: 20 × it passes)
     bad = _result()

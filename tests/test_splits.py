@@ -317,7 +317,8 @@ def test_the_shipped_sweeps_have_fault_free_runs():
     at least three per condition (one for each role of the seed split)."""
     from r2rsim.sweep import plan_sweep
 
-    expected = {"quickstart.yaml": {None: 4}, "thesis_sensor_faults.yaml": {"OC1": 5, "OC2": 5}}
+    expected = {"quickstart.yaml": {None: 4}, "thesis_sensor_faults.yaml": {"OC1": 5, "OC2": 5},
+                "first_benchmark.yaml": {"OC1": 5, "OC2": 5}}
     assert sorted(p.name for p in (REPO / "sweeps").glob("*.yaml")) == sorted(expected)
     for name, want in expected.items():
         plan = plan_sweep(REPO / "sweeps" / name)

@@ -587,6 +587,8 @@ def test_bad_sweep_file(tmp_path, capsys, kind):
     if " invalid (nothing was run)" in err:  # a line per invalid combination, each located
         assert len(lines) >= 2 and all(line.startswith("  ") and f"{sw}" not in line
                                        for line in lines[1:])
+    elif "unknown key" in err:  # located by its line, and that line of the file quoted
+        assert len(lines) == 2 and lines[1].startswith("    ") and " line " in lines[0]
     else:
         assert len(lines) == 1
     assert not (tmp_path / "out").exists()

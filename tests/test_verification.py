@@ -1,4 +1,4 @@
-"""physics.md §3 verification tests, through line files and the public API.
+"""docs/physics.md §3 verification tests, through line files and the public API.
 
 Expected values and tolerances are those of physics.md §3; where the exact span model
 (eq. 1.2) has a different answer and §3 does not list it, the closed form is derived in the

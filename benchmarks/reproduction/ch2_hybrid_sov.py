@@ -19,9 +19,11 @@ reported beside it, not asserted.
     python benchmarks/reproduction/ch2_hybrid_sov.py --quick -o "$(mktemp -d)"
 
 Writes DIR/report.md, DIR/table_2_3.csv, table_2_4.csv, table_2_5.csv, assertions.json and
-the figures. Exit status: 0 when every assertion passes, 3 when one fails (1 is an error, 2 a
-usage error). ``--quick`` (CI) asserts the checks the full study passes; the ones it fails
-are reported in parentheses, not asserted.
+the figures. Exit status: 0 when every asserted check passes or is one of the study's
+documented non-reproductions (``EXPECTED_FAILURES``: printed as XFAIL (documented), with its
+reason); 3 when a check the committed report passes fails, or a listed one unexpectedly
+passes (XPASS; see _expected.py); 1 is an error, 2 a usage error. ``--quick`` (CI) asserts
+the checks the full study passes; the ones it fails are reported in parentheses, not asserted.
 """
 
 from __future__ import annotations
@@ -35,11 +37,28 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # _expected.py, beside this file
+from _expected import exit_status, report_note, summary, verdict  # noqa: E402
+
 REPO = Path(__file__).resolve().parents[2]
 LINE = REPO / "lines" / "thesis_testbed_realistic.yaml"
 SCEN = REPO / "scenarios" / "thesis_realistic"
-#: exit status when an assertion fails (1 is left to uncaught errors), as in ch3_parity.py
-ASSERTION_FAILED = 3
+#: the checks the committed full report (docs/reproduction/hybrid_sov/report.md) fails: the
+#: documented non-reproductions, each with its reason. They are XFAIL (documented), not a
+#: failure: the exit status is 0 unless another check fails or one of these passes (XPASS)
+EXPECTED_FAILURES = {
+    "tension AIC hybrid < data-driven (Tobit likelihoods)":
+        "AIC on tens of thousands of autocorrelated training samples rewards the "
+        "data-driven model's better in-sample fit (report: Reading the results)",
+    "pitch AIC hybrid < data-driven (Gaussian likelihoods)":
+        "as the tension AIC: the in-sample fit of the quadratic data-driven pitch model wins",
+    "pitch: transient RMSE >= 1.5 x steady RMSE (hybrid, validation)":
+        "each test-bed roll has its own relaxed pitch, which L0(R) cannot know: the pitch "
+        "error is a per-roll offset more than a transient one",
+    "stepwise keeps the dancer angle in the dancer stage (alternating fit)":
+        "the alternating fit's pitch-derived stage-3 target carries per-roll offsets (~4.5 N) "
+        "and selects no dancer term; the oracle fit selects alpha",
+}
 N_TRAIN, N_VAL = 4, 3
 #: the study runs hybrid-sov's offline preprocessing (centred Savitzky-Golay filter), as the
 #: thesis does: its comparisons with the true tensions (T_s3 RMSE, the pre-changeover climb,
@@ -541,10 +560,8 @@ def main(argv=None) -> int:
     def check(name, value, threshold, ok, quick=True):
         # --quick (CI) asserts what the full study reproduces; the checks the full study
         # fails (quick=False) it reports in parentheses: CI guards against regressions, the
-        # full study's report says what is not reproduced
-        result = "PASS" if ok else "FAIL"
-        if args.quick and not quick:
-            result = f"({result.lower()})"
+        # full study's report says what is not reproduced (EXPECTED_FAILURES: XFAIL)
+        result = verdict(name, bool(ok), not (args.quick and not quick), EXPECTED_FAILURES)
         A.append({"assertion": name, "measured": value, "threshold": threshold,
                   "result": result})
 
@@ -608,11 +625,9 @@ def main(argv=None) -> int:
     write_report(out, args, t23, t24, t25, ta, stage3, climbs, diag, cens, m,
                  time.perf_counter() - t0, cycles_ds, fail_ds, rob, train)
     print(ta.to_string(index=False))
-    fails = int((ta["result"] == "FAIL").sum())
-    print(f"\n{int((ta['result'] == 'PASS').sum())} PASS, {fails} FAIL"
-          f"{', the rest reported only (--quick)' if args.quick else ''}; "
-          f"report: {out / 'report.md'}")
-    return ASSERTION_FAILED if fails else 0
+    print("\n" + summary(ta["assertion"], ta["result"], EXPECTED_FAILURES))
+    print(f"report: {out / 'report.md'}")
+    return exit_status(ta["result"])
 
 
 def notes(t23: pd.DataFrame, train) -> list[str]:
@@ -676,6 +691,7 @@ def write_report(out, args, t23, t24, t25, ta, stage3, climbs, diag, cens, m, wa
         "dancer-failure detection is reported beside the asserted offline one "
         "(`hybrid-sov (causal, reported)`), not asserted.", "",
         "## Assertions", "", md_table(ta), "",
+        report_note(ta["result"], EXPECTED_FAILURES), "",
         "## Reading the results", "",
         *notes(t23, train), "",
         "## Table 2-3 analogue (RMSE; tension = the stage-2 load cell, T_s2)", "",

@@ -16,10 +16,12 @@ it, causal (its default): the thesis's analysis was offline, and the centred fil
 Without ``--data`` the script simulates what it needs into ``DIR/data`` from the sweeps of
 scenarios/thesis_realistic/ (``--quick``: fewer seeds and cases, 60 s runs). It writes
 ``DIR/report.md`` (tables, PASS/FAIL, the thresholds), ``DIR/assertions.json`` and PNG figures
-made by the report stage, and prints the PASS/FAIL table. Exit status: 0 when every assertion
-passes, 3 when one fails (1 is an error, 2 a usage error). ``--quick`` (CI) asserts the checks
-the full study passes and its small data can support; the others it reports in parentheses
-(see ``Checks``).
+made by the report stage, and prints the PASS/FAIL table. Exit status: 0 when every asserted
+check passes or is one of the study's documented non-reproductions (``EXPECTED_FAILURES``:
+printed as XFAIL (documented), with its reason); 3 when a check the committed report passes
+fails, or a listed one unexpectedly passes (XPASS; see _expected.py); 1 is an error, 2 a usage
+error. ``--quick`` (CI) asserts the checks the full study passes and its small data can
+support; the others it reports in parentheses (see ``Checks``).
 """
 
 from __future__ import annotations
@@ -34,10 +36,21 @@ import numpy as np
 import pandas as pd
 import yaml
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # _expected.py, beside this file
+from _expected import ASSERTION_FAILED, exit_status, report_note, summary, verdict  # noqa: E402, F401
+
 REPO = Path(__file__).resolve().parents[2]
 SET = REPO / "scenarios" / "thesis_realistic"
-#: exit status when an assertion fails (1 is left to uncaught errors)
-ASSERTION_FAILED = 3
+_B_REASON = ("r2 sees a record-only B gain only through the span dynamics, against its noise "
+             "and run-to-run bias: 2.8-2.9 sigma for the 15 % faults, under the 3 sigma asked "
+             "(report: signatures)")
+#: the checks the committed full report (docs/reproduction/parity/report.md) fails: the
+#: documented non-reproductions, each with its reason. They are XFAIL (documented), not a
+#: failure: the exit status is 0 unless another check fails or one of these passes (XPASS)
+EXPECTED_FAILURES = {
+    "signature B gain -15 % record-only: r1, r2 move, r3 not": _B_REASON,
+    "signature B gain +15 % record-only: r1, r2 move, r3 not": _B_REASON,
+}
 A_COL, B_COL = "meas.sensor_A.tension_N", "meas.sensor_B.pitch_m"
 RELATIONS = ["r1", "r2", "r3"]
 #: thesis Table 3-2 (OC1), columns [y_A, ẏ_A, y_B, ẏ_B]
@@ -222,15 +235,14 @@ class Checks:
 
     def add(self, name: str, measured: str, threshold: str, thesis: str, ok: bool,
             quick: bool = True):
-        result = "PASS" if ok else "FAIL"
-        if self.quick and not quick:
-            result = f"({result.lower()})"
+        result = verdict(name, bool(ok), not (self.quick and not quick), EXPECTED_FAILURES)
         self.rows.append({"assertion": name, "measured": measured, "threshold": threshold,
                           "thesis": thesis, "result": result})
 
     @property
     def ok(self) -> bool:
-        return all(r["result"] != "FAIL" for r in self.rows)
+        """No FAIL and no XPASS (a documented expected failure, XFAIL, is not a failure)."""
+        return exit_status(r["result"] for r in self.rows) == 0
 
     def table(self) -> pd.DataFrame:
         return pd.DataFrame(self.rows)
@@ -366,6 +378,8 @@ def write_report(out: Path, res: dict, checks: Checks, figs, plan: Plan, data, e
         "## Assertions",
         "",
         md(checks.table(), index=False),
+        "",
+        report_note([r["result"] for r in checks.rows], EXPECTED_FAILURES),
         "",
         "Thresholds as issue 18 states them; the plug-in's own threshold θ is the 99 % "
         "quantile (alpha = 0.01) of its statistic on the calibration seeds, warm-up excluded "
@@ -539,8 +553,10 @@ def main(argv=None) -> int:
     (out / "assertions.json").write_text(json.dumps(checks.rows, indent=1, ensure_ascii=False),
                                          encoding="utf-8")
     print(checks.table().to_string(index=False))
+    print(summary([r["assertion"] for r in checks.rows], [r["result"] for r in checks.rows],
+                  EXPECTED_FAILURES))
     print(f"report: {out / 'report.md'} ({elapsed:.0f} s)")
-    return 0 if checks.ok else ASSERTION_FAILED
+    return exit_status(r["result"] for r in checks.rows)
 
 
 if __name__ == "__main__":

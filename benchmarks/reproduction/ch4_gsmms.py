@@ -10,8 +10,11 @@ present, ``DIR/switching``, made by ``r2rsim sweep scenarios/thesis_realistic/<n
 without it the script simulates what it needs into ``OUT/data`` (``--quick``: a few short
 runs). Seeds: healthy 1-10 train, 11-15 calibrate the per-node statistics, 16-20 test; fault
 seeds 101-105 are test only (the quick version scales these down). It writes
-``OUT/report.md`` with its tables and figures, prints a PASS/FAIL table and exits 3 when an
-assertion fails (1 is an error, 2 a usage error), as the other reproduction studies.
+``OUT/report.md`` with its tables and figures and prints a PASS/FAIL table. Exit status, as
+the other reproduction studies: 0 when every asserted check passes or is one of the study's
+documented non-reproductions (``EXPECTED_FAILURES``: printed as XFAIL (documented), with its
+reason); 3 when a check the committed report passes fails, or a listed one unexpectedly
+passes (XPASS; see _expected.py); 1 is an error, 2 a usage error.
 """
 
 from __future__ import annotations
@@ -26,10 +29,24 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # _expected.py, beside this file
+from _expected import ASSERTION_FAILED, exit_status, report_note, summary, verdict  # noqa: E402, F401
+
 REPO = Path(__file__).resolve().parents[2]
 SCENARIO = REPO / "scenarios" / "thesis_realistic" / "registration.yaml"
-#: exit status when an assertion fails (1 is left to uncaught errors)
-ASSERTION_FAILED = 3
+_SAME = ("both conditions run the same product, so one A-B relation fits OC1 and OC2 alike and "
+         "the global model is not worse (the thesis's gap appears with a second product; "
+         "report: Why the global model is not worse here)")
+#: the checks the committed full report (docs/reproduction/gsmms/report.md) fails: the
+#: documented non-reproductions, each with its reason. They are XFAIL (documented), not a
+#: failure: the exit status is 0 unless another check fails or one of these passes (XPASS)
+EXPECTED_FAILURES = {
+    "global worse in some condition": _SAME,
+    "four-cell mean GSMMS − global": _SAME,
+    "OC3 (held out) streamed: node added":
+        "OC3 lies between OC1 and OC2 with the same A-B relation: it joins an existing node, "
+        "re-fitted to fit it (the FAR check passes; report: Why OC3 adds no node)",
+}
 A = "meas.sensor_A.tension_N"
 B = "meas.sensor_B.pitch_m"
 KEEP = ("k", "t_s", "meas.", "sp.", "label.is_faulty", "label.severity", "label.score_mask",
@@ -446,8 +463,7 @@ class Check:
 
     @property
     def result(self) -> str:
-        return ("PASS" if self.ok else "FAIL") if self.asserted else \
-            ("(pass)" if self.ok else "(fail)")
+        return verdict(self.name, bool(self.ok), self.asserted, EXPECTED_FAILURES)
 
 
 #: the checks the quick version asserts; the others need the full set of runs (a node's
@@ -691,6 +707,7 @@ def study(root: Path, out: Path, plan: Plan) -> list[Check]:
             c.asserted = c.name.startswith(QUICK_ASSERTED)
     md[1:1] = ["", "| assertion | threshold | measured | result |", "|---|---|---|---|"] + [
         f"| {c.name} | {c.threshold} | {c.measured} | {c.result} |" for c in checks] + [
+        "", report_note([c.result for c in checks], EXPECTED_FAILURES),
         "", "Results in parentheses are reported, not asserted (the quick version: too few "
         "runs for them)." if plan.quick else "",
         f"Run time: {time.perf_counter() - t_start:.0f} s (reading the data included)."]
@@ -719,8 +736,9 @@ def main(argv=None) -> int:
     width = max(len(c.name) for c in checks)
     for c in checks:
         print(f"{c.result:<6}  {c.name:<{width}}  {c.measured}  (required {c.threshold})")
+    print(summary([c.name for c in checks], [c.result for c in checks], EXPECTED_FAILURES))
     print(f"report: {args.output / 'report.md'}")
-    return 0 if all(c.ok for c in checks if c.asserted) else ASSERTION_FAILED
+    return exit_status(c.result for c in checks)
 
 
 if __name__ == "__main__":

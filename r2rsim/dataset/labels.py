@@ -1,5 +1,5 @@
-"""Per-sample labels, derived only from ``faults.parquet`` and ``runs.parquet`` (DESIGN.md §4.3,
-fdd-benchmarks.md §6.4). The writer and the validator call the same function, so the labels
+"""Per-sample labels, derived only from ``faults.parquet`` and ``runs.parquet`` (docs/dataset.md
+§4). The writer and the validator call the same function, so the labels
 in a dataset can always be re-derived and checked.
 
 Semantics
@@ -118,6 +118,31 @@ def derive_labels(fault_rows: list[dict], k: np.ndarray, t: np.ndarray, *, warmu
     for sid, chan in sensor_channels.items():
         out[f"label.ch.{chan}"] = fa.sensor_mask(sid)
     return out
+
+
+def fault_presence(fault_rows: list[dict], t: np.ndarray) -> tuple[list, np.ndarray]:
+    """Where each of a run's faults is present, by the rule of ``label.is_faulty``.
+
+    A fault is present for ``onset_t_s <= t < end_t_s`` (docs/dataset.md §4), the same
+    derivation as :func:`derive_labels`, so the OR over every fault is ``label.is_faulty``;
+    the OR over some of them (one fault type or class) is a label of those faults alone
+    (``r2rsim export --label``).
+
+    Parameters
+    ----------
+    fault_rows : list of dict
+        The run's rows of faults.parquet.
+    t : ndarray
+        Sample times.
+
+    Returns
+    -------
+    faults : list of FaultInstance
+        The faults, in faults.parquet order (``.type`` is the catalogue type).
+    present : ndarray of bool, shape (len(faults), len(t))
+    """
+    fa = _FaultsAt(fault_rows, t)
+    return fa.faults, fa.present
 
 
 # ---- checking stored labels against their derivation (r2rsim validate, every reader) ------

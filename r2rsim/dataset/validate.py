@@ -1,4 +1,4 @@
-"""Check a dataset directory against the rules of DESIGN.md §4.3 / fdd-benchmarks.md §6.4.
+"""Check a dataset directory against the rules of docs/dataset.md (§4, §9.1).
 
 Rules: the directory holds exactly the files its manifest lists, with their sizes and
 checksums, and no listed path or run id leads outside it

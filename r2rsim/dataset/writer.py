@@ -1,4 +1,4 @@
-"""Write a run as a self-describing Parquet dataset (DESIGN.md §4.3, fdd-benchmarks.md §6).
+"""Write a run as a self-describing Parquet dataset (docs/dataset.md).
 
 Layout::
 

@@ -1,4 +1,4 @@
-"""The plug-in contract for diagnostic algorithms (architecture.md B8, scikit-learn
+"""The plug-in contract for diagnostic algorithms (docs/diagnostics.md §2, scikit-learn
 conventions).
 
 A plug-in is a :class:`Diagnostic` subclass:

@@ -1,7 +1,7 @@
 """The evaluation harness: fit a diagnostic plug-in on healthy runs, score test runs, and
 compute every metric of :mod:`r2rsim.evaluate.metrics` the same way for every plug-in.
 
-The protocol (fdd-benchmarks.md §5.5):
+The protocol (docs/diagnostics.md §4, §5):
 
 * **train** runs are fault-free; the plug-in is fitted on them and on nothing else;
 * **val** runs are fault-free; the harness calibrates its own threshold theta on their scores

@@ -1,4 +1,4 @@
-"""Fault-detection evaluation metrics (docs: fdd-benchmarks.md §5, M1–M7, M9, M15).
+"""Fault-detection evaluation metrics (docs/diagnostics.md §5: M1–M7, M9, M15).
 
 Every metric works on a list of :class:`RunData`, one per simulated run, holding plain numpy
 arrays: the sample times, the ground truth ``y(k)``, the score mask, and the detector's alarm,

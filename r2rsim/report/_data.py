@@ -279,13 +279,29 @@ def select_channels(run: RunData, globs) -> list[str]:
 
 def channel_units(root: Path, verifier: Verifier | None = None) -> dict[str, str]:
     """Unit of each column from channels.parquet (empty when the file is missing)."""
+    return {c: unit for c, (unit, _) in channel_table(root, verifier).items()}
+
+
+def channel_table(root: Path, verifier: Verifier | None = None
+                  ) -> dict[str, tuple[str, str]]:
+    """``(unit, description)`` of each column from channels.parquet (empty when the file is
+    missing; a description ``""`` when it has none). The description names the sensor type
+    of a reading (``encoder 'enc_pull' on pull: measured ...``)."""
     f = root / "channels.parquet"
     if not f.is_file():
         return {}
     with _reading(root, f, verifier):
-        ch = pq.read_table(_whole(root, f.name, verifier),
-                           columns=["channel", "unit"]).to_pandas()
-    return dict(zip(ch["channel"], ch["unit"].fillna(""), strict=True))
+        table = pq.read_table(_whole(root, f.name, verifier))
+        ch = table.select(["channel", "unit", *(["description"] if "description" in
+                                                table.column_names else [])]).to_pandas()
+    desc = ch["description"].fillna("") if "description" in ch else [""] * len(ch)
+    return dict(zip(ch["channel"], zip(ch["unit"].fillna(""), desc, strict=True),
+                    strict=True))
+
+
+def is_encoder(description: str) -> bool:
+    """Whether a channel is an encoder's reading (its channels.parquet description)."""
+    return str(description).startswith("encoder ")
 
 
 def run_rows(root: Path, name: str, run_id: str, verifier: Verifier | None = None
@@ -298,6 +314,18 @@ def run_rows(root: Path, name: str, run_id: str, verifier: Verifier | None = Non
         df = pq.read_table(_whole(root, name, verifier),
                            filters=[("run_id", "=", run_id)]).to_pandas()
     return df.reset_index(drop=True)
+
+
+def run_rows_all(root: Path, name: str, columns: list[str],
+                 verifier: Verifier | None = None) -> pd.DataFrame:
+    """These columns (those the file has) of every row of faults.parquet or events.parquet
+    (empty when the file is missing); the file is checked whole."""
+    f = root / name
+    if not f.is_file():
+        return pd.DataFrame()
+    with _reading(root, f, verifier):
+        table = pq.read_table(_whole(root, name, verifier))
+    return table.select([c for c in columns if c in table.column_names]).to_pandas()
 
 
 def _row_groups_in(meta: pq.FileMetaData, t0: float, t1: float) -> list[int]:
@@ -379,19 +407,159 @@ def _floats(arr: pa.ChunkedArray) -> np.ndarray:
 
 
 def read_envelopes(run: RunData, columns: list[str], t0: float, t1: float,
-                   n_buckets: int) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+                   n_buckets: int, means=()) -> dict[str, tuple[np.ndarray, ...]]:
     """Each column's min/max envelope (:func:`decimate_minmax`) over [t0, t1], streamed: the
-    chunks share bucket edges, so the result is the envelope of the whole window."""
+    chunks share bucket edges, so the result is the envelope of the whole window.
+
+    The columns in ``means`` (encoder speeds: a count difference over each sample period,
+    quantised to one count, so the envelope of a steady speed is a band between two levels)
+    are reduced to each bucket's mean instead, with its minimum and maximum:
+    ``(t, mean, min, max)``, ``t`` the mean time of the bucket's samples. The mean of an
+    encoder's speeds over a bucket is its count difference over the bucket divided by its
+    duration: the speed measured with a longer counting window."""
     parts: dict[str, list] = {c: [] for c in columns}
     for t, values in iter_window(run, columns, t0, t1):
-        if t.size > 2 * n_buckets:
-            starts = _bucket_starts(t, n_buckets, (t0, t1))  # shared by the columns
-            for c, y in values.items():
+        whole = t.size <= 2 * n_buckets
+        starts = None if whole else _bucket_starts(t, n_buckets, (t0, t1))  # shared
+        for c, y in values.items():
+            if c in means:
+                parts[c].append(_bucket_means(t, y, np.arange(t.size) if whole else starts))
+            elif whole:
+                parts[c].append((t, y))
+            else:
                 idx = _minmax_indices(y, starts)
                 parts[c].append((t[idx], y[idx]))
-        else:
-            for c, y in values.items():
-                parts[c].append((t, y))
-    return {c: (np.concatenate([p[0] for p in ps]) if ps else np.empty(0),
-                np.concatenate([p[1] for p in ps]) if ps else np.empty(0))
+    return {c: tuple(np.concatenate([p[i] for p in ps]) if ps else np.empty(0)
+                     for i in range(4 if c in means else 2))
             for c, ps in parts.items()}
+
+
+def _bucket_means(t: np.ndarray, y: np.ndarray, starts: np.ndarray) -> tuple:
+    """Mean time, mean, min and max of each bucket's non-NaN samples (NaN for a bucket
+    without any)."""
+    ok = np.isfinite(y)
+    counts = np.add.reduceat(ok.astype(float), starts)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.add.reduceat(np.where(ok, y, 0.0), starts) / counts
+        lo = np.fmin.reduceat(y, starts)
+        hi = np.fmax.reduceat(y, starts)
+    tm = np.add.reduceat(t, starts) / np.diff(np.append(starts, t.size))
+    return tm, mean, lo, hi
+
+
+# ---- the labels of test runs (the report's ROC/PR curves and statistic figures) -----------
+
+#: the samples columns the diagnostics figures take from a test run: the ground truth the
+#: harness scores against (:func:`r2rsim.evaluate.harness.run_data`) and the labels the
+#: check compares with faults.parquet (:data:`r2rsim.dataset.labels.QUICK_LABELS`, and every
+#: ``label.ch.*``)
+LABEL_COLUMNS = ("k", "t_s", "label.is_faulty", "label.score_mask", "label.primary_type",
+                 "label.severity", "label.n_active", "label.mode")
+_NEEDED_LABELS = ("k", "t_s", "label.is_faulty", "label.score_mask", "label.primary_type")
+
+
+def label_runs(paths, verify: bool = True) -> list:
+    """The runs of the test datasets with only the samples columns the diagnostics figures
+    use (:data:`LABEL_COLUMNS`), as :class:`r2rsim.dataset.read.Run` objects: what
+    :func:`r2rsim.evaluate.harness.read_datasets` gives, without parsing the hundreds of
+    channels the figures do not draw. Checked as it checks them (``verify``): every file
+    the manifest lists is there with its size, each file read has its sha256 (hashed whole,
+    from the bytes parsed), and each run's labels agree with faults.parquet and runs.parquet
+    (:func:`r2rsim.dataset.labels.quick_label_problem`). A directory holding datasets one
+    level down contributes all of them.
+
+    Raises
+    ------
+    InputError
+        For a missing or incomplete dataset, a file that differs from manifest.json, labels
+        that differ from faults.parquet (``verify``), or an unreadable file.
+    """
+    from ..dataset.paths import SWEEP_MARKER
+
+    out = []
+    for p in map(Path, paths):
+        if not p.is_dir():
+            raise InputError(f"{p}: no such dataset directory")
+        if is_dataset_dir(p) or (p / SWEEP_MARKER).is_file():
+            dirs = [p]
+        else:
+            dirs = sorted(d for d in p.iterdir() if d.is_dir() and is_dataset_dir(d))
+            if not dirs:
+                raise InputError(f"{p}: not an r2rsim dataset and holds none")
+        for d in dirs:
+            out += _label_runs(open_dataset(d), verify)
+    return out
+
+
+def _label_runs(root: Path, verify: bool) -> list:
+    from ..dataset.labels import quick_label_problem
+    from ..dataset.read import Run
+
+    with Verifier(root, verify) as v:
+        tables = {}
+        for name in ("runs.parquet", "faults.parquet"):
+            with _reading(root, root / name, v):
+                tables[name] = pq.read_table(_whole(root, name, v))
+        runs_t, faults_t = tables["runs.parquet"], tables["faults.parquet"]
+        for t, name in ((runs_t, "runs.parquet"), (faults_t, "faults.parquet")):
+            if "run_id" not in t.column_names:
+                raise v.fail(f"{name} has no column run_id: not a complete r2rsim dataset")
+        faults = faults_t.to_pandas()
+        fault_rows: dict[str, list[dict]] = {}
+        for f in faults_t.to_pylist() if verify else ():
+            fault_rows.setdefault(str(f["run_id"]), []).append(f)
+        out = []
+        for info, row in zip(runs_t.to_pandas().to_dict("records"), runs_t.to_pylist(),
+                             strict=True):
+            rid = str(row["run_id"])
+            table = _label_table(root, rid, v)
+            if verify:
+                try:
+                    problem = quick_label_problem(table, row, fault_rows.get(rid, []))
+                except (KeyError, TypeError, ValueError, pa.ArrowException) as exc:
+                    raise v.fail(f"its labels cannot be checked ({type(exc).__name__}: "
+                                 f"{exc}): not a complete r2rsim dataset (--no-verify reads "
+                                 f"it anyway)", rid) from None
+                if problem:
+                    raise v.fail(f"{problem}: the labels in the samples differ from what "
+                                 f"faults.parquet and runs.parquet give (edited after the "
+                                 f"writing?); refusing to use it (`r2rsim validate {root}` "
+                                 f"lists every problem; --no-verify reads it anyway)", rid)
+            samples = table.to_pandas().set_index("k", drop=False).sort_index()
+            out.append(Run(rid, samples, faults[faults["run_id"].astype(str) == rid]
+                           .reset_index(drop=True), info, root))
+        v.check()
+    return out
+
+
+def _label_table(root: Path, run_id: str, v: Verifier) -> pa.Table:
+    """The label columns of one run's samples files (each file hashed whole, from the
+    bytes parsed)."""
+    if run_id in ("", ".", "..") or any(c in run_id for c in "/\\\0"):
+        raise v.fail(f"run id {run_id!r} in runs.parquet is not a plain name (its samples "
+                     f"would lie outside samples/)")
+    files = sample_files(root, run_id)
+    if not files:
+        raise v.fail("no samples file (samples/run_id=<id>/part-*.parquet): the directory "
+                     "is not a complete r2rsim dataset", run_id)
+    parts = []
+    for f in files:
+        rel = f.relative_to(root).as_posix()
+        with _reading(root, f, v):
+            v.listed(rel, run_id)
+            data = f.read_bytes()
+            v.start(rel, run_id, data)
+            pf = pq.ParquetFile(pa.BufferReader(data))
+            names = pf.schema_arrow.names
+            cols = [c for c in (*LABEL_COLUMNS, *sorted(n for n in names
+                                                        if n.startswith("label.ch.")))
+                    if c in names]
+            parts.append(pf.read(columns=cols))
+        v.check(rel)  # a changed file is told as such, before anything else about it
+    table = parts[0] if len(parts) == 1 else pa.concat_tables(parts,
+                                                              promote_options="default")
+    missing = [c for c in _NEEDED_LABELS if c not in table.column_names]
+    if missing:
+        raise v.fail(f"the samples have no column {', '.join(missing)}: not a complete "
+                     f"r2rsim dataset", run_id)
+    return table

@@ -10,19 +10,20 @@ so their areas are the ``roc_auc`` and ``pr_auc`` of the results table.
 
 from __future__ import annotations
 
+import io
 import math
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from sklearn.metrics import precision_recall_curve, roc_curve
 
 from ..dataset.read import Run
 from ..errors import InputError
-from ..evaluate.harness import ALL, METRICS, NONE, fault_key, read_datasets, run_data
+from ..evaluate.harness import ALL, METRICS, NONE, fault_key, run_data
 from ..evaluate.metrics import average_precision, pooled_scores, roc_auc
-from ._mpl import require_matplotlib
+from ._data import label_runs
+from ._mpl import axis_label, display_unit, plain_ticks, require_matplotlib, wrap_title
 
 #: the results file of each kind of results directory
 DIAGNOSE_FILE = "metrics.parquet"
@@ -58,11 +59,20 @@ def results_kind(path: str | Path) -> str:
                      f"`r2rsim diagnose`, no {BENCH_FILE} written by `r2rsim bench -o`)")
 
 
-def _read_table(path: Path) -> pd.DataFrame:
-    """A Parquet file of a results directory; one InputError naming it when it cannot be
-    read (truncated, not Parquet)."""
+#: the columns of predictions.parquet the figures use (the others are not read)
+PREDICTION_COLUMNS = ("run_id", "k", "t_s", "statistic", "alarm", "method")
+
+
+def _read_table(path: Path, columns=None) -> pd.DataFrame:
+    """A Parquet file of a results directory (``columns``: these of them, those it has);
+    one InputError naming it when it cannot be read (truncated, not Parquet)."""
     try:
-        return pd.read_parquet(path)
+        if columns is not None:
+            import pyarrow.parquet as pq
+
+            names = set(pq.read_schema(path).names)
+            columns = [c for c in columns if c in names]
+        return pd.read_parquet(path, columns=columns)
     except Exception as exc:  # noqa: BLE001 - pyarrow raises several types on bad files
         first = (str(exc).strip().splitlines() or [""])[0]
         raise InputError(f"{path}: not a readable Parquet file ({type(exc).__name__}: "
@@ -109,7 +119,7 @@ def _predictions(results: Results) -> pd.DataFrame:
     if results_kind(d) != "diagnose" or not (d / PREDICTIONS_FILE).is_file():
         raise InputError(f"{d}: no {PREDICTIONS_FILE} (written by `r2rsim diagnose`; a bench "
                          f"directory has none)")
-    return _read_table(d / PREDICTIONS_FILE)
+    return _read_table(d / PREDICTIONS_FILE, PREDICTION_COLUMNS)
 
 
 def _test_runs(datasets: Sequence[str | Path] | str | Path, run_ids) -> dict[str, Run]:
@@ -123,7 +133,9 @@ def _test_runs(datasets: Sequence[str | Path] | str | Path, run_ids) -> dict[str
                          "and faults are not in the results directory)")
     paths = [d for d in datasets if not isinstance(d, Run)]
     runs: dict[str, Run] = {}
-    for r in [d for d in datasets if isinstance(d, Run)] + read_datasets(paths):
+    # only the label columns of the samples: the figures draw no channel
+    for r in [d for d in datasets if isinstance(d, Run)] + (label_runs(paths) if paths
+                                                             else []):
         if r.run_id in runs:
             raise InputError(f"run {r.run_id} is in {runs[r.run_id].path} and in {r.path}; "
                              f"name the test datasets only once")
@@ -154,7 +166,8 @@ def _theta(table: pd.DataFrame, series: str) -> float:
 # --------------------------------------------------------------------------- statistic
 
 
-def plot_statistic(results: str | Path, datasets, run_id: str | None = None):
+def plot_statistic(results: str | Path, datasets, run_id: str | None = None, *,
+                   theta: float | None = None):
     """The detector statistic of one test run over time, with the calibrated threshold, the
     plug-in's alarms and the fault windows.
 
@@ -167,6 +180,9 @@ def plot_statistic(results: str | Path, datasets, run_id: str | None = None):
         windows; the results directory does not record them).
     run_id : str, optional
         The run to show; default the first faulty test run (else the first run).
+    theta : float, optional
+        The threshold to draw (default: the one in the results' metrics table; give it when
+        ``results`` is a predictions DataFrame already read).
 
     Returns
     -------
@@ -188,7 +204,8 @@ def plot_statistic(results: str | Path, datasets, run_id: str | None = None):
     p = _aligned(preds[preds["run_id"] == run_id], run)
     t, stat, alarm = p["t_s"].to_numpy(), p["statistic"].to_numpy(), p["alarm"].to_numpy(bool)
     method = str(p["method"].iloc[0])
-    theta = _theta(results_table(results), method)
+    if theta is None:
+        theta = _theta(results_table(results), method)
 
     fig = Figure(figsize=(8, 3.5), layout="constrained")
     ax = fig.add_subplot()
@@ -207,8 +224,9 @@ def plot_statistic(results: str | Path, datasets, run_id: str | None = None):
                    label=f"threshold θ = {theta:.4g} (calibrated)")
     ax.plot(t[alarm], stat[alarm], ls="none", marker="|", color="tab:orange", ms=8,
             gid="alarms", label=f"alarm ({int(alarm.sum())} samples)")
-    ax.set(xlabel="t [s]", ylabel="statistic", xlim=(t[0], t[-1]),
-           title=f"{method}: run {run_id}")
+    ax.set(xlabel=axis_label("time", "s"), ylabel=axis_label("detector statistic", "1"),
+           xlim=(t[0], t[-1]), title=f"{method}: run {run_id}")
+    plain_ticks(ax, xbins=10)
     ax.legend(loc="upper left", fontsize="small")
     return fig
 
@@ -259,6 +277,8 @@ def plot_roc_pr(results: Results, datasets, condition: str = ALL, fault: str = A
         :func:`~r2rsim.evaluate.metrics.average_precision`) of the pooled scored samples.
     """
     Figure = require_matplotlib()
+    from sklearn.metrics import precision_recall_curve, roc_curve
+
     preds = _predictions(results)
     runs = _test_runs(datasets, preds["run_id"])
     fig = Figure(figsize=(9, 4), layout="constrained")
@@ -278,13 +298,14 @@ def plot_roc_pr(results: Results, datasets, condition: str = ALL, fault: str = A
         prevalence = y.mean()
     ax_roc.plot([0, 1], [0, 1], color="0.6", ls=":", label="chance")
     ax_pr.axhline(prevalence, color="0.6", ls=":", label=f"chance ({prevalence:.2f})")
-    ax_roc.set(xlabel="false-positive rate", ylabel="true-positive rate", title="ROC",
-               xlim=(0, 1), ylim=(0, 1.02))
-    ax_pr.set(xlabel="recall", ylabel="precision", title="precision-recall", xlim=(0, 1),
-              ylim=(0, 1.02))
+    ax_roc.set(xlabel=axis_label("false-positive rate", "1"),
+               ylabel=axis_label("true-positive rate", "1"), title="ROC", xlim=(0, 1),
+               ylim=(0, 1.02))
+    ax_pr.set(xlabel=axis_label("recall", "1"), ylabel=axis_label("precision", "1"),
+              title="precision-recall", xlim=(0, 1), ylim=(0, 1.02))
     ax_roc.legend(loc="lower right", fontsize="small")
     ax_pr.legend(loc="best", fontsize="small")
-    fig.suptitle(f"scored test samples, condition {condition}, fault {fault}")
+    fig.suptitle(wrap_title(f"scored test samples, condition {condition}, fault {fault}", fig))
     return fig
 
 
@@ -328,13 +349,14 @@ def _metric_rows(table: pd.DataFrame, metric: str, by: str, condition: str | Non
 
 
 def _ylabel(metric: str) -> str:
+    """``metric (unit)``; a probability, rate or count is ``(1)``."""
     m = METRICS.get(metric)
-    unit = f" [{m.unit}]" if m is not None and m.unit else ""
-    return f"{metric}{unit}"
+    return axis_label(metric, m.unit if m is not None else "")
 
 
 def plot_metric(results: Results, metric: str = "dd_median_s", by: str = "condition",
-                condition: str | None = None, fault: str | None = None):
+                condition: str | None = None, fault: str | None = None, *,
+                units: dict[str, str] | None = None):
     """One metric of a results table by condition, fault or fault magnitude, per method.
 
     Parameters
@@ -352,6 +374,8 @@ def plot_metric(results: Results, metric: str = "dd_median_s", by: str = "condit
     fault : str, optional
         The fault (``type:target``); default: each condition pooled over its faults for
         ``by="condition"``, every fault as its own series for ``by="magnitude"``.
+    units : dict, optional
+        The magnitude unit of each fault (``type:target``), as :func:`plot_mdm` takes it.
 
     Returns
     -------
@@ -372,7 +396,7 @@ def plot_metric(results: Results, metric: str = "dd_median_s", by: str = "condit
             bars = ax.errorbar(g["magnitude"], g["value"], yerr=_ci(g), marker="o", capsize=3,
                                label=f"{series} {f}" if several else series)
             bars.lines[0].set_gid(f"{series}|{f}")  # the data line (not the caps)
-        ax.set_xlabel("fault magnitude")
+        ax.set_xlabel(axis_label("fault magnitude", _common_unit(rows["fault"], units)))
     else:
         levels = list(dict.fromkeys(rows[by]))
         series = list(dict.fromkeys(rows["series"]))
@@ -385,13 +409,99 @@ def plot_metric(results: Results, metric: str = "dd_median_s", by: str = "condit
                 null = _null_rows(results, NULL_OF[metric], rows, s, by, levels)
                 ax.plot(x, null, ls="none", marker="_", markersize=14, mew=2, color="k",
                         gid=f"null:{s}", label=NULL_OF[metric] if i == 0 else None)
-        ax.set_xticks(np.arange(len(levels)), levels, rotation=20 if by == "fault" else 0,
-                      ha="right" if by == "fault" else "center")
+        # category labels (faults are long: type:target) turned so that they never meet
+        turn = by == "fault" or sum(len(str(v)) for v in levels) > 60
+        ax.set_xticks(np.arange(len(levels)), levels, rotation=30 if turn else 0,
+                      ha="right" if turn else "center", rotation_mode="anchor")
         ax.set_xlabel(by)
     desc = METRICS[metric].description if metric in METRICS else ""
-    ax.set(ylabel=_ylabel(metric), title=f"{metric} by {by}: {desc}".rstrip(": "))
+    ax.set(ylabel=_ylabel(metric))
+    ax.set_title(wrap_title(f"{metric} by {by}: {desc}".rstrip(": "), fig))
+    plain_ticks(ax)
     ax.legend(fontsize="small")
     return fig
+
+
+def fault_units(runs) -> dict[str, str]:
+    """The magnitude unit of each fault stratum (``type:target``) of the runs (Run objects),
+    from their faults.parquet rows (``magnitude_unit``, as the dataset stores it)."""
+    from ..evaluate.harness import fault_key
+    from ..evaluate.splits import acting_faults
+
+    out: dict[str, str] = {}
+    for run in runs or ():
+        faults = acting_faults(run)
+        if len(faults) == 1 and "magnitude_unit" in faults.columns:
+            unit = faults["magnitude_unit"].iloc[0]
+            if isinstance(unit, str):
+                out.setdefault(fault_key(run), unit)
+    return out
+
+
+def recorded_units(results) -> dict[str, str]:
+    """The magnitude unit of each fault (``type:target``) of the test datasets a
+    ``r2rsim diagnose`` directory recorded in datasets.json, from their faults.parquet
+    (checked against each dataset's manifest.json; a dataset that is gone, or refused, gives
+    none). Empty for anything else (a bench, a DataFrame)."""
+    from ..dataset.verify import Verifier
+    from ._data import is_dataset_dir
+    from ._html import _recorded_datasets
+
+    if not isinstance(results, str | Path) or results_kind(results) != "diagnose":
+        return {}
+    try:
+        paths = _recorded_datasets(Path(results))[0] or []
+    except InputError:
+        return {}
+    roots = []
+    for p in map(Path, paths):
+        roots += [p] if is_dataset_dir(p) else sorted(
+            d for d in p.iterdir() if d.is_dir() and is_dataset_dir(d))
+    out: dict[str, str] = {}
+    for root in roots:
+        try:
+            with Verifier(root) as v:
+                faults = pd.read_parquet(io.BytesIO(v.read("faults.parquet")),
+                                         columns=["fault_type", "target_id", "magnitude_unit"])
+        except (InputError, OSError, ValueError, KeyError):
+            continue
+        for f in faults.itertuples(index=False):
+            if isinstance(f.magnitude_unit, str):
+                out.setdefault(f"{f.fault_type}:{f.target_id}", f.magnitude_unit)
+    return out
+
+
+def magnitude_unit(fault: str, units: dict[str, str] | None = None) -> str | None:
+    """The unit of a fault stratum's magnitude: from ``units`` (:func:`fault_units`), else
+    from the fault type where it does not depend on the target (a gain is relative, a
+    bearing friction in N*m); None when only the target's reading would tell."""
+    if units and fault in units:
+        return units[fault]
+    from ..schema.faults import CATALOGUE
+    from ..schema.faults import magnitude_unit as catalogue_unit
+
+    ftype = fault.split(":", 1)[0]
+    if "+" in fault or ftype not in CATALOGUE or CATALOGUE[ftype].magnitude.startswith(
+            "reading"):
+        return None
+    return catalogue_unit(ftype, None)
+
+
+#: how a magnitude axis says that the results do not give its unit (no test datasets)
+UNKNOWN_UNIT = "unit of the target's reading"
+
+
+def _common_unit(faults, units) -> str:
+    found = {magnitude_unit(f, units) for f in set(faults)}
+    return found.pop() or UNKNOWN_UNIT if len(found) == 1 else UNKNOWN_UNIT
+
+
+def _magnitude_quantity(fault: str) -> str:
+    """The magnitude's name on an axis: the fault type's last word (``sensor.offset``:
+    offset)."""
+    if "+" in fault:
+        return "fault magnitude"
+    return fault.split(":", 1)[0].rsplit(".", 1)[-1].replace("_", " ")
 
 
 #: the null rate drawn beside each detection probability
@@ -418,7 +528,8 @@ def _ci(g: pd.DataFrame) -> np.ndarray | None:
     return np.clip(np.vstack([lo, hi]), 0, None)
 
 
-def plot_mdm(results: Results, calibrated: bool = False, condition: str | None = None):
+def plot_mdm(results: Results, calibrated: bool = False, condition: str | None = None, *,
+             units: dict[str, str] | None = None):
     """Detection probability against fault magnitude (MDM curves), one axes per fault, one
     line per method, with the P_D = 0.9 level and the MDM90 of the results table marked.
 
@@ -432,6 +543,14 @@ def plot_mdm(results: Results, calibrated: bool = False, condition: str | None =
         threshold theta (``pd_cal``, ``mdm90_cal``).
     condition : str, optional
         The condition (default: the pooled ``all``, or the only one).
+    units : dict, optional
+        The magnitude unit of each fault (``type:target`` to an SI unit as faults.parquet
+        stores it, :func:`fault_units` of the test runs): the x axis is ``offset (N)``.
+        Default: from the faults.parquet of the test datasets a ``r2rsim diagnose``
+        directory recorded (:func:`recorded_units`). A fault missing from it takes the unit
+        its type gives alone (``gain (relative)``), else the axis says that the unit is the
+        target reading's. Small magnitudes are shown with a prefix (a gain error of 5.8e-05
+        as 58 ppm).
 
     Returns
     -------
@@ -441,37 +560,46 @@ def plot_mdm(results: Results, calibrated: bool = False, condition: str | None =
     pd_name, mdm_name, null_name = (("pd_cal", "mdm90_cal", "pd_null_cal") if calibrated
                                     else ("pd", "mdm90", "pd_null"))
     table = results_table(results)
+    if units is None:
+        units = recorded_units(results)
     if not ((table["metric"] == pd_name) & table["magnitude"].notna()).any():
         raise InputError(f"no per-magnitude {pd_name} in the results: MDM curves need a "
                          f"fault run at several magnitudes")
     rows = _metric_rows(table, pd_name, "magnitude", condition, None)
     cond = rows["condition"].iloc[0]
     faults = list(dict.fromkeys(rows["fault"]))
-    fig = Figure(figsize=(4.5 * len(faults), 3.8), layout="constrained")
+    fig = Figure(figsize=(max(6.5, 4.5 * len(faults)), 4.2), layout="constrained")
     axes = np.atleast_1d(fig.subplots(1, len(faults), squeeze=False)[0])
     for ax, f in zip(axes, faults, strict=True):
+        unit = magnitude_unit(f, units)
+        factor, shown = display_unit(unit, rows[rows["fault"] == f]["magnitude"])
         for series, g in rows[rows["fault"] == f].groupby("series", sort=False):
             g = g.sort_values("magnitude")
-            line, = ax.plot(g["magnitude"], g["value"], marker="o", gid=f"{series}|{f}",
-                            label=series)
+            line, = ax.plot(g["magnitude"] * factor, g["value"], marker="o",
+                            gid=f"{series}|{f}", label=series)
             null = table[(table["series"] == series) & (table["metric"] == null_name)
                          & (table["condition"] == cond) & (table["fault"] == f)
                          & table["magnitude"].notna()].sort_values("magnitude")
             if not null.empty:  # what chance alone gives in the same windows
-                ax.plot(null["magnitude"], null["value"], ls=":", marker=".",
+                ax.plot(null["magnitude"] * factor, null["value"], ls=":", marker=".",
                         color=line.get_color(), gid=f"null:{series}|{f}",
-                        label=f"{series}: {null_name}")
+                        label=f"{series}: {null_name} (chance)")
             mdm = table[(table["series"] == series) & (table["metric"] == mdm_name)
                         & (table["condition"] == cond) & (table["fault"] == f)
                         & table["magnitude"].isna()]["value"]
-            for x in _mdm_marks(mdm, g["magnitude"]):
-                ax.axvline(x, color=line.get_color(), ls="--", lw=1, gid=f"mdm:{series}|{f}")
+            for i, x in enumerate(_mdm_marks(mdm, g["magnitude"])):
+                ax.axvline(x * factor, color=line.get_color(), ls="--", lw=1,
+                           gid=f"mdm:{series}|{f}",
+                           label=f"{series}: {mdm_name}" if i == 0 else None)
         ax.axhline(MDM_LEVEL, color="0.5", ls=":", label=f"P_D = {MDM_LEVEL}")
-        ax.set(xlabel="fault magnitude", ylabel=pd_name, ylim=(-0.03, 1.03), title=f)
+        ax.set(xlabel=axis_label(_magnitude_quantity(f),
+                                  shown if unit is not None else UNKNOWN_UNIT),
+               ylabel=axis_label(pd_name, "1"), ylim=(-0.03, 1.03), title=f)
+        plain_ticks(ax, xbins=6)
         ax.legend(fontsize="small")
     at = "at theta" if calibrated else "plug-in alarms"
-    fig.suptitle(f"detection probability by magnitude ({at}, condition {cond}); dotted: "
-                 f"{null_name} (chance); dashed: {mdm_name}")
+    fig.suptitle(wrap_title(f"detection probability by fault magnitude ({at}, condition "
+                            f"{cond})", fig), fontsize="large")
     return fig
 
 

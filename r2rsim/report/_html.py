@@ -22,6 +22,8 @@ from ._diagnostics import (
     _metric_rows,
     _predictions,
     _test_runs,
+    _theta,
+    fault_units,
     plot_mdm,
     plot_metric,
     plot_roc_pr,
@@ -96,9 +98,11 @@ def write_report(results: str | Path, output: str | Path | None = None,
     missing_note = None
     if datasets is None and kind == "diagnose":
         datasets, missing_note = _recorded_datasets(src)
-    if datasets is not None and kind == "diagnose":  # read once for every figure
-        datasets = list(_test_runs(datasets, _predictions(src)["run_id"]).values())
-    figures = _figures(src, kind, table, datasets)
+    preds = None
+    if datasets is not None and kind == "diagnose":  # read once (labels only) for every figure
+        preds = _predictions(src)  # read once for every figure
+        datasets = list(_test_runs(datasets, preds["run_id"]).values())
+    figures = _figures(src, kind, table, datasets, preds)
     if missing_note:
         figures.append(f"<p class='note'>{html.escape(missing_note)}</p>")
     body = [f"<h1>r2rsim {kind} report</h1>", _header(src, kind, table),
@@ -190,15 +194,58 @@ def _table(df: pd.DataFrame, table_id: str) -> str:
     return f"<div class='scroll'>{text}</div>"
 
 
-def _figures(src: Path, kind: str, table: pd.DataFrame, runs) -> list[str]:
-    """The figures as HTML; one that cannot be drawn from these results is a note."""
+def report_figures(results: str | Path, datasets=None) -> list:
+    """The figures :func:`write_report` puts in the report of a results directory.
+
+    Parameters
+    ----------
+    results : str or Path
+        A directory written by ``r2rsim diagnose`` or ``r2rsim bench -o``.
+    datasets : path, sequence of paths or of Run, optional
+        The test datasets of a diagnose result, as :func:`write_report` takes them.
+
+    Returns
+    -------
+    list of (str, matplotlib.figure.Figure)
+        Each figure with its caption, in the report's order; a figure the results cannot
+        give (a note in the report) is left out.
+    """
+    require_matplotlib()
+    src = Path(results)
+    kind = results_kind(src)
+    table = results_table(src)
+    if datasets is None and kind == "diagnose":
+        datasets = _recorded_datasets(src)[0]
+    preds = None
+    if datasets is not None and kind == "diagnose":
+        preds = _predictions(src)
+        datasets = list(_test_runs(datasets, preds["run_id"]).values())
+    return [item for item in _figures(src, kind, table, datasets, preds, render=_built)
+            if isinstance(item, tuple)]
+
+
+def _built(caption: str, plot, *args, **kwargs):
+    """``(caption, figure)``, or None for a figure these results cannot give."""
+    try:
+        return caption, plot(*args, **kwargs)
+    except InputError:
+        return None
+
+
+def _figures(src: Path, kind: str, table: pd.DataFrame, runs, preds=None, render=None
+             ) -> list:
+    """The figures as HTML; one that cannot be drawn from these results is a note.
+    ``render(caption, plot, *args, **kwargs)`` makes each figure's entry (default: its
+    HTML, :func:`_figure`)."""
+    figure = render or _html_figure
     out = []
     for by in ("condition", "fault"):
         for metric in FIGURE_METRICS:
             if _n_levels(table, metric, by) > 1:
-                out.append(_figure(f"{metric} by {by}", plot_metric, table, metric, by))
+                out.append(figure(f"{metric} by {by}", plot_metric, table, metric, by))
     if (table["metric"].eq("pd") & table["magnitude"].notna()).any():
-        out.append(_figure("detection probability by fault magnitude (MDM)", plot_mdm, table))
+        out.append(figure("detection probability by fault magnitude (MDM)", plot_mdm, table,
+                           units=fault_units(runs)))
     if kind != "diagnose":
         return out
     if runs is None:
@@ -206,10 +253,13 @@ def _figures(src: Path, kind: str, table: pd.DataFrame, runs) -> list[str]:
                    "datasets (their labels are not in the results directory): "
                    "<code>r2rsim report RESULTS --data DATASET...</code></p>")
         return out
-    out.append(_figure("ROC and PR curves of the scored test samples", plot_roc_pr, src,
+    preds = _predictions(src) if preds is None else preds
+    out.append(figure("ROC and PR curves of the scored test samples", plot_roc_pr, preds,
                        runs))
-    for rid in _example_runs(src, runs):
-        out.append(_figure(f"statistic of run {rid}", plot_statistic, src, runs, rid))
+    for rid in _example_runs(preds, runs):
+        method = str(preds.loc[preds["run_id"] == rid, "method"].iloc[0])
+        out.append(figure(f"statistic of run {rid}", plot_statistic, preds, runs, rid,
+                           theta=_theta(table, method)))
     return out
 
 
@@ -220,18 +270,18 @@ def _n_levels(table: pd.DataFrame, metric: str, by: str) -> int:
         return 0
 
 
-def _example_runs(src: Path, runs) -> list[str]:
+def _example_runs(preds: pd.DataFrame, runs) -> list[str]:
     """The first test run of each fault (fault-free first), at most :data:`STATISTIC_RUNS`."""
     by_id = {r.run_id: r for r in runs}
     first: dict[str, str] = {}
-    for rid in dict.fromkeys(_predictions(src)["run_id"]):
+    for rid in dict.fromkeys(preds["run_id"]):
         first.setdefault(fault_key(by_id[rid]), rid)
     return [first[k] for k in sorted(first, key=lambda k: (k != "none", k))][:STATISTIC_RUNS]
 
 
-def _figure(caption: str, plot, *args) -> str:
+def _html_figure(caption: str, plot, *args, **kwargs) -> str:
     try:
-        fig = plot(*args)
+        fig = plot(*args, **kwargs)
     except InputError as exc:
         return f"<p class='note'>{html.escape(caption)}: not drawn ({html.escape(exc.message)})</p>"
     buf = io.BytesIO()

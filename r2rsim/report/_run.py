@@ -3,14 +3,16 @@ quantity, with the run's fault windows shaded and its events marked."""
 
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 
 from ..dataset.verify import Verifier
 from ..errors import InputError
 from ._data import (
-    channel_units,
+    channel_table,
     check_run_labels,
     constant_columns,
+    is_encoder,
     open_dataset,
     open_run,
     read_envelopes,
@@ -19,7 +21,7 @@ from ._data import (
     select_channels,
     verified,
 )
-from ._mpl import require_matplotlib
+from ._mpl import axis_label, display_unit, plain_ticks, require_matplotlib, wrap_title
 
 #: what a run figure shows unless told: span tensions with the tension readings and
 #: set-points, web speeds with the line speed set-point, dancer and festoon positions,
@@ -34,6 +36,10 @@ _QUANTITIES = ("tension", "speed", "position", "angle", "velocity", "radius", "d
                "torque", "force", "length", "strain", "inertia", "mass", "acceleration")
 _AXES_HEIGHT_IN = 2.0
 _WIDTH_IN = 10.0
+#: colour and dash pattern of the set-points of one axes, in turn: each its own, all dark
+#: (a reading is a thin coloured line, a set-point a dark dashed one)
+SETPOINT_STYLES = (("k", "--"), ("0.45", "-."), ("k", ":"), ("0.45", (0, (6, 2, 1, 2, 1, 2))),
+                   ("k", (0, (1, 1))), ("0.45", (0, (8, 3))))
 
 
 def plot_run(dataset, run_id: str | None = None, channels=None, t0: float | None = None,
@@ -43,8 +49,13 @@ def plot_run(dataset, run_id: str | None = None, channels=None, t0: float | None
     """Plot channels of one run against time.
 
     One axes per physical quantity and unit (span tensions, web speeds, positions, radii,
-    torques...), all sharing the time axis. Set-points (``sp.*``) are drawn dashed against
-    the readings. Fault windows from ``faults.parquet`` are shaded and named (a fault
+    torques...), all sharing the time axis, each labelled ``quantity (unit)`` with plain tick
+    labels (no offset; small lengths and angles in mm or mrad). Set-points (``sp.*``) are
+    drawn dark and dashed against the readings, each set-point of an axes with its own
+    colour and dash pattern (:data:`SETPOINT_STYLES`) and legend entry. An encoder's speed
+    (quantised to one count per sample period) is drawn as its mean per pixel column, the
+    speed over a longer counting window, in a light band from its minimum to its maximum
+    there. Fault windows from ``faults.parquet`` are shaded and named (a fault
     without an end lasts to the end of the run); events from ``events.parquet`` (splices,
     slack, web breaks, dancer end stops...) are vertical lines, one colour per kind. Only
     the requested columns are read, row group by row group, and each is thinned to a
@@ -108,18 +119,23 @@ def _plot_run(root, v, run_id, channels, t0, t1, n_buckets, faults, events, figs
         raise InputError(f"dataset {root}: run {run.run_id}: no samples between t0 = {t0:g} "
                          f"and t1 = {t1:g} s (the run spans {run.t_start:g} to "
                          f"{run.t_end:g} s)")
-    units = channel_units(root, v)
+    table = channel_table(root, v)
+    units = {c: table.get(c, ("", ""))[0] for c in columns}
+    encoders = {c for c in columns if is_encoder(table.get(c, ("", ""))[1])}
     groups = _group_by_quantity(columns, units)
     fig = Figure(figsize=figsize or (_WIDTH_IN, 1.0 + _AXES_HEIGHT_IN * len(groups)),
                  layout="constrained")
     n_buckets = n_buckets or int(fig.get_figwidth() * fig.dpi)
-    data = read_envelopes(run, columns, t0, t1, n_buckets)
+    data = read_envelopes(run, columns, t0, t1, n_buckets, means=encoders)
     axes = fig.subplots(len(groups), 1, sharex=True, squeeze=False)[:, 0]
-    for ax, (label, group) in zip(axes, groups.items(), strict=True):
-        _draw_channels(ax, group, data)
-        ax.set_ylabel(label)
+    for ax, ((quantity, unit), group) in zip(axes, groups.items(), strict=True):
+        factor, shown = display_unit(unit, np.concatenate(
+            [np.ravel(data[c][1:]) for c in group] or [np.empty(0)]))
+        _draw_channels(ax, group, data, factor)
+        ax.set_ylabel(axis_label(quantity, shown))
+        plain_ticks(ax, xbins=12)
     axes[-1].set_xlim(t0, t1)
-    axes[-1].set_xlabel("t [s]")
+    axes[-1].set_xlabel(axis_label("time", "s"))
     handles = []
     if faults:
         handles += _shade_faults(axes, run_rows(root, "faults.parquet", run.run_id, v),
@@ -130,7 +146,7 @@ def _plot_run(root, v, run_id, channels, t0, t1, n_buckets, faults, events, figs
     if handles:
         fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 4),
                    fontsize="small", frameon=False)
-    fig.suptitle(f"{root.name}: {run.run_id}", fontsize="medium")
+    fig.suptitle(wrap_title(f"{root.name}: {run.run_id}", fig, "medium"), fontsize="medium")
     return fig
 
 
@@ -159,36 +175,45 @@ def _channels(run, channels) -> list[str]:
 
 def _quantity(column: str, unit: str) -> str:
     """The physical quantity a column holds: a known word of its name, else its name
-    without the unit suffix (``error_N`` -> ``error``)."""
+    without the unit suffix (``error_N`` -> ``error``); a speed in rad/s is an angular
+    speed."""
     name = column.rsplit(".", 1)[-1]
     word = next((w for w in name.split("_") if w in _QUANTITIES), None)
     if word:
-        return word
+        return "angular speed" if word == "speed" and unit == "rad/s" else word
     suffix = "_" + unit.replace("/", "_").replace("*", "_").replace("^", "")
     return name[:-len(suffix)] if unit and name.endswith(suffix) else name
 
 
-def _group_by_quantity(columns: list[str], units: dict[str, str]) -> dict[str, list[str]]:
-    """Columns grouped by ``quantity [unit]`` (the axes label), in order of first use."""
-    groups: dict[str, list[str]] = {}
+def _group_by_quantity(columns: list[str], units: dict[str, str]
+                       ) -> dict[tuple[str, str], list[str]]:
+    """Columns grouped by ``(quantity, unit)`` (one axes each), in order of first use."""
+    groups: dict[tuple[str, str], list[str]] = {}
     for c in columns:
         unit = units.get(c, "")
-        q = _quantity(c, unit)
-        label = f"{q} [{unit}]" if unit and unit != "1" else q
-        groups.setdefault(label, []).append(c)
+        groups.setdefault((_quantity(c, unit), unit), []).append(c)
     return groups
 
 
-def _draw_channels(ax, columns: list[str], data: dict) -> None:
-    """One line per column: set-points dashed black, readings thin, true values solid."""
+def _draw_channels(ax, columns: list[str], data: dict, factor: float = 1.0) -> None:
+    """One line per column: each set-point dark and dashed in its own style, readings thin,
+    true values solid; an encoder (``data`` holding its bucket means, minima and maxima) as
+    its mean in a light min-max band. Values are multiplied by ``factor`` (the axes' unit)."""
+    n_sp = 0
     for c in columns:
-        t, y = data[c]
+        t, y, *band = data[c]
         if c.startswith("sp."):
-            ax.plot(t, y, color="k", ls="--", lw=1.0, label=c)
+            colour, dashes = SETPOINT_STYLES[n_sp % len(SETPOINT_STYLES)]
+            n_sp += 1
+            ax.plot(t, y * factor, color=colour, ls=dashes, lw=1.2, label=c)
+        elif band:
+            line, = ax.plot(t, y * factor, lw=1.0, label=c)
+            ax.fill_between(t, band[0] * factor, band[1] * factor, color=line.get_color(),
+                            alpha=0.25, lw=0, gid=f"band:{c}")
         elif c.startswith("meas."):
-            ax.plot(t, y, lw=0.7, alpha=0.8, label=c)
+            ax.plot(t, y * factor, lw=0.7, alpha=0.8, label=c)
         else:
-            ax.plot(t, y, lw=1.1, label=c)
+            ax.plot(t, y * factor, lw=1.1, label=c)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="x-small",
               frameon=False)
     ax.grid(True, alpha=0.3)

@@ -1,4 +1,4 @@
-"""The fault catalogue (DESIGN.md §5, fdd-benchmarks.md §6.3) and a scenario's fault entries.
+"""The fault catalogue (docs/dataset.md §5.1) and a scenario's fault entries.
 
 Every fault has an ``id``, a ``type`` from :data:`CATALOGUE`, a ``target`` (the id of a
 sensor, element, dancer or unwind, as the type says), an ``onset``, an optional ``end``, a

@@ -1,4 +1,4 @@
-"""Pydantic models of a line file (DESIGN.md §4.1).
+"""Pydantic models of a line file (README.md "A line file"; every key: docs/keys.md).
 
 A line is a list of elements in web order (unwind first, rewind last), the spans between
 consecutive elements, the web material, and the sensors and controllers as data. All

@@ -3,20 +3,22 @@
 from __future__ import annotations
 
 import codecs
+import difflib
 import json
 import math
 import os
 import re
 import stat
+import types
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal, Union, get_args, get_origin
 
 import yaml
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
 from .. import limits
-from ..errors import InputError, PlausibilityWarning
+from ..errors import InputError, PlausibilityWarning, R2RError
 from ..units import QuantityError, parse_quantity
 from . import plausibility
 from .faults import check_faults, target_problem
@@ -369,10 +371,153 @@ def _describe(err: dict) -> tuple[str, str | None]:
     return msg, None
 
 
-def validation_errors(exc: ValidationError, data: Any) -> list[tuple[str, str]]:
-    """All problems of a failed validation as ``[(yaml_path, message), ...]``."""
+def _unwrap(tp):
+    """The type inside ``Annotated[...]`` (and nested ones)."""
+    while get_origin(tp) is Annotated:
+        tp = get_args(tp)[0]
+    return tp
+
+
+def _union_members(tp) -> list | None:
+    if get_origin(tp) in (Union, types.UnionType):
+        return [_unwrap(a) for a in get_args(tp) if a is not type(None)]
+    return None
+
+
+def _is_model(tp) -> bool:
+    return isinstance(tp, type) and issubclass(tp, BaseModel)
+
+
+def _field_keys(model) -> set[str]:
+    return {k for name, f in model.model_fields.items() for k in (name, f.alias) if k}
+
+
+def _tags(model) -> set[str]:
+    """What pydantic names a union member by in an error's location: its ``type`` literal
+    (a discriminated union) and its class name."""
+    out = {model.__name__}
+    f = model.model_fields.get("type")
+    if f is not None and get_origin(_unwrap(f.annotation)) is Literal:
+        out |= {str(v) for v in get_args(_unwrap(f.annotation))}
+    return out
+
+
+def allowed_keys(tp, loc: tuple) -> set[str]:
+    """The keys a mapping at the pydantic location ``loc`` (inside a value of type ``tp``)
+    may have: the fields (and aliases) of the model(s) there; empty when there is none."""
+    tp = _unwrap(tp)
+    members = _union_members(tp)
+    if members is not None:
+        if loc and isinstance(loc[0], str):
+            tagged = [m for m in members if _is_model(m) and loc[0] in _tags(m)]
+            if tagged:
+                return set().union(*(allowed_keys(m, loc[1:]) for m in tagged))
+            if _UNION_LABEL.match(loc[0]) and not any(
+                    _is_model(m) and loc[0] in m.model_fields for m in members):
+                return set().union(*(allowed_keys(m, loc[1:]) for m in members))
+        return set().union(*(allowed_keys(m, loc) for m in members))
+    if not loc:
+        return _field_keys(tp) if _is_model(tp) else set()
+    part, rest = loc[0], loc[1:]
+    if _is_model(tp):
+        for name, f in tp.model_fields.items():
+            if part in (name, f.alias):
+                return allowed_keys(f.annotation, rest)
+        return set()
+    origin, args = get_origin(tp), get_args(tp)
+    if origin in (list, tuple, set, frozenset) and args and isinstance(part, int):
+        return allowed_keys(args[0], rest)
+    if origin is dict and len(args) == 2:
+        return allowed_keys(args[1], rest)
+    return set()
+
+
+def _parent(node: Any, parts: list) -> Any:
+    for p in parts:
+        if isinstance(node, dict) and p in node:
+            node = node[p]
+        elif isinstance(node, list) and isinstance(p, int) and p < len(node):
+            node = node[p]
+        else:
+            return None
+    return node
+
+
+def _data_parts(loc: tuple, data: Any) -> list:
+    """The parts of a pydantic location that are in the data (union tags dropped)."""
+    out, node = [], data
+    for part in loc:
+        if isinstance(node, dict) and part in node:
+            out.append(part)
+            node = node[part]
+        elif isinstance(node, list) and isinstance(part, int) and part < len(node):
+            out.append(part)
+            node = node[part]
+        elif isinstance(node, dict):
+            continue  # a union member's tag
+        else:
+            break
+    return out
+
+
+def suggestion(key: Any, allowed: set[str], present=()) -> list[str] | None:
+    """The allowed keys closest to a misspelt one (difflib, closest first; at most 3), if
+    any is close; keys the mapping already has are not suggested."""
+    if not isinstance(key, str):
+        return None
+    left = sorted(k for k in allowed if k not in present and k != key)
+    close = difflib.get_close_matches(key, left, n=3, cutoff=0.7) or \
+        difflib.get_close_matches(key.lower(), left, n=3, cutoff=0.7)
+    return close or None
+
+
+def _did_you_mean(close: list[str]) -> str:
+    names = [f"'{k}'" for k in close]
+    listed = ", ".join(names[:-1]) + " or " + names[-1] if len(names) > 1 else names[0]
+    return f" (did you mean {listed}?)"
+
+
+def _unknown_keys_first(errors: list[dict], model, data: Any) -> tuple[list[dict], dict]:
+    """Suggestions for the unknown keys (``id(err) -> key``), the unknown keys that resemble
+    a missing required key put first, and those missing-key errors dropped: the typo is the
+    one problem (``durations: 60 s`` is an unknown key, not a missing ``duration``)."""
+    hints: dict[int, list[str]] = {}
+    for err in errors:
+        if err["type"] == "extra_forbidden":
+            allowed = allowed_keys(model, tuple(err["loc"][:-1]))
+            parent = _parent(data, _data_parts(err["loc"][:-1], data))
+            hint = suggestion(err["loc"][-1], allowed,
+                              parent.keys() if isinstance(parent, dict) else ())
+            if hint is not None:
+                hints[id(err)] = hint
+    missing = {(tuple(e["loc"][:-1]), e["loc"][-1]): e for e in errors if e["type"] == "missing"}
+    first, drop = [], set()
+    for err in errors:
+        gone = [missing[key] for key in ((tuple(err["loc"][:-1]), h)
+                                         for h in hints.get(id(err), ())) if key in missing]
+        if gone:
+            first.append(err)
+            drop.add(id(gone[0]))
+    rest = [e for e in errors if id(e) not in drop and all(e is not f for f in first)]
+    return first + rest, hints
+
+
+def validation_errors(exc: ValidationError, data: Any, model=None,
+                      file: str | None = None) -> list[tuple[str, str]]:
+    """All problems of a failed validation as ``[(yaml_path, message), ...]``.
+
+    With the ``model`` validated, an unknown key gets the allowed key closest to it ("did you
+    mean ...?"), and one that resembles a missing required key is reported first, instead of
+    that key's absence. With the ``file`` the data was read from, the path of an unknown key
+    is preceded by its line in the file (``line 4: durations``), and the message followed by
+    that line of the file."""
+    errors = _union_errors(exc.errors(), data)
+    hints: dict = {}
+    if model is not None:
+        errors, hints = _unknown_keys_first(errors, model, data)
+    source = None
     out = []
-    for err in _union_errors(exc.errors(), data):
+    for err in errors:
         msg, extra = _describe(err)
         m = _CROSS.match(msg)
         if m:
@@ -381,19 +526,67 @@ def validation_errors(exc: ValidationError, data: Any) -> list[tuple[str, str]]:
         path = _yaml_path(err["loc"], data)
         if extra:
             path = f"{path}.{extra}" if path else extra
+        if err["type"] == "extra_forbidden":
+            if id(err) in hints:
+                msg += _did_you_mean(hints[id(err)])
+            if file is not None:
+                if source is None:
+                    source = _SourceLines(file)
+                where = source.key_line(_data_parts(err["loc"], data))
+                if where is not None:
+                    number, text = where
+                    path = f"line {number}: {path}" if path else f"line {number}"
+                    msg += f"\n    {text}"
         out.append((path, msg))
     return out
+
+
+class _SourceLines:
+    """The lines of a YAML file where keys are, read again only when an error needs them."""
+
+    def __init__(self, file: str):
+        self.root = None
+        try:
+            path = Path(file)
+            if path.is_file():
+                self.text = _decode(_read_bytes(path), file)
+                self.root = yaml.compose(self.text, Loader=_BaseLoader)
+        except (R2RError, OSError, yaml.YAMLError, RecursionError, ValueError):
+            self.root = None
+
+    def key_line(self, parts: list) -> tuple[int, str] | None:
+        """``(line number, the line's text)`` of the key at ``parts`` in the file (None when
+        the file does not have it there: the data came from elsewhere, e.g. a sweep)."""
+        node, key_node = self.root, None
+        for part in parts:
+            if isinstance(node, yaml.MappingNode):
+                found = [(k, v) for k, v in node.value
+                         if isinstance(k, yaml.ScalarNode) and k.value == str(part)]
+                if not found:
+                    return None
+                key_node, node = found[-1]
+            elif isinstance(node, yaml.SequenceNode) and isinstance(part, int) and \
+                    part < len(node.value):
+                key_node, node = None, node.value[part]
+            else:
+                return None
+        if key_node is None:
+            return None
+        i = key_node.start_mark.line
+        lines = self.text.splitlines()
+        return (i + 1, lines[i].strip()) if i < len(lines) else None
 
 
 def _validate(model, data: Any, file: str):
     try:
         return model.model_validate(data)
     except ValidationError as exc:
-        problems = validation_errors(exc, data)
+        problems = validation_errors(exc, data, model, file)
         path, msg = problems[0]
         if len(problems) > 1:
+            msg, nl, quoted = msg.partition("\n")  # the quoted source line stays last
             msg += f" (and {len(problems) - 1} more problem{'s' if len(problems) > 2 else ''}; " \
-                   f"`r2rsim validate` lists them all)"
+                   f"`r2rsim validate` lists them all){nl}{quoted}"
         err = InputError(msg, file=file, path=path or None)
         err.problems = problems
         raise err from None

@@ -14,8 +14,9 @@ tensions that are rounding noise, without a word. Two levels:
 * **warning** (:class:`r2rsim.errors.PlausibilityWarning`): possible but far outside the
   ranges of ``physics.md`` §2 (the user may mean it: a 10 mm tape, a 60 m/s line), or a
   choice with a silent consequence (a web with no break stress never breaks, a set-point
-  above the break tension breaks the web). ``r2rsim`` prints warnings as
-  ``warning: file: path: message`` and runs on.
+  above the break tension breaks the web, unless the loop commands a roll's torque and the
+  drive's torque_max / R stays below the break tension: the warning then says so). ``r2rsim``
+  prints warnings as ``warning: file: path: message`` and runs on.
 
 Each check is a ``(level, yaml_path, message)``; :func:`line_problems` and
 :func:`scenario_problems` return them all, and the loader raises or warns.
@@ -239,7 +240,7 @@ def line_problems(line) -> list[tuple[str, str, str]]:
     # tension set-points
     for j, c in enumerate(line.controllers):
         if c.type == "tension_pi":
-            out += tension_problems(line, c.setpoint, f"controllers[{j}].setpoint")
+            out += tension_problems(line, c.setpoint, f"controllers[{j}].setpoint", c.id)
     out += magnitude_problems(line, {path for level, path, _ in out if level == ERROR})
     if not any(level == ERROR for level, _, _ in out):  # the loop estimates need a sane web
         out += controller_problems(line)
@@ -534,8 +535,55 @@ def magnitude_problems(model, reported: set[str] | None = None) -> list[tuple[st
     return out
 
 
-def tension_problems(line, tension: float, path: str) -> list[tuple[str, str, str]]:
-    """A tension set-point or initial tension against the web's break tension and EA."""
+def _torque_mode_roll(line, controller_id: str | None):
+    """The unwind or rewind a tension loop commands the torque of, when its drive saturates
+    (``torque_max``); else None."""
+    c = next((c for c in line.controllers if c.id == controller_id), None)
+    if c is None or c.type != "tension_pi":
+        return None
+    e = next((e for e in line.elements if e.id == c.element), None)
+    drive = getattr(e, "drive", None)
+    if e is None or e.type not in ("unwind", "rewind") or drive is None or \
+            drive.type != "torque" or drive.torque_max is None or getattr(e, "roll", None) is None:
+        return None
+    if any(o.type == "speed_pi" and o.element == e.id for o in line.controllers):
+        return None  # a speed trim: the tension comes from the draw, not from this torque
+    return e
+
+
+def _break_by_torque(line, tension: float, controller_id: str | None) -> str:
+    """What a tension set-point above the break tension does, when the loop commands the
+    torque of a roll: the drive holds at most torque_max / R (the tension of a static
+    balance of the roll; accelerating its inertia adds to it), so the web breaks only if
+    that reaches the break tension at a radius the roll passes through."""
+    T_break = line.web.break_tension
+    e = _torque_mode_roll(line, controller_id)
+    if e is None:
+        return ": the web breaks"
+    tau, r0, core = e.drive.torque_max, e.roll.outer_radius, e.roll.core_radius
+    held0 = tau / r0
+    why = (f"'{controller_id}' commands the torque of '{e.id}', whose torque_max "
+           f"{_fmt(tau)} N m holds at most torque_max / R = {_fmt(held0)} N at its starting "
+           f"radius {_fmt(r0)} m")
+    if held0 >= T_break:
+        return ": the web breaks"
+    if e.type == "unwind" and tau / core >= T_break:
+        return (f": the web breaks only once the roll has unwound to a radius of "
+                f"{_fmt(tau / T_break)} m (torque_max / break tension): {why}")
+    if e.type == "unwind":
+        why += f" and {_fmt(tau / core)} N at its core radius {_fmt(core)} m"
+    else:
+        why += " (less as the roll grows)"
+    return (f", but the web does not break: {why}; the drive saturates and the tension stays "
+            "below the set-point and the break tension (the dynamic tension of accelerating "
+            "the roll aside)")
+
+
+def tension_problems(line, tension: float, path: str,
+                     controller_id: str | None = None) -> list[tuple[str, str, str]]:
+    """A tension set-point or initial tension against the web's break tension and EA; a
+    set-point of ``controller_id`` above the break tension also against what its drive can
+    hold (:func:`_break_by_torque`)."""
     web = line.web
     if tension > FORCE_MAX:
         return [(ERROR, path, _outside("tension", tension, "N", 0.0, FORCE_MAX, "film and "
@@ -544,8 +592,8 @@ def tension_problems(line, tension: float, path: str) -> list[tuple[str, str, st
     out = []
     if tension > web.break_tension:
         out.append((WARNING, path, f"{_fmt(tension)} N is above the web's break tension "
-                    f"{_fmt(web.break_tension)} N (break_stress x thickness x width): the web "
-                    "breaks"))
+                    f"{_fmt(web.break_tension)} N (break_stress x thickness x width)"
+                    f"{_break_by_torque(line, tension, controller_id)}"))
     if 0 < tension / web.EA < STRAIN_RESOLUTION:
         out.append((WARNING, path, f"{_fmt(tension)} N stretches the web by only "
                     f"{tension / web.EA:.1e} (T/EA, EA = {_fmt(web.EA)} N): below 1e-9 the span "
@@ -655,7 +703,7 @@ def scenario_problems(scenario, line) -> list[tuple[str, str, str]]:
                 out.append((WARNING, f"{p}.line_speed", f"{_fmt(st.line_speed)} m/s is faster "
                             "than any line in physics.md §2.2 (paper machines: 15-35 m/s)"))
         for cid, T in (st.tension or {}).items():
-            out += tension_problems(line, T, f"{p}.tension.{cid}")
+            out += tension_problems(line, T, f"{p}.tension.{cid}", cid)
     init = scenario.initial
     if init.tension is not None:
         out += [(lvl, path, msg + ("" if "break tension" not in msg else

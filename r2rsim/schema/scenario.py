@@ -1,4 +1,4 @@
-"""Pydantic models of a scenario file (DESIGN.md §4.2; the minimal form of issue 2).
+"""Pydantic models of a scenario file (README.md "A scenario file"; every key: docs/keys.md).
 
 A scenario names a line, a duration, a record rate, a seed, an output location, the initial
 state, an operating programme of set-point changes (with operating-mode names), scheduled

@@ -11,6 +11,7 @@ a Dask cluster); finished runs are kept and skipped when the sweep is run again.
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from dataclasses import dataclass, field
@@ -19,11 +20,21 @@ from pathlib import Path
 from .. import limits
 from ..dataset.paths import check_writable
 from ..errors import InputError
+from ..units import QuantityError, parse_quantity
 from ._plan import RunSpec, SweepPlan, load_sweep, plan_sweep
 from ._store import Outcome, SweepStore, write_failure
 
-__all__ = ["RunSpec", "SweepPlan", "SweepSummary", "default_workers", "load_sweep",
-           "plan_sweep", "run_sweep"]
+__all__ = ["RunSpec", "SweepPlan", "SweepSummary", "choose_workers", "default_workers",
+           "load_sweep", "plan_sweep", "planned_seconds", "run_sweep"]
+
+#: simulated seconds of runs that pay for one more local worker process. A worker's start
+#: (spawn, imports, loading numba's cached kernels) costs ~1.4-1.8 s of CPU, while the
+#: shipped lines simulate 1 s in ~1-4 ms of CPU (~0.1 s per run on top): on 2 cores, 2
+#: workers were slower than 1 for every sweep up to 2400 simulated s and no faster at 7200 s
+#: (a shared machine, load 2-6); on an idle one the second worker's share of the runs
+#: outweighs its start from ~4-5 s of serial CPU, ~1200-1500 simulated s of the heavier line
+#: (docs/sweeps.md §6 has the measurements).
+SIM_S_PER_WORKER = 2000.0
 
 
 def default_workers() -> int:
@@ -32,6 +43,37 @@ def default_workers() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not Linux
         return os.cpu_count() or 1
+
+
+def planned_seconds(specs) -> float:
+    """The simulated seconds the runs ``specs`` are planned for (each run's ``duration``,
+    with the sweep's overrides applied)."""
+    total = 0.0
+    for spec in specs:
+        try:
+            total += parse_quantity(spec.scenario_data.get("duration"), "time")
+        except (QuantityError, TypeError, ValueError):  # validated: not expected
+            total += SIM_S_PER_WORKER
+    return total
+
+
+def choose_workers(planned_s: float, n_runs: int, cores: int | None = None) -> int:
+    """The default number of local worker processes: one per :data:`SIM_S_PER_WORKER`
+    simulated seconds of planned runs (rounded up), at most one per core and per run, and
+    at least one. ``--workers N`` overrides it.
+
+    Parameters
+    ----------
+    planned_s : float
+        Simulated seconds of the runs to do (:func:`planned_seconds`).
+    n_runs : int
+        How many runs there are to do.
+    cores : int, optional
+        The cores this process may use (default :func:`default_workers`).
+    """
+    cores = default_workers() if cores is None else cores
+    want = math.ceil(planned_s / SIM_S_PER_WORKER) if planned_s > 0 else 1
+    return max(1, min(cores, n_runs, want))
 
 
 @dataclass
@@ -106,8 +148,9 @@ def run_sweep(sweep_path: str | Path, output: str | Path | None = None, *,
         The dataset directory (default: the sweep's ``output``, else ``runs/<name>``). A
         directory holding this sweep, finished or not, is continued.
     workers : int, optional
-        Local worker processes (default: the number of cores); 0 runs in this process.
-        With ``scheduler: local`` the workers of the LocalCluster.
+        Local worker processes (default: by the work, :func:`choose_workers`: one per 2000
+        simulated seconds of runs to do, at most one per core); 0 runs in this process.
+        With ``scheduler: local`` the workers of the LocalCluster (default: one per core).
     scheduler : str, optional
         A Dask scheduler address, or ``local`` to start a LocalCluster.
     retry_failed : bool
@@ -139,6 +182,7 @@ def run_sweep(sweep_path: str | Path, output: str | Path | None = None, *,
     t0 = time.perf_counter()
     plan = plan_sweep(sweep_path)
     out = Path(output) if output is not None else plan.default_output
+    chosen = workers is None and scheduler is None  # by the work, once it is known
     workers = default_workers() if workers is None else workers
     if workers < 0 or (scheduler is not None and workers < 1):
         raise InputError(f"--workers must be >= {1 if scheduler else 0}, got {workers}")
@@ -149,8 +193,11 @@ def run_sweep(sweep_path: str | Path, output: str | Path | None = None, *,
     store.inspect()
     outcomes = store.outcomes(retry_failed)
     todo = [s for s in plan.runs if s.run_id not in outcomes]
+    planned = planned_seconds(todo) if chosen else None
+    if chosen:
+        workers = choose_workers(planned, len(todo), workers)
     summary = SweepSummary(out, len(plan.runs), warnings=plan.warnings,
-                           executor=_describe(workers, scheduler))
+                           executor=_describe(workers, scheduler, planned))
     summary.skipped = len(outcomes)
     summary.skipped_failed = sum(o.status == "failed" for o in outcomes.values())
     summary.failures = [(k, o.reason) for k, o in outcomes.items() if o.status == "failed"]
@@ -196,9 +243,14 @@ def run_sweep(sweep_path: str | Path, output: str | Path | None = None, *,
     return summary
 
 
-def _describe(workers: int, scheduler: str | None) -> str:
+def _describe(workers: int, scheduler: str | None, planned_s: float | None = None) -> str:
+    """The executor line of the summary; ``planned_s``: the workers were chosen by the
+    work (:func:`choose_workers`), which it says."""
     if scheduler == "local":
         return f"Dask LocalCluster, {workers} worker processes"
     if scheduler is not None:
         return f"Dask scheduler {scheduler}"
-    return "this process (serial)" if workers == 0 else f"{workers} local worker processes"
+    if workers == 0:
+        return "this process (serial)"
+    text = f"{workers} local worker process{'es' if workers != 1 else ''}"
+    return text if planned_s is None else f"{text} (the default for {planned_s:.3g} s of runs)"

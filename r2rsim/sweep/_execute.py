@@ -265,7 +265,8 @@ def _distributed():
         import distributed
     except ImportError:
         raise InputError("--scheduler needs dask.distributed: pip install "
-                         "'r2rsim[dask]'") from None
+                         "'dask[distributed]' (or pip install -e \".[dask]\" in the r2rsim "
+                         "checkout)") from None
     return distributed
 
 

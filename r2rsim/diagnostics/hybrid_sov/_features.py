@@ -48,7 +48,7 @@ def wavelet_denoise(x: np.ndarray, wavelet: str = "db4", level: int | None = Non
     Raises
     ------
     InputError
-        When PyWavelets is not installed (``pip install r2rsim[wavelet]``).
+        When PyWavelets is not installed (``pip install PyWavelets``, the ``[wavelet]`` extra).
     """
     try:
         import pywt
