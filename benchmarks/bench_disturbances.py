@@ -49,18 +49,24 @@ HARDER = [
     {"type": "out_of_round", "element": "reg_drive", "eccentricity": "0.02 mm"},
     {"type": "bearing_drag", "element": "in_idler", "std": "0.02 N*m", "bandwidth": "2 Hz"},
     {"type": "bearing_drag", "element": "reg_idler", "std": "0.02 N*m", "bandwidth": "2 Hz"},
-    {"type": "wound_in_strain", "element": "unwind", "std": 3e-5,
-     "correlation_length": "5 m"},
+    {"type": "wound_in_strain", "element": "unwind", "std": 3e-5, "correlation_length": "5 m"},
 ]
 
 
 def prepare(tmp: Path, speed: float, duration: float, disturbances: list, name: str):
     """Compile the scenario as ``r2rsim run`` does; return (compiled line, y0, scenario,
     path of the scenario file)."""
-    sc = {"name": name, "line": str(ROOT / "lines" / "registration.yaml"),
-          "duration": duration, "record_rate": 100.0, "seed": 100, "warmup": 5.0,
-          "initial": {"state": "steady"},
-          "programme": [{"at": 0, "line_speed": speed}], "disturbances": disturbances}
+    sc = {
+        "name": name,
+        "line": str(ROOT / "lines" / "registration.yaml"),
+        "duration": duration,
+        "record_rate": 100.0,
+        "seed": 100,
+        "warmup": 5.0,
+        "initial": {"state": "steady"},
+        "programme": [{"at": 0, "line_speed": speed}],
+        "disturbances": disturbances,
+    }
     path = tmp / f"{name}.yaml"
     path.write_text(yaml.safe_dump(sc))
     scenario, line, _ = load_scenario(path)
@@ -82,8 +88,14 @@ def measure(cl, y0, scenario, repeat: int):
     walls, res = [], None
     for _ in range(repeat):
         t0 = time.perf_counter()
-        res = r2rsim.simulate(cl, scenario.duration, scenario.record_rate, y0,
-                              scenario.solver, on_chunk=lambda t, Y, A: None)
+        res = r2rsim.simulate(
+            cl,
+            scenario.duration,
+            scenario.record_rate,
+            y0,
+            scenario.solver,
+            on_chunk=lambda t, Y, A: None,
+        )
         walls.append(time.perf_counter() - t0)
     walls.sort()
     return walls[len(walls) // 2], res.stats["nfev"], res.stats["steps"], res.terminated
@@ -98,13 +110,13 @@ def _tension_error(out: Path, reference: Path) -> float:
     return float(np.max(np.abs(a[cols].to_numpy(float) - b[cols].to_numpy(float))))
 
 
-def realistic(repeat: int, rtol: float | None = None, atol_scale: float | None = None
-              ) -> None:
+def realistic(repeat: int, rtol: float | None = None, atol_scale: float | None = None) -> None:
     """The bar on the calibrated set's base scenario: whole runs, with and without its
     disturbances, alternated so that machine load hits both alike; with tolerances, also
     the error they cost against a tight reference."""
-    base = yaml.safe_load((ROOT / "scenarios" / "thesis_realistic" / "registration.yaml")
-                          .read_text())
+    base = yaml.safe_load(
+        (ROOT / "scenarios" / "thesis_realistic" / "registration.yaml").read_text()
+    )
     base["line"] = str(ROOT / "lines" / "registration_realistic.yaml")
     solver = {k: v for k, v in (("rtol", rtol), ("atol_scale", atol_scale)) if v is not None}
     if solver:
@@ -113,16 +125,26 @@ def realistic(repeat: int, rtol: float | None = None, atol_scale: float | None =
     worst = 1.0
     with tempfile.TemporaryDirectory() as td:
         tmp = Path(td)
-        print(f"calibrated set base run, {base['duration']}, whole r2rsim run: median of "
-              f"{repeat}; solver {solver or 'as the scenario (rtol 1e-6)'}")
-        print(f"{'condition':>9} {'without s':>10} {'with s':>8} {'RTF without':>12} "
-              f"{'RTF with':>9} {'ratio':>6}" + (f" {'max |dT| N':>11}" if solver else ""))
+        print(
+            f"calibrated set base run, {base['duration']}, whole r2rsim run: median of "
+            f"{repeat}; solver {solver or 'as the scenario (rtol 1e-6)'}"
+        )
+        print(
+            f"{'condition':>9} {'without s':>10} {'with s':>8} {'RTF without':>12} "
+            f"{'RTF with':>9} {'ratio':>6}" + (f" {'max |dT| N':>11}" if solver else "")
+        )
         for mode, (v, T) in conditions.items():
             paths = {}
             for label in ("without", "with"):
                 sc = dict(base, name=f"{label}_{mode}")
-                sc["programme"] = [{"at": 0, "line_speed": v, "mode": mode, "tension": {
-                    "registration_loop": T, "unwind_tension": T}}]
+                sc["programme"] = [
+                    {
+                        "at": 0,
+                        "line_speed": v,
+                        "mode": mode,
+                        "tension": {"registration_loop": T, "unwind_tension": T},
+                    }
+                ]
                 if label == "without":
                     sc["disturbances"] = []
                 paths[label] = tmp / f"{label}_{mode}.yaml"
@@ -145,10 +167,14 @@ def realistic(repeat: int, rtol: float | None = None, atol_scale: float | None =
                 paths["ref"].write_text(yaml.safe_dump(ref))
                 r2rsim.run_scenario(paths["ref"], output=tmp / "out_ref", overwrite=True)
                 err = f" {_tension_error(tmp / 'out_with', tmp / 'out_ref'):11.4f}"
-            print(f"{mode:>9} {w0:10.2f} {w1:8.2f} {duration / w0:12.0f} {duration / w1:9.0f} "
-                  f"{w0 / w1:6.2f}" + err)
-    print(f"bar: RTF with disturbances >= 50 % of without: {'PASS' if worst >= 0.5 else 'FAIL'}"
-          f" (worst {worst * 100:.0f} %)")
+            print(
+                f"{mode:>9} {w0:10.2f} {w1:8.2f} {duration / w0:12.0f} {duration / w1:9.0f} "
+                f"{w0 / w1:6.2f}" + err
+            )
+    print(
+        f"bar: RTF with disturbances >= 50 % of without: {'PASS' if worst >= 0.5 else 'FAIL'}"
+        f" (worst {worst * 100:.0f} %)"
+    )
 
 
 def main() -> None:
@@ -156,8 +182,11 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=120.0)
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--speeds", type=float, nargs="+", default=[0.5, 1.0])
-    ap.add_argument("--realistic", action="store_true",
-                    help="measure the calibrated set's base scenario (whole runs)")
+    ap.add_argument(
+        "--realistic",
+        action="store_true",
+        help="measure the calibrated set's base scenario (whole runs)",
+    )
     ap.add_argument("--rtol", type=float, help="with --realistic: both runs' rtol")
     ap.add_argument("--atol-scale", type=float, help="with --realistic: both runs' atol_scale")
     args = ap.parse_args()
@@ -168,10 +197,11 @@ def main() -> None:
         tmp = Path(td)
         cl, y0, sc, _ = prepare(tmp, 0.5, 1.0, HARDER, "warm")
         r2rsim.simulate(cl, 1.0, 100.0, y0, sc.solver)  # compile the kernels, not timed
-        print(f"registration line, {args.duration:g} s, 100 Hz; solver: median of "
-              f"{args.repeat}")
-        print(f"{'speed':>7} {'disturbances':>12} {'wall s':>8} {'RTF':>7} {'RHS':>8} "
-              f"{'steps':>7} {'run wall s':>10} {'run RTF':>8}")
+        print(f"registration line, {args.duration:g} s, 100 Hz; solver: median of {args.repeat}")
+        print(
+            f"{'speed':>7} {'disturbances':>12} {'wall s':>8} {'RTF':>7} {'RHS':>8} "
+            f"{'steps':>7} {'run wall s':>10} {'run RTF':>8}"
+        )
         ratios = {"solver": [], "run": []}
         for v in args.speeds:
             rows = {}
@@ -183,17 +213,23 @@ def main() -> None:
                 r2rsim.run_scenario(path, output=tmp / f"out_{name}")
                 run_wall = time.perf_counter() - t0
                 rows[label] = (wall, nfev, steps, run_wall)
-                print(f"{v:>3g} m/s {label:>12} {wall:8.3f} {args.duration / wall:7.0f} "
-                      f"{nfev:8d} {steps:7d} {run_wall:10.3f} {args.duration / run_wall:8.0f}"
-                      + ("  (terminated)" if term else ""))
+                print(
+                    f"{v:>3g} m/s {label:>12} {wall:8.3f} {args.duration / wall:7.0f} "
+                    f"{nfev:8d} {steps:7d} {run_wall:10.3f} {args.duration / run_wall:8.0f}"
+                    + ("  (terminated)" if term else "")
+                )
             (w0, f0, s0, r0), (w1, f1, s1, r1) = rows["without"], rows["with"]
             ratios["solver"].append(w0 / w1)
             ratios["run"].append(r0 / r1)
-            print(f"{'':>7} with/without: solver RTF x{w0 / w1:.2f} (RHS x{f1 / f0:.0f}, "
-                  f"steps x{s1 / s0:.0f}), run RTF x{r0 / r1:.2f}")
+            print(
+                f"{'':>7} with/without: solver RTF x{w0 / w1:.2f} (RHS x{f1 / f0:.0f}, "
+                f"steps x{s1 / s0:.0f}), run RTF x{r0 / r1:.2f}"
+            )
         for what, r in ratios.items():
-            print(f"bar ({what}): RTF with disturbances >= 50 % of without: "
-                  f"{'PASS' if min(r) >= 0.5 else 'FAIL'} (worst {min(r) * 100:.0f} %)")
+            print(
+                f"bar ({what}): RTF with disturbances >= 50 % of without: "
+                f"{'PASS' if min(r) >= 0.5 else 'FAIL'} (worst {min(r) * 100:.0f} %)"
+            )
 
 
 if __name__ == "__main__":

@@ -34,23 +34,46 @@ DEFAULT = REPO / "scenarios" / "thesis_normal_cycles.yaml"
 def _measure(scenario: str, duration: float) -> None:
     """Helper mode: one ``r2rsim run`` subprocess; print its peak RSS (KiB) as JSON."""
     with tempfile.TemporaryDirectory(prefix="r2rsim-mem-") as tmp:
-        cmd = [sys.executable, "-m", "r2rsim.cli", "run", scenario, "-o",
-               str(Path(tmp) / "ds"), "--duration", repr(duration), "-q"]
+        cmd = [
+            sys.executable,
+            "-m",
+            "r2rsim.cli",
+            "run",
+            scenario,
+            "-o",
+            str(Path(tmp) / "ds"),
+            "--duration",
+            repr(duration),
+            "-q",
+        ]
         p = subprocess.run(cmd, capture_output=True, text=True)
         usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-        samples = next((ln.split()[-2] for ln in p.stdout.splitlines()
-                        if ln.startswith("simulated")), "?")
+        samples = next(
+            (ln.split()[-2] for ln in p.stdout.splitlines() if ln.startswith("simulated")), "?"
+        )
     # ru_maxrss is in KiB on Linux (bytes on macOS)
     scale = 1 if sys.platform != "darwin" else 1 / 1024
-    print(json.dumps({"returncode": p.returncode, "maxrss_kib": usage.ru_maxrss * scale,
-                      "cpu_s": usage.ru_utime + usage.ru_stime, "samples": samples,
-                      "stderr": p.stderr[-500:]}))
+    print(
+        json.dumps(
+            {
+                "returncode": p.returncode,
+                "maxrss_kib": usage.ru_maxrss * scale,
+                "cpu_s": usage.ru_utime + usage.ru_stime,
+                "samples": samples,
+                "stderr": p.stderr[-500:],
+            }
+        )
+    )
 
 
 def measure(scenario: str, duration: float) -> dict:
     """Peak RSS of one ``r2rsim run`` of ``scenario`` for ``duration`` seconds."""
-    p = subprocess.run([sys.executable, __file__, "--one", scenario, "--duration",
-                        repr(duration)], capture_output=True, text=True, check=True)
+    p = subprocess.run(
+        [sys.executable, __file__, "--one", scenario, "--duration", repr(duration)],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     res = json.loads(p.stdout.strip().splitlines()[-1])
     if res["returncode"] != 0:
         raise SystemExit(f"r2rsim run failed ({res['returncode']}): {res['stderr']}")
@@ -60,8 +83,12 @@ def measure(scenario: str, duration: float) -> dict:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scenario", nargs="?", default=str(DEFAULT))
-    ap.add_argument("--duration", type=float, default=150.0,
-                    help="simulated time of the 1x run [s] (default 150)")
+    ap.add_argument(
+        "--duration",
+        type=float,
+        default=150.0,
+        help="simulated time of the 1x run [s] (default 150)",
+    )
     ap.add_argument("--factor", type=float, default=10.0, help="length of the long run")
     ap.add_argument("--one", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -75,9 +102,11 @@ def main(argv: list[str] | None = None) -> int:
         d = args.duration * mult
         res = measure(args.scenario, d)
         rows.append((d, res))
-        print(f"{Path(args.scenario).name} {d:8.1f} s  {res['samples']:>9} samples  "
-              f"peak RSS {res['maxrss_kib'] / 1024:8.1f} MiB  (cpu {res['cpu_s']:.1f} s)",
-              flush=True)
+        print(
+            f"{Path(args.scenario).name} {d:8.1f} s  {res['samples']:>9} samples  "
+            f"peak RSS {res['maxrss_kib'] / 1024:8.1f} MiB  (cpu {res['cpu_s']:.1f} s)",
+            flush=True,
+        )
     ratio = rows[1][1]["maxrss_kib"] / rows[0][1]["maxrss_kib"]
     print(f"ratio {args.factor:g}x / 1x: {ratio:.2f} (target <= 1.3)")
     return 0

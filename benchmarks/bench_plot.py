@@ -48,8 +48,12 @@ SPIKE_AT = 0.3427  # one sample of state.span3.tension_N, this far into the run,
 SPIKE_N = 1.0e4
 _SPANS = [f"span{i}" for i in range(1, 6)]
 _NODES = ["unwind", "idler1", "swrapA", "swrapB", "pull", "rewind"]
-_SENSORS = [("lc_unwind", "tension_N", "N"), ("lc_rewind", "tension_N", "N"),
-            ("enc_pull", "speed_rad_s", "rad/s"), ("dia_unwind", "diameter_m", "m")]
+_SENSORS = [
+    ("lc_unwind", "tension_N", "N"),
+    ("lc_rewind", "tension_N", "N"),
+    ("enc_pull", "speed_rad_s", "rad/s"),
+    ("dia_unwind", "diameter_m", "m"),
+]
 
 
 def channel_table() -> list[tuple[str, str]]:
@@ -58,18 +62,31 @@ def channel_table() -> list[tuple[str, str]]:
     for s, q, unit in _SENSORS:
         cols += [(f"meas.{s}.{q}", unit), (f"true.{s}.{q}", unit), (f"ctrl.{s}.{q}", unit)]
     for s in _SPANS:
-        cols += [(f"state.{s}.tension_N", "N"), (f"state.{s}.geometric_strain", "1"),
-                 (f"state.{s}.length_m", "m")]
+        cols += [
+            (f"state.{s}.tension_N", "N"),
+            (f"state.{s}.geometric_strain", "1"),
+            (f"state.{s}.length_m", "m"),
+        ]
     for n in _NODES:
-        cols += [(f"state.{n}.surface_speed_m_s", "m/s"), (f"state.{n}.speed_rad_s", "rad/s"),
-                 (f"state.{n}.radius_m", "m"), (f"state.{n}.inertia_kg_m2", "kg*m^2"),
-                 (f"state.{n}.web_mass_kg", "kg"), (f"act.{n}.torque_N_m", "N*m"),
-                 (f"cmd.{n}.torque_N_m", "N*m"), (f"state.{n}.tension_ratio", "1")]
+        cols += [
+            (f"state.{n}.surface_speed_m_s", "m/s"),
+            (f"state.{n}.speed_rad_s", "rad/s"),
+            (f"state.{n}.radius_m", "m"),
+            (f"state.{n}.inertia_kg_m2", "kg*m^2"),
+            (f"state.{n}.web_mass_kg", "kg"),
+            (f"act.{n}.torque_N_m", "N*m"),
+            (f"cmd.{n}.torque_N_m", "N*m"),
+            (f"state.{n}.tension_ratio", "1"),
+        ]
     for c in ("pull_speed", "swrapA_speed", "swrapB_speed", "unwind_tension", "rewind_tension"):
         cols += [(f"ctrl.{c}.error", ""), (f"ctrl.{c}.output", ""), (f"ctrl.{c}.integral", "")]
-    cols += [("sp.line_speed_m_s", "m/s"), ("sp.line_acceleration_m_s2", "m/s^2"),
-             ("sp.unwind_tension.tension_N", "N"), ("sp.rewind_tension.tension_N", "N"),
-             ("label.severity", "1")]
+    cols += [
+        ("sp.line_speed_m_s", "m/s"),
+        ("sp.line_acceleration_m_s2", "m/s^2"),
+        ("sp.unwind_tension.tension_N", "N"),
+        ("sp.rewind_tension.tension_N", "N"),
+        ("label.severity", "1"),
+    ]
     return cols
 
 
@@ -89,8 +106,10 @@ def make_dataset(root: Path, seconds: float = 3600.0, rate: float = 1000.0) -> P
     cols = channel_table()
     fields = [pa.field("k", pa.int64()), pa.field("t_s", pa.float64())]
     fields += [pa.field(c, pa.float32()) for c, _ in cols]
-    fields += [pa.field("label.is_faulty", pa.bool_()),
-               pa.field("label.primary_type", pa.dictionary(pa.int8(), pa.string()))]
+    fields += [
+        pa.field("label.is_faulty", pa.bool_()),
+        pa.field("label.primary_type", pa.dictionary(pa.int8(), pa.string())),
+    ]
     schema = pa.schema(fields)
     n = int(round(seconds * rate)) + 1
     rows_per_group = (16 << 20) // (8 + 8 + 4 * len(cols) + 2)
@@ -98,9 +117,15 @@ def make_dataset(root: Path, seconds: float = 3600.0, rate: float = 1000.0) -> P
     folder.mkdir(parents=True)
     rng = np.random.default_rng(0)
     floats = [f.name for f in fields if pa.types.is_floating(f.type)]
-    with pq.ParquetWriter(folder / "part-0.parquet", schema, compression="zstd",
-                          compression_level=3, use_byte_stream_split=floats,
-                          use_dictionary=["label.primary_type"], write_statistics=True) as w:
+    with pq.ParquetWriter(
+        folder / "part-0.parquet",
+        schema,
+        compression="zstd",
+        compression_level=3,
+        use_byte_stream_split=floats,
+        use_dictionary=["label.primary_type"],
+        write_statistics=True,
+    ) as w:
         for k0 in range(0, n, rows_per_group):
             k = np.arange(k0, min(n, k0 + rows_per_group))
             t = k / rate
@@ -114,20 +139,41 @@ def make_dataset(root: Path, seconds: float = 3600.0, rate: float = 1000.0) -> P
             arrays.append(pa.array(faulty))
             arrays.append(pa.array(np.where(faulty, "sensor.offset", "normal")).dictionary_encode())
             w.write_table(pa.Table.from_arrays(arrays, schema=schema), row_group_size=len(k))
-    pq.write_table(pa.table({"run_id": [RUN_ID], "sample_period_s": [1 / rate],
-                             "duration_s": [seconds]}), root / "runs.parquet")
-    pq.write_table(pa.table({"channel": [c for c, _ in cols], "unit": [u for _, u in cols]}),
-                   root / "channels.parquet")
-    pq.write_table(pa.table({"run_id": [RUN_ID] * 2, "fault_id": ["lc_offset", "drag"],
-                             "fault_type": ["sensor.offset", "process.bearing_friction"],
-                             "onset_t_s": [600.0, 2400.0], "end_t_s": [900.0, None]}),
-                   root / "faults.parquet")
+    pq.write_table(
+        pa.table({"run_id": [RUN_ID], "sample_period_s": [1 / rate], "duration_s": [seconds]}),
+        root / "runs.parquet",
+    )
+    pq.write_table(
+        pa.table({"channel": [c for c, _ in cols], "unit": [u for _, u in cols]}),
+        root / "channels.parquet",
+    )
+    pq.write_table(
+        pa.table(
+            {
+                "run_id": [RUN_ID] * 2,
+                "fault_id": ["lc_offset", "drag"],
+                "fault_type": ["sensor.offset", "process.bearing_friction"],
+                "onset_t_s": [600.0, 2400.0],
+                "end_t_s": [900.0, None],
+            }
+        ),
+        root / "faults.parquet",
+    )
     ev_t = [1800.0, 1830.0, 1850.0]
-    pq.write_table(pa.table({"run_id": [RUN_ID] * 3, "t_s": ev_t,
-                             "kind": ["splice", "splice", "slack"],
-                             "component": ["unwind", "unwind", "span2"],
-                             "state": ["fill", "complete", "start"], "message": [""] * 3,
-                             "values_json": ["{}"] * 3}), root / "events.parquet")
+    pq.write_table(
+        pa.table(
+            {
+                "run_id": [RUN_ID] * 3,
+                "t_s": ev_t,
+                "kind": ["splice", "splice", "slack"],
+                "component": ["unwind", "unwind", "span2"],
+                "state": ["fill", "complete", "start"],
+                "message": [""] * 3,
+                "values_json": ["{}"] * 3,
+            }
+        ),
+        root / "events.parquet",
+    )
     write_manifest(root)
     return root
 
@@ -138,11 +184,18 @@ def write_manifest(root: Path) -> None:
     from r2rsim.dataset.paths import sha256_file
     from r2rsim.dataset.writer import SCHEMA_VERSION
 
-    files = {p.relative_to(root).as_posix(): {"sha256": sha256_file(p), "bytes": p.stat().st_size}
-             for p in sorted(root.rglob("*")) if p.is_file() and p.name != "manifest.json"}
-    (root / "manifest.json").write_text(json.dumps({"schema_version": SCHEMA_VERSION,
-                                                    "run_ids": [RUN_ID], "files": files},
-                                                   indent=2, sort_keys=True))
+    files = {
+        p.relative_to(root).as_posix(): {"sha256": sha256_file(p), "bytes": p.stat().st_size}
+        for p in sorted(root.rglob("*"))
+        if p.is_file() and p.name != "manifest.json"
+    }
+    (root / "manifest.json").write_text(
+        json.dumps(
+            {"schema_version": SCHEMA_VERSION, "run_ids": [RUN_ID], "files": files},
+            indent=2,
+            sort_keys=True,
+        )
+    )
 
 
 def _vm(field: str) -> int:
@@ -170,18 +223,25 @@ def measure(root: Path, png: Path) -> dict:
     plot_run(root, verify=False).savefig(png)
     traced = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
-    spans = [ln for ax in fig.axes for ln in ax.get_lines()
-             if ln.get_label() == "state.span3.tension_N"]
+    spans = [
+        ln for ax in fig.axes for ln in ax.get_lines() if ln.get_label() == "state.span3.tension_N"
+    ]
     part = next((root / "samples").rglob("part-0.parquet"))
     meta = pq.ParquetFile(part).metadata
     in_memory = sum(meta.row_group(g).total_byte_size for g in range(meta.num_row_groups))
-    return {"rows": meta.num_rows, "columns": meta.num_columns, "wall_s": wall,
-            "peak_rss_growth_bytes": rss_growth,
-            "peak_rss_bytes": rss_peak, "tracemalloc_peak_bytes": traced,
-            "samples_on_disk_bytes": part.stat().st_size, "samples_in_memory_bytes": in_memory,
-            "spike_survives": bool(spans and max(ln.get_ydata().max() for ln in spans)
-                                   == SPIKE_N),
-            "lines": sum(len(ax.get_lines()) for ax in fig.axes), "axes": len(fig.axes)}
+    return {
+        "rows": meta.num_rows,
+        "columns": meta.num_columns,
+        "wall_s": wall,
+        "peak_rss_growth_bytes": rss_growth,
+        "peak_rss_bytes": rss_peak,
+        "tracemalloc_peak_bytes": traced,
+        "samples_on_disk_bytes": part.stat().st_size,
+        "samples_in_memory_bytes": in_memory,
+        "spike_survives": bool(spans and max(ln.get_ydata().max() for ln in spans) == SPIKE_N),
+        "lines": sum(len(ax.get_lines()) for ax in fig.axes),
+        "axes": len(fig.axes),
+    }
 
 
 def cli_cpu(args: list[str], repeat: int = 3) -> float:
@@ -189,8 +249,9 @@ def cli_cpu(args: list[str], repeat: int = 3) -> float:
     best = float("inf")
     for _ in range(repeat):
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
-        subprocess.run([sys.executable, "-m", "r2rsim.cli", *args], check=True,
-                       stdout=subprocess.DEVNULL)
+        subprocess.run(
+            [sys.executable, "-m", "r2rsim.cli", *args], check=True, stdout=subprocess.DEVNULL
+        )
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         best = min(best, after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
     return best
@@ -201,17 +262,31 @@ def measure_cli(where: Path) -> dict:
     report`` (pca on the quick-start sweep), the data made in ``where`` first."""
     repo = Path(__file__).resolve().parents[1]
     run, sweep, res = where / "quickstart", where / "quickstart_sweep", where / "pca"
-    for args in (["run", str(repo / "scenarios" / "quickstart.yaml"), "-o", str(run), "-q"],
-                 ["sweep", str(repo / "sweeps" / "quickstart.yaml"), "-o", str(sweep), "-q"],
-                 ["diagnose", "--method", "pca", "--data", str(sweep), "-o", str(res)]):
-        subprocess.run([sys.executable, "-m", "r2rsim.cli", *args], check=True,
-                       stdout=subprocess.DEVNULL)
-    return {"plot_cpu_s": cli_cpu(["plot", str(run), "-o", str(where / "run.png"),
-                                   "--overwrite"]),
-            "plot_sweep_cpu_s": cli_cpu(["plot", str(sweep), "--sweep",
-                                         "meas.lc_rewind.tension_N", "--axis", "offset",
-                                         "-o", str(where / "sweep.png"), "--overwrite"]),
-            "report_cpu_s": cli_cpu(["report", str(res), "-o", str(where / "report.html")])}
+    for args in (
+        ["run", str(repo / "scenarios" / "quickstart.yaml"), "-o", str(run), "-q"],
+        ["sweep", str(repo / "sweeps" / "quickstart.yaml"), "-o", str(sweep), "-q"],
+        ["diagnose", "--method", "pca", "--data", str(sweep), "-o", str(res)],
+    ):
+        subprocess.run(
+            [sys.executable, "-m", "r2rsim.cli", *args], check=True, stdout=subprocess.DEVNULL
+        )
+    return {
+        "plot_cpu_s": cli_cpu(["plot", str(run), "-o", str(where / "run.png"), "--overwrite"]),
+        "plot_sweep_cpu_s": cli_cpu(
+            [
+                "plot",
+                str(sweep),
+                "--sweep",
+                "meas.lc_rewind.tension_N",
+                "--axis",
+                "offset",
+                "-o",
+                str(where / "sweep.png"),
+                "--overwrite",
+            ]
+        ),
+        "report_cpu_s": cli_cpu(["report", str(res), "-o", str(where / "report.html")]),
+    }
 
 
 def main() -> None:
@@ -220,8 +295,11 @@ def main() -> None:
     ap.add_argument("--rate", type=float, default=1000.0)
     ap.add_argument("--keep", type=Path, help="write the dataset and PNG here and keep them")
     ap.add_argument("--make", type=Path, help=argparse.SUPPRESS)  # child process: build only
-    ap.add_argument("--cli", action="store_true",
-                    help="CPU time of r2rsim plot and r2rsim report on the quick start")
+    ap.add_argument(
+        "--cli",
+        action="store_true",
+        help="CPU time of r2rsim plot and r2rsim report on the quick start",
+    )
     args = ap.parse_args()
     if args.cli:
         with tempfile.TemporaryDirectory(prefix="r2rsim-bench-cli-") as tmp:
@@ -238,24 +316,45 @@ def main() -> None:
         where = args.keep or Path(tmp)
         root = where / "long"
         t = time.perf_counter()
-        subprocess.run([sys.executable, __file__, "--make", str(root), "--seconds",
-                        repr(args.seconds), "--rate", repr(args.rate)], check=True)
+        subprocess.run(
+            [
+                sys.executable,
+                __file__,
+                "--make",
+                str(root),
+                "--seconds",
+                repr(args.seconds),
+                "--rate",
+                repr(args.rate),
+            ],
+            check=True,
+        )
         print(f"wrote the synthetic dataset in {time.perf_counter() - t:.1f} s")
         r = measure(root, where / "long.png")
     mib = 1 << 20
-    print(f"run          {r['rows']} rows x {r['columns']} columns ({args.seconds:g} s at "
-          f"{args.rate:g} Hz)")
-    print(f"samples      {r['samples_on_disk_bytes'] / mib:.0f} MiB on disk, "
-          f"{r['samples_in_memory_bytes'] / mib:.0f} MiB uncompressed")
-    print(f"plot_run     {r['wall_s']:.2f} s wall (read, draw, save PNG); {r['axes']} axes, "
-          f"{r['lines']} lines")
-    print(f"memory       peak RSS growth {r['peak_rss_growth_bytes'] / mib:.0f} MiB (process "
-          f"peak {r['peak_rss_bytes'] / mib:.0f} MiB with its imports), "
-          f"tracemalloc peak {r['tracemalloc_peak_bytes'] / mib:.0f} MiB")
+    print(
+        f"run          {r['rows']} rows x {r['columns']} columns ({args.seconds:g} s at "
+        f"{args.rate:g} Hz)"
+    )
+    print(
+        f"samples      {r['samples_on_disk_bytes'] / mib:.0f} MiB on disk, "
+        f"{r['samples_in_memory_bytes'] / mib:.0f} MiB uncompressed"
+    )
+    print(
+        f"plot_run     {r['wall_s']:.2f} s wall (read, draw, save PNG); {r['axes']} axes, "
+        f"{r['lines']} lines"
+    )
+    print(
+        f"memory       peak RSS growth {r['peak_rss_growth_bytes'] / mib:.0f} MiB (process "
+        f"peak {r['peak_rss_bytes'] / mib:.0f} MiB with its imports), "
+        f"tracemalloc peak {r['tracemalloc_peak_bytes'] / mib:.0f} MiB"
+    )
     print(f"spike        {'survives' if r['spike_survives'] else 'LOST'} the decimation")
     ok = r["wall_s"] < 5 and r["peak_rss_growth_bytes"] < r["samples_on_disk_bytes"]
-    print(f"verdict      {'PASS' if ok else 'FAIL'} (< 5 s, peak RSS growth below the "
-          f"samples' size on disk)")
+    print(
+        f"verdict      {'PASS' if ok else 'FAIL'} (< 5 s, peak RSS growth below the "
+        f"samples' size on disk)"
+    )
     print(json.dumps(r))
 
 

@@ -42,8 +42,14 @@ from __future__ import annotations
 import os
 
 # Pin BLAS/OpenMP/numba threads before numpy is imported (shared 2-core machines).
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
-             "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS", "NUMBA_NUM_THREADS"):
+for _var in (
+    "OMP_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "VECLIB_MAXIMUM_THREADS",
+    "NUMEXPR_NUM_THREADS",
+    "NUMBA_NUM_THREADS",
+):
     os.environ[_var] = "1"
 
 import argparse  # noqa: E402
@@ -119,13 +125,16 @@ def chain_line_dict(n_spans: int, seed: int = 0) -> dict:
 
     stand = {"friction": {"viscous": 0.01}, "drive": {"torque_lag": 1e-3}}
     # docs/solver.md §2: the unwind carries a 0.5 N m, 7 Hz torque ripple (roll eccentricity)
-    unwind_drive = {"torque_lag": 1e-3,
-                    "torque_ripple": {"amplitude": 0.5, "frequency": 7.0}}
-    elements: list[dict] = [{
-        "id": "unwind", "type": "unwind",
-        "roll": {"core_radius": 0.076, "outer_radius": 0.3, "core_inertia": 0.5},
-        "friction": {"viscous": 0.01}, "drive": unwind_drive,
-    }]
+    unwind_drive = {"torque_lag": 1e-3, "torque_ripple": {"amplitude": 0.5, "frequency": 7.0}}
+    elements: list[dict] = [
+        {
+            "id": "unwind",
+            "type": "unwind",
+            "roll": {"core_radius": 0.076, "outer_radius": 0.3, "core_inertia": 0.5},
+            "friction": {"viscous": 0.01},
+            "drive": unwind_drive,
+        }
+    ]
     controllers: list[dict] = []
     master = True
     for k in range(1, n_spans):
@@ -134,27 +143,48 @@ def chain_line_dict(n_spans: int, seed: int = 0) -> dict:
             J = 0.02
             kp = J * 2 * math.pi * 20.0
             ki = kp * 2 * math.pi * 20.0 / 4.0
-            elements.append({"id": rid, "type": "driven", "radius": 0.10, "inertia": J,
-                             "drive": {"torque_lag": 1e-3}})
-            ctrl = {"id": f"{rid}_speed", "type": "speed_pi", "element": rid, "kp": kp,
-                    "ki": ki}
+            elements.append(
+                {
+                    "id": rid,
+                    "type": "driven",
+                    "radius": 0.10,
+                    "inertia": J,
+                    "drive": {"torque_lag": 1e-3},
+                }
+            )
+            ctrl = {"id": f"{rid}_speed", "type": "speed_pi", "element": rid, "kp": kp, "ki": ki}
             ctrl.update({"master": True} if master else {"draw": 0.0})
             controllers.append(ctrl)
             master = False
         else:
-            elements.append({"id": rid, "type": "idler", "radius": 0.05, "inertia": 1e-3,
-                             "friction": {"viscous": 1e-5, "coulomb": 2e-3}})
-    elements.append({
-        "id": "rewind", "type": "rewind",
-        "roll": {"core_radius": 0.076, "outer_radius": 0.1, "core_inertia": 0.5}, **stand,
-    })
+            elements.append(
+                {
+                    "id": rid,
+                    "type": "idler",
+                    "radius": 0.05,
+                    "inertia": 1e-3,
+                    "friction": {"viscous": 1e-5, "coulomb": 2e-3},
+                }
+            )
+    elements.append(
+        {
+            "id": "rewind",
+            "type": "rewind",
+            "roll": {"core_radius": 0.076, "outer_radius": 0.1, "core_inertia": 0.5},
+            **stand,
+        }
+    )
     sensors = [
-        {"id": "lc_in", "type": "load_cell", "element": "roller1", "wrap_angle": 3.1416,
-         "filter": 0.0},
+        {
+            "id": "lc_in",
+            "type": "load_cell",
+            "element": "roller1",
+            "wrap_angle": 3.1416,
+            "filter": 0.0,
+        },
         {"id": "lc_rewind", "type": "load_cell", "element": "rewind", "filter": 0.0},
     ]
-    tension = {"type": "tension_pi", "setpoint": T_SET, "kp": 0.1, "ki": 0.5,
-               "output_limit": 150.0}
+    tension = {"type": "tension_pi", "setpoint": T_SET, "kp": 0.1, "ki": 0.5, "output_limit": 150.0}
     controllers += [
         {"id": "unwind_tension", "element": "unwind", "sensor": "lc_in", **tension},
         {"id": "rewind_tension", "element": "rewind", "sensor": "lc_rewind", **tension},
@@ -162,8 +192,13 @@ def chain_line_dict(n_spans: int, seed: int = 0) -> dict:
     return {
         "name": f"chain_{n_spans}",
         "description": "solver.md §2 chain line (no dancer)",
-        "web": {"material": "PET", "modulus": 4e9, "thickness": 50e-6, "width": 0.5,
-                "density": 1390.0},
+        "web": {
+            "material": "PET",
+            "modulus": 4e9,
+            "thickness": 50e-6,
+            "width": 0.5,
+            "density": 1390.0,
+        },
         "elements": elements,
         "spans": [{"length": float(x)} for x in lengths],
         "sensors": sensors,
@@ -187,8 +222,10 @@ def build_case(n_spans: int):
         ``"steady"`` or ``"nominal"``.
     """
     line = r2rsim.load_line(chain_line_dict(n_spans))
-    steps = [ProgrammeStep(at=0.0, line_speed=V_START),
-             ProgrammeStep(at=0.0, line_speed=V_END, ramp=RAMP)]
+    steps = [
+        ProgrammeStep(at=0.0, line_speed=V_START),
+        ProgrammeStep(at=0.0, line_speed=V_END, ramp=RAMP),
+    ]
     prog = r2rsim.Programme.from_steps(line, steps)
     cl = r2rsim.compile_line(line, prog)
     y_nom = r2rsim.nominal_state(cl)
@@ -225,8 +262,14 @@ class _TensionRecorder:
     the run needs no algebraic outputs (``simulate(outputs=False)``), like ``solve_ivp``.
     """
 
-    def __init__(self, cols: np.ndarray, rate: float, sub_every: int,
-                 strain_cols: np.ndarray | None = None, EA: float = 0.0):
+    def __init__(
+        self,
+        cols: np.ndarray,
+        rate: float,
+        sub_every: int,
+        strain_cols: np.ndarray | None = None,
+        EA: float = 0.0,
+    ):
         self.cols, self.rate, self.every = cols, rate, sub_every
         self.strain_cols, self.EA = strain_cols, EA
         self.k: list[np.ndarray] = []
@@ -268,13 +311,17 @@ def run_r2rsim(cl, y0: np.ndarray, settings, outputs: bool = False) -> RunResult
     strain = np.array([cl.index(f"{s}.strain") for s in cl.span_ids], np.int64)
     rec = _TensionRecorder(tension_columns(cl), RECORD_RATE, every, strain, cl.line.web.EA)
     t0 = time.perf_counter()
-    res = r2rsim.simulate(cl, DURATION, RECORD_RATE, y0, settings, on_chunk=rec,
-                          outputs=outputs)
+    res = r2rsim.simulate(cl, DURATION, RECORD_RATE, y0, settings, on_chunk=rec, outputs=outputs)
     wall = time.perf_counter() - t0
     k, T = rec.arrays()
-    extra = {"terminated": res.terminated, "reason": res.termination_reason,
-             "inner_wall": res.stats["wall_s"], "restarts": res.stats["restarts"],
-             "events": len(res.events), "steps": res.stats.get("steps")}
+    extra = {
+        "terminated": res.terminated,
+        "reason": res.termination_reason,
+        "inner_wall": res.stats["wall_s"],
+        "restarts": res.stats["restarts"],
+        "events": len(res.events),
+        "steps": res.stats.get("steps"),
+    }
     return RunResult(wall, int(res.stats["nfev"]), int(res.stats["njev"]), k, T, extra)
 
 
@@ -334,8 +381,9 @@ def _radau_solve(cl, y0, duration, fun, jac, rtol, atol):
         off_grid = len(t_eval) == 0 or t_eval[-1] < b  # breakpoint between two samples
         if off_grid:
             t_eval = np.append(t_eval, b)
-        sol = solve_ivp(fun, (a, b), y, method="Radau", t_eval=t_eval, jac=jac, rtol=rtol,
-                        atol=atol)
+        sol = solve_ivp(
+            fun, (a, b), y, method="Radau", t_eval=t_eval, jac=jac, rtol=rtol, atol=atol
+        )
         if not sol.success:
             raise RuntimeError(f"Radau failed on [{a:g}, {b:g}] s: {sol.message}")
         nfev, njev, nlu = nfev + sol.nfev, njev + sol.njev, nlu + sol.nlu
@@ -388,7 +436,7 @@ def run_radau(cl, y0: np.ndarray, rtol: float = RTOL, all_outputs: bool = False)
         for (a, _b), kk, Y in zip(_segments(cl, DURATION), ks, Ys, strict=True):
             cl.set_segment_start(a)
             for i in range(0, len(kk), rows):
-                cl.outputs(kk[i:i + rows] / RECORD_RATE, Y[i:i + rows])
+                cl.outputs(kk[i : i + rows] / RECORD_RATE, Y[i : i + rows])
         extra["all_outputs_s"] = time.perf_counter() - t1
     cl.set_segment_start(0.0)
     return RunResult(wall, nfev, njev, np.concatenate(k_out), np.concatenate(T_out), extra)
@@ -397,13 +445,26 @@ def run_radau(cl, y0: np.ndarray, rtol: float = RTOL, all_outputs: bool = False)
 def warm_up(cl, y0: np.ndarray, rtol: float, radau_rtol: float) -> None:
     """Short untimed runs of both solvers (numba compile / cache load, imports)."""
     for backend in ("cvode", "radau5"):
-        r2rsim.simulate(cl, WARMUP_S, RECORD_RATE, y0,
-                        r2rsim.SolverSettings(backend=backend, rtol=rtol),
-                        on_chunk=lambda t, Y, A: None)
+        r2rsim.simulate(
+            cl,
+            WARMUP_S,
+            RECORD_RATE,
+            y0,
+            r2rsim.SolverSettings(backend=backend, rtol=rtol),
+            on_chunk=lambda t, Y, A: None,
+        )
     fun, jac = radau_callbacks(cl)
     cl.set_segment_start(0.0)
-    solve_ivp(fun, (0.0, WARMUP_S), y0, method="Radau", jac=jac, rtol=radau_rtol,
-              atol=cl.atol, t_eval=np.linspace(0.0, WARMUP_S, 6))
+    solve_ivp(
+        fun,
+        (0.0, WARMUP_S),
+        y0,
+        method="Radau",
+        jac=jac,
+        rtol=radau_rtol,
+        atol=cl.atol,
+        t_eval=np.linspace(0.0, WARMUP_S, 6),
+    )
     cl.outputs(np.zeros(2), np.vstack([y0, y0]))
 
 
@@ -436,8 +497,10 @@ def profile_r2rsim(cl, y0: np.ndarray, settings, log, top: int = 8) -> None:
     log(f"  profile of one r2rsim run ({run.wall:.3f} s wall, top {top} by own time):")
     for (fname, line, func), (_cc, ncalls, tottime, _cum, _callers) in entries:
         where = f"{Path(fname).parent.name}/{Path(fname).name}:{line}" if line else fname
-        log(f"    {tottime:8.3f} s {100 * tottime / run.wall:5.1f} %  {ncalls:7d} calls  "
-            f"{func} ({where})")
+        log(
+            f"    {tottime:8.3f} s {100 * tottime / run.wall:5.1f} %  {ncalls:7d} calls  "
+            f"{func} ({where})"
+        )
 
 
 # =========================================================================================
@@ -447,18 +510,24 @@ def _ladder(cl, y0, ref, backend: str, target: float, log) -> dict | None:
     """The loosest tolerance on a backend's ladder whose max tension error is at most
     ``target`` (Radau's), timed like the main runs; None if no rung reaches it."""
     for rt, sc in EQUAL_ACCURACY_LADDER[backend]:
-        run = run_r2rsim(cl, y0, r2rsim.SolverSettings(backend=backend, rtol=rt,
-                                                       atol_scale=sc))
+        run = run_r2rsim(cl, y0, r2rsim.SolverSettings(backend=backend, rtol=rt, atol_scale=sc))
         err = tension_errors(run, ref)[0]
-        log(f"  ladder {backend}: rtol {rt:g}, atol x {sc:g}: {run.wall:.3f} s, "
-            f"max err {err:.2e} N")
+        log(
+            f"  ladder {backend}: rtol {rt:g}, atol x {sc:g}: {run.wall:.3f} s, max err {err:.2e} N"
+        )
         if err <= target:
             return {"rtol": rt, "atol_scale": sc, "wall": run.wall, "err": err}
     return None
 
 
-def bench_case(n_spans: int, repeat: int, log, rtol: float = RTOL, radau_rtol: float = RTOL,
-               profile: bool = False) -> dict:
+def bench_case(
+    n_spans: int,
+    repeat: int,
+    log,
+    rtol: float = RTOL,
+    radau_rtol: float = RTOL,
+    profile: bool = False,
+) -> dict:
     """Run the whole comparison for one N.
 
     Parameters
@@ -482,9 +551,11 @@ def bench_case(n_spans: int, repeat: int, log, rtol: float = RTOL, radau_rtol: f
     """
     t_build = time.perf_counter()
     cl, y0, init_mode = build_case(n_spans)
-    log(f"N={n_spans}: {cl.n_states} states, Jacobian nnz {len(cl.pattern[0])}, band "
+    log(
+        f"N={n_spans}: {cl.n_states} states, Jacobian nnz {len(cl.pattern[0])}, band "
         f"({cl.lband}, {cl.uband}), {len(cl.aux_names)} outputs, initial state {init_mode} "
-        f"(built in {time.perf_counter() - t_build:.1f} s)")
+        f"(built in {time.perf_counter() - t_build:.1f} s)"
+    )
     warm_up(cl, y0, rtol, radau_rtol)
 
     cvode = r2rsim.SolverSettings(backend="cvode", rtol=rtol)
@@ -494,8 +565,10 @@ def bench_case(n_spans: int, repeat: int, log, rtol: float = RTOL, radau_rtol: f
         runs_r.append(run_r2rsim(cl, y0, cvode))
         runs_c.append(run_r2rsim(cl, y0, radau5))
         runs_p.append(run_radau(cl, y0, radau_rtol, all_outputs=i == repeat - 1))
-        log(f"  run {i + 1}/{repeat}: r2rsim cvode {runs_r[-1].wall:.3f} s, radau5 "
-            f"{runs_c[-1].wall:.3f} s, scipy Radau {runs_p[-1].wall:.3f} s")
+        log(
+            f"  run {i + 1}/{repeat}: r2rsim cvode {runs_r[-1].wall:.3f} s, radau5 "
+            f"{runs_c[-1].wall:.3f} s, scipy Radau {runs_p[-1].wall:.3f} s"
+        )
     wall_r = float(np.median([r.wall for r in runs_r]))
     wall_c = float(np.median([r.wall for r in runs_c]))
     wall_p = float(np.median([r.wall for r in runs_p]))
@@ -505,50 +578,86 @@ def bench_case(n_spans: int, repeat: int, log, rtol: float = RTOL, radau_rtol: f
             log(f"  WARNING: r2rsim {name} run terminated early: {run.extra['reason']}")
 
     t_ref = time.perf_counter()
-    ref = run_r2rsim(cl, y0, r2rsim.SolverSettings(backend="cvode", rtol=REF_RTOL,
-                                                   atol_scale=REF_ATOL_SCALE))
-    log(f"  reference (CVODE, rtol {REF_RTOL:g}, atol x {REF_ATOL_SCALE:g}): "
-        f"{time.perf_counter() - t_ref:.1f} s, {ref.nfev} RHS evals")
+    ref = run_r2rsim(
+        cl, y0, r2rsim.SolverSettings(backend="cvode", rtol=REF_RTOL, atol_scale=REF_ATOL_SCALE)
+    )
+    log(
+        f"  reference (CVODE, rtol {REF_RTOL:g}, atol x {REF_ATOL_SCALE:g}): "
+        f"{time.perf_counter() - t_ref:.1f} s, {ref.nfev} RHS evals"
+    )
     if ref.extra["terminated"]:
         log(f"  WARNING: reference run terminated early: {ref.extra['reason']}")
     err_r, end_r = tension_errors(rr, ref)
     err_c, end_c = tension_errors(rc, ref)
     err_p, end_p = tension_errors(rp, ref)
     all_out = rp.extra["all_outputs_s"]
-    log(f"  r2rsim cvode: {rr.extra['steps']} steps, {rr.nfev} RHS, {rr.njev} Jac, "
+    log(
+        f"  r2rsim cvode: {rr.extra['steps']} steps, {rr.nfev} RHS, {rr.njev} Jac, "
         f"{rr.extra['restarts']} solver calls; radau5: {rc.extra['steps']} steps, {rc.nfev} "
-        f"RHS, {rc.njev} Jac; scipy Radau: {rp.nfev} RHS, {rp.njev} Jac, {rp.extra['nlu']} LU")
-    log(f"  not in the scipy Radau wall: all {len(cl.aux_names)} outputs at every 1 kHz "
-        f"sample (which r2rsim computes) {all_out:.3f} s")
+        f"RHS, {rc.njev} Jac; scipy Radau: {rp.nfev} RHS, {rp.njev} Jac, {rp.extra['nlu']} LU"
+    )
+    log(
+        f"  not in the scipy Radau wall: all {len(cl.aux_names)} outputs at every 1 kHz "
+        f"sample (which r2rsim computes) {all_out:.3f} s"
+    )
     # the same run computing every algebraic output at every sample, as `r2rsim run` does
     with_out = run_r2rsim(cl, y0, cvode, outputs=True)
-    log(f"  r2rsim cvode with all {len(cl.aux_names)} algebraic outputs at 1 kHz: "
-        f"{with_out.wall:.3f} s (RTF {DURATION / with_out.wall:.1f})")
+    log(
+        f"  r2rsim cvode with all {len(cl.aux_names)} algebraic outputs at 1 kHz: "
+        f"{with_out.wall:.3f} s (RTF {DURATION / with_out.wall:.1f})"
+    )
     eq = _ladder(cl, y0, ref, "cvode", err_p, log)
     c_eq = _ladder(cl, y0, ref, "radau5", err_p, log)
     if profile:
         profile_r2rsim(cl, y0, cvode, log)
     return {
         "out_rtf": DURATION / with_out.wall,
-        "eq": eq, "c_eq": c_eq,
-        "N": n_spans, "n": cl.n_states,
-        "r_wall": wall_r, "r_rtf": DURATION / wall_r, "r_nfev": rr.nfev, "r_err": err_r,
+        "eq": eq,
+        "c_eq": c_eq,
+        "N": n_spans,
+        "n": cl.n_states,
+        "r_wall": wall_r,
+        "r_rtf": DURATION / wall_r,
+        "r_nfev": rr.nfev,
+        "r_err": err_r,
         "r_end": end_r,
-        "c_wall": wall_c, "c_rtf": DURATION / wall_c, "c_nfev": rc.nfev, "c_err": err_c,
+        "c_wall": wall_c,
+        "c_rtf": DURATION / wall_c,
+        "c_nfev": rc.nfev,
+        "c_err": err_c,
         "c_end": end_c,
-        "p_wall": wall_p, "p_rtf": DURATION / wall_p, "p_nfev": rp.nfev, "p_err": err_p,
+        "p_wall": wall_p,
+        "p_rtf": DURATION / wall_p,
+        "p_nfev": rp.nfev,
+        "p_err": err_p,
         "p_end": end_p,
-        "ratio": wall_p / wall_r, "c_ratio": wall_p / wall_c,
+        "ratio": wall_p / wall_r,
+        "c_ratio": wall_p / wall_c,
     }
 
 
 #: (rtol, atol scale) rungs tried, loosest first, until a backend is as accurate as scipy's
 #: Radau at its tolerance. radau5 is the same method, so its rungs are close together.
 EQUAL_ACCURACY_LADDER = {
-    "cvode": [(1e-6, 1.0), (1e-7, 1.0), (1e-7, 0.1), (1e-8, 0.1), (1e-8, 0.01),
-              (1e-9, 0.01), (1e-10, 0.001)],
-    "radau5": [(1e-6, 1.0), (7e-7, 1.0), (5e-7, 1.0), (3e-7, 1.0), (2e-7, 1.0), (1e-7, 1.0),
-               (1e-8, 0.1), (1e-9, 0.01)],
+    "cvode": [
+        (1e-6, 1.0),
+        (1e-7, 1.0),
+        (1e-7, 0.1),
+        (1e-8, 0.1),
+        (1e-8, 0.01),
+        (1e-9, 0.01),
+        (1e-10, 0.001),
+    ],
+    "radau5": [
+        (1e-6, 1.0),
+        (7e-7, 1.0),
+        (5e-7, 1.0),
+        (3e-7, 1.0),
+        (2e-7, 1.0),
+        (1e-7, 1.0),
+        (1e-8, 0.1),
+        (1e-9, 0.01),
+    ],
 }
 
 
@@ -556,8 +665,10 @@ def _ratio_verdict(eq: dict | None, p_wall: float) -> str:
     if eq is None:
         return "FAIL (scipy Radau's accuracy not reached on the ladder)"
     ratio = p_wall / eq["wall"]
-    return (f"{'PASS' if ratio >= RATIO_TARGET else 'FAIL'} (x{ratio:.2f} at rtol "
-            f"{eq['rtol']:g}, atol x {eq['atol_scale']:g})")
+    return (
+        f"{'PASS' if ratio >= RATIO_TARGET else 'FAIL'} (x{ratio:.2f} at rtol "
+        f"{eq['rtol']:g}, atol x {eq['atol_scale']:g})"
+    )
 
 
 def verdicts(row: dict) -> tuple[str, str, str]:
@@ -569,49 +680,81 @@ def verdicts(row: dict) -> tuple[str, str, str]:
     most scipy Radau's; its wall time is compared with scipy Radau's.
     """
     target = RTF_TARGETS.get(row["N"])
-    rtf = "n/a" if target is None else (
-        f"{'PASS' if row['r_rtf'] >= target else 'FAIL'} (>={target:g})")
-    return (rtf, _ratio_verdict(row.get("eq"), row["p_wall"]),
-            _ratio_verdict(row.get("c_eq"), row["p_wall"]))
+    rtf = (
+        "n/a"
+        if target is None
+        else (f"{'PASS' if row['r_rtf'] >= target else 'FAIL'} (>={target:g})")
+    )
+    return (
+        rtf,
+        _ratio_verdict(row.get("eq"), row["p_wall"]),
+        _ratio_verdict(row.get("c_eq"), row["p_wall"]),
+    )
 
 
 def format_table(rows: list[dict]) -> str:
     """The results table (one row per N)."""
-    head = (f"{'N':>4} {'states':>6} | {'backend':<13} {'wall s':>7} {'RTF':>7} {'RHS':>7} "
-            f"{'maxTerr N':>9} {'endTerr':>8} | {'ratio':>6} | verdicts")
+    head = (
+        f"{'N':>4} {'states':>6} | {'backend':<13} {'wall s':>7} {'RTF':>7} {'RHS':>7} "
+        f"{'maxTerr N':>9} {'endTerr':>8} | {'ratio':>6} | verdicts"
+    )
     out = [head, "-" * (len(head) + 50)]
     for r in rows:
         v_rtf, v_cv, v_r5 = verdicts(r)
-        for key, name, verdict in (("r", "r2rsim cvode", f"RTF {v_rtf}; >=2x at equal "
-                                    f"accuracy: {v_cv}"),
-                                   ("c", "r2rsim radau5", f">=2x at equal accuracy: {v_r5}"),
-                                   ("p", "scipy Radau", "")):
+        for key, name, verdict in (
+            ("r", "r2rsim cvode", f"RTF {v_rtf}; >=2x at equal accuracy: {v_cv}"),
+            ("c", "r2rsim radau5", f">=2x at equal accuracy: {v_r5}"),
+            ("p", "scipy Radau", ""),
+        ):
             ratio = f"{r['p_wall'] / r[key + '_wall']:>6.2f}"
             out.append(
                 f"{r['N']:>4} {r['n']:>6} | {name:<13} {r[key + '_wall']:>7.3f} "
                 f"{r[key + '_rtf']:>7.1f} {r[key + '_nfev']:>7d} {r[key + '_err']:>9.2e} "
-                f"{r[key + '_end']:>8.1e} | {ratio} | {verdict}")
+                f"{r[key + '_end']:>8.1e} | {ratio} | {verdict}"
+            )
     return "\n".join(out)
 
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point; returns 1 with ``--strict`` if a target failed, else 0."""
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--n", type=int, nargs="+", default=[20, 100, 500], metavar="N",
-                    help="numbers of spans (default: 20 100 500)")
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument(
+        "--n",
+        type=int,
+        nargs="+",
+        default=[20, 100, 500],
+        metavar="N",
+        help="numbers of spans (default: 20 100 500)",
+    )
     ap.add_argument("--quick", action="store_true", help="N = 20 only")
-    ap.add_argument("--repeat", type=int, default=None,
-                    help="timed runs per solver, median reported (default 3)")
-    ap.add_argument("--rtol", type=float, default=RTOL,
-                    help=f"r2rsim relative tolerance (default {RTOL:g})")
-    ap.add_argument("--radau-rtol", type=float, default=RTOL,
-                    help=f"Radau relative tolerance (default {RTOL:g})")
-    ap.add_argument("--profile", action="store_true",
-                    help="cProfile one extra r2rsim run per N and print where time goes")
-    ap.add_argument("--strict", action="store_true",
-                    help="exit with status 1 if any target FAILs (default: report only, since "
-                         "timings on shared machines are noisy)")
+    ap.add_argument(
+        "--repeat",
+        type=int,
+        default=None,
+        help="timed runs per solver, median reported (default 3)",
+    )
+    ap.add_argument(
+        "--rtol", type=float, default=RTOL, help=f"r2rsim relative tolerance (default {RTOL:g})"
+    )
+    ap.add_argument(
+        "--radau-rtol",
+        type=float,
+        default=RTOL,
+        help=f"Radau relative tolerance (default {RTOL:g})",
+    )
+    ap.add_argument(
+        "--profile",
+        action="store_true",
+        help="cProfile one extra r2rsim run per N and print where time goes",
+    )
+    ap.add_argument(
+        "--strict",
+        action="store_true",
+        help="exit with status 1 if any target FAILs (default: report only, since "
+        "timings on shared machines are noisy)",
+    )
     args = ap.parse_args(argv)
     ns = [20] if args.quick else args.n
     repeat = args.repeat if args.repeat is not None else 3
@@ -621,13 +764,17 @@ def main(argv: list[str] | None = None) -> int:
     def log(msg: str) -> None:
         print(msg, flush=True)
 
-    log(f"r2rsim {r2rsim.__version__} ({Path(r2rsim.__file__).parent}), numpy "
+    log(
+        f"r2rsim {r2rsim.__version__} ({Path(r2rsim.__file__).parent}), numpy "
         f"{np.__version__}, scipy {scipy.__version__}, Python {platform.python_version()}, "
-        f"{os.cpu_count()} CPUs")
-    log(f"scenario: {DURATION:g} s, {RECORD_RATE:g} Hz output, line speed {V_START:g} -> "
+        f"{os.cpu_count()} CPUs"
+    )
+    log(
+        f"scenario: {DURATION:g} s, {RECORD_RATE:g} Hz output, line speed {V_START:g} -> "
         f"{V_END:g} m/s over 0...{RAMP:g} s; rtol r2rsim {args.rtol:g}, Radau "
         f"{args.radau_rtol:g}; errors on a {ERROR_RATE:g} Hz subsample vs rtol {REF_RTOL:g} / "
-        f"atol x {REF_ATOL_SCALE:g}; median of {repeat} run(s)")
+        f"atol x {REF_ATOL_SCALE:g}; median of {repeat} run(s)"
+    )
     rows = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
@@ -635,17 +782,20 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(bench_case(n, repeat, log, args.rtol, args.radau_rtol, args.profile))
     print()
     print(format_table(rows))
-    print("RTF = simulated s / wall s. maxTerr: max |T - T_ref| over all spans and the "
-          f"{ERROR_RATE:g} Hz subsample; endTerr: at t = {DURATION:g} s. ratio = scipy Radau "
-          "wall / this wall, all at the same rtol (states at every sample). Equal accuracy: "
-          "the loosest rung of the backend's tolerance ladder at least as accurate as scipy "
-          "Radau. r2rsim cvode with every algebraic output at every sample (what `r2rsim run` "
-          "writes): RTF " + ", ".join(f"{r['out_rtf']:.1f} (N={r['N']})" for r in rows) + ".")
+    print(
+        "RTF = simulated s / wall s. maxTerr: max |T - T_ref| over all spans and the "
+        f"{ERROR_RATE:g} Hz subsample; endTerr: at t = {DURATION:g} s. ratio = scipy Radau "
+        "wall / this wall, all at the same rtol (states at every sample). Equal accuracy: "
+        "the loosest rung of the backend's tolerance ladder at least as accurate as scipy "
+        "Radau. r2rsim cvode with every algebraic output at every sample (what `r2rsim run` "
+        "writes): RTF " + ", ".join(f"{r['out_rtf']:.1f} (N={r['N']})" for r in rows) + "."
+    )
     # --strict: the RTF target (CVODE) and >= 2x scipy Radau at equal accuracy
     # with at least one r2rsim backend
-    all_ok = all(not v[0].startswith("FAIL") and not (v[1].startswith("FAIL")
-                                                      and v[2].startswith("FAIL"))
-                 for v in map(verdicts, rows))
+    all_ok = all(
+        not v[0].startswith("FAIL") and not (v[1].startswith("FAIL") and v[2].startswith("FAIL"))
+        for v in map(verdicts, rows)
+    )
     return 0 if all_ok or not args.strict else 1
 
 

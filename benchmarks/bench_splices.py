@@ -39,12 +39,16 @@ def main() -> None:
         walls.sort()
         swaps = sum(e.state == "swap" for e in res.events)
         rows[label] = (walls[1], res.stats["nfev"], res.stats["steps"], swaps)
-        print(f"{label:>10}: {walls[1]:.3f} s wall (median of 3, RTF {60 / walls[1]:.0f}), "
-              f"{res.stats['nfev']} RHS, {res.stats['steps']} steps, {swaps} swaps, "
-              f"{len(res.events)} events")
+        print(
+            f"{label:>10}: {walls[1]:.3f} s wall (median of 3, RTF {60 / walls[1]:.0f}), "
+            f"{res.stats['nfev']} RHS, {res.stats['steps']} steps, {swaps} swaps, "
+            f"{len(res.events)} events"
+        )
     (w0, f0, s0, _), (w1, f1, s1, n) = rows["no splice"], rows["10 splices"]
-    print(f"per splice: +{(w1 - w0) / n * 1e3:.1f} ms wall, +{(f1 - f0) / n:.0f} RHS "
-          f"evaluations, +{(s1 - s0) / n:.0f} steps")
+    print(
+        f"per splice: +{(w1 - w0) / n * 1e3:.1f} ms wall, +{(f1 - f0) / n:.0f} RHS "
+        f"evaluations, +{(s1 - s0) / n:.0f} steps"
+    )
 
 
 if __name__ == "__main__":

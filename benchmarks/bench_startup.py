@@ -82,8 +82,9 @@ def _cpu_of(cmd: list[str], env: dict | None = None) -> tuple[float, float, int,
 
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT,
-                          env={**os.environ, **(env or {})})
+    proc = subprocess.run(
+        cmd, capture_output=True, text=True, cwd=ROOT, env={**os.environ, **(env or {})}
+    )
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
@@ -100,30 +101,50 @@ def main() -> int:
         out = str(Path(tmp) / "qs")
         if not args.skip_cold:
             cache = str(Path(tmp) / "numba-cold")
-            cpu, wall, code, text = _cpu_of([*r2rsim, "run", str(QUICKSTART), "-o", out, "-q",
-                                             "--overwrite"], {"NUMBA_CACHE_DIR": cache})
+            cpu, wall, code, text = _cpu_of(
+                [*r2rsim, "run", str(QUICKSTART), "-o", out, "-q", "--overwrite"],
+                {"NUMBA_CACHE_DIR": cache},
+            )
             assert code == 0, text
-            print(f"cold compile: quick-start run with an empty numba cache: {cpu:.1f} s CPU, "
-                  f"{wall:.1f} s wall")
+            print(
+                f"cold compile: quick-start run with an empty numba cache: {cpu:.1f} s CPU, "
+                f"{wall:.1f} s wall"
+            )
             cache2 = str(Path(tmp) / "numba-cold2")
-            _, _, code, text = _cpu_of([sys.executable, "-c", _PROFILE, str(QUICKSTART), out],
-                                       {"NUMBA_CACHE_DIR": cache2})
+            _, _, code, text = _cpu_of(
+                [sys.executable, "-c", _PROFILE, str(QUICKSTART), out], {"NUMBA_CACHE_DIR": cache2}
+            )
             assert code == 0, text
             own = json.loads(text.strip().splitlines()[-1])
             total = sum(own.values())
-            print(f"  compiled functions: {len(own)}, {total:.1f} s CPU of compiling "
-                  f"(own time of each, nested ones excluded):")
+            print(
+                f"  compiled functions: {len(own)}, {total:.1f} s CPU of compiling "
+                f"(own time of each, nested ones excluded):"
+            )
             for name, s in sorted(own.items(), key=lambda kv: -kv[1])[:12]:
                 print(f"    {s:6.2f} s  {100 * s / total:5.1f} %  {name}")
         # warm: the default cache (filled by a first run)
         _cpu_of([*r2rsim, "run", str(QUICKSTART), "-o", out, "-q", "--overwrite"])
         rows = {
-            "warm quick-start run (process)": [*r2rsim, "run", str(QUICKSTART), "-o", out, "-q",
-                                               "--overwrite"],
+            "warm quick-start run (process)": [
+                *r2rsim,
+                "run",
+                str(QUICKSTART),
+                "-o",
+                out,
+                "-q",
+                "--overwrite",
+            ],
             "r2rsim --help": [*r2rsim, "--help"],
             "r2rsim list plugins": [*r2rsim, "list", "plugins"],
-            "r2rsim diagnose --method no-such": [*r2rsim, "diagnose", "--method", "no-such",
-                                                 "--data", out],
+            "r2rsim diagnose --method no-such": [
+                *r2rsim,
+                "diagnose",
+                "--method",
+                "no-such",
+                "--data",
+                out,
+            ],
         }
         print(f"warm start-up, median of {args.repeat} (CPU s, wall s):")
         for label, cmd in rows.items():
@@ -132,8 +153,10 @@ def main() -> int:
                 cpu, wall, _, _ = _cpu_of(cmd)
                 cpus.append(cpu)
                 walls.append(wall)
-            print(f"  {label:<36} {statistics.median(cpus):6.2f} CPU  "
-                  f"{statistics.median(walls):6.2f} wall")
+            print(
+                f"  {label:<36} {statistics.median(cpus):6.2f} CPU  "
+                f"{statistics.median(walls):6.2f} wall"
+            )
         phases = []
         for _ in range(args.repeat):
             _, _, code, text = _cpu_of([sys.executable, "-c", _PHASES, str(QUICKSTART), out])

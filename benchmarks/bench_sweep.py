@@ -48,8 +48,14 @@ from __future__ import annotations
 import os
 
 # Pin BLAS/OpenMP/numba threads before numpy is imported (the sweep's workers do the same).
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
-             "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS", "NUMBA_NUM_THREADS"):
+for _var in (
+    "OMP_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "VECLIB_MAXIMUM_THREADS",
+    "NUMEXPR_NUM_THREADS",
+    "NUMBA_NUM_THREADS",
+):
     os.environ[_var] = "1"
 
 import argparse  # noqa: E402
@@ -72,17 +78,24 @@ RSS_RATIO_BAR = 1.10
 RSS_ABS_BAR_MIB = 5.0
 
 # executor label -> (workers, scheduler)
-EXECUTORS = {"serial (in-process)": (0, None), "1 worker process": (1, None),
-             "2 worker processes": (2, None), "Dask LocalCluster, 2": (2, "local")}
+EXECUTORS = {
+    "serial (in-process)": (0, None),
+    "1 worker process": (1, None),
+    "2 worker processes": (2, None),
+    "Dask LocalCluster, 2": (2, "local"),
+}
 
 
 def write_sweep(folder: Path, name: str, duration: float, runs: int) -> Path:
     """A sweep of ``runs`` seeds of the quick-start scenario at ``duration`` s."""
     path = folder / f"{name}.yaml"
-    path.write_text(f"name: {name}\n"
-                    f"scenario: {json.dumps(str(BASE))}\n"
-                    f"set: {{duration: {duration:g} s}}\n"
-                    f"seeds: {runs}\n", encoding="utf-8")
+    path.write_text(
+        f"name: {name}\n"
+        f"scenario: {json.dumps(str(BASE))}\n"
+        f"set: {{duration: {duration:g} s}}\n"
+        f"seeds: {runs}\n",
+        encoding="utf-8",
+    )
     return path
 
 
@@ -162,28 +175,40 @@ def run_once(sweep: Path, out: Path, workers: int, scheduler: str | None) -> dic
     shutil.rmtree(out, ignore_errors=True)
     changed = sorted(k for k in {*environ, *os.environ} if environ.get(k) != os.environ.get(k))
     if changed:  # would reach the next executor's workers: measure each one as it is
-        print(f"  warning: the sweep ({workers=}, {scheduler=}) left os.environ changed: "
-              f"{', '.join(f'{k}={os.environ.get(k)}' for k in changed)}; put back",
-              flush=True)
+        print(
+            f"  warning: the sweep ({workers=}, {scheduler=}) left os.environ changed: "
+            f"{', '.join(f'{k}={os.environ.get(k)}' for k in changed)}; put back",
+            flush=True,
+        )
         os.environ.clear()
         os.environ.update(environ)
     if _numba_index_stamps() != stamps:
-        print(f"  warning: numba's cache was rewritten during this sweep ({workers=}, "
-              f"{scheduler=}): something compiled (a stale cache, or another numba "
-              f"version sharing it; NUMBA_CACHE_DIR gives r2rsim its own)", flush=True)
+        print(
+            f"  warning: numba's cache was rewritten during this sweep ({workers=}, "
+            f"{scheduler=}): something compiled (a stale cache, or another numba "
+            f"version sharing it; NUMBA_CACHE_DIR gives r2rsim its own)",
+            flush=True,
+        )
     ran = s.done + s.failed
     if s.failed or not s.complete:
-        raise SystemExit(f"sweep {sweep.name} ({workers=}, {scheduler=}) did not finish "
-                         f"cleanly: {s.done} done, {s.failed} failed: {s.failures[:3]}")
+        raise SystemExit(
+            f"sweep {sweep.name} ({workers=}, {scheduler=}) did not finish "
+            f"cleanly: {s.done} done, {s.failed} failed: {s.failures[:3]}"
+        )
     typical = statistics.median(r["wall_s"] for _, r in arrivals)
-    return {"runs": ran, "wall": s.wall_s, "solver": s.solver_s, "cpu": cpu,
-            "worker_run": sum(r["wall_s"] for _, r in arrivals),
-            # the first result's arrival less a typical run: planning, process / cluster
-            # start-up, imports and the numba cache load of the first run
-            "startup": arrivals[0][0] - t0 - typical,
-            # after the last result: pool shutdown and finalisation
-            "tail": t1 - arrivals[-1][0],
-            "workers": max(workers, 1)}
+    return {
+        "runs": ran,
+        "wall": s.wall_s,
+        "solver": s.solver_s,
+        "cpu": cpu,
+        "worker_run": sum(r["wall_s"] for _, r in arrivals),
+        # the first result's arrival less a typical run: planning, process / cluster
+        # start-up, imports and the numba cache load of the first run
+        "startup": arrivals[0][0] - t0 - typical,
+        # after the last result: pool shutdown and finalisation
+        "tail": t1 - arrivals[-1][0],
+        "workers": max(workers, 1),
+    }
 
 
 def median_of(results: list[dict]) -> dict:
@@ -197,13 +222,12 @@ def overhead(r: dict) -> float:
     return (per_run_wall - r["solver"] / r["runs"]) / per_run_wall
 
 
-def scaling(folder: Path, runs: int, duration: float, repeat: int, dask: bool
-            ) -> dict[str, dict]:
+def scaling(folder: Path, runs: int, duration: float, repeat: int, dask: bool) -> dict[str, dict]:
     sweep = write_sweep(folder, "bench_scaling", duration, runs)
     labels = [k for k in EXECUTORS if dask or EXECUTORS[k][1] is None]
     results: dict[str, list[dict]] = {k: [] for k in labels}
     for i in range(repeat):
-        order = labels[i % len(labels):] + labels[:i % len(labels)]  # spread the noise
+        order = labels[i % len(labels) :] + labels[: i % len(labels)]  # spread the noise
         for label in order:
             workers, scheduler = EXECUTORS[label]
             r = run_once(sweep, folder / "out", workers, scheduler)
@@ -214,43 +238,59 @@ def scaling(folder: Path, runs: int, duration: float, repeat: int, dask: bool
 
 def print_scaling(res: dict[str, dict], duration: float) -> float | None:
     one = res["1 worker process"]["wall"]
-    print(f"\nScaling: quick-start line, {duration:g} s of line time per run "
-          f"(median wall of the rounds)")
-    hdr = (f"{'executor':<22} {'runs':>5} {'wall s':>8} {'runs/min':>9} {'solver s/run':>13} "
-           f"{'overhead':>9} {'speed-up':>9} {'efficiency':>11}")
+    print(
+        f"\nScaling: quick-start line, {duration:g} s of line time per run "
+        f"(median wall of the rounds)"
+    )
+    hdr = (
+        f"{'executor':<22} {'runs':>5} {'wall s':>8} {'runs/min':>9} {'solver s/run':>13} "
+        f"{'overhead':>9} {'speed-up':>9} {'efficiency':>11}"
+    )
     print(hdr)
     print("-" * len(hdr))
     for label, r in res.items():
         sp = one / r["wall"]
-        print(f"{label:<22} {r['runs']:>5} {r['wall']:>8.2f} {60 * r['runs'] / r['wall']:>9.1f} "
-              f"{r['solver'] / r['runs']:>13.3f} {overhead(r):>8.1%} {sp:>8.2f}x "
-              f"{sp / r['workers']:>10.0%}")
-    print("\nWhere the wall time goes, s (capacity = wall x workers; solver = the runs' "
-          "simulate(); in-run = the rest of each run in its worker: scenario build, "
-          "compile_line, steady state, tables, commit with checksums and self-validation; "
-          "start-up = first result less a typical run: plan, process start, imports, numba "
-          "cache load; tail = after the last result: pool shutdown, finalisation; "
-          "CPU = this process + its workers)")
-    hdr2 = (f"{'executor':<22} {'capacity':>9} {'solver':>8} {'in-run':>8} {'start-up':>9} "
-            f"{'tail':>6} {'CPU':>8} {'cores busy':>11}")
+        print(
+            f"{label:<22} {r['runs']:>5} {r['wall']:>8.2f} {60 * r['runs'] / r['wall']:>9.1f} "
+            f"{r['solver'] / r['runs']:>13.3f} {overhead(r):>8.1%} {sp:>8.2f}x "
+            f"{sp / r['workers']:>10.0%}"
+        )
+    print(
+        "\nWhere the wall time goes, s (capacity = wall x workers; solver = the runs' "
+        "simulate(); in-run = the rest of each run in its worker: scenario build, "
+        "compile_line, steady state, tables, commit with checksums and self-validation; "
+        "start-up = first result less a typical run: plan, process start, imports, numba "
+        "cache load; tail = after the last result: pool shutdown, finalisation; "
+        "CPU = this process + its workers)"
+    )
+    hdr2 = (
+        f"{'executor':<22} {'capacity':>9} {'solver':>8} {'in-run':>8} {'start-up':>9} "
+        f"{'tail':>6} {'CPU':>8} {'cores busy':>11}"
+    )
     print(hdr2)
     print("-" * len(hdr2))
     for label, r in res.items():
         cap = r["wall"] * r["workers"]
-        print(f"{label:<22} {cap:>9.2f} {r['solver']:>8.2f} "
-              f"{r['worker_run'] - r['solver']:>8.2f} {r['startup']:>9.2f} {r['tail']:>6.2f} "
-              f"{r['cpu']:>8.2f} {r['cpu'] / r['wall']:>11.2f}")
+        print(
+            f"{label:<22} {cap:>9.2f} {r['solver']:>8.2f} "
+            f"{r['worker_run'] - r['solver']:>8.2f} {r['startup']:>9.2f} {r['tail']:>6.2f} "
+            f"{r['cpu']:>8.2f} {r['cpu'] / r['wall']:>11.2f}"
+        )
     r1, r2 = res["1 worker process"], res.get("2 worker processes")
     if r2:
         f1, f2 = r1["startup"] + r1["tail"], r2["startup"] + r2["tail"]
-        print(f"fixed costs per sweep (start-up + tail): 1 worker {f1:.2f} s, 2 workers "
-              f"{f2:.2f} s; with them, 2 workers can be at most "
-              f"{r1['wall'] / (f2 + (r1['wall'] - f1) / 2):.2f}x one worker on this sweep")
+        print(
+            f"fixed costs per sweep (start-up + tail): 1 worker {f1:.2f} s, 2 workers "
+            f"{f2:.2f} s; with them, 2 workers can be at most "
+            f"{r1['wall'] / (f2 + (r1['wall'] - f1) / 2):.2f}x one worker on this sweep"
+        )
     for label, r in res.items():
         if r["workers"] > 1 and r["cpu"] / r["wall"] < 0.8 * r["workers"]:
-            print(f"note: {label} kept only {r['cpu'] / r['wall']:.2f} of {r['workers']} cores "
-                  f"busy: other processes had the rest (see the load), so its speed-up "
-                  f"understates the executor; run again on a quiet machine")
+            print(
+                f"note: {label} kept only {r['cpu'] / r['wall']:.2f} of {r['workers']} cores "
+                f"busy: other processes had the rest (see the load), so its speed-up "
+                f"understates the executor; run again on a quiet machine"
+            )
     two = res.get("2 worker processes")
     return one / two["wall"] if two else None
 
@@ -260,22 +300,29 @@ def overhead_table(folder: Path, runs: int, repeat: int) -> float:
     labels = ["serial (in-process)", "1 worker process", "2 worker processes"]
     results: dict[str, list[dict]] = {k: [] for k in labels}
     for i in range(repeat):
-        for label in labels[i % 3:] + labels[:i % 3]:
+        for label in labels[i % 3 :] + labels[: i % 3]:
             workers, scheduler = EXECUTORS[label]
             results[label].append(run_once(sweep, folder / "out", workers, scheduler))
-    print(f"\nOverhead per 60 s quick-start run ({runs} runs, median wall of {repeat} "
-          f"round(s), load {_load()}; overhead = (wall per run - solver per run) / wall per "
-          f"run; pools: wall per run = wall x workers / runs)")
-    hdr = (f"{'executor':<22} {'runs':>5} {'wall s':>8} {'wall/run s':>11} {'solver/run s':>13} "
-           f"{'in-run/run s':>13} {'CPU/run s':>10} {'overhead':>9}")
+    print(
+        f"\nOverhead per 60 s quick-start run ({runs} runs, median wall of {repeat} "
+        f"round(s), load {_load()}; overhead = (wall per run - solver per run) / wall per "
+        f"run; pools: wall per run = wall x workers / runs)"
+    )
+    hdr = (
+        f"{'executor':<22} {'runs':>5} {'wall s':>8} {'wall/run s':>11} {'solver/run s':>13} "
+        f"{'in-run/run s':>13} {'CPU/run s':>10} {'overhead':>9}"
+    )
     print(hdr)
     print("-" * len(hdr))
     for label in labels:
         r = median_of(results[label])
         n = r["runs"]
-        print(f"{label:<22} {n:>5} {r['wall']:>8.2f} {r['wall'] * r['workers'] / n:>11.3f} "
-              f"{r['solver'] / n:>13.3f} {(r['worker_run'] - r['solver']) / n:>13.3f} "
-              f"{r['cpu'] / n:>10.3f} {overhead(r):>8.1%}", flush=True)
+        print(
+            f"{label:<22} {n:>5} {r['wall']:>8.2f} {r['wall'] * r['workers'] / n:>11.3f} "
+            f"{r['solver'] / n:>13.3f} {(r['worker_run'] - r['solver']) / n:>13.3f} "
+            f"{r['cpu'] / n:>10.3f} {overhead(r):>8.1%}",
+            flush=True,
+        )
     return overhead(median_of(results["serial (in-process)"]))
 
 
@@ -293,11 +340,9 @@ _PROFILED = [
     ("r2rsim.measure.sensors", "MeasurementModel.measure", "      measurement model"),
     ("r2rsim.run", "derive_labels", "      labels"),
     ("r2rsim.dataset.writer", "DatasetWriter.write_chunk", "      write_chunk (to Arrow)"),
-    ("r2rsim.dataset.writer", "DatasetWriter.write_table",
-     "    write_table (runs, channels, ...)"),
+    ("r2rsim.dataset.writer", "DatasetWriter.write_table", "    write_table (runs, channels, ...)"),
     ("r2rsim.dataset.writer", "DatasetWriter.commit", "    commit"),
-    ("r2rsim.dataset.writer", "DatasetWriter._flush_row_group",
-     "      Parquet row group (any)"),
+    ("r2rsim.dataset.writer", "DatasetWriter._flush_row_group", "      Parquet row group (any)"),
     ("r2rsim.dataset.writer", "sha256_file", "      sha256 for the manifest"),
     ("r2rsim.run", "validate_dataset", "      validate_dataset"),
     ("r2rsim.dataset.validate", "_check_samples", "        re-read samples + labels"),
@@ -346,9 +391,11 @@ def profile_serial(folder: Path, runs: int) -> None:
             setattr(obj, name, f)
         shutil.rmtree(folder / "out", ignore_errors=True)
     n = s.done + s.failed
-    print(f"\nProfile: serial sweep of {n} x 60 s, per run: wall {wall / n * 1e3:.1f} ms, CPU "
-          f"{cpu / n * 1e3:.1f} ms, solver_s {s.solver_s / n * 1e3:.1f} ms (overhead "
-          f"{(wall - s.solver_s) / wall:.1%}; the wrappers add a little)")
+    print(
+        f"\nProfile: serial sweep of {n} x 60 s, per run: wall {wall / n * 1e3:.1f} ms, CPU "
+        f"{cpu / n * 1e3:.1f} ms, solver_s {s.solver_s / n * 1e3:.1f} ms (overhead "
+        f"{(wall - s.solver_s) / wall:.1%}; the wrappers add a little)"
+    )
     print(f"{'':40} {'wall ms/run':>11} {'CPU ms/run':>11} {'calls':>6}")
     for label, (w, c, k) in acc.items():
         print(f"{label:40} {w / n * 1e3:>11.2f} {c / n * 1e3:>11.2f} {k:>6}")
@@ -362,21 +409,37 @@ def _mem_one(runs: int, duration: float) -> None:
         sweep = write_sweep(Path(tmp), f"bench_mem_{runs}", duration, runs)
         before = _rss_kib()
         r = run_once(sweep, Path(tmp) / "out", 2, None)
-    print(json.dumps({"runs": r["runs"], "wall": r["wall"], "rss_before_kib": before,
-                      "maxrss_kib": _peak_rss_kib(), "rss_after_kib": _rss_kib()}))
+    print(
+        json.dumps(
+            {
+                "runs": r["runs"],
+                "wall": r["wall"],
+                "rss_before_kib": before,
+                "maxrss_kib": _peak_rss_kib(),
+                "rss_after_kib": _rss_kib(),
+            }
+        )
+    )
 
 
 def memory(sizes: list[int], duration: float) -> list[dict]:
-    print(f"\nParent memory: a fresh process runs a sweep of N runs of {duration:g} s on 2 "
-          f"worker processes (load {_load()})")
-    hdr = (f"{'runs':>5} {'wall s':>8} {'RSS before MiB':>15} {'peak RSS MiB':>13} "
-           f"{'growth MiB':>11}")
+    print(
+        f"\nParent memory: a fresh process runs a sweep of N runs of {duration:g} s on 2 "
+        f"worker processes (load {_load()})"
+    )
+    hdr = (
+        f"{'runs':>5} {'wall s':>8} {'RSS before MiB':>15} {'peak RSS MiB':>13} {'growth MiB':>11}"
+    )
     print(hdr)
     print("-" * len(hdr))
     rows = []
     for n in sizes:
-        p = subprocess.run([sys.executable, __file__, "--mem-one", str(n), "--mem-duration",
-                            repr(duration)], capture_output=True, text=True, cwd=REPO)
+        p = subprocess.run(
+            [sys.executable, __file__, "--mem-one", str(n), "--mem-duration", repr(duration)],
+            capture_output=True,
+            text=True,
+            cwd=REPO,
+        )
         if p.returncode != 0:
             raise SystemExit(f"memory helper failed ({p.returncode}): {p.stderr[-2000:]}")
         lines = p.stdout.strip().splitlines()
@@ -384,9 +447,12 @@ def memory(sizes: list[int], duration: float) -> list[dict]:
             print(ln)
         r = json.loads(lines[-1])
         rows.append(r)
-        print(f"{n:>5} {r['wall']:>8.2f} {r['rss_before_kib'] / 1024:>15.1f} "
-              f"{r['maxrss_kib'] / 1024:>13.1f} "
-              f"{(r['maxrss_kib'] - r['rss_before_kib']) / 1024:>11.1f}", flush=True)
+        print(
+            f"{n:>5} {r['wall']:>8.2f} {r['rss_before_kib'] / 1024:>15.1f} "
+            f"{r['maxrss_kib'] / 1024:>13.1f} "
+            f"{(r['maxrss_kib'] - r['rss_before_kib']) / 1024:>11.1f}",
+            flush=True,
+        )
     return rows
 
 
@@ -394,17 +460,23 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smaller sweeps (CI, < 2 min)")
     ap.add_argument("--runs", type=int, help="runs of the scaling sweep (24; quick 10)")
-    ap.add_argument("--duration", type=float,
-                    help="line time of a scaling run [s] (900; quick 1200)")
-    ap.add_argument("--repeat", type=int,
-                    help="rounds of the scaling and overhead sweeps (3; quick 1)")
+    ap.add_argument(
+        "--duration", type=float, help="line time of a scaling run [s] (900; quick 1200)"
+    )
+    ap.add_argument(
+        "--repeat", type=int, help="rounds of the scaling and overhead sweeps (3; quick 1)"
+    )
     ap.add_argument("--overhead-runs", type=int, help="60 s runs for the overhead (40; quick 16)")
     ap.add_argument("--mem-runs", type=int, nargs=2, default=[50, 200])
-    ap.add_argument("--mem-duration", type=float, default=1.0,
-                    help="line time of a memory run [s] (1)")
+    ap.add_argument(
+        "--mem-duration", type=float, default=1.0, help="line time of a memory run [s] (1)"
+    )
     ap.add_argument("--no-dask", action="store_true", help="skip the Dask LocalCluster")
-    ap.add_argument("--profile", action="store_true",
-                    help="also time the parts of a serial 60 s run (wrapping r2rsim functions)")
+    ap.add_argument(
+        "--profile",
+        action="store_true",
+        help="also time the parts of a serial 60 s run (wrapping r2rsim functions)",
+    )
     ap.add_argument("--strict", action="store_true", help="exit 1 when a bar fails")
     ap.add_argument("--mem-one", type=int, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -429,16 +501,17 @@ def main(argv: list[str] | None = None) -> int:
 
     import r2rsim
 
-    print(f"r2rsim {r2rsim.__version__}, numpy {numpy.__version__}, Python "
-          f"{sys.version.split()[0]}, {os.cpu_count()} cores, load "
-          f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    print(
+        f"r2rsim {r2rsim.__version__}, numpy {numpy.__version__}, Python "
+        f"{sys.version.split()[0]}, {os.cpu_count()} cores, load "
+        f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}"
+    )
     with tempfile.TemporaryDirectory(prefix="r2rsim-bench-sweep-") as tmp:
         folder = Path(tmp)
         # untimed warm-up: numba compile / cache load in this process, cache on disk for
         # the workers
         run_once(write_sweep(folder, "bench_warmup", 2.0, 2), folder / "out", 0, None)
-        print(f"\nscaling sweep: {runs} runs x {duration:g} s, {repeat} round(s); load "
-              f"{_load()}")
+        print(f"\nscaling sweep: {runs} runs x {duration:g} s, {repeat} round(s); load {_load()}")
         res = scaling(folder, runs, duration, repeat, dask)
         speedup = print_scaling(res, duration)
         serial_ov = overhead_table(folder, ov_runs, repeat)
@@ -451,17 +524,27 @@ def main(argv: list[str] | None = None) -> int:
     diff_mib = (big["maxrss_kib"] - small["maxrss_kib"]) / 1024
     per_run_kib = (big["maxrss_kib"] - small["maxrss_kib"]) / (big["runs"] - small["runs"])
     verdicts = [
-        (f"2 worker processes >= {SPEEDUP_BAR}x one worker", f"{speedup:.2f}x",
-         speedup >= SPEEDUP_BAR),
-        (f"serial overhead of a 60 s run <= {OVERHEAD_BAR:.0%}", f"{serial_ov:.1%}",
-         serial_ov <= OVERHEAD_BAR),
-        (f"parent peak RSS {big['runs']} runs within {RSS_RATIO_BAR - 1:.0%} "
-         f"(or {RSS_ABS_BAR_MIB:g} MiB) of {small['runs']} runs",
-         f"x{ratio:.3f}, {diff_mib:+.1f} MiB ({per_run_kib:+.1f} KiB/run)",
-         ratio <= RSS_RATIO_BAR or diff_mib <= RSS_ABS_BAR_MIB),
+        (
+            f"2 worker processes >= {SPEEDUP_BAR}x one worker",
+            f"{speedup:.2f}x",
+            speedup >= SPEEDUP_BAR,
+        ),
+        (
+            f"serial overhead of a 60 s run <= {OVERHEAD_BAR:.0%}",
+            f"{serial_ov:.1%}",
+            serial_ov <= OVERHEAD_BAR,
+        ),
+        (
+            f"parent peak RSS {big['runs']} runs within {RSS_RATIO_BAR - 1:.0%} "
+            f"(or {RSS_ABS_BAR_MIB:g} MiB) of {small['runs']} runs",
+            f"x{ratio:.3f}, {diff_mib:+.1f} MiB ({per_run_kib:+.1f} KiB/run)",
+            ratio <= RSS_RATIO_BAR or diff_mib <= RSS_ABS_BAR_MIB,
+        ),
     ]
-    print(f"\nparent growth {per_run_kib:+.1f} KiB per run from {small['runs']} to {big['runs']} "
-          f"runs: {per_run_kib * 10000 / 1024:+.0f} MiB at 10 000 runs if it stays linear")
+    print(
+        f"\nparent growth {per_run_kib:+.1f} KiB per run from {small['runs']} to {big['runs']} "
+        f"runs: {per_run_kib * 10000 / 1024:+.0f} MiB at 10 000 runs if it stays linear"
+    )
     print("\nBars")
     for what, value, ok in verdicts:
         print(f"  {'PASS' if ok else 'FAIL'}  {what:<52} {value}")

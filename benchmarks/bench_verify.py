@@ -83,8 +83,7 @@ def _variants(root: Path, figure, png: Path):
         "plot, no verify": (thread, fig(False)),
         "plot, sizes + sha256": (thread, fig(True)),
         "plot, sizes + sha256, hashed in the plotting thread": (inline, fig(True)),
-        "plot, sizes + sha256, sweep files read twice": ({**thread, "whole": False},
-                                                         fig(True)),
+        "plot, sizes + sha256, sweep files read twice": ({**thread, "whole": False}, fig(True)),
     }
 
 
@@ -97,7 +96,7 @@ def measure(root: Path, figure, png: Path, repeat: int) -> dict[str, tuple]:
     times: dict[str, list[tuple[float, float]]] = {k: [] for k in variants}
     names = list(variants)
     for p in range(repeat):
-        for name in names[p % len(names):] + names[:p % len(names)]:
+        for name in names[p % len(names) :] + names[: p % len(names)]:
             settings, fn = variants[name]
             verify.HASH_IN_THREAD = settings["hash"]
             _sweep.READ_WHOLE_FILES = settings["whole"]
@@ -107,9 +106,15 @@ def measure(root: Path, figure, png: Path, repeat: int) -> dict[str, tuple]:
             fn()
             times[name].append(_timed(fn))
     verify.HASH_IN_THREAD = _sweep.READ_WHOLE_FILES = True
-    return {k: (min(w for w, _ in v), min(c for _, c in v),
-                statistics.median(w for w, _ in v), statistics.median(c for _, c in v))
-            for k, v in times.items()}
+    return {
+        k: (
+            min(w for w, _ in v),
+            min(c for _, c in v),
+            statistics.median(w for w, _ in v),
+            statistics.median(c for _, c in v),
+        )
+        for k, v in times.items()
+    }
 
 
 def components(root: Path, figure_reads: str, repeat: int) -> dict[str, float]:
@@ -125,10 +130,13 @@ def components(root: Path, figure_reads: str, repeat: int) -> dict[str, float]:
     from r2rsim.dataset.verify import Verifier
 
     tables = ["runs.parquet", "faults.parquet"]
-    samples = sorted(p.relative_to(root).as_posix()
-                     for p in (root / "samples").rglob("*.parquet"))
-    fig_files = [*tables, "channels.parquet", "events.parquet",
-                 *(samples[:1] if figure_reads == "one run" else samples)]
+    samples = sorted(p.relative_to(root).as_posix() for p in (root / "samples").rglob("*.parquet"))
+    fig_files = [
+        *tables,
+        "channels.parquet",
+        "events.parquet",
+        *(samples[:1] if figure_reads == "one run" else samples),
+    ]
     runs = {r["run_id"]: r for r in pq.read_table(root / "runs.parquet").to_pylist()}
     faults: dict[str, list] = {}
     for f in pq.read_table(root / "faults.parquet").to_pylist():
@@ -140,7 +148,7 @@ def components(root: Path, figure_reads: str, repeat: int) -> dict[str, float]:
 
     def labels():
         for rel in samples:
-            rid = rel.split("/")[1][len("run_id="):]
+            rid = rel.split("/")[1][len("run_id=") :]
             t = pq.read_table(root / rel)
             c = time.process_time()
             _label_problem(t, runs[rid], faults.get(rid, []), root)
@@ -148,9 +156,11 @@ def components(root: Path, figure_reads: str, repeat: int) -> dict[str, float]:
 
     best: dict[str, float] = {}
     for _ in range(repeat):
-        for name, fn in (("sizes", lambda: Verifier(root).close()),
-                         ("sha256, read_runs", lambda: sha(tables + samples)),
-                         ("sha256, figure", lambda: sha(fig_files))):
+        for name, fn in (
+            ("sizes", lambda: Verifier(root).close()),
+            ("sha256, read_runs", lambda: sha(tables + samples)),
+            ("sha256, figure", lambda: sha(fig_files)),
+        ):
             cpu = _timed(fn)[1]
             best[name] = min(best.get(name, cpu), cpu)
         out = [0.0]
@@ -161,11 +171,12 @@ def components(root: Path, figure_reads: str, repeat: int) -> dict[str, float]:
 
 def report(title: str, res: dict[str, tuple]) -> None:
     print(f"\n{title}")
-    print(f"  {'variant':<52} {'wall s':>7} {'cpu s':>7} {'+wall':>7} {'+cpu':>7}   "
-          f"{'median: wall':>12} {'cpu':>6} {'+wall':>7} {'+cpu':>7}")
+    print(
+        f"  {'variant':<52} {'wall s':>7} {'cpu s':>7} {'+wall':>7} {'+cpu':>7}   "
+        f"{'median: wall':>12} {'cpu':>6} {'+wall':>7} {'+cpu':>7}"
+    )
     for name, r in res.items():
-        base = res["read_runs, no verify" if name.startswith("read_runs") else
-                   "plot, no verify"]
+        base = res["read_runs, no verify" if name.startswith("read_runs") else "plot, no verify"]
         cells = []
         for i in (0, 2):
             w, c = (100 * (r[j] / base[j] - 1) for j in (i, i + 1))
@@ -179,10 +190,17 @@ def report_components(parts: dict[str, float], res: dict[str, tuple]) -> None:
     rr, fig = res["read_runs, no verify"][1], res["plot, no verify"][1]
     print("  the parts alone (cpu s, best; % of the reader's cpu without verification):")
     for name, cpu in parts.items():
-        against = [("read_runs", rr)] if name in ("sha256, read_runs", "labels") else \
-            [("plot", fig)] if name == "sha256, figure" else [("read_runs", rr), ("plot", fig)]
-        print(f"    {name:<20} {cpu:>7.3f}   " + ", ".join(
-            f"{100 * cpu / base:.1f}% of {who}" for who, base in against))
+        against = (
+            [("read_runs", rr)]
+            if name in ("sha256, read_runs", "labels")
+            else [("plot", fig)]
+            if name == "sha256, figure"
+            else [("read_runs", rr), ("plot", fig)]
+        )
+        print(
+            f"    {name:<20} {cpu:>7.3f}   "
+            + ", ".join(f"{100 * cpu / base:.1f}% of {who}" for who, base in against)
+        )
 
 
 def _run_figure(root, verify):
@@ -202,11 +220,18 @@ def _sweep_figure(channel):
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--long", type=Path, required=True,
-                    help="the 1500 s run (simulated here if the directory does not exist)")
+    ap.add_argument(
+        "--long",
+        type=Path,
+        required=True,
+        help="the 1500 s run (simulated here if the directory does not exist)",
+    )
     ap.add_argument("--sweep", type=Path, help="a finished sweep (r2rsim sweep ... -o DIR)")
-    ap.add_argument("--channel", default="meas.sensor_A.tension_N",
-                    help="the sweep figure's channel (default: meas.sensor_A.tension_N)")
+    ap.add_argument(
+        "--channel",
+        default="meas.sensor_A.tension_N",
+        help="the sweep figure's channel (default: meas.sensor_A.tension_N)",
+    )
     ap.add_argument("--repeat", type=int, default=5, help="timed passes (default 5)")
     args = ap.parse_args()
     import matplotlib
@@ -215,9 +240,21 @@ def main() -> None:
     import r2rsim.report  # noqa: F401 - imported before timing
 
     if not args.long.exists():
-        subprocess.run([sys.executable, "-m", "r2rsim.cli", "run",
-                        str(REPO / "scenarios" / "quickstart.yaml"), "--duration", "1500",
-                        "-o", str(args.long), "-q"], check=True)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "r2rsim.cli",
+                "run",
+                str(REPO / "scenarios" / "quickstart.yaml"),
+                "--duration",
+                "1500",
+                "-o",
+                str(args.long),
+                "-q",
+            ],
+            check=True,
+        )
     with tempfile.TemporaryDirectory(prefix="r2rsim-bench-verify-") as tmp:
         png = Path(tmp) / "figure.png"
         import pyarrow.parquet as pq
@@ -229,11 +266,12 @@ def main() -> None:
         if args.sweep is not None:
             runs = pq.read_metadata(args.sweep / "runs.parquet").num_rows
             res = measure(args.sweep, _sweep_figure(args.channel), png, args.repeat)
-            report(f"(b) a sweep of {runs} runs: {args.sweep} (plot --sweep {args.channel})",
-                   res)
+            report(f"(b) a sweep of {runs} runs: {args.sweep} (plot --sweep {args.channel})", res)
             report_components(components(args.sweep, "every run", args.repeat), res)
-    print(f"\n+wall, +cpu: more than the same reader without verification; best of "
-          f"{args.repeat} passes, then their median (cpu: every thread of the process)")
+    print(
+        f"\n+wall, +cpu: more than the same reader without verification; best of "
+        f"{args.repeat} passes, then their median (cpu: every thread of the process)"
+    )
 
 
 if __name__ == "__main__":

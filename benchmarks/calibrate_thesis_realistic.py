@@ -34,10 +34,10 @@ WINDOW_S = 1.0
 CONDITIONS = {"OC1": 130.0, "OC2": 160.0, "OC3": 145.0, "P2": 130.0}
 
 
-def local_residual_sigma(runs, setpoint: float, fit_seeds=FIT_SEEDS,
-                         test_seeds=TEST_SEEDS) -> dict:
+def local_residual_sigma(runs, setpoint: float, fit_seeds=FIT_SEEDS, test_seeds=TEST_SEEDS) -> dict:
     """σ of the 1 s-averaged local A-B residual of one condition's ``runs``: fitted on the
     runs of ``fit_seeds``, measured on those of ``test_seeds``."""
+
     def averaged(run):
         s = run.samples
         s = s[s.t_s >= 10.0]  # after the first controller transients
@@ -57,20 +57,29 @@ def local_residual_sigma(runs, setpoint: float, fit_seeds=FIT_SEEDS,
     within = float(np.mean([r.std(ddof=1) for r in res]))
     between = float(np.std([r.mean() for r in res], ddof=1))
     sigma = float(np.concatenate(res).std(ddof=1))
-    return {"sigma_N": sigma, "within_run_N": within, "between_runs_N": between,
-            "P05_sigmas": 0.05 * setpoint / sigma, "P20_sigmas": 0.20 * setpoint / sigma}
+    return {
+        "sigma_N": sigma,
+        "within_run_N": within,
+        "between_runs_N": between,
+        "P05_sigmas": 0.05 * setpoint / sigma,
+        "P20_sigmas": 0.20 * setpoint / sigma,
+    }
 
 
-def calibrate(fit_seeds=FIT_SEEDS, test_seeds=TEST_SEEDS, duration=None, workers=None,
-              modes=CONDITIONS) -> dict[str, dict]:
+def calibrate(
+    fit_seeds=FIT_SEEDS, test_seeds=TEST_SEEDS, duration=None, workers=None, modes=CONDITIONS
+) -> dict[str, dict]:
     """Run the healthy sweep's conditions ``modes`` with the given seeds (optionally shorter)
     and measure the local residual of each: {mode: local_residual_sigma(...)}."""
     from r2rsim.dataset.read import read_runs
     from r2rsim.sweep import run_sweep
 
     sweep = yaml.safe_load((SET / "healthy.yaml").read_text())
-    sweep.update(name="thesis_realistic_calibration", scenario=str(SET / "registration.yaml"),
-                 seeds=list(fit_seeds) + list(test_seeds))
+    sweep.update(
+        name="thesis_realistic_calibration",
+        scenario=str(SET / "registration.yaml"),
+        seeds=list(fit_seeds) + list(test_seeds),
+    )
     sweep.pop("seed", None)
     if duration is not None:
         sweep.setdefault("set", {})["duration"] = duration
@@ -89,12 +98,16 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workers", type=int, default=None)
     args = ap.parse_args(argv)
-    print(f"{'condition':<10} {'set-point':>9} {'sigma':>7} {'within':>7} {'between':>8} "
-          f"{'P05/sigma':>9} {'P20/sigma':>9}")
+    print(
+        f"{'condition':<10} {'set-point':>9} {'sigma':>7} {'within':>7} {'between':>8} "
+        f"{'P05/sigma':>9} {'P20/sigma':>9}"
+    )
     for mode, m in calibrate(workers=args.workers).items():
-        print(f"{mode:<10} {CONDITIONS[mode]:>7.0f} N {m['sigma_N']:>5.2f} N "
-              f"{m['within_run_N']:>5.2f} N {m['between_runs_N']:>6.2f} N "
-              f"{m['P05_sigmas']:>9.2f} {m['P20_sigmas']:>9.2f}")
+        print(
+            f"{mode:<10} {CONDITIONS[mode]:>7.0f} N {m['sigma_N']:>5.2f} N "
+            f"{m['within_run_N']:>5.2f} N {m['between_runs_N']:>6.2f} N "
+            f"{m['P05_sigmas']:>9.2f} {m['P20_sigmas']:>9.2f}"
+        )
     return 0
 
 

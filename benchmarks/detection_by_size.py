@@ -48,8 +48,7 @@ def by_size(table: pd.DataFrame, metric: str) -> pd.DataFrame:
     null rate."""
     keys = ["study", "label", "condition", "fault", "magnitude"]
     rows = table[table["magnitude"].notna()]
-    pd_ = rows[rows["metric"] == metric].set_index(keys)[["value", "ci_low", "ci_high",
-                                                          "n_runs"]]
+    pd_ = rows[rows["metric"] == metric].set_index(keys)[["value", "ci_low", "ci_high", "n_runs"]]
     null = rows[rows["metric"] == NULL_OF[metric]].set_index(keys)["value"]
     out = pd_.join(null.rename("null"), how="left").reset_index()
     out["abs"] = out["magnitude"].abs()
@@ -65,11 +64,16 @@ def falls(sizes: pd.DataFrame) -> pd.DataFrame:
         for i in range(1, len(g)):
             small, large = g.iloc[i - 1], g.iloc[i]
             if large["ci_high"] < small["value"]:
-                found.append({**{k: large[k] for k in ("study", "label", "condition",
-                                                       "fault")},
-                              "smaller": small["magnitude"], "pd_smaller": small["value"],
-                              "larger": large["magnitude"], "pd_larger": large["value"],
-                              "ci_high_larger": large["ci_high"]})
+                found.append(
+                    {
+                        **{k: large[k] for k in ("study", "label", "condition", "fault")},
+                        "smaller": small["magnitude"],
+                        "pd_smaller": small["value"],
+                        "larger": large["magnitude"],
+                        "pd_larger": large["value"],
+                        "ci_high_larger": large["ci_high"],
+                    }
+                )
     return pd.DataFrame(found)
 
 
@@ -78,26 +82,36 @@ def main(argv=None) -> int:
     ap.add_argument("results", nargs="+", type=Path, help="bench -o or diagnose -o directories")
     ap.add_argument("--metric", choices=sorted(NULL_OF), default="pd")
     ap.add_argument("--table", action="store_true", help="also print P_D and pd_null by size")
-    ap.add_argument("--pooled", action="store_true",
-                    help="also judge the pooled condition 'all' (mixes operating points)")
+    ap.add_argument(
+        "--pooled",
+        action="store_true",
+        help="also judge the pooled condition 'all' (mixes operating points)",
+    )
     args = ap.parse_args(argv)
     sizes = pd.concat([by_size(read(p), args.metric) for p in args.results], ignore_index=True)
     if args.table:
         with pd.option_context("display.width", 200, "display.max_rows", None):
-            print(sizes.drop(columns=["abs", "sign"]).to_string(index=False,
-                                                                float_format="%.3g"))
+            print(sizes.drop(columns=["abs", "sign"]).to_string(index=False, float_format="%.3g"))
     pooled = sizes["condition"] == "all"
-    print(f"pooled condition 'all': {len(falls(sizes[pooled]))} falls (not judged"
-          f"{'; --pooled judges it' if not args.pooled else ''}: sizes of different operating "
-          f"points)")
+    print(
+        f"pooled condition 'all': {len(falls(sizes[pooled]))} falls (not judged"
+        f"{'; --pooled judges it' if not args.pooled else ''}: sizes of different operating "
+        f"points)"
+    )
     if not args.pooled:
         sizes = sizes[~pooled]
     bad = falls(sizes)
-    n_pairs = int(sum(max(len(g) - 1, 0) for _, g in sizes.groupby(
-        ["study", "label", "condition", "fault", "sign"])))
-    print(f"{args.metric}: {n_pairs} consecutive size pairs over "
-          f"{sizes.groupby(['study', 'label', 'condition', 'fault']).ngroups} strata; "
-          f"{len(bad)} fall beyond the bootstrap interval")
+    n_pairs = int(
+        sum(
+            max(len(g) - 1, 0)
+            for _, g in sizes.groupby(["study", "label", "condition", "fault", "sign"])
+        )
+    )
+    print(
+        f"{args.metric}: {n_pairs} consecutive size pairs over "
+        f"{sizes.groupby(['study', 'label', 'condition', 'fault']).ngroups} strata; "
+        f"{len(bad)} fall beyond the bootstrap interval"
+    )
     if len(bad):
         print(bad.to_string(index=False, float_format="%.3g"))
     return 1 if len(bad) else 0

@@ -115,8 +115,12 @@ def compare(root: Path) -> int:
         got = {"y0": y0, **_evaluate(cl, ref["T"], ref["Y"])}
         worst = {k: _worst(ref[k], got[k]) for k in KEYS}
         bad = {k: v for k, v in worst.items() if v > RTOL}
-        print(("FAIL " if bad else "ok   ") + name + "  " +
-              "  ".join(f"{k} {v:.1e}" for k, v in worst.items()))
+        print(
+            ("FAIL " if bad else "ok   ")
+            + name
+            + "  "
+            + "  ".join(f"{k} {v:.1e}" for k, v in worst.items())
+        )
         failed += bool(bad)
     print(f"{failed} case(s) differ by more than {RTOL:g}" if failed else "all cases agree")
     return 1 if failed else 0

@@ -21,8 +21,11 @@ from pathlib import Path
 from r2rsim.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
-CHANNELS = ["state.span[3469].tension_N", "state.registration.tension_N",
-            "state.dancer.position_rad"]
+CHANNELS = [
+    "state.span[3469].tension_N",
+    "state.registration.tension_N",
+    "state.dancer.position_rad",
+]
 
 
 def figure(name: str, tmp: Path) -> None:
@@ -30,8 +33,17 @@ def figure(name: str, tmp: Path) -> None:
     rc = main(["run", str(ROOT / "scenarios" / f"{name}.yaml"), "-o", str(out), "-q"])
     if rc != 0:
         sys.exit(f"r2rsim run {name}: exit {rc}")
-    rc = main(["plot", str(out), "--overwrite", "--channels", *CHANNELS, "-o",
-               str(ROOT / "docs" / f"{name}.png")])
+    rc = main(
+        [
+            "plot",
+            str(out),
+            "--overwrite",
+            "--channels",
+            *CHANNELS,
+            "-o",
+            str(ROOT / "docs" / f"{name}.png"),
+        ]
+    )
     if rc != 0:
         sys.exit(f"r2rsim plot {name}: exit {rc}")
 

@@ -25,21 +25,44 @@ if TYPE_CHECKING:  # the real imports, for type checkers and IDEs
 
 # Public name -> submodule that defines it (imported on first attribute access).
 _LAZY = {
-    "CompiledLine": ".compile", "Programme": ".compile", "compile_line": ".compile",
-    "RunSummary": ".run", "run_scenario": ".run",
-    "Line": ".schema", "Scenario": ".schema", "load_line": ".schema",
+    "CompiledLine": ".compile",
+    "Programme": ".compile",
+    "compile_line": ".compile",
+    "RunSummary": ".run",
+    "run_scenario": ".run",
+    "Line": ".schema",
+    "Scenario": ".schema",
+    "load_line": ".schema",
     "load_scenario": ".schema",
-    "SimulationResult": ".solve", "SolverSettings": ".solve", "nominal_state": ".solve",
-    "simulate": ".solve", "steady_state": ".solve",
+    "SimulationResult": ".solve",
+    "SolverSettings": ".solve",
+    "nominal_state": ".solve",
+    "simulate": ".solve",
+    "steady_state": ".solve",
 }
 # Stage packages that the former eager imports made available as ``r2rsim.<stage>`` after a
 # bare ``import r2rsim``; still reachable that way, now imported on first access.
 _SUBMODULES = frozenset({"compile", "dataset", "measure", "run", "schema", "solve", "units"})
 
 __all__ = [
-    "CompiledLine", "InputError", "Line", "Programme", "R2RError", "RunSummary", "Scenario",
-    "SimulationError", "SimulationResult", "SolverSettings", "__version__", "compile_line",
-    "load_line", "load_scenario", "nominal_state", "run_scenario", "simulate", "steady_state",
+    "CompiledLine",
+    "InputError",
+    "Line",
+    "Programme",
+    "R2RError",
+    "RunSummary",
+    "Scenario",
+    "SimulationError",
+    "SimulationResult",
+    "SolverSettings",
+    "__version__",
+    "compile_line",
+    "load_line",
+    "load_scenario",
+    "nominal_state",
+    "run_scenario",
+    "simulate",
+    "steady_state",
 ]
 
 

@@ -45,13 +45,15 @@ class RunSet(Strict):
     selected by their axis values."""
 
     scenario: str | None = Field(None, description="scenario file, relative to the spec")
-    seeds: Annotated[list[Annotated[int, Field(ge=0, le=MAX_SEED)]],
-                     Field(min_length=1)] | None = Field(
-        None, description="root seeds (with scenario), each once")
+    seeds: Annotated[list[Annotated[int, Field(ge=0, le=MAX_SEED)]], Field(min_length=1)] | None = (
+        Field(None, description="root seeds (with scenario), each once")
+    )
     sweep: str | None = Field(None, description="sweep file, relative to the spec")
     where: dict[str, Any] = Field(
-        default_factory=dict, description="with sweep: only the runs with these axis values "
-        "(axis name or runs.parquet column: value or list of values)")
+        default_factory=dict,
+        description="with sweep: only the runs with these axis values "
+        "(axis name or runs.parquet column: value or list of values)",
+    )
 
     @model_validator(mode="after")
     def _one_source(self):
@@ -60,8 +62,9 @@ class RunSet(Strict):
         if self.scenario is not None and self.seeds is None:
             raise ValueError("a scenario needs its seeds")
         if self.sweep is not None and self.seeds is not None:
-            raise ValueError("a sweep has its own seeds (give no seeds); select its runs "
-                             "with where")
+            raise ValueError(
+                "a sweep has its own seeds (give no seeds); select its runs with where"
+            )
         if self.scenario is not None and self.where:
             raise ValueError("where selects runs of a sweep, not of a scenario")
         return self
@@ -94,21 +97,26 @@ class EvaluationSettings(Strict):
     persistence: Annotated[int, Field(ge=1)] = 1
     grace: Annotated[Time, Field(ge=0)] = 0.0
     detection_window: Annotated[Time, Field(gt=0)] | None = Field(
-        DETECTION_WINDOW_S, description="W: a fault counts as detected only within W of "
-        "being fully developed; null: up to its end")
+        DETECTION_WINDOW_S,
+        description="W: a fault counts as detected only within W of "
+        "being fully developed; null: up to its end",
+    )
     own_threshold: Literal["val", "fit"] = Field(
-        "val", description="the plug-ins' own thresholds: recalibrated on the val runs at "
-        "alpha, or as their fit set them")
+        "val",
+        description="the plug-ins' own thresholds: recalibrated on the val runs at "
+        "alpha, or as their fit set them",
+    )
     n_boot: Annotated[int, Field(ge=0, le=MAX_BOOTSTRAP)] = 200
-    seed: Annotated[int, Field(ge=0, le=MAX_SEED)] = Field(0, description="seed of the "
-                                                          "bootstrap")
+    seed: Annotated[int, Field(ge=0, le=MAX_SEED)] = Field(0, description="seed of the bootstrap")
     drive_data: bool = Field(False, description="also show plug-ins cmd.*, act.*, ctrl.*")
     mode_strata: bool = Field(False, description="also report per-regime (label.mode) strata")
     window: Literal["fault", "steady"] = Field(
-        "fault", description="steady: also report dr/pd/dd over severity-1 samples")
+        "fault", description="steady: also report dr/pd/dd over severity-1 samples"
+    )
     isolation: bool = Field(False, description="score rank_channels against label.ch.*")
     vus_buffer: Annotated[Time, Field(ge=0, le=MAX_VUS_BUFFER_S)] | None = Field(
-        None, description="report vus_pr with buffers up to this duration")
+        None, description="report vus_pr with buffers up to this duration"
+    )
 
 
 class Compare(Strict):
@@ -123,7 +131,8 @@ class BenchSpec(Strict):
     name: Id
     description: str = ""
     duration: Annotated[Time, Field(gt=0)] | None = Field(
-        None, description="overrides every scenario's duration")
+        None, description="overrides every scenario's duration"
+    )
     studies: Annotated[list[Study], Field(min_length=1)]
     methods: Annotated[list[MethodSpec], Field(min_length=1)]
     evaluation: EvaluationSettings = Field(default_factory=EvaluationSettings)
@@ -136,8 +145,9 @@ def _spec_file(spec_path: Path, rel: str, what: str, ypath: str) -> Path:
     if not p.exists():
         raise InputError(f"{what} file '{rel}' not found", file=str(spec_path), path=ypath)
     if not p.is_file():  # a directory, /dev/zero, a FIFO: there, but nothing to read
-        raise InputError(f"{what} file '{rel}' is not a regular file", file=str(spec_path),
-                         path=ypath)
+        raise InputError(
+            f"{what} file '{rel}' is not a regular file", file=str(spec_path), path=ypath
+        )
     return p
 
 
@@ -164,25 +174,35 @@ def load_spec(path: str | Path) -> BenchSpec:
                 seeds = rs.seeds or []
                 for k, seed in enumerate(seeds):  # the same run twice would count twice
                     if seeds.index(seed) != k:
-                        raise InputError(f"seed {seed} is listed twice", file=f,
-                                         path=f"studies[{i}].{role}[{j}].seeds[{k}]")
+                        raise InputError(
+                            f"seed {seed} is listed twice",
+                            file=f,
+                            path=f"studies[{i}].{role}[{j}].seeds[{k}]",
+                        )
                 _spec_file(path, getattr(rs, key), key, f"studies[{i}].{role}[{j}].{key}")
                 if key == "sweep" and spec.duration is not None:
-                    raise InputError("duration overrides scenarios, not sweeps: set the "
-                                     "sweep's duration in the sweep file (set: {duration: "
-                                     "...})", file=f, path="duration")
+                    raise InputError(
+                        "duration overrides scenarios, not sweeps: set the "
+                        "sweep's duration in the sweep file (set: {duration: "
+                        "...})",
+                        file=f,
+                        path="duration",
+                    )
     if spec.compare is not None and (path.parent / spec.compare.baseline).exists():
         # read now, not after the simulations (a missing one: run_bench, by --update)
-        read_baseline(_spec_file(path, spec.compare.baseline, "baseline", "compare.baseline"),
-                      f)
+        read_baseline(_spec_file(path, spec.compare.baseline, "baseline", "compare.baseline"), f)
     for name in spec.compare.metrics if spec.compare else ():
         if name not in METRICS:
-            raise InputError(f"unknown metric '{name}' (known: {', '.join(METRICS)})", file=f,
-                             path=f"compare.metrics.{name}")
+            raise InputError(
+                f"unknown metric '{name}' (known: {', '.join(METRICS)})",
+                file=f,
+                path=f"compare.metrics.{name}",
+            )
     labels = [m.key for m in spec.methods]
     if len(set(labels)) != len(labels):
-        raise InputError("two methods have the same label; give one a 'label'", file=f,
-                         path="methods")
+        raise InputError(
+            "two methods have the same label; give one a 'label'", file=f, path="methods"
+        )
     for i, m in enumerate(spec.methods):
         try:
             cls = get(m.method)
@@ -225,9 +245,9 @@ def read_baseline(path: str | Path, spec_file: str | None = None) -> pd.DataFram
         Naming the spec file and ``compare.baseline``: the file cannot be read, its first line
         is not the header of a baseline, or it is not a CSV of numbers.
     """
+
     def bad(why: str) -> InputError:
-        return InputError(f"'{path}' {why}", file=spec_file,
-                          path="compare.baseline")
+        return InputError(f"'{path}' {why}", file=spec_file, path="compare.baseline")
 
     header = ",".join(BASELINE_COLUMNS)
     try:
@@ -236,8 +256,10 @@ def read_baseline(path: str | Path, spec_file: str | None = None) -> pd.DataFram
     except OSError as exc:
         raise bad(f"cannot be read ({exc.strerror or exc})") from None
     if first.removeprefix("\ufeff") != header:  # (a BOM from a spreadsheet is fine)
-        raise bad(f"is not a baseline file written by `r2rsim bench --update` (its first "
-                  f"line is not '{header}')")
+        raise bad(
+            f"is not a baseline file written by `r2rsim bench --update` (its first "
+            f"line is not '{header}')"
+        )
     try:  # names as written: a label '007' is not the number 7
         table = pd.read_csv(path, encoding="utf-8-sig", dtype=str, keep_default_na=False)
     except (OSError, ValueError) as exc:  # pandas' ParserError, UnicodeDecodeError
@@ -247,8 +269,7 @@ def read_baseline(path: str | Path, spec_file: str | None = None) -> pd.DataFram
         try:  # an empty cell is no value (how --update writes NaN)
             table[col] = pd.to_numeric(table[col].where(table[col] != "")).astype(float)
         except (ValueError, TypeError):
-            raise bad(f"is not a baseline file: its {col} column holds text, not "
-                      f"numbers") from None
+            raise bad(f"is not a baseline file: its {col} column holds text, not numbers") from None
     return table
 
 
@@ -260,13 +281,19 @@ def _update_target(spec_path: Path, rel: str) -> Path:
     base = spec_path.resolve().parent
     target = (spec_path.parent / rel).resolve()
     if target == base or not target.is_relative_to(base):
-        raise InputError(f"'{rel}' is outside the spec's directory {base}: --update writes the "
-                         f"baseline only inside it (a path relative to the spec file)",
-                         file=str(spec_path), path="compare.baseline")
+        raise InputError(
+            f"'{rel}' is outside the spec's directory {base}: --update writes the "
+            f"baseline only inside it (a path relative to the spec file)",
+            file=str(spec_path),
+            path="compare.baseline",
+        )
     out = spec_path.parent / rel
     if not out.parent.is_dir():  # as the OS walks it (sub/../x needs sub)
-        raise InputError(f"no directory {out.parent} to write the baseline '{rel}' into",
-                         file=str(spec_path), path="compare.baseline")
+        raise InputError(
+            f"no directory {out.parent} to write the baseline '{rel}' into",
+            file=str(spec_path),
+            path="compare.baseline",
+        )
     return out
 
 
@@ -296,8 +323,9 @@ class BenchResult:
     baseline: Path | None
 
 
-def _dataset(workdir: Path, scenario: Path, seed: int, duration: float | None,
-             verify: bool = True) -> list[Run]:
+def _dataset(
+    workdir: Path, scenario: Path, seed: int, duration: float | None, verify: bool = True
+) -> list[Run]:
     """The runs of one dataset of the work directory: simulated, or reused if it is already
     there (the name holds a hash of the scenario file, its line file and the r2rsim version,
     the seed and the duration, so an edit to either file or a new release simulates again).
@@ -324,20 +352,22 @@ def _dataset(workdir: Path, scenario: Path, seed: int, duration: float | None,
     elif out.is_dir() and ((out / "runs.parquet").is_file() or (out / "samples").is_dir()):
         why = f"dataset {out}: incomplete (no manifest.json)"
     elif out.exists():  # not something bench wrote: never deleted
-        raise InputError(f"bench workdir: {out} exists and is not an r2rsim dataset; remove "
-                         f"it or choose another --workdir")
+        raise InputError(
+            f"bench workdir: {out} exists and is not an r2rsim dataset; remove "
+            f"it or choose another --workdir"
+        )
     else:
         why = None
     if why is not None:
-        print(f"warning: bench workdir: {why}; deleting it and simulating it again",
-              file=sys.stderr)
+        print(
+            f"warning: bench workdir: {why}; deleting it and simulating it again", file=sys.stderr
+        )
         shutil.rmtree(out)
     run_scenario(scenario, output=out, seed=seed, duration=duration)
     return read_runs(out, verify=False)  # just written and validated, labels included
 
 
-def _sweep_dataset(workdir: Path, sweep: Path, where: dict, log,
-                   verify: bool = True) -> list[Run]:
+def _sweep_dataset(workdir: Path, sweep: Path, where: dict, log, verify: bool = True) -> list[Run]:
     """The runs of a sweep in the work directory, selected by ``where``: the sweep is run
     (or continued; its finished runs are checked by their checksums and kept) into a
     directory named by a hash of the sweep file, its base scenario and line, and the r2rsim
@@ -352,13 +382,16 @@ def _sweep_dataset(workdir: Path, sweep: Path, where: dict, log,
     out = workdir / f"{sweep.stem}__{h.hexdigest()[:12]}"
     summary = run_sweep(sweep, output=out)
     if not summary.ok:
-        log(f"warning: sweep {sweep}: {summary.failed + summary.skipped_failed} run(s) "
-            f"failed; the bench uses the runs that have data")
+        log(
+            f"warning: sweep {sweep}: {summary.failed + summary.skipped_failed} run(s) "
+            f"failed; the bench uses the runs that have data"
+        )
     return read_runs(out, verify=verify, where=where or None)
 
 
-def study_runs(spec_path: Path, spec: BenchSpec, study: Study, workdir: Path, log=print,
-               verify: bool = True) -> dict[str, list[Run]]:
+def study_runs(
+    spec_path: Path, spec: BenchSpec, study: Study, workdir: Path, log=print, verify: bool = True
+) -> dict[str, list[Run]]:
     """The train, val and test runs of one study of a spec, simulated into ``workdir`` or
     reused from it (:func:`_dataset`, :func:`_sweep_dataset`).
 
@@ -387,18 +420,24 @@ def study_runs(spec_path: Path, spec: BenchSpec, study: Study, workdir: Path, lo
         runs = []
         for rs in getattr(study, role):
             if rs.sweep is not None:
-                runs += _sweep_dataset(workdir, spec_path.parent / rs.sweep, rs.where, log,
-                                       verify)
+                runs += _sweep_dataset(workdir, spec_path.parent / rs.sweep, rs.where, log, verify)
                 continue
             for seed in rs.seeds:
-                runs += _dataset(workdir, spec_path.parent / rs.scenario, seed, spec.duration,
-                                 verify)
+                runs += _dataset(
+                    workdir, spec_path.parent / rs.scenario, seed, spec.duration, verify
+                )
         roles[role] = runs
     return roles
 
 
-def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
-              update: bool = False, log=print, verify: bool = True) -> BenchResult:
+def run_bench(
+    spec_path: str | Path,
+    workdir: str | Path | None = None,
+    *,
+    update: bool = False,
+    log=print,
+    verify: bool = True,
+) -> BenchResult:
     """Run a benchmark spec and compare with its baseline file.
 
     Parameters
@@ -425,9 +464,12 @@ def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
     if baseline is not None and update:
         baseline = _update_target(spec_path, spec.compare.baseline)
     elif baseline is not None and not baseline.is_file():
-        raise InputError(f"baseline file '{spec.compare.baseline}' not found (create it with "
-                         f"`r2rsim bench {spec_path} --update`)", file=str(spec_path),
-                         path="compare.baseline")
+        raise InputError(
+            f"baseline file '{spec.compare.baseline}' not found (create it with "
+            f"`r2rsim bench {spec_path} --update`)",
+            file=str(spec_path),
+            path="compare.baseline",
+        )
     tmp = None
     if workdir is None:
         tmp = tempfile.TemporaryDirectory(prefix="r2rsim-bench-")
@@ -439,20 +481,34 @@ def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
         frames, evaluations = [], {}
         for study in spec.studies:
             roles = study_runs(spec_path, spec, study, workdir, log, verify)
-            log(f"study {study.name}: {len(roles['train'])} train, {len(roles['val'])} val, "
-                f"{len(roles['test'])} test runs")
+            log(
+                f"study {study.name}: {len(roles['train'])} train, {len(roles['val'])} val, "
+                f"{len(roles['test'])} test runs"
+            )
             for m in spec.methods:
                 cls = get(m.method)
                 est = call(cls, "__init__", cls, **m.params)
-                ev = evaluate(est, roles["train"], roles["test"], roles["val"],
-                              alpha=ev_set.alpha, m=ev_set.persistence, h=ev_set.grace,
-                              n_boot=ev_set.n_boot, seed=ev_set.seed, split=study.name,
-                              drive_data=ev_set.drive_data, mode_strata=ev_set.mode_strata,
-                              window=ev_set.window, isolation=ev_set.isolation,
-                              vus_buffer=ev_set.vus_buffer,
-                              detection_window=(math.inf if ev_set.detection_window is None
-                                                else ev_set.detection_window),
-                              own_threshold=ev_set.own_threshold)
+                ev = evaluate(
+                    est,
+                    roles["train"],
+                    roles["test"],
+                    roles["val"],
+                    alpha=ev_set.alpha,
+                    m=ev_set.persistence,
+                    h=ev_set.grace,
+                    n_boot=ev_set.n_boot,
+                    seed=ev_set.seed,
+                    split=study.name,
+                    drive_data=ev_set.drive_data,
+                    mode_strata=ev_set.mode_strata,
+                    window=ev_set.window,
+                    isolation=ev_set.isolation,
+                    vus_buffer=ev_set.vus_buffer,
+                    detection_window=(
+                        math.inf if ev_set.detection_window is None else ev_set.detection_window
+                    ),
+                    own_threshold=ev_set.own_threshold,
+                )
                 evaluations[(study.name, m.key)] = ev
                 log(ev.format())
                 frames.append(ev.metrics.assign(study=study.name, label=m.key))
@@ -460,8 +516,9 @@ def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
         if tmp is not None:
             tmp.cleanup()
     results = pd.concat(frames, ignore_index=True)
-    results = results[["study", "label", *[c for c in results.columns
-                                           if c not in ("study", "label")]]]
+    results = results[
+        ["study", "label", *[c for c in results.columns if c not in ("study", "label")]]
+    ]
     if spec.compare is None:
         return BenchResult(results, evaluations, [], [], 0, None)
     if update:
@@ -469,8 +526,9 @@ def run_bench(spec_path: str | Path, workdir: str | Path | None = None, *,
         _write_baseline(keep[BASELINE_COLUMNS], baseline)
         log(f"baseline written: {baseline} ({len(keep)} values)")
         return BenchResult(results, evaluations, [], [], 0, baseline)
-    regressions, improvements, n = compare(results, read_baseline(baseline, str(spec_path)),
-                                           spec.compare.metrics)
+    regressions, improvements, n = compare(
+        results, read_baseline(baseline, str(spec_path)), spec.compare.metrics
+    )
     return BenchResult(results, evaluations, regressions, improvements, n, baseline)
 
 
@@ -478,17 +536,24 @@ def write_results(results: pd.DataFrame, output: str | Path, overwrite: bool = F
     """Write a bench's results table as ``results.parquet`` and ``results.csv`` into
     ``output``: a new or empty directory, or (``overwrite``) one holding only earlier bench
     results (:func:`r2rsim.evaluate.results.check_results_output`). Returns ``output``."""
-    return _write_results(output, "bench", {
-        "results.parquet": lambda p: results.to_parquet(p, index=False),
-        "results.csv": lambda p: results.to_csv(p, index=False)}, overwrite)
+    return _write_results(
+        output,
+        "bench",
+        {
+            "results.parquet": lambda p: results.to_parquet(p, index=False),
+            "results.csv": lambda p: results.to_csv(p, index=False),
+        },
+        overwrite,
+    )
 
 
 def _fmt(v: float) -> str:
     return "nan" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.6g}"
 
 
-def compare(results: pd.DataFrame, baseline: pd.DataFrame, tolerances: dict[str, float]
-            ) -> tuple[list[str], list[str], int]:
+def compare(
+    results: pd.DataFrame, baseline: pd.DataFrame, tolerances: dict[str, float]
+) -> tuple[list[str], list[str], int]:
     """Compare results with baseline values, metric by metric.
 
     Returns
@@ -506,9 +571,11 @@ def compare(results: pd.DataFrame, baseline: pd.DataFrame, tolerances: dict[str,
         if row.metric not in tolerances:
             continue
         n += 1
-        where = (f"{row.study}/{row.label} {row.condition} {row.fault}"
-                 + ("" if pd.isna(row.magnitude) else f" magnitude {row.magnitude:g}")
-                 + f" {row.metric}")
+        where = (
+            f"{row.study}/{row.label} {row.condition} {row.fault}"
+            + ("" if pd.isna(row.magnitude) else f" magnitude {row.magnitude:g}")
+            + f" {row.metric}"
+        )
         tol = tolerances[row.metric]
         value = cur.get(_key(row))
         if value is None or math.isnan(value):
@@ -520,11 +587,16 @@ def compare(results: pd.DataFrame, baseline: pd.DataFrame, tolerances: dict[str,
             continue
         better = METRICS[row.metric].higher_is_better
         # no better direction: a change either way beyond the tolerance counts as worse
-        worse = (row.value - value if better else value - row.value) if better is not None \
+        worse = (
+            (row.value - value if better else value - row.value)
+            if better is not None
             else abs(value - row.value)
-        line = (f"{where}: baseline {_fmt(row.value)}, now {_fmt(value)} "
-                f"({'worse' if worse > 0 else 'better'} by {_fmt(abs(worse))}, "
-                f"tolerance {_fmt(tol)})")
+        )
+        line = (
+            f"{where}: baseline {_fmt(row.value)}, now {_fmt(value)} "
+            f"({'worse' if worse > 0 else 'better'} by {_fmt(abs(worse))}, "
+            f"tolerance {_fmt(tol)})"
+        )
         slack = tol + 1e-9 * max(1.0, abs(row.value))  # the CSV keeps 10 digits
         if worse > slack:
             regressions.append(line)

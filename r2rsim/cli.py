@@ -25,18 +25,18 @@ EXIT_TERMINATED = 143  # 128 + SIGTERM
 
 ELEMENTS = {
     "unwind": "roll paying out web: roll (core/outer radius, core inertia, build per wrap, "
-              "wound-in strain), friction, drive (torque with lag/saturation, or ideal_speed)",
+    "wound-in strain), friction, drive (torque with lag/saturation, or ideal_speed)",
     "rewind": "roll taking up web (same keys as unwind)",
     "idler": "undriven roller: radius, inertia, friction, wrap_angle, friction_coefficient",
     "driven": "motor-driven roller: radius, inertia, friction, drive",
     "nip": "nip pair as one degree of freedom: radius, inertia, drive, pressure_roller",
     "dancer": "translating dancer: roller on a carriage (mass, load_force, spring, damping, "
-              "coulomb, travel_range end stops); span lengths from the geometry",
+    "coulomb, travel_range end stops); span lengths from the geometry",
     "pivot_dancer": "pivoted dancer: roller on an arm (pivot, arm_length, arm_inertia, "
-                    "cylinder, torsion_spring, torque, gravity, angle_range end stops)",
+    "cylinder, torsion_spring, torque, gravity, angle_range end stops)",
     "festoon (span)": "spans[i].festoon: carriage with n moving rollers, 2n lumped strands",
     "splicer (unwind)": "unwind.splicer + spare_roll: zero_speed (fill, brake, dwell, swap, "
-                        "accelerate, refill) or flying (speed_match_error); splice joint",
+    "accelerate, refill) or flying (speed_match_error); splice joint",
 }
 SENSORS = {
     "load_cell": "bearing force of a roller -> indicated tension (wrap_angle, axis_angle)",
@@ -44,15 +44,15 @@ SENSORS = {
     "roll_diameter": "ultrasonic/laser diameter of an unwind/rewind roll",
     "dancer_position": "dancer travel [m] / arm angle [rad] or festoon carriage position [m]",
     "pitch_length": "2-D vision pitch length on a span, (T/ES + 1)·L0 (thesis eq. 2.11); "
-                    "L0 = q0 + q1·R³ (relaxed_pitch_law, eq. 2.24) + pitch_variation",
+    "L0 = q0 + q1·R³ (relaxed_pitch_law, eq. 2.24) + pitch_variation",
 }
 CONTROLLERS = {
     "speed_pi": "speed PI on a torque drive, torque feed-forward, draw; one master node",
     "tension_pi": "tension PI on a load cell: torque mode on unwind/rewind (T_ref·R feed-"
-                  "forward + trim), speed trim on speed-controlled elements; reads a "
-                  "load_cell or a pitch_length sensor",
+    "forward + trim), speed trim on speed-controlled elements; reads a "
+    "load_cell or a pitch_length sensor",
     "dancer_pi": "dancer/festoon position loop trimming the speed of an upstream or "
-                 "downstream element, with limits",
+    "downstream element, with limits",
 }
 
 
@@ -116,18 +116,29 @@ def _cmd_run(args) -> int:
     if sys.stderr.isatty() and not args.quiet:
         from tqdm import tqdm
 
-        bar = tqdm(total=0, unit="s", desc="simulating", leave=False,
-                   bar_format="{desc}: {n:.1f}/{total:.1f} s sim [{elapsed}<{remaining}]")
+        bar = tqdm(
+            total=0,
+            unit="s",
+            desc="simulating",
+            leave=False,
+            bar_format="{desc}: {n:.1f}/{total:.1f} s sim [{elapsed}<{remaining}]",
+        )
 
         def progress(t, total):
             bar.total = total
             bar.n = t
             bar.refresh()
+
     try:
         with _sigterm_as_interrupt(), notify_compiling(_compile_notice(bar, args.quiet)):
-            summary = run_scenario(args.scenario, output=args.output, seed=args.seed,
-                                   duration=args.duration, progress=progress,
-                                   overwrite=args.overwrite)
+            summary = run_scenario(
+                args.scenario,
+                output=args.output,
+                seed=args.seed,
+                duration=args.duration,
+                progress=progress,
+                overwrite=args.overwrite,
+            )
     finally:
         if bar is not None:
             bar.close()
@@ -135,12 +146,17 @@ def _cmd_run(args) -> int:
         print(f"warning: {w}", file=sys.stderr)
     print(summary.format())
     if not summary.ok:  # batch users must be able to trust $?
-        why = (f"states not finite from t = {summary.nonfinite_t:g} s"
-               if summary.nonfinite_t is not None else
-               f"the run ended early: {summary.termination_reason} at "
-               f"t = {summary.termination_time:g} s")
-        print(f"error: {args.scenario}: {why}; the dataset is written and marked "
-              f"(runs.parquet termination_reason)", file=sys.stderr)
+        why = (
+            f"states not finite from t = {summary.nonfinite_t:g} s"
+            if summary.nonfinite_t is not None
+            else f"the run ended early: {summary.termination_reason} at "
+            f"t = {summary.termination_time:g} s"
+        )
+        print(
+            f"error: {args.scenario}: {why}; the dataset is written and marked "
+            f"(runs.parquet termination_reason)",
+            file=sys.stderr,
+        )
         return EXIT_FAILURE
     return 0
 
@@ -160,28 +176,41 @@ def _cmd_sweep(args) -> int:
             bar = tqdm(total=total, unit="run", desc="sweep", leave=False)
         if rec is not None:
             bar.update(1)
+
     try:
         from .sweep import run_sweep
 
         with _sigterm_as_interrupt():
-            summary = run_sweep(args.sweep, output=args.output, workers=args.workers,
-                                scheduler=args.scheduler, retry_failed=args.retry_failed,
-                                overwrite=args.overwrite, progress=progress)
+            summary = run_sweep(
+                args.sweep,
+                output=args.output,
+                workers=args.workers,
+                scheduler=args.scheduler,
+                retry_failed=args.retry_failed,
+                overwrite=args.overwrite,
+                progress=progress,
+            )
     except OSError as exc:  # the disk is full, a directory read-only: the runs are kept
         if args.debug:
             raise
         where = f" ({exc.filename})" if exc.filename else ""
-        print(f"error: cannot write the sweep's files: {exc.strerror or exc}{where}. The "
-              f"finished runs are kept: free space or fix the permissions, and run the same "
-              f"command again to continue" if started
-              else f"error: {exc.strerror or exc}{where}; nothing was written", file=sys.stderr)
+        print(
+            f"error: cannot write the sweep's files: {exc.strerror or exc}{where}. The "
+            f"finished runs are kept: free space or fix the permissions, and run the same "
+            f"command again to continue"
+            if started
+            else f"error: {exc.strerror or exc}{where}; nothing was written",
+            file=sys.stderr,
+        )
         return EXIT_FAILURE
     except KeyboardInterrupt as exc:
         what = "terminated (SIGTERM)" if isinstance(exc, Terminated) else "interrupted"
-        print(f"{what}; the finished runs are kept: run the same command again to continue"
-              if started else f"{what} before this sweep ran a run; runs it finished before, "
-                               f"if any, are kept",
-              file=sys.stderr)
+        print(
+            f"{what}; the finished runs are kept: run the same command again to continue"
+            if started
+            else f"{what} before this sweep ran a run; runs it finished before, if any, are kept",
+            file=sys.stderr,
+        )
         return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
     finally:
         if bar is not None:
@@ -191,10 +220,13 @@ def _cmd_sweep(args) -> int:
     print(summary.format())
     if not summary.ok:
         n = summary.failed + summary.skipped_failed
-        print(f"error: {n} run{'s' if n != 1 else ''} of the sweep failed (listed above; "
-              f"failures.parquet, runs.parquet termination_reason); the others are written. "
-              f"--retry-failed runs them again (a solver failure repeats unless the cause, "
-              f"e.g. the solver settings, changes)", file=sys.stderr)
+        print(
+            f"error: {n} run{'s' if n != 1 else ''} of the sweep failed (listed above; "
+            f"failures.parquet, runs.parquet termination_reason); the others are written. "
+            f"--retry-failed runs them again (a solver failure repeats unless the cause, "
+            f"e.g. the solver settings, changes)",
+            file=sys.stderr,
+        )
         return EXIT_FAILURE
     return 0
 
@@ -261,9 +293,17 @@ def _cmd_diagnose(args) -> int:
     cls = get(args.method)
     params = _parse_params(args.param, cls)
     # every flag, and the output directory, is checked before a dataset is read
-    check_settings(alpha=args.alpha, m=args.persistence, h=args.grace, n_boot=args.n_boot,
-                   window=args.window, vus_buffer=args.vus_buffer, seed=args.seed,
-                   detection_window=args.detection_window, own_threshold=args.own_threshold)
+    check_settings(
+        alpha=args.alpha,
+        m=args.persistence,
+        h=args.grace,
+        n_boot=args.n_boot,
+        window=args.window,
+        vus_buffer=args.vus_buffer,
+        seed=args.seed,
+        detection_window=args.detection_window,
+        own_threshold=args.own_threshold,
+    )
     output = args.output or Path("results") / args.method
     check_results_output(output, "diagnose", args.overwrite)
     est = call(cls, "__init__", cls, **params)
@@ -278,26 +318,44 @@ def _cmd_diagnose(args) -> int:
             if not split.train:
                 raise InputError(no_training_run(runs))
         else:
-            split = split_by_condition(runs, train=args.train_mode, test=args.test_mode,
-                                       val=args.val_fraction)
+            split = split_by_condition(
+                runs, train=args.train_mode, test=args.test_mode, val=args.val_fraction
+            )
     else:
         if not args.train or not args.test:
-            raise InputError("name the training and test datasets (--train and --test), or "
-                             "pool them with --data and --split")
+            raise InputError(
+                "name the training and test datasets (--train and --test), or "
+                "pool them with --data and --split"
+            )
         from .evaluate.harness import Split
 
-        split = Split(read_datasets(args.train, verify=verify, where=where),
-                      read_datasets(args.val or [], verify=verify, where=where),
-                      read_datasets(args.test, verify=verify, where=where))
+        split = Split(
+            read_datasets(args.train, verify=verify, where=where),
+            read_datasets(args.val or [], verify=verify, where=where),
+            read_datasets(args.test, verify=verify, where=where),
+        )
     print(split.describe())
     if not split.val:
         print("no validation runs: metrics at the plug-in's own threshold only (no *_cal)")
-    ev = evaluate(est, split.train, split.test, split.val, alpha=args.alpha,
-                  m=args.persistence, h=args.grace, n_boot=args.n_boot, seed=args.seed,
-                  split=split.name, drive_data=args.drive_data,
-                  mode_strata=args.mode_strata, window=args.window, isolation=args.isolation,
-                  vus_buffer=args.vus_buffer, detection_window=args.detection_window,
-                  own_threshold=args.own_threshold)
+    ev = evaluate(
+        est,
+        split.train,
+        split.test,
+        split.val,
+        alpha=args.alpha,
+        m=args.persistence,
+        h=args.grace,
+        n_boot=args.n_boot,
+        seed=args.seed,
+        split=split.name,
+        drive_data=args.drive_data,
+        mode_strata=args.mode_strata,
+        window=args.window,
+        isolation=args.isolation,
+        vus_buffer=args.vus_buffer,
+        detection_window=args.detection_window,
+        own_threshold=args.own_threshold,
+    )
     out = ev.write(output, overwrite=args.overwrite)
     print(ev.format())
     print(f"written: {out}/predictions.parquet, metrics.parquet, metrics.csv, datasets.json")
@@ -310,8 +368,7 @@ def _cmd_bench(args) -> int:
 
     if args.output:  # before anything is simulated
         check_results_output(args.output, "bench", args.overwrite)
-    res = run_bench(args.spec, workdir=args.workdir, update=args.update,
-                    verify=not args.no_verify)
+    res = run_bench(args.spec, workdir=args.workdir, update=args.update, verify=not args.no_verify)
     if args.output:
         out = write_results(res.results, args.output, overwrite=args.overwrite)
         print(f"results written: {out}/results.parquet, results.csv")
@@ -324,8 +381,11 @@ def _cmd_bench(args) -> int:
     if res.regressions:
         for line in res.regressions:
             print(f"REGRESSION: {line}", file=sys.stderr)
-        print(f"error: {len(res.regressions)} of {res.n_checked} metrics regressed beyond "
-              f"their tolerance against {res.baseline}", file=sys.stderr)
+        print(
+            f"error: {len(res.regressions)} of {res.n_checked} metrics regressed beyond "
+            f"their tolerance against {res.baseline}",
+            file=sys.stderr,
+        )
         return EXIT_FAILURE
     print(f"bench passed: {res.n_checked} metrics within tolerance of {res.baseline}")
     return 0
@@ -358,21 +418,38 @@ def _report_datasets_unverified(results: Path, data: list[str] | None):
 
 
 def _add_report_parser(sub) -> None:
-    rp = sub.add_parser("report", help="write a self-contained HTML report (tables and "
-                        "figures) of a diagnose or bench results directory")
-    rp.add_argument("results", metavar="RESULTS_DIR",
-                    help="written by `r2rsim diagnose -o` or `r2rsim bench -o`")
-    rp.add_argument("-o", "--output", help="HTML file (default: RESULTS_DIR/report.html); "
-                    "an existing file is replaced only if it is an r2rsim report")
-    rp.add_argument("--data", nargs="+", metavar="DATASET",
-                    help="the test datasets a diagnose result was scored on: adds ROC/PR "
-                    "curves and the statistic of a few runs (default: those r2rsim "
-                    "diagnose recorded in RESULTS_DIR/datasets.json). They are checked as "
-                    "`r2rsim diagnose` checks them: sizes and checksums against their "
-                    "manifest.json, and each run's labels against faults.parquet")
-    rp.add_argument("--no-verify", action="store_true",
-                    help="read test datasets whose files differ from their manifest.json "
-                    "(or whose labels differ from faults.parquet) anyway")
+    rp = sub.add_parser(
+        "report",
+        help="write a self-contained HTML report (tables and "
+        "figures) of a diagnose or bench results directory",
+    )
+    rp.add_argument(
+        "results",
+        metavar="RESULTS_DIR",
+        help="written by `r2rsim diagnose -o` or `r2rsim bench -o`",
+    )
+    rp.add_argument(
+        "-o",
+        "--output",
+        help="HTML file (default: RESULTS_DIR/report.html); "
+        "an existing file is replaced only if it is an r2rsim report",
+    )
+    rp.add_argument(
+        "--data",
+        nargs="+",
+        metavar="DATASET",
+        help="the test datasets a diagnose result was scored on: adds ROC/PR "
+        "curves and the statistic of a few runs (default: those r2rsim "
+        "diagnose recorded in RESULTS_DIR/datasets.json). They are checked as "
+        "`r2rsim diagnose` checks them: sizes and checksums against their "
+        "manifest.json, and each run's labels against faults.parquet",
+    )
+    rp.add_argument(
+        "--no-verify",
+        action="store_true",
+        help="read test datasets whose files differ from their manifest.json "
+        "(or whose labels differ from faults.parquet) anyway",
+    )
     rp.set_defaults(func=_cmd_report)
 
 
@@ -380,42 +457,79 @@ def _cmd_export(args) -> int:
     where = parse_where(args.where)  # a malformed --where is refused before the imports
     from .evaluate.export import export_dataset
 
-    summary = export_dataset(args.dataset, args.output, args.format, channels=args.channels,
-                             label=args.label, split=args.split, where=where,
-                             drop_warmup=args.drop_warmup, verify=not args.no_verify)
+    summary = export_dataset(
+        args.dataset,
+        args.output,
+        args.format,
+        channels=args.channels,
+        label=args.label,
+        split=args.split,
+        where=where,
+        drop_warmup=args.drop_warmup,
+        verify=not args.no_verify,
+    )
     print(summary.split)
     print(summary.describe())
     return 0
 
 
 def _add_export_parser(sub) -> None:
-    ex = sub.add_parser("export", help="write a dataset's runs as TimeEval or TSB-AD CSV "
-                        "files (docs/dataset.md §13)")
+    ex = sub.add_parser(
+        "export",
+        help="write a dataset's runs as TimeEval or TSB-AD CSV files (docs/dataset.md §13)",
+    )
     ex.add_argument("dataset", help="a run's or a sweep's dataset directory")
     # no `choices`: a bad value is one `error:` line from export_dataset, not argparse's usage
-    ex.add_argument("--format", required=True, metavar="{timeeval,tsb-ad}",
-                    help="timeeval: datasets.csv and r2rsim/RUN.csv (timestamp, channels, "
-                    "is_anomaly); tsb-ad: NNN_R2RSIM_id_N_Sensor_tr_T_1st_F.csv (channels, "
-                    "Label) and file_list.csv")
-    ex.add_argument("-o", "--output", required=True,
-                    help="output directory; must not exist, or be empty")
-    ex.add_argument("--channels", nargs="+", metavar="PATTERN",
-                    help="glob patterns of the columns to export (default: meas.*); true.*, "
-                    "state.*, act.*, cmd.*, label.*, flag.* and ctrl.*_seen_* only when a "
-                    "pattern names that family")
-    ex.add_argument("--label", default="any",
-                    help="any (label.is_faulty, default), a fault class (sensor) or type "
-                    "(sensor.offset): 1 where such a fault is present")
-    ex.add_argument("--split", default="all", metavar="{all,train,val,test}",
-                    help="the runs of one role of the split `r2rsim diagnose --data --split "
-                    "seed` makes (every faulty run is a test run), or all (default)")
-    ex.add_argument("--where", action="append", default=[], metavar="KEY=VALUE[,VALUE]",
-                    help="only the runs with these runs.parquet values, e.g. a sweep's axis: "
-                    "offset=-10,10 (repeatable)")
-    ex.add_argument("--drop-warmup", action="store_true",
-                    help="leave out the warm-up samples (outside label.score_mask)")
-    ex.add_argument("--no-verify", action="store_true",
-                    help="use a dataset whose files differ from their manifest.json checksums")
+    ex.add_argument(
+        "--format",
+        required=True,
+        metavar="{timeeval,tsb-ad}",
+        help="timeeval: datasets.csv and r2rsim/RUN.csv (timestamp, channels, "
+        "is_anomaly); tsb-ad: NNN_R2RSIM_id_N_Sensor_tr_T_1st_F.csv (channels, "
+        "Label) and file_list.csv",
+    )
+    ex.add_argument(
+        "-o", "--output", required=True, help="output directory; must not exist, or be empty"
+    )
+    ex.add_argument(
+        "--channels",
+        nargs="+",
+        metavar="PATTERN",
+        help="glob patterns of the columns to export (default: meas.*); true.*, "
+        "state.*, act.*, cmd.*, label.*, flag.* and ctrl.*_seen_* only when a "
+        "pattern names that family",
+    )
+    ex.add_argument(
+        "--label",
+        default="any",
+        help="any (label.is_faulty, default), a fault class (sensor) or type "
+        "(sensor.offset): 1 where such a fault is present",
+    )
+    ex.add_argument(
+        "--split",
+        default="all",
+        metavar="{all,train,val,test}",
+        help="the runs of one role of the split `r2rsim diagnose --data --split "
+        "seed` makes (every faulty run is a test run), or all (default)",
+    )
+    ex.add_argument(
+        "--where",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE[,VALUE]",
+        help="only the runs with these runs.parquet values, e.g. a sweep's axis: "
+        "offset=-10,10 (repeatable)",
+    )
+    ex.add_argument(
+        "--drop-warmup",
+        action="store_true",
+        help="leave out the warm-up samples (outside label.score_mask)",
+    )
+    ex.add_argument(
+        "--no-verify",
+        action="store_true",
+        help="use a dataset whose files differ from their manifest.json checksums",
+    )
     ex.set_defaults(func=_cmd_export)
 
 
@@ -428,9 +542,11 @@ def _failed_runs_note(path: Path) -> str:
     if not found or not found[0]:
         return ""
     failed, n_runs = found
-    return (f"; an INCOMPLETE sweep: {len(failed)} of {n_runs} runs failed (e.g. {failed[0]}; "
-            f"failures.parquet and runs.parquet termination_reason say why; `r2rsim sweep "
-            f"--retry-failed` runs them again)")
+    return (
+        f"; an INCOMPLETE sweep: {len(failed)} of {n_runs} runs failed (e.g. {failed[0]}; "
+        f"failures.parquet and runs.parquet termination_reason say why; `r2rsim sweep "
+        f"--retry-failed` runs them again)"
+    )
 
 
 def _cmd_validate(args) -> int:
@@ -440,8 +556,9 @@ def _cmd_validate(args) -> int:
     shown: set[str] = set()  # a line's problem once, though its scenario names it again
 
     def problem(exc: InputError) -> None:
-        key = InputError(exc.message, file=exc.file and str(Path(exc.file).resolve()),
-                         path=exc.path).format()
+        key = InputError(
+            exc.message, file=exc.file and str(Path(exc.file).resolve()), path=exc.path
+        ).format()
         if key not in shown:
             shown.add(key)
             print(exc.format(), file=sys.stderr)
@@ -473,9 +590,11 @@ def _cmd_validate(args) -> int:
                 def n(k, what):
                     return f"{k} {what}{'' if k == 1 else 's'}"
 
-                kind = (f"sweep ({n(len(plan.runs), 'run')}: "
-                        f"{n(plan.n_combinations, 'combination')} x "
-                        f"{n(len(plan.seeds), 'seed')})")
+                kind = (
+                    f"sweep ({n(len(plan.runs), 'run')}: "
+                    f"{n(plan.n_combinations, 'combination')} x "
+                    f"{n(len(plan.seeds), 'seed')})"
+                )
             else:
                 from .run import check_plan, default_output, plan_from_file
 
@@ -501,15 +620,20 @@ def _cmd_schema(args) -> int:
     kinds = ("line", "scenario", "sweep")
     bad = [k for k in args.kind if k not in kinds]
     if bad:
-        print(f"error: r2rsim schema: unknown file kind '{bad[0]}' (line, scenario or sweep)",
-              file=sys.stderr)
+        print(
+            f"error: r2rsim schema: unknown file kind '{bad[0]}' (line, scenario or sweep)",
+            file=sys.stderr,
+        )
         return EXIT_INPUT
     if args.markdown:
         print(reference_markdown(args.kind or kinds), end="")
         return 0
     if len(args.kind) != 1:
-        print("error: r2rsim schema: name one of line, scenario, sweep (or give --markdown for "
-              "the reference of every key)", file=sys.stderr)
+        print(
+            "error: r2rsim schema: name one of line, scenario, sweep (or give --markdown for "
+            "the reference of every key)",
+            file=sys.stderr,
+        )
         return EXIT_INPUT
     print(json_schema(args.kind[0]))
     return 0
@@ -529,21 +653,29 @@ def _list_plugins(load: bool) -> int:
                 print(f"{name:<12} {e.value:<55} BROKEN: {e.error}")
                 continue
             doc = (e.cls.__doc__ or "").strip().splitlines()
-            print(f"{name:<12} {e.cls.__module__ + '.' + e.cls.__qualname__:<55} "
-                  f"{doc[0] if doc else ''}")
+            print(
+                f"{name:<12} {e.cls.__module__ + '.' + e.cls.__qualname__:<55} "
+                f"{doc[0] if doc else ''}"
+            )
         print(f"(entry-point group '{GROUP}'; every plug-in imported and checked)")
     else:
         for name, e in listing().items():
             broken += e.problem is not None
             cls = e.value.replace(":", ".")
-            print(f"{name:<12} {cls:<55} "
-                  + (f"BROKEN: plug-in '{name}' ({e.value}) {e.problem}" if e.problem
-                     else e.summary))
-        print(f"(entry-point group '{GROUP}'; read from the metadata and source without "
-              f"importing the plug-ins: `r2rsim list plugins --load` imports and checks each)")
+            print(
+                f"{name:<12} {cls:<55} "
+                + (f"BROKEN: plug-in '{name}' ({e.value}) {e.problem}" if e.problem else e.summary)
+            )
+        print(
+            f"(entry-point group '{GROUP}'; read from the metadata and source without "
+            f"importing the plug-ins: `r2rsim list plugins --load` imports and checks each)"
+        )
     if broken:
-        print(f"warning: {broken} registered plug-in{'s' if broken > 1 else ''} cannot be "
-              f"loaded (marked BROKEN above); the others work", file=sys.stderr)
+        print(
+            f"warning: {broken} registered plug-in{'s' if broken > 1 else ''} cannot be "
+            f"loaded (marked BROKEN above); the others work",
+            file=sys.stderr,
+        )
     return 0
 
 
@@ -553,18 +685,22 @@ def _cmd_list(args) -> int:
     if args.what == "faults":
         from .schema.faults import CATALOGUE
 
-        acts = {"loop": "inside the loop if a controller reads the sensor and the fault "
-                "is not record_only, else on the record",
-                "record": "on the recorded measurement", "model": "on the line's equations"}
+        acts = {
+            "loop": "inside the loop if a controller reads the sensor and the fault "
+            "is not record_only, else on the record",
+            "record": "on the recorded measurement",
+            "model": "on the line's equations",
+        }
         print(f"{'type':<31} {'target':<10} {'magnitude':<10} description")
         for ft in CATALOGUE.values():
-            print(f"{ft.name:<31} {ft.target:<10} {ft.magnitude:<10} {ft.description} "
-                  f"(acts {acts[ft.acts]})")
+            print(
+                f"{ft.name:<31} {ft.target:<10} {ft.magnitude:<10} {ft.description} "
+                f"(acts {acts[ft.acts]})"
+            )
         return 0
     if args.what == "channels":
         if not args.line:
-            raise InputError("name the line or scenario file: r2rsim list channels "
-                             "LINE|SCENARIO")
+            raise InputError("name the line or scenario file: r2rsim list channels LINE|SCENARIO")
         return _list_channels(args.line)
     tables = {"elements": ELEMENTS, "sensors": SENSORS, "controllers": CONTROLLERS}
     for name, desc in tables[args.what].items():
@@ -588,15 +724,20 @@ def _list_channels(path: str) -> int:
         scenario = Scenario.model_validate({"line": path, "duration": 1})
         plan = RunPlan(scenario, line, name="line", source=str(path), scenario_sha256="")
     elif "axes" in data or "scenario" in data:
-        raise InputError("this is a sweep file: list the channels of its scenario (scenario: "
-                         "...); every run of a sweep writes the same columns", file=str(path))
+        raise InputError(
+            "this is a sweep file: list the channels of its scenario (scenario: "
+            "...); every run of a sweep writes the same columns",
+            file=str(path),
+        )
     else:
-        raise InputError("neither a line file (elements: ...) nor a scenario (line: ...): "
-                         "r2rsim list channels LINE|SCENARIO", file=str(path))
+        raise InputError(
+            "neither a line file (elements: ...) nor a scenario (line: ...): "
+            "r2rsim list channels LINE|SCENARIO",
+            file=str(path),
+        )
     table = channels_table(plan).to_pydict()
     print(f"{'channel':<44} {'unit':<8} description")
-    for name, unit, desc in zip(table["channel"], table["unit"], table["description"],
-                                strict=True):
+    for name, unit, desc in zip(table["channel"], table["unit"], table["description"], strict=True):
         print(f"{name:<44} {unit or '-':<8} {desc}")
     return 0
 
@@ -610,15 +751,18 @@ def _plot_output(output: str, dataset: str, overwrite: bool = False) -> Path:
     file it holds), and no existing file unless ``--overwrite``."""
     out = Path(output)
     if out.suffix.lower() not in PLOT_FORMATS:
-        raise InputError(f"-o {output}: unknown figure format '{out.suffix}' (use "
-                         f"{', '.join(PLOT_FORMATS)})")
+        raise InputError(
+            f"-o {output}: unknown figure format '{out.suffix}' (use {', '.join(PLOT_FORMATS)})"
+        )
     if out.is_dir():
         raise InputError(f"-o {output}: is a directory; name the file to write")
     if not out.parent.resolve().is_dir():
         raise InputError(f"-o {output}: no directory {out.parent} to write into")
     if out.resolve().is_relative_to(Path(dataset).resolve()):
-        raise InputError(f"-o {output}: inside the dataset {dataset}; write the figure "
-                         f"elsewhere (a dataset holds only its own files)")
+        raise InputError(
+            f"-o {output}: inside the dataset {dataset}; write the figure "
+            f"elsewhere (a dataset holds only its own files)"
+        )
     if out.exists() and not overwrite:
         raise InputError(f"-o {output}: the file exists; pass --overwrite to replace it")
     return out
@@ -632,14 +776,22 @@ def _cmd_plot(args) -> int:
     if args.sweep is not None:
         if args.run is not None or args.channels is not None:
             raise InputError("--sweep plots every run: drop --run and --channels")
-        fig = plot_sweep(args.dataset, args.sweep, args.statistic, args.axis,
-                         group=args.group, t0=args.t0, t1=args.t1,
-                         verify=not args.no_verify)
+        fig = plot_sweep(
+            args.dataset,
+            args.sweep,
+            args.statistic,
+            args.axis,
+            group=args.group,
+            t0=args.t0,
+            t1=args.t1,
+            verify=not args.no_verify,
+        )
     else:
         if (args.axis, args.group) != (None, None):
             raise InputError("--axis and --group go with --sweep CHANNEL")
-        fig = plot_run(args.dataset, args.run, args.channels, args.t0, args.t1,
-                       verify=not args.no_verify)
+        fig = plot_run(
+            args.dataset, args.run, args.channels, args.t0, args.t1, verify=not args.no_verify
+        )
     fig.savefig(out, format=out.suffix.lower()[1:])
     print(f"wrote {out}")
     return 0
@@ -647,7 +799,8 @@ def _cmd_plot(args) -> int:
 
 def _add_plot_parser(sub) -> None:
     pl = sub.add_parser(
-        "plot", help="plot a run's channels, faults and events, or a sweep statistic, to "
+        "plot",
+        help="plot a run's channels, faults and events, or a sweep statistic, to "
         "a PNG/SVG/PDF file (needs matplotlib: the [plot] extra)",
         description="Plot one run of DATASET: the chosen channels on shared time axes, one "
         "axes per quantity, fault windows shaded, events marked. With --sweep CHANNEL: the "
@@ -657,30 +810,47 @@ def _add_plot_parser(sub) -> None:
         "reads one does: every listed file there with its size, and each file the figure "
         "reads (the runs, channels, faults and events tables, the samples files it opens) "
         "with its sha256; a dataset changed after it was written, or an unfinished sweep, "
-        "is refused (exit 2). --no-verify draws it anyway.")
-    pl.add_argument("dataset", metavar="DATASET", help="dataset directory (r2rsim run or "
-                    "sweep)")
+        "is refused (exit 2). --no-verify draws it anyway.",
+    )
+    pl.add_argument("dataset", metavar="DATASET", help="dataset directory (r2rsim run or sweep)")
     pl.add_argument("--run", metavar="ID", help="run id (default: the first run)")
-    pl.add_argument("--channels", nargs="+", metavar="GLOB",
-                    help="column globs, e.g. 'state.span*.tension_N' 'meas.*' (default: "
-                    "span tensions, readings, set-points, speeds, positions, radii, torques)")
-    pl.add_argument("--t0", type=_duration_arg, metavar="T", help="window start (s or "
-                    "with units)")
+    pl.add_argument(
+        "--channels",
+        nargs="+",
+        metavar="GLOB",
+        help="column globs, e.g. 'state.span*.tension_N' 'meas.*' (default: "
+        "span tensions, readings, set-points, speeds, positions, radii, torques)",
+    )
+    pl.add_argument("--t0", type=_duration_arg, metavar="T", help="window start (s or with units)")
     pl.add_argument("--t1", type=_duration_arg, metavar="T", help="window end")
-    pl.add_argument("--sweep", metavar="CHANNEL",
-                    help="plot a statistic of CHANNEL per run against a sweep axis")
-    pl.add_argument("--statistic", default="mean", choices=["mean", "std", "min", "max", "rms"],
-                    help="with --sweep: per run, over --t0..--t1 (default: mean)")
-    pl.add_argument("--axis", metavar="NAME", help="with --sweep: the x axis (default: the "
-                    "first sweep axis)")
+    pl.add_argument(
+        "--sweep",
+        metavar="CHANNEL",
+        help="plot a statistic of CHANNEL per run against a sweep axis",
+    )
+    pl.add_argument(
+        "--statistic",
+        default="mean",
+        choices=["mean", "std", "min", "max", "rms"],
+        help="with --sweep: per run, over --t0..--t1 (default: mean)",
+    )
+    pl.add_argument(
+        "--axis", metavar="NAME", help="with --sweep: the x axis (default: the first sweep axis)"
+    )
     pl.add_argument("--group", metavar="NAME", help="with --sweep: colour by this axis")
-    pl.add_argument("-o", "--output", default="plot.png",
-                    help="figure file, .png, .svg or .pdf (default: plot.png)")
-    pl.add_argument("--overwrite", action="store_true",
-                    help="replace the figure file if it exists")
-    pl.add_argument("--no-verify", action="store_true",
-                    help="draw a dataset whose files differ from their manifest.json sizes "
-                    "or checksums (or that has none)")
+    pl.add_argument(
+        "-o",
+        "--output",
+        default="plot.png",
+        help="figure file, .png, .svg or .pdf (default: plot.png)",
+    )
+    pl.add_argument("--overwrite", action="store_true", help="replace the figure file if it exists")
+    pl.add_argument(
+        "--no-verify",
+        action="store_true",
+        help="draw a dataset whose files differ from their manifest.json sizes "
+        "or checksums (or that has none)",
+    )
     pl.set_defaults(func=_cmd_plot)
 
 
@@ -710,8 +880,11 @@ def _run_command(args) -> int:
         def show(message, category, filename, lineno, file=None, line=None):
             if issubclass(category, PlausibilityWarning):
                 where = getattr(message, "file", None)
-                key = (where and str(Path(where).resolve()), getattr(message, "path", None),
-                       getattr(message, "message", str(message)))
+                key = (
+                    where and str(Path(where).resolve()),
+                    getattr(message, "path", None),
+                    getattr(message, "message", str(message)),
+                )
                 if key not in shown:
                     shown.add(key)
                     print(f"warning: {message}", file=sys.stderr)
@@ -724,160 +897,301 @@ def _run_command(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="r2rsim", description="Roll-to-roll web-handling line "
-                                "simulator with labelled Parquet datasets.")
+    p = argparse.ArgumentParser(
+        prog="r2rsim",
+        description="Roll-to-roll web-handling line simulator with labelled Parquet datasets.",
+    )
     p.add_argument("--version", action="version", version=f"r2rsim {__version__}")
     p.add_argument("--debug", action="store_true", help="show tracebacks on errors")
     sub = p.add_subparsers(dest="command", required=True)
-    for add in (_add_run_parser, _add_sweep_parser, _add_file_parsers, _add_diagnose_parser,
-                _add_bench_parser, _add_report_parser, _add_export_parser, _add_list_parser,
-                _add_plot_parser):
+    for add in (
+        _add_run_parser,
+        _add_sweep_parser,
+        _add_file_parsers,
+        _add_diagnose_parser,
+        _add_bench_parser,
+        _add_report_parser,
+        _add_export_parser,
+        _add_list_parser,
+        _add_plot_parser,
+    ):
         add(sub)
     for sp in sub.choices.values():  # `r2rsim run X --debug` as well as `r2rsim --debug run X`
-        sp.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
-                        help="show tracebacks on errors")
+        sp.add_argument(
+            "--debug",
+            action="store_true",
+            default=argparse.SUPPRESS,
+            help="show tracebacks on errors",
+        )
     return p
 
 
 def _add_run_parser(sub) -> None:
     r = sub.add_parser("run", help="run a scenario and write its dataset")
     r.add_argument("scenario")
-    r.add_argument("-o", "--output", help="dataset directory (default: the scenario's "
-                   "output, else runs/NAME); must not exist, or be empty")
-    r.add_argument("--overwrite", action="store_true",
-                   help="replace the output directory if it holds an r2rsim dataset (never "
-                   "a directory holding other files)")
+    r.add_argument(
+        "-o",
+        "--output",
+        help="dataset directory (default: the scenario's "
+        "output, else runs/NAME); must not exist, or be empty",
+    )
+    r.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the output directory if it holds an r2rsim dataset (never "
+        "a directory holding other files)",
+    )
     r.add_argument("--seed", type=int, help="root seed (overrides the scenario)")
-    r.add_argument("--duration", type=_duration_arg,
-                   help="simulated time, s or with units ('90 s', '2 min'); overrides the "
-                   "scenario")
+    r.add_argument(
+        "--duration",
+        type=_duration_arg,
+        help="simulated time, s or with units ('90 s', '2 min'); overrides the scenario",
+    )
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=_cmd_run)
 
 
 def _add_sweep_parser(sub) -> None:
-    sw = sub.add_parser("sweep", help="run a sweep file (a base scenario x axes x seeds) "
-                        "into one dataset; continues an unfinished one")
+    sw = sub.add_parser(
+        "sweep",
+        help="run a sweep file (a base scenario x axes x seeds) "
+        "into one dataset; continues an unfinished one",
+    )
     sw.add_argument("sweep")
-    sw.add_argument("-o", "--output", help="dataset directory (default: the sweep's output, "
-                    "else runs/NAME); a directory holding this sweep is continued")
-    sw.add_argument("--workers", type=int, help="worker processes (default: by the planned "
-                    "work, one per 2000 simulated seconds of runs, at most one per core; 0: in "
-                    "this process)")
-    sw.add_argument("--scheduler", metavar="ADDRESS", help="run on a Dask cluster: a "
-                    "scheduler address, or 'local' to start a LocalCluster of --workers "
-                    "processes (needs dask.distributed: the [dask] extra)")
-    sw.add_argument("--retry-failed", action="store_true",
-                    help="run again the runs that failed before")
-    sw.add_argument("--overwrite", action="store_true",
-                    help="replace a finished r2rsim dataset at the output (never a directory "
-                    "holding other files)")
+    sw.add_argument(
+        "-o",
+        "--output",
+        help="dataset directory (default: the sweep's output, "
+        "else runs/NAME); a directory holding this sweep is continued",
+    )
+    sw.add_argument(
+        "--workers",
+        type=int,
+        help="worker processes (default: by the planned "
+        "work, one per 2000 simulated seconds of runs, at most one per core; 0: in "
+        "this process)",
+    )
+    sw.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run on a Dask cluster: a "
+        "scheduler address, or 'local' to start a LocalCluster of --workers "
+        "processes (needs dask.distributed: the [dask] extra)",
+    )
+    sw.add_argument(
+        "--retry-failed", action="store_true", help="run again the runs that failed before"
+    )
+    sw.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace a finished r2rsim dataset at the output (never a directory "
+        "holding other files)",
+    )
     sw.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     sw.set_defaults(func=_cmd_sweep)
 
 
 def _add_file_parsers(sub) -> None:
     """``validate`` and ``schema``."""
-    v = sub.add_parser("validate", help="check line, scenario and sweep files and datasets, "
-                       "list every problem")
+    v = sub.add_parser(
+        "validate", help="check line, scenario and sweep files and datasets, list every problem"
+    )
     v.add_argument("files", nargs="+")
     v.set_defaults(func=_cmd_validate)
 
-    s = sub.add_parser("schema", help="print the JSON Schema of a line, scenario or sweep "
-                       "file, or (--markdown) a reference of every key")
+    s = sub.add_parser(
+        "schema",
+        help="print the JSON Schema of a line, scenario or sweep "
+        "file, or (--markdown) a reference of every key",
+    )
     # no `choices`: argparse (3.11) checks an empty nargs="*" list against them and fails
-    s.add_argument("kind", nargs="*", metavar="{line,scenario,sweep}",
-                   help="the file kind (with --markdown: any number, default all)")
-    s.add_argument("--markdown", action="store_true",
-                   help="print every key (type, default, meaning) as Markdown tables: the text "
-                   "of docs/keys.md")
+    s.add_argument(
+        "kind",
+        nargs="*",
+        metavar="{line,scenario,sweep}",
+        help="the file kind (with --markdown: any number, default all)",
+    )
+    s.add_argument(
+        "--markdown",
+        action="store_true",
+        help="print every key (type, default, meaning) as Markdown tables: the text "
+        "of docs/keys.md",
+    )
     s.set_defaults(func=_cmd_schema)
 
 
 def _add_diagnose_parser(sub) -> None:
-    d = sub.add_parser("diagnose", help="fit a diagnostic plug-in on healthy runs, score "
-                       "test runs, write predictions and metrics")
+    d = sub.add_parser(
+        "diagnose",
+        help="fit a diagnostic plug-in on healthy runs, score "
+        "test runs, write predictions and metrics",
+    )
     d.add_argument("--method", required=True, help="registered plug-in (r2rsim list plugins)")
     d.add_argument("--train", nargs="+", metavar="DATASET", help="fault-free datasets to fit on")
-    d.add_argument("--val", nargs="+", metavar="DATASET",
-                   help="fault-free datasets to calibrate the threshold on (M6)")
+    d.add_argument(
+        "--val",
+        nargs="+",
+        metavar="DATASET",
+        help="fault-free datasets to calibrate the threshold on (M6)",
+    )
     d.add_argument("--test", nargs="+", metavar="DATASET", help="datasets to score")
-    d.add_argument("--data", nargs="+", metavar="DATASET",
-                   help="a pool of datasets to split with --split")
-    d.add_argument("--split", choices=["seed", "condition"], default="seed",
-                   help="with --data: by seed (60/20/20) or by operating condition")
+    d.add_argument(
+        "--data", nargs="+", metavar="DATASET", help="a pool of datasets to split with --split"
+    )
+    d.add_argument(
+        "--split",
+        choices=["seed", "condition"],
+        default="seed",
+        help="with --data: by seed (60/20/20) or by operating condition",
+    )
     d.add_argument("--train-mode", default="OC1", help="--split condition: training mode")
     d.add_argument("--test-mode", default="OC2", help="--split condition: test mode")
-    d.add_argument("--val-fraction", type=float, default=0.25,
-                   help="--split condition: fraction of the healthy training-mode runs "
-                        "held out for calibration")
-    d.add_argument("--drive-data", action="store_true",
-                   help="also show the plug-in cmd.*, act.* and ctrl.* (drive data)")
-    d.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
-                   help="plug-in parameter (repeatable)")
-    d.add_argument("--where", action="append", default=[], metavar="KEY=VALUE[,VALUE]",
-                   help="only the runs with these runs.parquet values, e.g. a sweep's axis: "
-                   "offset=-10,10 (repeatable)")
+    d.add_argument(
+        "--val-fraction",
+        type=float,
+        default=0.25,
+        help="--split condition: fraction of the healthy training-mode runs "
+        "held out for calibration",
+    )
+    d.add_argument(
+        "--drive-data",
+        action="store_true",
+        help="also show the plug-in cmd.*, act.* and ctrl.* (drive data)",
+    )
+    d.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="plug-in parameter (repeatable)",
+    )
+    d.add_argument(
+        "--where",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE[,VALUE]",
+        help="only the runs with these runs.parquet values, e.g. a sweep's axis: "
+        "offset=-10,10 (repeatable)",
+    )
     d.add_argument("--alpha", type=float, default=0.01, help="calibration false-alarm rate")
-    d.add_argument("-m", "--persistence", type=int, default=1,
-                   help="consecutive alarms that confirm a detection")
+    d.add_argument(
+        "-m",
+        "--persistence",
+        type=int,
+        default=1,
+        help="consecutive alarms that confirm a detection",
+    )
     d.add_argument("--grace", type=float, default=0.0, help="grace period after a fault [s]")
     # the default is r2rsim.evaluate.metrics.DETECTION_WINDOW_S, written out so that the
     # parser does not import the evaluation stage (tests/test_detection_window.py checks it)
-    d.add_argument("--detection-window", type=float, default=20.0, metavar="SECONDS",
-                   help="W: a fault counts as detected only within W of being fully "
-                   "developed (default 20 s; inf: up to its end)")
-    d.add_argument("--own-threshold", choices=("val", "fit"), default="val",
-                   help="the plug-in's own threshold: recalibrated on the val runs at "
-                   "--alpha (default) or as its fit set it")
-    d.add_argument("--mode-strata", action="store_true",
-                   help="also report per-regime strata from label.mode (mode:<name>)")
-    d.add_argument("--window", choices=("fault", "steady"), default="fault",
-                   help="steady: also report dr/pd/dd over severity-1 samples")
-    d.add_argument("--isolation", action="store_true",
-                   help="score rank_channels against label.ch.* (hit1)")
-    d.add_argument("--vus-buffer", type=float, default=None, metavar="SECONDS",
-                   help="report vus_pr with buffers from 0 to SECONDS (at most 60 s)")
+    d.add_argument(
+        "--detection-window",
+        type=float,
+        default=20.0,
+        metavar="SECONDS",
+        help="W: a fault counts as detected only within W of being fully "
+        "developed (default 20 s; inf: up to its end)",
+    )
+    d.add_argument(
+        "--own-threshold",
+        choices=("val", "fit"),
+        default="val",
+        help="the plug-in's own threshold: recalibrated on the val runs at "
+        "--alpha (default) or as its fit set it",
+    )
+    d.add_argument(
+        "--mode-strata",
+        action="store_true",
+        help="also report per-regime strata from label.mode (mode:<name>)",
+    )
+    d.add_argument(
+        "--window",
+        choices=("fault", "steady"),
+        default="fault",
+        help="steady: also report dr/pd/dd over severity-1 samples",
+    )
+    d.add_argument(
+        "--isolation", action="store_true", help="score rank_channels against label.ch.* (hit1)"
+    )
+    d.add_argument(
+        "--vus-buffer",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="report vus_pr with buffers from 0 to SECONDS (at most 60 s)",
+    )
     d.add_argument("--n-boot", type=int, default=1000, help="bootstrap replicates over runs")
     d.add_argument("--seed", type=int, default=0, help="seed of the bootstrap (0 to 2**64 - 1)")
-    d.add_argument("-o", "--output", help="output directory (default: results/METHOD); "
-                   "must not exist, or be empty")
-    d.add_argument("--overwrite", action="store_true",
-                   help="replace the output directory if it holds r2rsim diagnose results "
-                   "(never a directory holding other files)")
-    d.add_argument("--no-verify", action="store_true",
-                   help="use datasets whose files differ from their manifest.json checksums")
+    d.add_argument(
+        "-o",
+        "--output",
+        help="output directory (default: results/METHOD); must not exist, or be empty",
+    )
+    d.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the output directory if it holds r2rsim diagnose results "
+        "(never a directory holding other files)",
+    )
+    d.add_argument(
+        "--no-verify",
+        action="store_true",
+        help="use datasets whose files differ from their manifest.json checksums",
+    )
     d.set_defaults(func=_cmd_diagnose)
 
 
 def _add_bench_parser(sub) -> None:
-    b = sub.add_parser("bench", help="run a diagnostic benchmark spec and compare with its "
-                       "baseline results (non-zero exit on a regression)")
+    b = sub.add_parser(
+        "bench",
+        help="run a diagnostic benchmark spec and compare with its "
+        "baseline results (non-zero exit on a regression)",
+    )
     b.add_argument("spec")
     b.add_argument("--workdir", help="keep (and reuse) the simulated datasets here")
     b.add_argument("--update", action="store_true", help="write the baseline file")
-    b.add_argument("-o", "--output", help="write results.parquet/.csv into this directory; "
-                   "it must not exist, or be empty")
-    b.add_argument("--overwrite", action="store_true",
-                   help="replace the -o directory if it holds r2rsim bench results (never a "
-                   "directory holding other files)")
-    b.add_argument("--no-verify", action="store_true",
-                   help="reuse --workdir datasets without checking their checksums")
+    b.add_argument(
+        "-o",
+        "--output",
+        help="write results.parquet/.csv into this directory; it must not exist, or be empty",
+    )
+    b.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the -o directory if it holds r2rsim bench results (never a "
+        "directory holding other files)",
+    )
+    b.add_argument(
+        "--no-verify",
+        action="store_true",
+        help="reuse --workdir datasets without checking their checksums",
+    )
     b.set_defaults(func=_cmd_bench)
 
 
 def _add_list_parser(sub) -> None:
-    ls = sub.add_parser("list", help="list element, sensor, controller or fault types, "
-                        "diagnostic plug-ins, or the channels of a line or scenario")
-    ls.add_argument("what", choices=["elements", "sensors", "controllers", "faults",
-                                     "plugins", "channels"])
-    ls.add_argument("line", nargs="?", metavar="FILE",
-                    help="line or scenario file (for 'channels': the columns a run of it "
-                    "writes; a scenario's include its set-point and fault-label columns)")
-    ls.add_argument("--load", action="store_true",
-                    help="plugins: import every plug-in and check it (slower: imports "
-                    "scikit-learn and each plug-in's modules); without it they are listed "
-                    "from their metadata and source")
+    ls = sub.add_parser(
+        "list",
+        help="list element, sensor, controller or fault types, "
+        "diagnostic plug-ins, or the channels of a line or scenario",
+    )
+    ls.add_argument(
+        "what", choices=["elements", "sensors", "controllers", "faults", "plugins", "channels"]
+    )
+    ls.add_argument(
+        "line",
+        nargs="?",
+        metavar="FILE",
+        help="line or scenario file (for 'channels': the columns a run of it "
+        "writes; a scenario's include its set-point and fault-label columns)",
+    )
+    ls.add_argument(
+        "--load",
+        action="store_true",
+        help="plugins: import every plug-in and check it (slower: imports "
+        "scikit-learn and each plug-in's modules); without it they are listed "
+        "from their metadata and source",
+    )
     ls.set_defaults(func=_cmd_list)
 
 
@@ -898,15 +1212,14 @@ _KEPT_WHEN_STOPPED = {
     "run": "no dataset written",
     "sweep": "no run started; runs the sweep finished before, if any, are kept",
     "bench": "the datasets it finished are kept (the next `r2rsim bench` reuses them); no "
-             "results or baseline written",
+    "results or baseline written",
 }
 
 
 def _stopped(command: str | None, exc: KeyboardInterrupt) -> int:
     """Say in one line that the command was stopped and what it kept; its exit status."""
     what = "terminated (SIGTERM)" if isinstance(exc, Terminated) else "interrupted"
-    print(f"{what}; {_KEPT_WHEN_STOPPED.get(command or '', 'nothing written')}",
-          file=sys.stderr)
+    print(f"{what}; {_KEPT_WHEN_STOPPED.get(command or '', 'nothing written')}", file=sys.stderr)
     return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
 
 

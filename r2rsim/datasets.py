@@ -34,21 +34,30 @@ from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["BenchmarkData", "DATASETS", "get_data_home", "load_first_benchmark",
-           "load_thesis_realistic"]
+__all__ = [
+    "BenchmarkData",
+    "DATASETS",
+    "get_data_home",
+    "load_first_benchmark",
+    "load_thesis_realistic",
+]
 
 #: the environment variable that moves the cache (as ``data_home=`` does for one call)
 DATA_HOME_ENV = "R2RSIM_DATA"
 
 #: name -> (the file it is made from, relative to the source tree; what it is)
 DATASETS = {
-    "first_benchmark": ("sweeps/first_benchmark.yaml",
-                        "registration process, OC1/OC2, fault-free and three fault families, "
-                        "5 seeds: 40 runs of 20 s, split by seed"),
-    "thesis_realistic": ("benchmarks/thesis_realistic.yaml",
-                         "the calibrated thesis set (healthy and sensor-fault sweeps of "
-                         "scenarios/thesis_realistic/), split as a study of the benchmark "
-                         "spec"),
+    "first_benchmark": (
+        "sweeps/first_benchmark.yaml",
+        "registration process, OC1/OC2, fault-free and three fault families, "
+        "5 seeds: 40 runs of 20 s, split by seed",
+    ),
+    "thesis_realistic": (
+        "benchmarks/thesis_realistic.yaml",
+        "the calibrated thesis set (healthy and sensor-fault sweeps of "
+        "scenarios/thesis_realistic/), split as a study of the benchmark "
+        "spec",
+    ),
 }
 #: the studies of benchmarks/thesis_realistic.yaml
 THESIS_STUDIES = ("local", "global", "global_products")
@@ -114,20 +123,25 @@ def _source_file(name: str) -> Path:
     rel = DATASETS[name][0]
     path = Path(__file__).resolve().parent.parent / rel
     if not path.is_file():
-        raise InputError(f"dataset {name!r} is generated from {rel} of r2rsim's source tree, "
-                         f"which is not next to this installation ({path.parent.parent}); "
-                         f"install r2rsim from a checkout: pip install -e .")
+        raise InputError(
+            f"dataset {name!r} is generated from {rel} of r2rsim's source tree, "
+            f"which is not next to this installation ({path.parent.parent}); "
+            f"install r2rsim from a checkout: pip install -e ."
+        )
     return path
 
 
 def _announce(name: str, where: Path, quiet: bool) -> None:
     if not quiet:
-        print(f"r2rsim.datasets: {name}: simulating what is not yet in {where} (first use "
-              f"only)", file=sys.stderr)
+        print(
+            f"r2rsim.datasets: {name}: simulating what is not yet in {where} (first use only)",
+            file=sys.stderr,
+        )
 
 
-def load_first_benchmark(*, data_home: str | os.PathLike | None = None,
-                         workers: int | None = None, quiet: bool = False) -> BenchmarkData:
+def load_first_benchmark(
+    *, data_home: str | os.PathLike | None = None, workers: int | None = None, quiet: bool = False
+) -> BenchmarkData:
     """The first benchmark: a small labelled sweep, generated on first use.
 
     The registration process of the calibrated thesis set (realistic sensors, process
@@ -170,20 +184,24 @@ def load_first_benchmark(*, data_home: str | os.PathLike | None = None,
         _announce(name, out, quiet)
     summary = run_sweep(sweep, output=out, workers=workers)
     if not summary.ok:
-        raise InputError(f"dataset {name!r}: {summary.failed + summary.skipped_failed} run(s) "
-                         f"of {sweep} failed in {out}")
+        raise InputError(
+            f"dataset {name!r}: {summary.failed + summary.skipped_failed} run(s) "
+            f"of {sweep} failed in {out}"
+        )
     try:
         runs = read_runs(out)
     except InputError as exc:  # the cache was changed after r2rsim wrote it
-        raise InputError(f"{exc.message}; the cached dataset {out} is not what r2rsim wrote: "
-                         f"delete it to generate it again") from exc
+        raise InputError(
+            f"{exc.message}; the cached dataset {out} is not what r2rsim wrote: "
+            f"delete it to generate it again"
+        ) from exc
     split = split_by_seed(runs)
     return BenchmarkData(name, split, [out], DATASETS[name][1])
 
 
-def load_thesis_realistic(study: str = "global", *,
-                          data_home: str | os.PathLike | None = None,
-                          quiet: bool = False) -> BenchmarkData:
+def load_thesis_realistic(
+    study: str = "global", *, data_home: str | os.PathLike | None = None, quiet: bool = False
+) -> BenchmarkData:
     """The calibrated thesis set, split as one study of ``benchmarks/thesis_realistic.yaml``.
 
     The registration process with realistic sensors, disturbances and run-to-run
@@ -223,8 +241,9 @@ def load_thesis_realistic(study: str = "global", *,
     return _load_study(name, _source_file(name), study, get_data_home(data_home) / name, quiet)
 
 
-def _load_study(name: str, spec_path: Path, study: str, workdir: Path,
-                quiet: bool) -> BenchmarkData:
+def _load_study(
+    name: str, spec_path: Path, study: str, workdir: Path, quiet: bool
+) -> BenchmarkData:
     """The runs of one study of a benchmark spec, simulated into ``workdir`` or reused from
     it exactly as ``r2rsim bench SPEC --workdir WORKDIR`` does."""
     from .bench import load_spec, study_runs
@@ -237,8 +256,17 @@ def _load_study(name: str, spec_path: Path, study: str, workdir: Path,
     workdir.mkdir(parents=True, exist_ok=True)
     if not any(workdir.iterdir()):
         _announce(name, workdir, quiet)
-    roles = study_runs(spec_path, spec, chosen, workdir,
-                       log=(lambda m: None) if quiet else (lambda m: print(m, file=sys.stderr)))
+    roles = study_runs(
+        spec_path,
+        spec,
+        chosen,
+        workdir,
+        log=(lambda m: None) if quiet else (lambda m: print(m, file=sys.stderr)),
+    )
     paths = sorted({r.path for runs in roles.values() for r in runs})
-    return BenchmarkData(name, Split(roles["train"], roles["val"], roles["test"], study), paths,
-                         DATASETS.get(name, ("", ""))[1])
+    return BenchmarkData(
+        name,
+        Split(roles["train"], roles["val"], roles["test"], study),
+        paths,
+        DATASETS.get(name, ("", ""))[1],
+    )

@@ -84,17 +84,23 @@ def run_size_problem(duration: float, record_rate: float) -> tuple[str, str] | N
     if not (math.isfinite(record_rate) and record_rate > 0):
         return "record_rate", f"must be a finite rate > 0, got {record_rate!r}"
     if duration > MAX_DURATION_S:
-        return "duration", (f"{duration:.10g} s is longer than the limit of {MAX_DURATION_S:g} s "
-                            f"({MAX_DURATION_S / 86400:.1f} days; docs/security.md)")
+        return "duration", (
+            f"{duration:.10g} s is longer than the limit of {MAX_DURATION_S:g} s "
+            f"({MAX_DURATION_S / 86400:.1f} days; docs/security.md)"
+        )
     if record_rate > MAX_RECORD_RATE_HZ:
-        return "record_rate", (f"{record_rate:.10g} Hz is above the limit of "
-                               f"{MAX_RECORD_RATE_HZ:g} Hz (docs/security.md): nothing in the "
-                               "model is faster than the drives' ~1 ms torque lag")
+        return "record_rate", (
+            f"{record_rate:.10g} Hz is above the limit of "
+            f"{MAX_RECORD_RATE_HZ:g} Hz (docs/security.md): nothing in the "
+            "model is faster than the drives' ~1 ms torque lag"
+        )
     samples = duration * record_rate
     if samples > MAX_SAMPLES:
-        return "duration", (f"{duration:g} s at {record_rate:g} Hz is {samples:.3g} samples, "
-                            f"more than the limit of {MAX_SAMPLES:.0e} per run "
-                            "(docs/security.md); lower the record rate or split the run")
+        return "duration", (
+            f"{duration:g} s at {record_rate:g} Hz is {samples:.3g} samples, "
+            f"more than the limit of {MAX_SAMPLES:.0e} per run "
+            "(docs/security.md); lower the record rate or split the run"
+        )
     return None
 
 
@@ -105,6 +111,7 @@ def wound_in_strain_points(v_max: float, duration: float, correlation_length: fl
     samples (:data:`MAX_SAMPLES`)."""
     dx = correlation_length / 10.0
     return (1.5 * v_max * duration + 10.0 * correlation_length) / dx + 2
+
 
 #: Most runs in one sweep: 100 000 (combinations x seeds). The Tennessee Eastman sets have
 #: 500 runs per fault; 100 000 short runs is days of CPU on one machine, and every run is a

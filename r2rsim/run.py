@@ -75,28 +75,38 @@ class RunSummary:
         """The run ended as its scenario meant: it reached its duration, or it ended early
         in a way the scenario's ``expect.termination`` lists. A solver failure and states
         that are not finite never are. ``r2rsim run`` exits 1 when this is False."""
-        return ended_as_expected(self.terminated, self.termination_reason,
-                                 self.expected_terminations, self.nonfinite_t)
+        return ended_as_expected(
+            self.terminated, self.termination_reason, self.expected_terminations, self.nonfinite_t
+        )
 
     def format(self) -> str:
-        lines = [f"dataset      {self.output}",
-                 f"simulated    {self.simulated_s:.3f} s in {self.wall_s:.2f} s wall "
-                 f"(real-time factor {self.real_time_factor:.0f}), {self.n_samples} samples",
-                 f"solver       {self.solver_stats.get('solver', '')}, "
-                 f"{self.solver_stats.get('nfev', 0)} RHS evaluations; initial state "
-                 f"{self.initial_state}"]
+        lines = [
+            f"dataset      {self.output}",
+            f"simulated    {self.simulated_s:.3f} s in {self.wall_s:.2f} s wall "
+            f"(real-time factor {self.real_time_factor:.0f}), {self.n_samples} samples",
+            f"solver       {self.solver_stats.get('solver', '')}, "
+            f"{self.solver_stats.get('nfev', 0)} RHS evaluations; initial state "
+            f"{self.initial_state}",
+        ]
         compile_s = self.solver_stats.get("compile_s", 0.0)
         if compile_s >= 1.0:  # a cold numba cache: reported apart from the wall time
-            lines.insert(2, f"compiled     numba kernels in {compile_s:.1f} s (first run only; "
-                            f"not in the wall time above)")
+            lines.insert(
+                2,
+                f"compiled     numba kernels in {compile_s:.1f} s (first run only; "
+                f"not in the wall time above)",
+            )
         lines += [f"WARNING      {w}" for w in self.warnings]
         if self.terminated:
             how = "expected" if self.ok else "not expected by the scenario (expect.termination)"
-            lines.append(f"TERMINATED   {self.termination_reason} at "
-                         f"t = {self.termination_time:.4f} s ({how})")
+            lines.append(
+                f"TERMINATED   {self.termination_reason} at "
+                f"t = {self.termination_time:.4f} s ({how})"
+            )
         if self.nonfinite_t is not None:
-            lines.append(f"FAILED       states not finite (nan or inf) from t = "
-                         f"{self.nonfinite_t:.4f} s; the samples are kept, marked in runs.parquet")
+            lines.append(
+                f"FAILED       states not finite (nan or inf) from t = "
+                f"{self.nonfinite_t:.4f} s; the samples are kept, marked in runs.parquet"
+            )
         lines.append("tension [N]  span        min       mean        max")
         for sid, (lo, mean, hi) in self.tension_stats.items():
             lines.append(f"             {sid:<8} {lo:9.2f}  {mean:9.2f}  {hi:9.2f}")
@@ -119,19 +129,26 @@ def _refuse_line_file(path: Path) -> None:
     except R2RError:
         return
     if ("elements" in data or "web" in data) and "line" not in data and "programme" not in data:
-        raise InputError("this is a line file, not a scenario: a scenario names a line file "
-                         "(line: ...) and drives it through a programme. Check the line with "
-                         f"`r2rsim validate {path}`, or write a scenario for it (see "
-                         "scenarios/quickstart.yaml)", file=str(path))
+        raise InputError(
+            "this is a line file, not a scenario: a scenario names a line file "
+            "(line: ...) and drives it through a programme. Check the line with "
+            f"`r2rsim validate {path}`, or write a scenario for it (see "
+            "scenarios/quickstart.yaml)",
+            file=str(path),
+        )
 
 
 def _name_from_stem(scenario_path: Path) -> str:
     """A scenario without ``name:`` is named after its file, if that is a safe name."""
     stem = scenario_path.stem
     if not _STEM.fullmatch(stem):
-        raise InputError(f"the scenario has no name, and its file name '{stem}' cannot name "
-                         f"the run (letters, digits, '_', '-', '.'; starting with a letter or "
-                         f"digit): add a name", file=str(scenario_path), path="name")
+        raise InputError(
+            f"the scenario has no name, and its file name '{stem}' cannot name "
+            f"the run (letters, digits, '_', '-', '.'; starting with a letter or "
+            f"digit): add a name",
+            file=str(scenario_path),
+            path="name",
+        )
     return stem
 
 
@@ -145,10 +162,13 @@ def _scenario_output(scenario_path: Path, output: str) -> Path:
     base = scenario_path.resolve().parent
     target = (base / output).resolve()
     if target == base or not target.is_relative_to(base):
-        raise InputError(f"'{output}' is outside the scenario's directory {base}: output "
-                         f"names a directory inside it (relative to the scenario file); to "
-                         f"write elsewhere give -o on the command line",
-                         file=str(scenario_path), path="output")
+        raise InputError(
+            f"'{output}' is outside the scenario's directory {base}: output "
+            f"names a directory inside it (relative to the scenario file); to "
+            f"write elsewhere give -o on the command line",
+            file=str(scenario_path),
+            path="output",
+        )
     return base / output
 
 
@@ -186,8 +206,9 @@ class RunPlan:
     line_config: str = ""
 
 
-def plan_from_file(scenario_path: str | Path, seed: int | None = None,
-                   duration: float | None = None) -> RunPlan:
+def plan_from_file(
+    scenario_path: str | Path, seed: int | None = None, duration: float | None = None
+) -> RunPlan:
     """Load a scenario file (and its line) into a :class:`RunPlan`, with ``--seed`` and
     ``--duration`` applied.
 
@@ -204,27 +225,42 @@ def plan_from_file(scenario_path: str | Path, seed: int | None = None,
             raise InputError(f"--duration must be > 0, got {duration:g}")
         size = run_size_problem(duration, scenario.record_rate)
         if size is not None:  # the same limits as the file's duration (r2rsim.limits)
-            raise InputError(f"--duration with record_rate {scenario.record_rate:g} Hz: "
-                             f"{size[1]}", file=str(scenario_path))
+            raise InputError(
+                f"--duration with record_rate {scenario.record_rate:g} Hz: {size[1]}",
+                file=str(scenario_path),
+            )
         scenario.duration = duration
     if seed is not None:
         if not 0 <= seed <= MAX_SEED:
-            raise InputError(f"--seed must be >= 0, got {seed}" if seed < 0 else
-                             f"--seed must be at most 2**64 - 1 = {MAX_SEED}, got {seed}")
+            raise InputError(
+                f"--seed must be >= 0, got {seed}"
+                if seed < 0
+                else f"--seed must be at most 2**64 - 1 = {MAX_SEED}, got {seed}"
+            )
         scenario.seed = seed
     name = scenario.name or _name_from_stem(scenario_path)
     scenario_text = scenario_path.read_text(encoding="utf-8")
     line_text = line_path.read_text(encoding="utf-8")
     # the two copies must not overwrite each other (a.yaml next to lines/a.yaml)
-    line_copy = (line_path.name if line_path.name != scenario_path.name
-                 else f"line.{line_path.name}")
-    files = {f"scenario/{scenario_path.name}": scenario_text,
-             f"scenario/{line_copy}": line_text,
-             f"scenario/{name}.normalised.yaml":
-                 yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=True)}
+    line_copy = line_path.name if line_path.name != scenario_path.name else f"line.{line_path.name}"
+    files = {
+        f"scenario/{scenario_path.name}": scenario_text,
+        f"scenario/{line_copy}": line_text,
+        f"scenario/{name}.normalised.yaml": yaml.safe_dump(
+            scenario.model_dump(mode="json"), sort_keys=True
+        ),
+    }
     sha = hashlib.sha256((scenario_text + "\0" + line_text).encode()).hexdigest()
-    return RunPlan(scenario, line, name, str(scenario_path), sha, files,
-                   {"scenario": scenario_path.name, "line": line_copy}, line_path.stem)
+    return RunPlan(
+        scenario,
+        line,
+        name,
+        str(scenario_path),
+        sha,
+        files,
+        {"scenario": scenario_path.name, "line": line_copy},
+        line_path.stem,
+    )
 
 
 def check_plan(plan: RunPlan) -> list[str]:
@@ -261,9 +297,14 @@ def sample_columns(scenario, line, file: str | None = None) -> tuple[str, ...]:
     return tuple(cols)
 
 
-def run_scenario(scenario_path: str | Path, output: str | Path | None = None,
-                 seed: int | None = None, duration: float | None = None,
-                 progress=None, overwrite: bool = False) -> RunSummary:
+def run_scenario(
+    scenario_path: str | Path,
+    output: str | Path | None = None,
+    seed: int | None = None,
+    duration: float | None = None,
+    progress=None,
+    overwrite: bool = False,
+) -> RunSummary:
     """Run a scenario file and write its dataset.
 
     Parameters
@@ -312,10 +353,18 @@ def default_output(plan: RunPlan) -> Path:
     return _scenario_output(Path(plan.source), plan.scenario.output)
 
 
-def execute(plan: RunPlan, out: str | Path, *, run_id: str | None = None, progress=None,
-            overwrite: bool = False, run_columns: dict | None = None,
-            compile0: float | None = None, clean_stale: bool = True,
-            check_labels: bool = True) -> RunSummary:
+def execute(
+    plan: RunPlan,
+    out: str | Path,
+    *,
+    run_id: str | None = None,
+    progress=None,
+    overwrite: bool = False,
+    run_columns: dict | None = None,
+    compile0: float | None = None,
+    clean_stale: bool = True,
+    check_labels: bool = True,
+) -> RunSummary:
     """Simulate a :class:`RunPlan` and write its dataset at ``out``.
 
     Parameters
@@ -351,63 +400,111 @@ def execute(plan: RunPlan, out: str | Path, *, run_id: str | None = None, progre
     prep = _prepare(plan)
     cl, faults, sensor_chan = prep.cl, prep.faults, prep.sensor_chan
     run_id = run_id or f"{name}__s{scenario.seed}"
-    meta = {"r2rsim.schema_version": "0.1", "r2rsim.version": __version__,
-            "r2rsim.scenario_sha256": plan.scenario_sha256,
-            "r2rsim.root_seed": str(scenario.seed)}
+    meta = {
+        "r2rsim.schema_version": "0.1",
+        "r2rsim.version": __version__,
+        "r2rsim.scenario_sha256": plan.scenario_sha256,
+        "r2rsim.root_seed": str(scenario.seed),
+    }
     rate = scenario.record_rate
     fault_rows = [f.record(run_id, int(math.ceil(f.onset * rate - 1e-9))) for f in faults]
     modes = [(st.at, st.mode) for st in scenario.programme if st.mode is not None]
     writer = DatasetWriter(out, run_id, meta, overwrite=overwrite, clean=clean_stale)
     try:
-        sink = _ChunkSink(writer, MeasurementModel(cl, rate, prep.ss_meas, faults), cl,
-                          fault_rows, scenario.warmup, modes, sensor_chan)
+        sink = _ChunkSink(
+            writer,
+            MeasurementModel(cl, rate, prep.ss_meas, faults),
+            cl,
+            fault_rows,
+            scenario.warmup,
+            modes,
+            sensor_chan,
+        )
         wall0, compile_sim0 = time.perf_counter(), compile_seconds()
-        res = simulate(cl, scenario.duration, rate, prep.y0,
-                       scenario.solver, on_chunk=sink.on_chunk,
-                       progress=(lambda t: progress(t, scenario.duration)) if progress else None,
-                       initial_state_mode=prep.init_mode, events=scenario.events,
-                       faults=faults, rolls=prep.rolls)
+        res = simulate(
+            cl,
+            scenario.duration,
+            rate,
+            prep.y0,
+            scenario.solver,
+            on_chunk=sink.on_chunk,
+            progress=(lambda t: progress(t, scenario.duration)) if progress else None,
+            initial_state_mode=prep.init_mode,
+            events=scenario.events,
+            faults=faults,
+            rolls=prep.rolls,
+        )
         sink.close(res.terminated)
         nonfinite_t, warnings = sink.nonfinite_t, list(prep.warnings)
         if writer.first_nonfinite is not None:  # an output (float32 as written), not a state
             t_col, column = writer.first_nonfinite
             if nonfinite_t is None or t_col < nonfinite_t:
                 nonfinite_t = t_col
-                warnings.append(f"{plan.source}: the samples column {column} is not finite "
-                                f"from t = {t_col:g} s (nan or inf; a value beyond float32's "
-                                "range, 3.4e38, is written as inf)")
+                warnings.append(
+                    f"{plan.source}: the samples column {column} is not finite "
+                    f"from t = {t_col:g} s (nan or inf; a value beyond float32's "
+                    "range, 3.4e38, is written as inf)"
+                )
         # the wall time and real-time factor without numba compiling (reported apart)
         wall = time.perf_counter() - wall0 - (compile_seconds() - compile_sim0)
         res.stats["compile_s"] = compile_seconds() - compile0
         sim_end = res.termination_time if res.terminated else scenario.duration
 
         writer.write_table("channels", _channels_table(cl, sink, sensor_chan, rate))
-        writer.write_table("faults", pa.Table.from_pylist(fault_rows, schema=FAULTS_SCHEMA)
-                           if fault_rows else FAULTS_SCHEMA.empty_table())
+        writer.write_table(
+            "faults",
+            pa.Table.from_pylist(fault_rows, schema=FAULTS_SCHEMA)
+            if fault_rows
+            else FAULTS_SCHEMA.empty_table(),
+        )
         events = _run_events(res, faults, sim_end)
         writer.write_table("events", _events_table(run_id, events))
-        variability_rows = prep.variability_rows + (prep.rolls.rows if prep.rolls is not None
-                                                    else [])
-        writer.write_table("variability", pa.Table.from_pylist(
-            [{"run_id": run_id, **r} for r in variability_rows], schema=VARIABILITY_SCHEMA))
-        runs = _runs_table(plan, prep, run_id, res, faults, modes, writer.n_rows, sim_end,
-                           nonfinite_t, wall)
+        variability_rows = prep.variability_rows + (
+            prep.rolls.rows if prep.rolls is not None else []
+        )
+        writer.write_table(
+            "variability",
+            pa.Table.from_pylist(
+                [{"run_id": run_id, **r} for r in variability_rows], schema=VARIABILITY_SCHEMA
+            ),
+        )
+        runs = _runs_table(
+            plan, prep, run_id, res, faults, modes, writer.n_rows, sim_end, nonfinite_t, wall
+        )
         for col, arr in (run_columns or {}).items():
             runs = runs.append_column(col, arr)
         writer.write_table("runs", runs)
         for rel, text in plan.files.items():
             writer.write_text(rel, text)
-        path = writer.commit({"run_ids": [run_id], "scenario_sha256": plan.scenario_sha256,
-                              "root_seed": scenario.seed, **plan.manifest},
-                             check=lambda d: validate_dataset(d, labels=check_labels))
+        path = writer.commit(
+            {
+                "run_ids": [run_id],
+                "scenario_sha256": plan.scenario_sha256,
+                "root_seed": scenario.seed,
+                **plan.manifest,
+            },
+            check=lambda d: validate_dataset(d, labels=check_labels),
+        )
     except BaseException:
         writer.abort()
         raise
-    return RunSummary(path, run_id, float(sim_end), wall, writer.n_rows,
-                      sink.tension_stats(cl.span_ids), events,
-                      res.terminated, res.termination_reason, res.termination_time,
-                      prep.init_mode, res.stats, warnings,
-                      list(scenario.expect.termination), nonfinite_t)
+    return RunSummary(
+        path,
+        run_id,
+        float(sim_end),
+        wall,
+        writer.n_rows,
+        sink.tension_stats(cl.span_ids),
+        events,
+        res.terminated,
+        res.termination_reason,
+        res.termination_time,
+        prep.init_mode,
+        res.stats,
+        warnings,
+        list(scenario.expect.termination),
+        nonfinite_t,
+    )
 
 
 @dataclass
@@ -438,9 +535,16 @@ def _compiled(plan: RunPlan, ss_process: np.random.SeedSequence):
     line, rolls, variability_rows = realise_variability(scenario, line, ss_process)
     disturbances = realise_disturbances(scenario, line, ss_process)
     pitch_var = realise_pitch_variations(line, ss_process)
-    cl = compile_line(line, prog, scenario.faults, disturbances, pitch_var,
-                      joint_slots_needed(scenario, line), nominal_web=declared_web,
-                      pitch_offsets=rolls.sensor_pitch_offsets if rolls else None)
+    cl = compile_line(
+        line,
+        prog,
+        scenario.faults,
+        disturbances,
+        pitch_var,
+        joint_slots_needed(scenario, line),
+        nominal_web=declared_web,
+        pitch_offsets=rolls.sensor_pitch_offsets if rolls else None,
+    )
     return line, cl, rolls, variability_rows, disturbances
 
 
@@ -455,7 +559,7 @@ def channels_table(plan: RunPlan) -> pa.Table:
     rate = plan.scenario.record_rate
     sink = _ChunkSink.__new__(_ChunkSink)  # what _channels_table reads of one: meas, cols
     sink.meas, sink.cols = MeasurementModel(cl, rate, ss_meas), true_state_columns(cl)
-    sensor_chan = {s.id: channel_names(cl, s)[0][len("meas."):] for s in cl.sensors}
+    sensor_chan = {s.id: channel_names(cl, s)[0][len("meas.") :] for s in cl.sensors}
     return _channels_table(cl, sink, sensor_chan, rate)
 
 
@@ -467,8 +571,9 @@ def _prepare(plan: RunPlan) -> _Prepared:
     ss_process, ss_meas, ss_faults = np.random.SeedSequence(scenario.seed).spawn(3)
     line, cl, rolls, variability_rows, disturbances = _compiled(plan, ss_process)
     init = scenario.initial
-    y0 = nominal_state(cl, init.tension, init.span_tension, init.slack, init.position,
-                       file=plan.source)
+    y0 = nominal_state(
+        cl, init.tension, init.span_tension, init.slack, init.position, file=plan.source
+    )
     for d in disturbances:  # an out-of-round roller starts at a random angle
         if d.type == "out_of_round":
             y0[cl.index(f"{d.element}.angle")] = d.phase
@@ -482,12 +587,26 @@ def _prepare(plan: RunPlan) -> _Prepared:
             warnings.append(
                 f"{plan.source}: initial.state: steady was asked for, but no steady state "
                 "was found at the t = 0 set-points (is the line at rest, or are span tensions "
-                "not held by any loop or draw?); the run starts from the nominal state")
-    sensor_chan = {s.id: channel_names(cl, s)[0][len("meas."):] for s in cl.sensors}
-    faults = realise_faults(scenario, line, ss_faults, plan.source,
-                            channel_of=lambda sid: f"meas.{sensor_chan[sid]}")
-    return _Prepared(line, cl, rolls, variability_rows, y0, init_mode, warnings, ss_process,
-                     ss_meas, ss_faults, faults, sensor_chan)
+                "not held by any loop or draw?); the run starts from the nominal state"
+            )
+    sensor_chan = {s.id: channel_names(cl, s)[0][len("meas.") :] for s in cl.sensors}
+    faults = realise_faults(
+        scenario, line, ss_faults, plan.source, channel_of=lambda sid: f"meas.{sensor_chan[sid]}"
+    )
+    return _Prepared(
+        line,
+        cl,
+        rolls,
+        variability_rows,
+        y0,
+        init_mode,
+        warnings,
+        ss_process,
+        ss_meas,
+        ss_faults,
+        faults,
+        sensor_chan,
+    )
 
 
 class _ChunkSink:
@@ -530,9 +649,17 @@ class _ChunkSink:
     def _flush(self, terminated: bool):
         data = self.held.pop()
         k_last = int(data["k"][-1]) if terminated and len(data["k"]) else None
-        data.update(derive_labels(self.fault_rows, data["k"], data["t_s"],
-                                  warmup=self.warmup, modes=self.modes,
-                                  terminated_k=k_last, sensor_channels=self.sensor_chan))
+        data.update(
+            derive_labels(
+                self.fault_rows,
+                data["k"],
+                data["t_s"],
+                warmup=self.warmup,
+                modes=self.modes,
+                terminated_k=k_last,
+                sensor_channels=self.sensor_chan,
+            )
+        )
         self.writer.write_chunk(data)
 
     def close(self, terminated: bool):
@@ -543,8 +670,10 @@ class _ChunkSink:
     def tension_stats(self, span_ids) -> dict:
         """(min, mean, max) true tension of each span [N]."""
         n = max(self.n, 1)
-        return {sid: (float(self.t_min[i]), float(self.t_sum[i] / n), float(self.t_max[i]))
-                for i, sid in enumerate(span_ids)}
+        return {
+            sid: (float(self.t_min[i]), float(self.t_sum[i] / n), float(self.t_max[i]))
+            for i, sid in enumerate(span_ids)
+        }
 
 
 #: the label columns of every dataset, with their descriptions (channels.parquet)
@@ -552,100 +681,180 @@ _LABEL_CHANNELS = [
     ("label.is_faulty", "any fault present"),
     ("label.n_active", "number of faults present"),
     ("label.fault_ids", "ids of the faults present"),
-    ("label.primary_type", "type of the present fault with the largest magnitude_rel, "
-     "else 'normal'"),
+    (
+        "label.primary_type",
+        "type of the present fault with the largest magnitude_rel, else 'normal'",
+    ),
     ("label.severity", "profile p(t) of the primary fault, 0-1"),
     ("label.phase", "warmup / normal / faulty / terminated"),
     ("label.mode", "operating mode named by the programme"),
-    ("label.score_mask", "false during warm-up")]
+    ("label.score_mask", "false during warm-up"),
+]
 
 
 def _channels_table(cl, sink: _ChunkSink, sensor_chan: dict, rate: float) -> pa.Table:
     """channels.parquet: the dictionary of every samples column, in the order they are
     written."""
-    rows = [("run_id", "index", "", "", "run id (the hive partition key of samples/)", None),
-            ("k", "index", "", "", "sample index from 0", None),
-            ("t_s", "index", "s", "", "simulation time", None)]
+    rows = [
+        ("run_id", "index", "", "", "run id (the hive partition key of samples/)", None),
+        ("k", "index", "", "", "sample index from 0", None),
+        ("t_s", "index", "s", "", "simulation time", None),
+    ]
     for mc in sink.meas.channels:  # in the order MeasurementModel.measure writes them
         s = mc["sensor"]
         unit = unit_of_suffix(channel_names(cl, s)[2])
         where = getattr(s, "element", None) or s.span
-        rows.append((mc["name"], "measured", unit, where,
-                     f"{s.type} '{s.id}' on {where}: measured (noise, sampling)", mc["rate"]))
-        rows.append((mc["true"], "true", unit, where,
-                     f"noise- and fault-free shadow of {mc['name']} (never give to "
-                     "algorithms)", rate))
+        rows.append(
+            (
+                mc["name"],
+                "measured",
+                unit,
+                where,
+                f"{s.type} '{s.id}' on {where}: measured (noise, sampling)",
+                mc["rate"],
+            )
+        )
+        rows.append(
+            (
+                mc["true"],
+                "true",
+                unit,
+                where,
+                f"noise- and fault-free shadow of {mc['name']} (never give to algorithms)",
+                rate,
+            )
+        )
         if s.range is not None:
-            rows.append((f"flag.{s.id}.clipped", "flag", "", s.id,
-                         f"{mc['name']} was clipped to its range {list(s.range)} "
-                         "(censored)", mc["rate"]))
-    rows += [(c["column"], c["kind"], c["unit"], c["component"], c["description"], rate)
-             for c in sink.cols]
+            rows.append(
+                (
+                    f"flag.{s.id}.clipped",
+                    "flag",
+                    "",
+                    s.id,
+                    f"{mc['name']} was clipped to its range {list(s.range)} (censored)",
+                    mc["rate"],
+                )
+            )
+    rows += [
+        (c["column"], c["kind"], c["unit"], c["component"], c["description"], rate)
+        for c in sink.cols
+    ]
     rows += [(col, "label", "", "", text, None) for col, text in _LABEL_CHANNELS]
-    rows += [(f"label.ch.{c}", "label", "", sid, f"a sensor fault acts on meas.{c}", None)
-             for sid, c in sensor_chan.items()]
-    return pa.table({
-        "channel": [r[0] for r in rows], "kind": [r[1] for r in rows],
-        "unit": [r[2] for r in rows], "component": [r[3] for r in rows],
-        "description": [r[4] for r in rows],
-        "rate_hz": pa.array([r[5] if r[5] is not None else rate for r in rows], pa.float64()),
-    })
+    rows += [
+        (f"label.ch.{c}", "label", "", sid, f"a sensor fault acts on meas.{c}", None)
+        for sid, c in sensor_chan.items()
+    ]
+    return pa.table(
+        {
+            "channel": [r[0] for r in rows],
+            "kind": [r[1] for r in rows],
+            "unit": [r[2] for r in rows],
+            "component": [r[3] for r in rows],
+            "description": [r[4] for r in rows],
+            "rate_hz": pa.array([r[5] if r[5] is not None else rate for r in rows], pa.float64()),
+        }
+    )
 
 
 def _run_events(res, faults, sim_end: float) -> list[Event]:
     """The solver's events and every fault's start and end within the simulated time, in
     time order."""
     events = list(res.events) + [
-        Event(tb, "fault", f.target, state, f"{f.id}: {f.type} on {f.target} {state}s",
-              {"fault_id": f.id})
-        for f in faults for tb, state in ((f.onset, "start"), (f.end, "end"))
-        if tb is not None and tb <= sim_end]
+        Event(
+            tb,
+            "fault",
+            f.target,
+            state,
+            f"{f.id}: {f.type} on {f.target} {state}s",
+            {"fault_id": f.id},
+        )
+        for f in faults
+        for tb, state in ((f.onset, "start"), (f.end, "end"))
+        if tb is not None and tb <= sim_end
+    ]
     events.sort(key=lambda e: e.t)
     return events
 
 
 def _events_table(run_id: str, events: list[Event]) -> pa.Table:
-    return pa.table({
-        "run_id": [run_id] * len(events), "t_s": [e.t for e in events],
-        "kind": [e.kind for e in events], "component": [e.component for e in events],
-        "state": [e.state for e in events], "message": [e.message for e in events],
-        "values_json": [json.dumps(e.values) for e in events]}, schema=EVENTS_SCHEMA)
+    return pa.table(
+        {
+            "run_id": [run_id] * len(events),
+            "t_s": [e.t for e in events],
+            "kind": [e.kind for e in events],
+            "component": [e.component for e in events],
+            "state": [e.state for e in events],
+            "message": [e.message for e in events],
+            "values_json": [json.dumps(e.values) for e in events],
+        },
+        schema=EVENTS_SCHEMA,
+    )
 
 
-def _runs_table(plan: RunPlan, prep: _Prepared, run_id: str, res, faults, modes,
-                n_rows: int, sim_end: float, nonfinite_t: float | None,
-                wall: float) -> pa.Table:
+def _runs_table(
+    plan: RunPlan,
+    prep: _Prepared,
+    run_id: str,
+    res,
+    faults,
+    modes,
+    n_rows: int,
+    sim_end: float,
+    nonfinite_t: float | None,
+    wall: float,
+) -> pa.Table:
     """The run's row of runs.parquet."""
     scenario = plan.scenario
-    seeds = {"process": int(prep.ss_process.generate_state(1, np.uint64)[0]),
-             "measurement": int(prep.ss_meas.generate_state(1, np.uint64)[0]),
-             "fault_sampling": int(prep.ss_faults.generate_state(1, np.uint64)[0])}
-    return pa.table({
-        "run_id": [run_id], "scenario_id": [plan.name],
-        "scenario_sha256": [plan.scenario_sha256],
-        "seed": pa.array([scenario.seed], pa.uint64()),
-        "seed_streams": pa.array([seeds], pa.struct([("process", pa.uint64()),
-                                                     ("measurement", pa.uint64()),
-                                                     ("fault_sampling", pa.uint64())])),
-        "split": pa.array([scenario.split_of(scenario.seed)], pa.string()),
-        "line_config": [prep.line.name or plan.line_config],
-        "operating_mode": pa.array(["+".join(dict.fromkeys(m for _, m in modes)) or None],
-                                   pa.string()),
-        "modes_json": [json.dumps(modes)],
-        "disturbances_json": [json.dumps([d.model_dump() for d in scenario.disturbances])],
-        "sample_period_s": [1.0 / scenario.record_rate],
-        "duration_s": [scenario.duration], "n_samples": pa.array([n_rows], pa.int64()),
-        "warmup_s": [scenario.warmup], "has_fault": [bool(faults)],
-        "n_faults": pa.array([len(faults)], pa.int16()), "terminated": [res.terminated],
-        "termination_reason": pa.array([res.termination_reason], pa.string()),
-        "termination_t_s": pa.array([res.termination_time], pa.float64()),
-        "simulated_s": [float(sim_end)],
-        "nonfinite_from_t_s": pa.array([nonfinite_t], pa.float64()),
-        "ended_as_expected": [ended_as_expected(
-            res.terminated, res.termination_reason, scenario.expect.termination,
-            nonfinite_t)],
-        "initial_state": [prep.init_mode], "solver": [res.stats["solver"]],
-        "rhs_evaluations": pa.array([res.stats["nfev"]], pa.int64()),
-        "r2rsim_version": [__version__], "python_version": [platform.python_version()],
-        "numpy_version": [np.__version__], "wallclock_s": [wall],
-    })
+    seeds = {
+        "process": int(prep.ss_process.generate_state(1, np.uint64)[0]),
+        "measurement": int(prep.ss_meas.generate_state(1, np.uint64)[0]),
+        "fault_sampling": int(prep.ss_faults.generate_state(1, np.uint64)[0]),
+    }
+    return pa.table(
+        {
+            "run_id": [run_id],
+            "scenario_id": [plan.name],
+            "scenario_sha256": [plan.scenario_sha256],
+            "seed": pa.array([scenario.seed], pa.uint64()),
+            "seed_streams": pa.array(
+                [seeds],
+                pa.struct(
+                    [
+                        ("process", pa.uint64()),
+                        ("measurement", pa.uint64()),
+                        ("fault_sampling", pa.uint64()),
+                    ]
+                ),
+            ),
+            "split": pa.array([scenario.split_of(scenario.seed)], pa.string()),
+            "line_config": [prep.line.name or plan.line_config],
+            "operating_mode": pa.array(
+                ["+".join(dict.fromkeys(m for _, m in modes)) or None], pa.string()
+            ),
+            "modes_json": [json.dumps(modes)],
+            "disturbances_json": [json.dumps([d.model_dump() for d in scenario.disturbances])],
+            "sample_period_s": [1.0 / scenario.record_rate],
+            "duration_s": [scenario.duration],
+            "n_samples": pa.array([n_rows], pa.int64()),
+            "warmup_s": [scenario.warmup],
+            "has_fault": [bool(faults)],
+            "n_faults": pa.array([len(faults)], pa.int16()),
+            "terminated": [res.terminated],
+            "termination_reason": pa.array([res.termination_reason], pa.string()),
+            "termination_t_s": pa.array([res.termination_time], pa.float64()),
+            "simulated_s": [float(sim_end)],
+            "nonfinite_from_t_s": pa.array([nonfinite_t], pa.float64()),
+            "ended_as_expected": [
+                ended_as_expected(
+                    res.terminated, res.termination_reason, scenario.expect.termination, nonfinite_t
+                )
+            ],
+            "initial_state": [prep.init_mode],
+            "solver": [res.stats["solver"]],
+            "rhs_evaluations": pa.array([res.stats["nfev"]], pa.int64()),
+            "r2rsim_version": [__version__],
+            "python_version": [platform.python_version()],
+            "numpy_version": [np.__version__],
+            "wallclock_s": [wall],
+        }
+    )

@@ -81,12 +81,34 @@ class _Unreadable(Exception):
 _L, _M, _T = "[length]", "[mass]", "[time]"
 
 _SI_PREFIXES: dict[str, float] = {
-    "p": 1e-12, "n": 1e-9, "u": 1e-6, "\u00b5": 1e-6, "\u03bc": 1e-6, "m": 1e-3, "c": 1e-2,
-    "d": 1e-1, "da": 1e1, "h": 1e2, "k": 1e3, "M": 1e6, "G": 1e9, "T": 1e12,
+    "p": 1e-12,
+    "n": 1e-9,
+    "u": 1e-6,
+    "\u00b5": 1e-6,
+    "\u03bc": 1e-6,
+    "m": 1e-3,
+    "c": 1e-2,
+    "d": 1e-1,
+    "da": 1e1,
+    "h": 1e2,
+    "k": 1e3,
+    "M": 1e6,
+    "G": 1e9,
+    "T": 1e12,
 }
 _LONG_PREFIXES: dict[str, float] = {
-    "pico": 1e-12, "nano": 1e-9, "micro": 1e-6, "milli": 1e-3, "centi": 1e-2, "deci": 1e-1,
-    "deca": 1e1, "deka": 1e1, "hecto": 1e2, "kilo": 1e3, "mega": 1e6, "giga": 1e9,
+    "pico": 1e-12,
+    "nano": 1e-9,
+    "micro": 1e-6,
+    "milli": 1e-3,
+    "centi": 1e-2,
+    "deci": 1e-1,
+    "deca": 1e1,
+    "deka": 1e1,
+    "hecto": 1e2,
+    "kilo": 1e3,
+    "mega": 1e6,
+    "giga": 1e9,
     "tera": 1e12,
 }
 _ANGLE_PREFIXES = ("n", "u", "\u00b5", "\u03bc", "m")
@@ -132,8 +154,9 @@ def _build_table() -> dict[str, tuple[float, dict[str, int]]]:
             for p in prefixes:
                 add(p + sym, _SI_PREFIXES[p] * factor, dims)
         for name in names:
-            spellings = [(name, factor)] + [(p + name, _LONG_PREFIXES[p] * factor)
-                                            for p in long_prefixes]
+            spellings = [(name, factor)] + [
+                (p + name, _LONG_PREFIXES[p] * factor) for p in long_prefixes
+            ]
             for spelling, f in spellings:
                 add(spelling, f, dims)
                 if plural:
@@ -149,8 +172,9 @@ _NUMBER = re.compile(
     r"([+-]?)((?:[0-9](?:_?[0-9])*(?:\.(?:[0-9](?:_?[0-9])*)?)?|\.[0-9](?:_?[0-9])*))"
     r"(?:[eE]([+-]?[0-9]+))?"
 )
-_SUPERSCRIPTS = str.maketrans("\u2070\u00b9\u00b2\u00b3\u2074\u2075\u2076\u2077\u2078\u2079"
-                              "\u207b\u207a", "0123456789-+")
+_SUPERSCRIPTS = str.maketrans(
+    "\u2070\u00b9\u00b2\u00b3\u2074\u2075\u2076\u2077\u2078\u2079\u207b\u207a", "0123456789-+"
+)
 _TOKEN = re.compile(
     r"(?P<space>[ \t\u00a0\u202f]+)"
     r"|(?P<pow>\*\*|\^)"
@@ -272,7 +296,7 @@ def _unit(name: str) -> tuple[float, dict]:
 def _exponent(tokens: list, i: int) -> tuple[int, int]:
     """Read the exponent after a ``^``/``**`` at ``tokens[i]``: ``(value, index after it)``."""
     if i < len(tokens) and tokens[i][0] == "open":
-        inner = tokens[i + 1:i + 3]
+        inner = tokens[i + 1 : i + 3]
         if len(inner) == 2 and inner[0][0] == "int" and inner[1][0] == "close":
             return _small_int(inner[0][1]), i + 3
         raise _Unreadable("an exponent in parentheses must be a whole number, as in 'm^(-1)'")
@@ -315,8 +339,7 @@ class _UnitFolder:
     def power(self, n: int | None) -> None:
         """Raise the pending operand to ``n`` (None: only check that there is one)."""
         if self.pend is None or not self.pend[2]:
-            raise _Unreadable("an exponent must follow a unit name or a parenthesis, "
-                              "as in 'm^2'")
+            raise _Unreadable("an exponent must follow a unit name or a parenthesis, as in 'm^2'")
         if n is None:
             return
         self.pend[0] = self.pend[0] ** n
@@ -383,8 +406,10 @@ def _parse_units(tokens: list) -> tuple[float, dict]:
         elif kind == "int":
             # "1/min", "5 1/s": a literal 1 is accepted only as a numerator
             if tok != "1" or i >= len(tokens) or tokens[i][0] != "div":
-                raise _Unreadable(f"unexpected number {tok!r} at position {pos + 1}; "
-                                  "only one number, at the start, is allowed")
+                raise _Unreadable(
+                    f"unexpected number {tok!r} at position {pos + 1}; "
+                    "only one number, at the start, is allowed"
+                )
             u.operand([1.0, {}, False])
         elif kind == "open":
             u.open()
@@ -522,8 +547,9 @@ def parse_any(text: str) -> tuple[float, dict]:
     """
     text = text.strip()
     if len(text) > MAX_CHARS:
-        raise QuantityError(f"cannot read {_shown(text)!r} as a quantity (longer than "
-                            f"{MAX_CHARS} characters)")
+        raise QuantityError(
+            f"cannot read {_shown(text)!r} as a quantity (longer than {MAX_CHARS} characters)"
+        )
     try:
         out, dims = _parse_text(text)
     except _Unreadable as exc:

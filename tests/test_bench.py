@@ -68,8 +68,12 @@ def test_bench_fails_when_a_metric_regresses(bench, capsys):
     d, _ = bench
     # a residual threshold at alpha = 0.2, kept as its fit set it (not recalibrated on the val
     # run at the evaluation's alpha), raises many more false alarms than the baseline's
-    spec = write_spec(d, params=", params: {alpha: 0.2}", name="worse.yaml",
-                      **{"persistence: 2}": "persistence: 2, own_threshold: fit}"})
+    spec = write_spec(
+        d,
+        params=", params: {alpha: 0.2}",
+        name="worse.yaml",
+        **{"persistence: 2}": "persistence: 2, own_threshold: fit}"},
+    )
     code, out, err = run(spec, d, capsys)
     assert code == 1
     assert "REGRESSION: reg/residual OC1 sensor.offset:sensor_A far_ff: baseline" in err
@@ -112,34 +116,66 @@ def test_a_missing_result_is_a_regression(bench, capsys):
     assert code == 1 and "sensor.gain:nowhere" in err and "now no value" in err
 
 
-@pytest.mark.parametrize("old, new, path, message", [
-    ("method: residual", "method: nosuch", "methods[0].method", "no diagnostic plug-in 'nosuch'"),
-    ("{method: residual}", "{method: residual, params: {beta: 1}}", "methods[0].params.beta",
-     "residual has no parameter 'beta'"),
-    ("far_ff: 0.002", "farr: 0.002", "compare.metrics.farr", "unknown metric 'farr'"),
-    ("far_ff: 0.002", "far_ff: -1", "compare.metrics.far_ff", "must be >= 0"),
-    ("seeds: [4]", "seeds: []", "studies[0].test[0].seeds", "at least 1"),
-    ("oc1_nominal.yaml, seeds: [4]", "nosuch.yaml, seeds: [4]", "studies[0].test[0].scenario",
-     "not found"),
-    ("base.csv", "missing.csv", "compare.baseline", "--update"),
-    ("n_boot: 20", "n_boot: 20, window: ramp", "evaluation.window", "'fault' or 'steady'"),
-    # refused when the spec is loaded, not after every run is simulated
-    ("n_boot: 20", "n_boot: 20, vus_buffer: 1e9 s", "evaluation.vus_buffer", "<= 60"),
-    ("n_boot: 20", "n_boot: 20, seed: -1", "evaluation.seed", "must be >= 0"),
-    ("n_boot: 20", "n_boot: 20, seed: 18446744073709551616", "evaluation.seed",
-     "must be <= 18446744073709551615"),
-    # a run set's seeds: the YAML path, not a --seed the user never gave
-    ("seeds: [4]", "seeds: [-4]", "studies[0].test[0].seeds[0]", "must be >= 0"),
-    ("seeds: [4]", "seeds: [18446744073709551616]", "studies[0].test[0].seeds[0]",
-     "must be <= 18446744073709551615"),
-    ("seeds: [1, 2]", "seeds: [1, 2, 1]", "studies[0].train[0].seeds[2]",
-     "seed 1 is listed twice"),
-    # there, but not a file to read
-    ("oc1_nominal.yaml, seeds: [4]", "., seeds: [4]", "studies[0].test[0].scenario",
-     "is not a regular file"),
-    ("baseline: base.csv", "baseline: .", "compare.baseline", "is not a regular file"),
-    ("baseline: base.csv", "baseline: /dev/zero", "compare.baseline", "is not a regular file"),
-])
+@pytest.mark.parametrize(
+    "old, new, path, message",
+    [
+        (
+            "method: residual",
+            "method: nosuch",
+            "methods[0].method",
+            "no diagnostic plug-in 'nosuch'",
+        ),
+        (
+            "{method: residual}",
+            "{method: residual, params: {beta: 1}}",
+            "methods[0].params.beta",
+            "residual has no parameter 'beta'",
+        ),
+        ("far_ff: 0.002", "farr: 0.002", "compare.metrics.farr", "unknown metric 'farr'"),
+        ("far_ff: 0.002", "far_ff: -1", "compare.metrics.far_ff", "must be >= 0"),
+        ("seeds: [4]", "seeds: []", "studies[0].test[0].seeds", "at least 1"),
+        (
+            "oc1_nominal.yaml, seeds: [4]",
+            "nosuch.yaml, seeds: [4]",
+            "studies[0].test[0].scenario",
+            "not found",
+        ),
+        ("base.csv", "missing.csv", "compare.baseline", "--update"),
+        ("n_boot: 20", "n_boot: 20, window: ramp", "evaluation.window", "'fault' or 'steady'"),
+        # refused when the spec is loaded, not after every run is simulated
+        ("n_boot: 20", "n_boot: 20, vus_buffer: 1e9 s", "evaluation.vus_buffer", "<= 60"),
+        ("n_boot: 20", "n_boot: 20, seed: -1", "evaluation.seed", "must be >= 0"),
+        (
+            "n_boot: 20",
+            "n_boot: 20, seed: 18446744073709551616",
+            "evaluation.seed",
+            "must be <= 18446744073709551615",
+        ),
+        # a run set's seeds: the YAML path, not a --seed the user never gave
+        ("seeds: [4]", "seeds: [-4]", "studies[0].test[0].seeds[0]", "must be >= 0"),
+        (
+            "seeds: [4]",
+            "seeds: [18446744073709551616]",
+            "studies[0].test[0].seeds[0]",
+            "must be <= 18446744073709551615",
+        ),
+        (
+            "seeds: [1, 2]",
+            "seeds: [1, 2, 1]",
+            "studies[0].train[0].seeds[2]",
+            "seed 1 is listed twice",
+        ),
+        # there, but not a file to read
+        (
+            "oc1_nominal.yaml, seeds: [4]",
+            "., seeds: [4]",
+            "studies[0].test[0].scenario",
+            "is not a regular file",
+        ),
+        ("baseline: base.csv", "baseline: .", "compare.baseline", "is not a regular file"),
+        ("baseline: base.csv", "baseline: /dev/zero", "compare.baseline", "is not a regular file"),
+    ],
+)
 def test_bad_specs_are_refused(tmp_path, capsys, old, new, path, message):
     spec = write_spec(tmp_path, **{old: new})
     assert main(["bench", str(spec), "--workdir", str(tmp_path / "w")]) == 2
@@ -152,19 +188,34 @@ def test_bad_specs_are_refused(tmp_path, capsys, old, new, path, message):
 HEADER = "study,label,condition,fault,magnitude,metric,value\n"
 
 
-@pytest.mark.parametrize("text, words", [
-    ("precious notes\nroot:x:0:0:root:/root:/bin/bash\n",  # a pandas ParserError traceback
-     "is not a baseline file written by `r2rsim bench --update` (its first line is not "
-     "'study,label,condition,fault,magnitude,metric,value')"),
-    (HEADER + "reg,residual,OC1,none,,far_ff,low\n", "its value column holds text"),
-    (HEADER + 'reg,residual,OC1,none,,far_ff,"1\n', "is not a readable CSV"),
-])
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        (
+            "precious notes\nroot:x:0:0:root:/root:/bin/bash\n",  # a pandas ParserError traceback
+            "is not a baseline file written by `r2rsim bench --update` (its first line is not "
+            "'study,label,condition,fault,magnitude,metric,value')",
+        ),
+        (HEADER + "reg,residual,OC1,none,,far_ff,low\n", "its value column holds text"),
+        (HEADER + 'reg,residual,OC1,none,,far_ff,"1\n', "is not a readable CSV"),
+    ],
+)
 @pytest.mark.parametrize("update", [False, True])
 def test_a_baseline_that_is_not_one_is_refused_and_kept(tmp_path, capsys, text, words, update):
     (tmp_path / "notes.csv").write_text(text)
     spec = write_spec(tmp_path, **{"base.csv": "notes.csv"})
-    assert main(["bench", str(spec), "--workdir", str(tmp_path / "w"),
-                 *(["--update"] if update else [])]) == 2
+    assert (
+        main(
+            [
+                "bench",
+                str(spec),
+                "--workdir",
+                str(tmp_path / "w"),
+                *(["--update"] if update else []),
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err
     assert err.startswith(f"error: {spec}: compare.baseline: '{tmp_path / 'notes.csv'}' ")
     assert err.count("\n") == 1 and words in err
@@ -172,14 +223,18 @@ def test_a_baseline_that_is_not_one_is_refused_and_kept(tmp_path, capsys, text, 
     assert not (tmp_path / "w").exists()
 
 
-@pytest.mark.parametrize("baseline, words", [
-    ("../victim.csv", "is outside the spec's directory"),  # was overwritten
-    ("{victim}", "is outside the spec's directory"),
-    ("sub/../../victim.csv", "is outside the spec's directory"),
-    ("nodir/base.csv", "no directory"),  # was found after the whole bench had run
-])
-def test_update_writes_the_baseline_only_inside_the_specs_directory(tmp_path, capsys,
-                                                                     baseline, words):
+@pytest.mark.parametrize(
+    "baseline, words",
+    [
+        ("../victim.csv", "is outside the spec's directory"),  # was overwritten
+        ("{victim}", "is outside the spec's directory"),
+        ("sub/../../victim.csv", "is outside the spec's directory"),
+        ("nodir/base.csv", "no directory"),  # was found after the whole bench had run
+    ],
+)
+def test_update_writes_the_baseline_only_inside_the_specs_directory(
+    tmp_path, capsys, baseline, words
+):
     victim = tmp_path / "victim.csv"
     victim.write_text(HEADER)  # reads as a baseline: only where it is stops --update
     d = tmp_path / "specs"
@@ -206,12 +261,16 @@ def test_thesis_options_add_metrics_and_keep_the_baseline(bench, capsys):
     # per-regime strata, steady window, isolation and VUS-PR on: the guarded metrics are
     # unchanged (the baseline still passes) and the new ones are in the results
     d, _ = bench
-    spec = write_spec(d, name="options.yaml", **{
-        "n_boot: 20": "n_boot: 20, mode_strata: true, window: steady, isolation: true, "
-                      "vus_buffer: 0.1 s"})
+    spec = write_spec(
+        d,
+        name="options.yaml",
+        **{
+            "n_boot: 20": "n_boot: 20, mode_strata: true, window: steady, isolation: true, "
+            "vus_buffer: 0.1 s"
+        },
+    )
     ev = load_spec(spec).evaluation
-    assert (ev.mode_strata, ev.window, ev.isolation, ev.vus_buffer) == (True, "steady", True,
-                                                                        0.1)
+    assert (ev.mode_strata, ev.window, ev.isolation, ev.vus_buffer) == (True, "steady", True, 0.1)
     code = main(["bench", str(spec), "--workdir", str(d / "work"), "-o", str(d / "opt")])
     assert code == 0, capsys.readouterr().err
     res = pd.read_csv(d / "opt" / "results.csv")
@@ -241,8 +300,11 @@ def test_names_made_of_digits_stay_names_in_the_baseline(bench, capsys):
     # a label "007" (or "1e3") reads back from the CSV as text, not as the number 7:
     # otherwise every metric of the baseline is reported missing
     d, _ = bench
-    spec = write_spec(d, name="digits.yaml", **{"{method: residual": "{method: residual, "
-                                                "label: '007'", "base.csv": "digits.csv"})
+    spec = write_spec(
+        d,
+        name="digits.yaml",
+        **{"{method: residual": "{method: residual, label: '007'", "base.csv": "digits.csv"},
+    )
     assert main(["bench", str(spec), "--update", "--workdir", str(d / "work")]) == 0
     base = pd.read_csv(d / "digits.csv", dtype=str)
     assert set(base.label) == {"007"}
@@ -256,14 +318,16 @@ def test_the_detection_window_is_a_spec_key(bench, capsys):
     # a window of 0.5 s after the onset (the offset from 20 s of a 25 s run) and one up to
     # the fault's end: the delays are bounded by the first, and the key reaches the harness
     d, _ = bench
-    spec = write_spec(d, name="window.yaml",
-                      **{"n_boot: 20": "n_boot: 20, detection_window: 0.5 s"})
+    spec = write_spec(
+        d, name="window.yaml", **{"n_boot: 20": "n_boot: 20, detection_window: 0.5 s"}
+    )
     assert load_spec(spec).evaluation.detection_window == 0.5
     code = main(["bench", str(spec), "--workdir", str(d / "work"), "-o", str(d / "win")])
     assert code in (0, 1), capsys.readouterr().err
     res = pd.read_csv(d / "win" / "results.csv")
     delays = res[res.metric == "dd_median_s"]["value"]
     assert len(delays) and (delays <= 0.5 + 1e-9).all()
-    unbounded = write_spec(d, name="nowindow.yaml",
-                           **{"n_boot: 20": "n_boot: 20, detection_window: null"})
+    unbounded = write_spec(
+        d, name="nowindow.yaml", **{"n_boot: 20": "n_boot: 20, detection_window: null"}
+    )
     assert load_spec(unbounded).evaluation.detection_window is None

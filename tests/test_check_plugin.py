@@ -33,8 +33,7 @@ class Zscore(Diagnostic):
         self._check_fitted()
         frame = self._frames(run)[0]
         z = (frame[self.columns_].to_numpy(float) - self.mean_) / self.std_
-        return pd.DataFrame({"statistic": np.abs(z).max(axis=1) * self.scale},
-                            index=frame.index)
+        return pd.DataFrame({"statistic": np.abs(z).max(axis=1) * self.scale}, index=frame.index)
 
     def rank_channels(self, scores):
         return pd.DataFrame({0: [self.columns_[0]] * len(scores)}, index=scores.index)
@@ -158,8 +157,9 @@ class ReadsTheFuture(Broken):
 
     def score(self, run):
         scores = super().score(run)
-        return scores.assign(statistic=scores["statistic"].rolling(9, center=True,
-                                                                   min_periods=1).mean())
+        return scores.assign(
+            statistic=scores["statistic"].rolling(9, center=True, min_periods=1).mean()
+        )
 
 
 class OfflineReadsTheFuture(ReadsTheFuture):
@@ -171,29 +171,34 @@ class IgnoresItsThreshold(Broken):
         return scores["statistic"] > 0.5
 
 
-@pytest.mark.parametrize("cls, rule", [
-    (ReadsTheFuture, "it declares itself causal"),
-    (IgnoresItsThreshold, "calibrate must move the threshold its decide uses"),
-    (ChangesItsParameter, "__init__ must store each parameter"),
-    (FittedAtInit, "__init__ set fitted attributes ['ready_']"),
-    (ScoresUnfitted, "score before fit returned"),
-    (FitReturnsNone, "fit must return self"),
-    (ScoresRenumbered, "indexed like the run's samples"),
-    (ScoresWithoutStatistic, "with a 'statistic' column"),
-    (DecidesInIntegers, "decide must return a boolean Series"),
-    (ChangesItsInput, "leave the frames they are given unchanged"),
-    (RanksHiddenChannels, "rank_channels must return a frame"),
-    (Random, "two fits with the same parameters must give the same scores"),
-    (LearnsLabels, "columns an algorithm may not see: ['label.is_faulty']"),
-    (NoColumnsValueError, "fit without its columns raised ValueError"),
-    (NoColumnsAccepted, "fit on a frame with only t_s must raise InputError"),
-])
+@pytest.mark.parametrize(
+    "cls, rule",
+    [
+        (ReadsTheFuture, "it declares itself causal"),
+        (IgnoresItsThreshold, "calibrate must move the threshold its decide uses"),
+        (ChangesItsParameter, "__init__ must store each parameter"),
+        (FittedAtInit, "__init__ set fitted attributes ['ready_']"),
+        (ScoresUnfitted, "score before fit returned"),
+        (FitReturnsNone, "fit must return self"),
+        (ScoresRenumbered, "indexed like the run's samples"),
+        (ScoresWithoutStatistic, "with a 'statistic' column"),
+        (DecidesInIntegers, "decide must return a boolean Series"),
+        (ChangesItsInput, "leave the frames they are given unchanged"),
+        (RanksHiddenChannels, "rank_channels must return a frame"),
+        (Random, "two fits with the same parameters must give the same scores"),
+        (LearnsLabels, "columns an algorithm may not see: ['label.is_faulty']"),
+        (NoColumnsValueError, "fit without its columns raised ValueError"),
+        (NoColumnsAccepted, "fit on a frame with only t_s must raise InputError"),
+    ],
+)
 def test_each_broken_rule_is_named(runs, cls, rule):
     with pytest.raises(AssertionError) as info:
         check_plugin(cls, *runs)
     message = str(info.value)
-    assert message.startswith("plug-in 'broken' breaks the contract (docs/diagnostics.md "
-                              "§2.1): ") and rule in message, message
+    assert (
+        message.startswith("plug-in 'broken' breaks the contract (docs/diagnostics.md §2.1): ")
+        and rule in message
+    ), message
 
 
 def test_data_without_the_required_channels_is_an_input_error(runs):
@@ -218,8 +223,9 @@ def test_the_default_calibrate_holds_alpha_exactly(runs):
     frames = [r.visible() for r in train]
     masks = [r.samples["label.score_mask"].to_numpy(bool) for r in train]
     est.calibrate(frames, 0.05, masks)
-    stat = np.concatenate([est.score(f)["statistic"].to_numpy()[m]
-                           for f, m in zip(frames, masks, strict=True)])
+    stat = np.concatenate(
+        [est.score(f)["statistic"].to_numpy()[m] for f, m in zip(frames, masks, strict=True)]
+    )
     # the (1 - alpha) quantile in inverted-CDF form: floor(0.05 n) samples exceed it
     assert (stat > est.threshold_).sum() == int(np.floor(0.05 * stat.size))
     assert est.threshold_ == np.sort(stat)[stat.size - 1 - int(np.floor(0.05 * stat.size))]

@@ -26,8 +26,13 @@ COMPILING = "compiling (first run only)…"
 
 
 def cli(*args, **kw):
-    return subprocess.run([sys.executable, "-m", "r2rsim.cli", *map(str, args)],
-                          capture_output=True, text=True, timeout=300, **kw)
+    return subprocess.run(
+        [sys.executable, "-m", "r2rsim.cli", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        **kw,
+    )
 
 
 def scenario_copy(tmp_path, **changes):
@@ -66,9 +71,17 @@ def test_a_scenario_without_line_key_is_not_called_a_line_file(tmp_path, capsys)
 # --------------------------------------------------------------------------- --debug
 
 
-@pytest.mark.parametrize("argv", [["run", "S"], ["validate", "S"], ["schema", "line"],
-                                  ["diagnose", "--method", "pca"], ["bench", "S"],
-                                  ["list", "plugins"]])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["run", "S"],
+        ["validate", "S"],
+        ["schema", "line"],
+        ["diagnose", "--method", "pca"],
+        ["bench", "S"],
+        ["list", "plugins"],
+    ],
+)
 def test_debug_is_accepted_after_every_subcommand(argv):
     p = build_parser()
     assert p.parse_args(argv).debug is False
@@ -92,8 +105,13 @@ def test_a_closed_pipe_ends_quietly(tmp_path):
     r, w = os.pipe()
     os.close(r)  # nobody reads: the first write fails with EPIPE, as after `| head` exits
     try:
-        p = subprocess.run([sys.executable, "-m", "r2rsim.cli", "list", "channels", str(LINE)],
-                           stdout=w, stderr=subprocess.PIPE, text=True, timeout=300)
+        p = subprocess.run(
+            [sys.executable, "-m", "r2rsim.cli", "list", "channels", str(LINE)],
+            stdout=w,
+            stderr=subprocess.PIPE,
+            text=True,
+            timeout=300,
+        )
     finally:
         os.close(w)
     assert p.stderr == ""
@@ -101,8 +119,13 @@ def test_a_closed_pipe_ends_quietly(tmp_path):
 
 
 def test_piped_into_head(tmp_path):
-    p = subprocess.run(f'"{sys.executable}" -m r2rsim.cli list channels "{LINE}" | head -n 1',
-                       shell=True, capture_output=True, text=True, timeout=300)
+    p = subprocess.run(
+        f'"{sys.executable}" -m r2rsim.cli list channels "{LINE}" | head -n 1',
+        shell=True,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert p.stdout.split()[:2] == ["channel", "unit"]
     assert p.stderr == ""
 
@@ -185,7 +208,7 @@ def compiling_simulate(monkeypatch):
         def fresh(n):
             s = 0.0
             for i in range(n):
-                s += i ** 0.5
+                s += i**0.5
             return s
 
         t0, c0 = time.perf_counter(), compile_seconds()
@@ -224,8 +247,10 @@ def test_wall_time_excludes_the_compile(tmp_path, monkeypatch):
     assert seen["sim_s"] - 1e-3 <= s.wall_s < seen["sim_s"] + 0.5
     assert s.real_time_factor == pytest.approx(1.0 / s.wall_s)
     text = s.format()
-    assert (f"compiled     numba kernels in {s.solver_stats['compile_s']:.1f} s (first run "
-            f"only; not in the wall time above)") in text
+    assert (
+        f"compiled     numba kernels in {s.solver_stats['compile_s']:.1f} s (first run "
+        f"only; not in the wall time above)"
+    ) in text
     fast = dataclasses.replace(s, solver_stats={**s.solver_stats, "compile_s": 0.3})
     assert "compiled " not in fast.format()  # under a second: not worth a line
 
@@ -234,8 +259,7 @@ def test_compile_notice_on_stderr_not_stdout(tmp_path, capsys, compiling_simulat
     assert main(["run", str(QUICKSTART), "-o", str(tmp_path / "a"), "--duration", "1"]) == 0
     out, err = capsys.readouterr()
     assert err.count(COMPILING) == 1 and COMPILING not in out
-    assert main(["run", str(QUICKSTART), "-o", str(tmp_path / "b"), "--duration", "1",
-                 "-q"]) == 0
+    assert main(["run", str(QUICKSTART), "-o", str(tmp_path / "b"), "--duration", "1", "-q"]) == 0
     out, err = capsys.readouterr()
     assert COMPILING not in err + out
 
@@ -261,17 +285,23 @@ sys.exit(main())
 
 
 @pytest.mark.parametrize("command, frozen", [("run", True), ("validate", False)])
-def test_the_console_script_skips_the_collector_at_exit_after_a_run(tmp_path, command,
-                                                                    frozen):
+def test_the_console_script_skips_the_collector_at_exit_after_a_run(tmp_path, command, frozen):
     """`r2rsim run` and `sweep` freeze the collector at exit (their shutdown took ~0.3 s of
     passes over numba's objects); the dataset is whole; other commands exit as usual."""
     out = tmp_path / "out"
-    assert main(["run", str(scenario_copy(tmp_path)), "-o", str(out), "--duration", "2",
-                 "-q"]) == 0
-    args = (["run", scenario_copy(tmp_path), "-o", out, "--overwrite", "--duration", "2",
-             "-q"] if command == "run" else ["validate", out])
-    p = subprocess.run([sys.executable, "-c", _EXIT_PROBE, *map(str, args)],
-                       capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert main(["run", str(scenario_copy(tmp_path)), "-o", str(out), "--duration", "2", "-q"]) == 0
+    args = (
+        ["run", scenario_copy(tmp_path), "-o", out, "--overwrite", "--duration", "2", "-q"]
+        if command == "run"
+        else ["validate", out]
+    )
+    p = subprocess.run(
+        [sys.executable, "-c", _EXIT_PROBE, *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=tmp_path,
+    )
     assert p.returncode == 0, p.stderr
     assert p.stdout.splitlines()[-1] == f"frozen at exit: {frozen}"
     assert main(["validate", str(out)]) == 0
@@ -283,8 +313,21 @@ def test_main_called_in_process_leaves_the_shutdown_alone(tmp_path, monkeypatch)
     import gc
 
     calls, real = [], atexit.register
-    monkeypatch.setattr(atexit, "register", lambda f, *a, **k: (calls.append(f),
-                                                                 real(f, *a, **k))[1])
-    assert main(["run", str(scenario_copy(tmp_path)), "-o", str(tmp_path / "o"),
-                 "--duration", "1", "-q"]) == 0
+    monkeypatch.setattr(
+        atexit, "register", lambda f, *a, **k: (calls.append(f), real(f, *a, **k))[1]
+    )
+    assert (
+        main(
+            [
+                "run",
+                str(scenario_copy(tmp_path)),
+                "-o",
+                str(tmp_path / "o"),
+                "--duration",
+                "1",
+                "-q",
+            ]
+        )
+        == 0
+    )
     assert gc.freeze not in calls

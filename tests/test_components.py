@@ -26,22 +26,53 @@ def test_v13_material_balance_across_dancer_festoon_slack_and_splice(tmp_path):
     d = yaml.safe_load((REPO / "lines" / "newsprint_line.yaml").read_text())
     els = d["elements"]
     els[3].update(position=[0.0, 0.0], wrap="cw")
-    els.insert(4, {"id": "dancer", "type": "dancer", "radius": 0.06, "inertia": 0.02,
-                   "position": [0.18, -1.0], "wrap": "ccw", "travel_range": [-0.3, 0.3],
-                   "mass": 20, "load_force": 560 - 20 * 9.81, "damping": 200})
-    els.insert(5, {"id": "out", "type": "idler", "radius": 0.06, "inertia": 0.02,
-                   "position": [0.36, 0.0], "wrap": "cw"})
+    els.insert(
+        4,
+        {
+            "id": "dancer",
+            "type": "dancer",
+            "radius": 0.06,
+            "inertia": 0.02,
+            "position": [0.18, -1.0],
+            "wrap": "ccw",
+            "travel_range": [-0.3, 0.3],
+            "mass": 20,
+            "load_force": 560 - 20 * 9.81,
+            "damping": 200,
+        },
+    )
+    els.insert(
+        5,
+        {
+            "id": "out",
+            "type": "idler",
+            "radius": 0.06,
+            "inertia": 0.02,
+            "position": [0.36, 0.0],
+            "wrap": "cw",
+        },
+    )
     d["spans"] = [d["spans"][0], d["spans"][1], d["spans"][2], {}, {}, {"length": 3.0}]
     line = r2rsim.load_line(write(tmp_path / "b.yaml", yaml.safe_dump(d)))
-    cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(
-        line, [ProgrammeStep(at=0, line_speed=12.0)]))
-    events = [ScenarioEvent(at=5, type="splice", element="unwind"),
-              ScenarioEvent(at=42, type="e_stop", deceleration=5.0)]
-    res = r2rsim.simulate(cl, 50.0, 200.0, r2rsim.nominal_state(cl),
-                          r2rsim.SolverSettings(rtol=1e-9), events=events)
+    cl = r2rsim.compile_line(
+        line, r2rsim.Programme.from_steps(line, [ProgrammeStep(at=0, line_speed=12.0)])
+    )
+    events = [
+        ScenarioEvent(at=5, type="splice", element="unwind"),
+        ScenarioEvent(at=42, type="e_stop", deceleration=5.0),
+    ]
+    res = r2rsim.simulate(
+        cl, 50.0, 200.0, r2rsim.nominal_state(cl), r2rsim.SolverSettings(rtol=1e-9), events=events
+    )
     kinds = {e.kind for e in res.events}
-    assert {"slack", "dancer_stop_low", "dancer_stop_high", "splice", "splice_joint",
-            "e_stop"} <= kinds, kinds
+    assert {
+        "slack",
+        "dancer_stop_low",
+        "dancer_stop_high",
+        "splice",
+        "splice_joint",
+        "e_stop",
+    } <= kinds, kinds
     assert any(e.state == "swap" for e in res.events)
     assert np.ptp(res["festoon.position_m"]) > 2.0  # the festoon emptied and refilled
     assert np.ptp(res["dancer.position_m"]) > 0.1
@@ -59,17 +90,27 @@ def flying_line(tmp_path, *, dancer: bool, delta: float, stiffness_ratio: float 
         path = dancer_line(tmp_path, EA=2.25e5, mass=10.0, force_total=520.0, outer=1.5)
         d = yaml.safe_load(path.read_text())
         rin = d["elements"][1]
-        d["elements"][1] = {"id": "rin", "type": "idler", "radius": 0.05, "inertia": 0.011,
-                            "position": rin["position"], "wrap": rin["wrap"]}
+        d["elements"][1] = {
+            "id": "rin",
+            "type": "idler",
+            "radius": 0.05,
+            "inertia": 0.011,
+            "position": rin["position"],
+            "wrap": rin["wrap"],
+        }
     else:
-        d = yaml.safe_load(dancer_line(tmp_path, EA=2.25e5, mass=10.0, force_total=520.0,
-                                       outer=1.5).read_text())
+        d = yaml.safe_load(
+            dancer_line(tmp_path, EA=2.25e5, mass=10.0, force_total=520.0, outer=1.5).read_text()
+        )
         d["elements"] = [d["elements"][0], d["elements"][1], d["elements"][-1]]
         d["spans"] = [{"length": 1.5}, {"length": 1.0}]
     src = d["elements"][0]
     src["spare_roll"] = dict(src["roll"])
-    src["splicer"] = {"type": "flying", "speed_match_error": delta,
-                      "joint": {"stiffness_ratio": stiffness_ratio}}
+    src["splicer"] = {
+        "type": "flying",
+        "speed_match_error": delta,
+        "joint": {"stiffness_ratio": stiffness_ratio},
+    }
     return write(tmp_path / f"flying_{dancer}.yaml", yaml.safe_dump(d))
 
 
@@ -78,22 +119,34 @@ def test_v23_flying_splice_speed_mismatch(tmp_path):
     # dx/dt = delta·v/2 = 12.5 mm/s ...
     v, delta, EA, T, L = 5.0, 0.005, 2.25e5, 260.0, 1.5
     line = r2rsim.load_line(flying_line(tmp_path, dancer=True, delta=delta))
-    cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(
-        line, [ProgrammeStep(at=0, line_speed=v)]))
-    res = r2rsim.simulate(cl, 20.0, 10.0, r2rsim.nominal_state(cl, T),
-                          r2rsim.SolverSettings(rtol=1e-10, atol_scale=1e-4),
-                          events=[ScenarioEvent(at=1.0, type="splice", element="src")])
+    cl = r2rsim.compile_line(
+        line, r2rsim.Programme.from_steps(line, [ProgrammeStep(at=0, line_speed=v)])
+    )
+    res = r2rsim.simulate(
+        cl,
+        20.0,
+        10.0,
+        r2rsim.nominal_state(cl, T),
+        r2rsim.SolverSettings(rtol=1e-10, atol_scale=1e-4),
+        events=[ScenarioEvent(at=1.0, type="splice", element="src")],
+    )
     assert any(e.state == "swap" and e.t == 1.0 for e in res.events)
     # the wound-in strain equals the running strain, so the drift is exact (V14 form)
     assert res["dancer.velocity_m_s"][-1] == pytest.approx(delta * v / 2, rel=1e-5)
     # ... and without a dancer span 1's tension heads for T(1+delta) - EA·delta < 0: slack
     # at t = tau·ln((T0 - Tinf)/(-Tinf)) after the splice (V20 formula), tau = L/v
     line = r2rsim.load_line(flying_line(tmp_path, dancer=False, delta=delta))
-    cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(
-        line, [ProgrammeStep(at=0, line_speed=v)]))
-    res = r2rsim.simulate(cl, 2.0, 1000.0, r2rsim.nominal_state(cl, T),
-                          r2rsim.SolverSettings(rtol=1e-10, atol_scale=1e-4),
-                          events=[ScenarioEvent(at=1.0, type="splice", element="src")])
+    cl = r2rsim.compile_line(
+        line, r2rsim.Programme.from_steps(line, [ProgrammeStep(at=0, line_speed=v)])
+    )
+    res = r2rsim.simulate(
+        cl,
+        2.0,
+        1000.0,
+        r2rsim.nominal_state(cl, T),
+        r2rsim.SolverSettings(rtol=1e-10, atol_scale=1e-4),
+        events=[ScenarioEvent(at=1.0, type="splice", element="src")],
+    )
     t_inf = T * (1 + delta) - EA * delta
     t_slack = 1.0 + L / v * np.log((T - t_inf) / (-t_inf))
     slack = [e for e in _events(res, "slack") if e.component == "span1"]
@@ -106,13 +159,18 @@ def test_splice_joint_carries_its_own_strain_through_the_nodes(tmp_path):
     # conservation no span's tension changes while it enters, crosses and leaves: tension
     # stays T (without the joint's own strain in the flux it jumped by up to 1/(1 - f/2)).
     v, T, ls = 5.0, 260.0, 0.05
-    line = r2rsim.load_line(flying_line(tmp_path, dancer=False, delta=0.0,
-                                        stiffness_ratio=2.0))
-    cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(
-        line, [ProgrammeStep(at=0, line_speed=v)]))
-    res = r2rsim.simulate(cl, 1.8, 2000.0, r2rsim.nominal_state(cl, T),
-                          r2rsim.SolverSettings(rtol=1e-10, atol_scale=1e-4),
-                          events=[ScenarioEvent(at=1.0, type="splice", element="src")])
+    line = r2rsim.load_line(flying_line(tmp_path, dancer=False, delta=0.0, stiffness_ratio=2.0))
+    cl = r2rsim.compile_line(
+        line, r2rsim.Programme.from_steps(line, [ProgrammeStep(at=0, line_speed=v)])
+    )
+    res = r2rsim.simulate(
+        cl,
+        1.8,
+        2000.0,
+        r2rsim.nominal_state(cl, T),
+        r2rsim.SolverSettings(rtol=1e-10, atol_scale=1e-4),
+        events=[ScenarioEvent(at=1.0, type="splice", element="src")],
+    )
     passes = [e for e in res.events if e.kind == "splice_joint"]
     # the lead enters span 2 once span 1's unstretched length L/(1+eps) has been paid out
     # at v/(1+eps), i.e. after L/v ...
@@ -131,8 +189,9 @@ def test_e_stop_ramps_the_line_down_at_its_deceleration_limit(repo):
     scen, line, _ = r2rsim.load_scenario(repo / "scenarios" / "quickstart.yaml")
     cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(line, scen.programme))
     y0 = r2rsim.steady_state(cl, r2rsim.nominal_state(cl))
-    res = r2rsim.simulate(cl, 12.0, 200.0, y0, events=[
-        ScenarioEvent(at=4.0, type="e_stop", deceleration=1.0)])
+    res = r2rsim.simulate(
+        cl, 12.0, 200.0, y0, events=[ScenarioEvent(at=4.0, type="e_stop", deceleration=1.0)]
+    )
     v0 = float(np.interp(4.0, res.t, res["setpoint.line_speed_m_s"]))
     sp = res["setpoint.line_speed_m_s"]
     t_end = 4.0 + v0 / 1.0
@@ -146,8 +205,9 @@ def test_e_stop_ramps_the_line_down_at_its_deceleration_limit(repo):
     states = [e.state for e in _events(res, "e_stop")]
     assert states == ["start", "end"]
     # the compiled line is restored after the run: a second run is identical
-    res2 = r2rsim.simulate(cl, 12.0, 200.0, y0, events=[
-        ScenarioEvent(at=4.0, type="e_stop", deceleration=1.0)])
+    res2 = r2rsim.simulate(
+        cl, 12.0, 200.0, y0, events=[ScenarioEvent(at=4.0, type="e_stop", deceleration=1.0)]
+    )
     assert np.array_equal(res.states, res2.states)
 
 
@@ -184,8 +244,7 @@ def test_thesis_normal_cycles(repo, tmp_path):
     sp = ev[ev.kind == "splice"]
     assert (sp.state == "swap").sum() >= 2
     assert (sp.state == "complete").sum() == (sp.state == "swap").sum()
-    assert not ev.kind.isin(["slack", "web_break", "dancer_stop_low",
-                             "dancer_stop_high"]).any()
+    assert not ev.kind.isin(["slack", "web_break", "dancer_stop_low", "dancer_stop_high"]).any()
     after = s.t_s > 2.0
     for roller in ("drive4", "r5a", "r5b"):
         v = s[f"state.{roller}.surface_speed_m_s"][after]
@@ -210,8 +269,9 @@ def test_thesis_normal_cycles(repo, tmp_path):
     assert fast("state.span3.tension_N") > 10 * fast("state.registration.tension_N")
     # Fig. 2-15a: tension climbs before every changeover while the dancer stores web
     lc = s["true.lc_stage2.tension_N"]
-    for t_fill, t_brake in zip(sp[sp.state == "fill"].t_s, sp[sp.state == "brake"].t_s,
-                               strict=True):
+    for t_fill, t_brake in zip(
+        sp[sp.state == "fill"].t_s, sp[sp.state == "brake"].t_s, strict=True
+    ):
         before = lc[(s.t_s > t_fill - 5) & (s.t_s < t_fill)].mean()
         late_fill = lc[(s.t_s > t_brake - 1) & (s.t_s < t_brake)].mean()
         assert late_fill > 1.04 * before, (t_fill, before, late_fill)

@@ -26,13 +26,13 @@ from r2rsim.schema.scenario import ProgrammeStep
 
 from conftest import REPO, kinematic_line, run_line, write
 
-CW = 50e-6                      # build per wrap = PET thickness
-RHO_W = 1390.0 * 1.0            # wound density x width (rho_r·c_w = rho·t_w, w = 1 m)
+CW = 50e-6  # build per wrap = PET thickness
+RHO_W = 1390.0 * 1.0  # wound density x width (rho_r·c_w = rho·t_w, w = 1 m)
 
 
 def J_roll(R, Rc=0.076, Jc=0.5):
     """Roll inertia of physics.md eq. 1.12."""
-    return Jc + 0.5 * math.pi * RHO_W * (R ** 4 - Rc ** 4)
+    return Jc + 0.5 * math.pi * RHO_W * (R**4 - Rc**4)
 
 
 def at(res, name, t):
@@ -75,8 +75,13 @@ FF_CASES = {
     "{inertia: false}": (1, 0.0, None, 1, 1),
     "{radius_rate: false}": (1, 1.0, None, 0, 1),
     "{friction: false}": (1, 1.0, None, 1, 0),
-    "{tension: true, inertia: {factor: 1.1}, radius_rate: false, friction: false}":
-        (1, 1.1, None, 0, 0),
+    "{tension: true, inertia: {factor: 1.1}, radius_rate: false, friction: false}": (
+        1,
+        1.1,
+        None,
+        0,
+        0,
+    ),
 }
 
 
@@ -86,27 +91,29 @@ def test_feedforward_terms_one_by_one(tmp_path, ff):
     sgn·T_ref·R + J_est·(a/R - sgn·c_w·V²/(2πR³)) + tau_f(ω) (sgn -1 unwind, +1 rewind),
     term by term as switched."""
     line = r2rsim.load_line(write(tmp_path / "l.yaml", TWO_ROLLS.format(ff=ff)))
-    prog = r2rsim.Programme.from_steps(line, [
-        ProgrammeStep(at=0, line_speed=2.0), ProgrammeStep(at=1.0, line_speed=6.0, ramp=2.0)])
+    prog = r2rsim.Programme.from_steps(
+        line, [ProgrammeStep(at=0, line_speed=2.0), ProgrammeStep(at=1.0, line_speed=6.0, ramp=2.0)]
+    )
     cl = r2rsim.compile_line(line, prog)
     cl.set_segment_start(1.0)
-    t = 2.0                                  # V = 4 m/s, a = 2 m/s^2
+    t = 2.0  # V = 4 m/s, a = 2 m/s^2
     V, a = 4.0, 2.0
     y = r2rsim.nominal_state(cl, 250.0)
     y[cl.index("ut.integral")] = y[cl.index("rt.integral")] = 0.0
-    y[cl.index("unwind.length")] = 2000.0    # R = sqrt(0.4² - c_w·s/π) = 0.3580 m
+    y[cl.index("unwind.length")] = 2000.0  # R = sqrt(0.4² - c_w·s/π) = 0.3580 m
     y[cl.index("unwind.speed")] = 12.0
-    y[cl.index("rewind.length")] = 300.0     # R = sqrt(0.15² + c_w·s/π) = 0.1652 m
+    y[cl.index("rewind.length")] = 300.0  # R = sqrt(0.15² + c_w·s/π) = 0.1652 m
     y[cl.index("rewind.speed")] = 20.0
     out = cl.outputs(t, y[None, :])[0]
     on_T, fac, value, rr, fr = FF_CASES[ff]
     for eid, sgn, Tref, R0, om, b, tc, weps, s in (
-            ("unwind", -1.0, 260.0, 0.40, 12.0, 0.01, 0.2, 5.0, 2000.0),
-            ("rewind", 1.0, 200.0, 0.15, 20.0, 0.02, 0.0, 1e-2, 300.0)):
-        R = math.sqrt(R0 ** 2 + sgn * CW / math.pi * s)
+        ("unwind", -1.0, 260.0, 0.40, 12.0, 0.01, 0.2, 5.0, 2000.0),
+        ("rewind", 1.0, 200.0, 0.15, 20.0, 0.02, 0.0, 1e-2, 300.0),
+    ):
+        R = math.sqrt(R0**2 + sgn * CW / math.pi * s)
         assert out[cl.aux_index(f"{eid}.radius_m")] == pytest.approx(R, rel=1e-14)
         J_est = value if value is not None else fac * J_roll(R)
-        alpha = a / R - rr * sgn * CW * V ** 2 / (2 * math.pi * R ** 3)
+        alpha = a / R - rr * sgn * CW * V**2 / (2 * math.pi * R**3)
         tau_f = b * om + tc * math.tanh(om / weps)
         expected = on_T * sgn * Tref * R + J_est * alpha + fr * tau_f
         got = out[cl.aux_index(f"{eid}.torque_command_N_m")]
@@ -115,7 +122,7 @@ def test_feedforward_terms_one_by_one(tmp_path, ff):
     # (J(R) = 36.29 kg·m², a/R = 5.59 1/s²) 202.76, radius rate 0.101, friction 0.317 N·m
     R = math.sqrt(0.16 - CW / math.pi * 2000)
     assert J_roll(R) == pytest.approx(36.2946, abs=1e-4)
-    assert J_roll(R) * CW * V ** 2 / (2 * math.pi * R ** 3) == pytest.approx(0.1007, abs=1e-4)
+    assert J_roll(R) * CW * V**2 / (2 * math.pi * R**3) == pytest.approx(0.1007, abs=1e-4)
 
 
 # physics.md V22(b): a 10 % low inertia estimate leaves dT = dJ·a/R² = 17.59 N at a = 0.5 m/s²,
@@ -149,13 +156,13 @@ def _open_loop_unwind_tension(res, t, f_inertia, rr, fr, V, a, b=0.01, tc=0.2, w
     R = at(res, "unwind.radius_m", t)
     om = at(res, "unwind.speed_rad_s", t)
     J = J_roll(R)
-    alpha_ff = a / R + rr * CW * V ** 2 / (2 * math.pi * R ** 3)
+    alpha_ff = a / R + rr * CW * V**2 / (2 * math.pi * R**3)
     tau_f = b * om + tc * math.tanh(om / weps)
     T = 260.0
     for _ in range(5):  # the strain enters only through 1 + eps: a fixed point in a few steps
         eps = T / EA_PET
         v0 = V / (1 + eps)
-        omdot = a / (R * (1 + eps)) + CW * v0 ** 2 / (2 * math.pi * R ** 3)
+        omdot = a / (R * (1 + eps)) + CW * v0**2 / (2 * math.pi * R**3)
         T = 260.0 + (J * omdot - f_inertia * J * alpha_ff + (1 - fr) * tau_f) / R
     return T
 
@@ -169,21 +176,22 @@ def test_v22b_inertia_estimate_error_during_acceleration(tmp_path):
         T[name] = at(res, "span1.tension_N", 10.5)
         f = 1.0 if name == "exact" else 0.9
         assert T[name] == pytest.approx(
-            _open_loop_unwind_tension(res, 10.5, f, 1, 1, V=5.75, a=0.5), abs=2e-3)
+            _open_loop_unwind_tension(res, 10.5, f, 1, 1, V=5.75, a=0.5), abs=2e-3
+        )
     R = at(res, "unwind.radius_m", 10.5)
     dJ = 0.1 * J_roll(R)
     # dT = dJ·(a/R + c_w·v²/(2πR³))/R; V22 neglects the radius-rate part (0.02 %)
     assert T["low"] - T["exact"] == pytest.approx(
-        dJ * (0.5 / R + CW * 5.75 ** 2 / (2 * math.pi * R ** 3)) / R, rel=1e-3)
+        dJ * (0.5 / R + CW * 5.75**2 / (2 * math.pi * R**3)) / R, rel=1e-3
+    )
     # V22's number at R = 0.4 m, a = 0.5 m/s²: 17.59 N (tolerance 0.1 %)
-    assert 0.1 * J_roll(0.4) * 0.5 / 0.4 ** 2 == pytest.approx(17.59, rel=1e-3)
+    assert 0.1 * J_roll(0.4) * 0.5 / 0.4**2 == pytest.approx(17.59, rel=1e-3)
     assert T["low"] - T["exact"] == pytest.approx(17.59, rel=5e-3)  # R has fallen to 0.3993 m
     # the exact feed-forward misses only the web's strain: the roll turns with the unstretched
     # web speed v/(1 + eps), so T - T_ref = -J·alpha·eps/((1 + eps)·R) = -0.20 N
     eps = 260.0 / EA_PET
-    alpha = 0.5 / R + CW * 5.75 ** 2 / (2 * math.pi * R ** 3)
-    assert T["exact"] - 260.0 == pytest.approx(-J_roll(R) * alpha * eps / ((1 + eps) * R),
-                                               rel=2e-2)
+    alpha = 0.5 / R + CW * 5.75**2 / (2 * math.pi * R**3)
+    assert T["exact"] - 260.0 == pytest.approx(-J_roll(R) * alpha * eps / ((1 + eps) * R), rel=2e-2)
 
 
 def test_radius_rate_and_friction_terms_at_constant_speed(tmp_path):
@@ -197,13 +205,14 @@ def test_radius_rate_and_friction_terms_at_constant_speed(tmp_path):
     T, R, om = {}, {}, {}
     for ff in ("true", "{radius_rate: false}", "{friction: false}"):
         path = write(tmp_path / "l.yaml", V22_LINE.format(R0="0.10 m", ff=ff))
-        _, res = run_line(path, duration=8.0, rate=100.0, steps=[{"at": 0, "line_speed": 5.0}],
-                          initial="steady")
+        _, res = run_line(
+            path, duration=8.0, rate=100.0, steps=[{"at": 0, "line_speed": 5.0}], initial="steady"
+        )
         T[ff] = at(res, "span1.tension_N", 8.0)
         R[ff] = at(res, "unwind.radius_m", 8.0)
         om[ff] = at(res, "unwind.speed_rad_s", 8.0)
     r, w = R["true"], om["true"]
-    radius_rate = J_roll(r) * CW * 5.0 ** 2 / (2 * math.pi * r ** 4)
+    radius_rate = J_roll(r) * CW * 5.0**2 / (2 * math.pi * r**4)
     friction = (0.01 * w + 0.2 * math.tanh(w / 1e-2)) / r
     assert r == pytest.approx(0.09677, abs=1e-5)
     assert radius_rate == pytest.approx(1.4035, abs=1e-4)
@@ -238,11 +247,14 @@ def test_torque_command_step_and_ramp(tmp_path, model):
     programmed step as tau_b + (tau_a - tau_b)·e^(-t/lag) and to a ramp of slope s as
     cmd(t) - s·lag·(1 - e^(-t/lag))."""
     path = write(tmp_path / "roller.yaml", ROLLER.format(model=model))
-    steps = [{"at": 0, "line_speed": 5.0},
-             {"at": 2.0, "torque": {"roller": 5.0}},
-             {"at": 10.0, "torque": {"roller": -3.0}, "ramp": 4.0}]
-    cl, res = run_line(path, duration=22.0, rate=1000.0, steps=steps, initial="steady",
-                       tension=100.0)
+    steps = [
+        {"at": 0, "line_speed": 5.0},
+        {"at": 2.0, "torque": {"roller": 5.0}},
+        {"at": 10.0, "torque": {"roller": -3.0}, "ramp": 4.0},
+    ]
+    cl, res = run_line(
+        path, duration=22.0, rate=1000.0, steps=steps, initial="steady", tension=100.0
+    )
     T2 = 100.0 if model == "exact" else 1e5 * 0.005 / 5.005
     # constant command of the line file (2 N·m): the steady state at t = 0 and just before 2 s
     for t in (0.0, 1.999):
@@ -251,7 +263,8 @@ def test_torque_command_step_and_ramp(tmp_path, model):
     # step 2 -> 5 N·m: the first-order lag, exactly
     for dt in (0.001, 0.005, 0.012):
         assert at(res, "roller.torque_N_m", 2.0 + dt) == pytest.approx(
-            5.0 - 3.0 * math.exp(-dt / 0.005), abs=1e-5)
+            5.0 - 3.0 * math.exp(-dt / 0.005), abs=1e-5
+        )
         assert at(res, "roller.torque_command_N_m", 2.0 + dt) == 5.0
         assert at(res, "setpoint.roller.torque_N_m", 2.0 + dt) == 5.0
     assert at(res, "span1.tension_N", 9.999) == pytest.approx(T2 + 50.0, abs=1e-5)
@@ -261,7 +274,8 @@ def test_torque_command_step_and_ramp(tmp_path, model):
         cmd = 5.0 + s * dt
         assert at(res, "setpoint.roller.torque_N_m", 10.0 + dt) == pytest.approx(cmd, abs=1e-12)
         assert at(res, "roller.torque_N_m", 10.0 + dt) == pytest.approx(
-            cmd - s * 0.005 * (1.0 - math.exp(-dt / 0.005)), abs=2e-6)
+            cmd - s * 0.005 * (1.0 - math.exp(-dt / 0.005)), abs=2e-6
+        )
     # after the ramp: T1 = T2 + (-3)/0.1; the downstream span, which swings while the roller
     # changes speed, returns to its draw tension (V4: steady tension depends on v_i only)
     assert at(res, "span1.tension_N", 22.0) == pytest.approx(T2 - 30.0, abs=1e-5)
@@ -285,11 +299,16 @@ def test_programmed_draw_on_a_kinematic_chain(tmp_path):
     speeds [5, 5.005, 5.005, 5.0075] m/s; after, V3's [299.7003, 499.0020, 399.4009] N.
     Span 1 lies upstream of n2 and never moves (V4)."""
     EA = 2.0e5
-    path = kinematic_line(tmp_path, model="linear", EA=EA, spans=[1.0, 1.0, 1.0],
-                          draws=[0.0, 0.001, 0.001, 0.0015], wound_strain=100.0 / EA)
+    path = kinematic_line(
+        tmp_path,
+        model="linear",
+        EA=EA,
+        spans=[1.0, 1.0, 1.0],
+        draws=[0.0, 0.001, 0.001, 0.0015],
+        wound_strain=100.0 / EA,
+    )
     steps = [{"at": 0, "line_speed": 5.0}, {"at": 1.0, "draw": {"n2": 0.002}, "ramp": 0.5}]
-    _, res = run_line(path, duration=6.0, rate=1000.0, steps=steps, initial="steady",
-                      tension=200.0)
+    _, res = run_line(path, duration=6.0, rate=1000.0, steps=steps, initial="steady", tension=200.0)
     before = _v3_chain([5.0, 5.005, 5.005, 5.0075], 100.0, EA)
     after = _v3_chain([5.0, 5.005, 5.010, 5.0075], 100.0, EA)
     np.testing.assert_allclose(after, [299.7003, 499.0020, 399.4009], atol=1e-4)
@@ -298,8 +317,14 @@ def test_programmed_draw_on_a_kinematic_chain(tmp_path):
         assert at(res, f"span{i}.tension_N", 6.0) == pytest.approx(after[i - 1], abs=1e-4)
     assert np.max(np.abs(res["span1.tension_N"] - before[0])) < 1e-6
     # the ramp: draw and surface speed follow V·(1 + d(t)) from 1.0 s to 1.5 s exactly
-    for t, d in ((0.5, 0.001), (1.0, 0.001), (1.1, 0.0012), (1.25, 0.0015), (1.5, 0.002),
-                 (3.0, 0.002)):
+    for t, d in (
+        (0.5, 0.001),
+        (1.0, 0.001),
+        (1.1, 0.0012),
+        (1.25, 0.0015),
+        (1.5, 0.002),
+        (3.0, 0.002),
+    ):
         assert at(res, "setpoint.n2.draw", t) == pytest.approx(d, abs=1e-15)
         assert at(res, "n2.surface_speed_m_s", t) == pytest.approx(5.0 * (1 + d), rel=1e-14)
     # and span 2 starts moving at 1.0 s, not before
@@ -331,12 +356,12 @@ def test_programmed_draw_on_a_speed_pi(tmp_path):
     k_i/800 = 0.5 1/s.)"""
     path = write(tmp_path / "chain.yaml", SPEED_PI_CHAIN.format(tff="true"))
     steps = [{"at": 0, "line_speed": 5.0}, {"at": 1.0, "draw": {"n2": 0.002}, "ramp": 0.5}]
-    _, res = run_line(path, duration=16.0, rate=10.0, steps=steps, initial="steady",
-                      tension=200.0)
+    _, res = run_line(path, duration=16.0, rate=10.0, steps=steps, initial="steady", tension=200.0)
     for i, T in zip((1, 2, 3), [299.7003, 499.0020, 399.4009], strict=True):
         assert at(res, f"span{i}.tension_N", 16.0) == pytest.approx(T, abs=1e-3)
     assert at(res, "span2.tension_N", 0.9) == pytest.approx(
-        _v3_chain([5.0, 5.005, 5.005], 100.0, 2e5)[1], abs=1e-3)
+        _v3_chain([5.0, 5.005, 5.005], 100.0, 2e5)[1], abs=1e-3
+    )
 
 
 @pytest.mark.parametrize("tff", ["true", "false"])
@@ -346,9 +371,14 @@ def test_speed_pi_feedforward_includes_the_draw_slope(tmp_path, tff):
     (dd/dt = 0.002 1/s), at t = 1.2 s (V = 5.2 m/s, d = 0.0014):
     0.1·(1.0014 + 0.0104)/0.1 = 1.0118 N·m."""
     line = r2rsim.load_line(write(tmp_path / "chain.yaml", SPEED_PI_CHAIN.format(tff=tff)))
-    prog = r2rsim.Programme.from_steps(line, [
-        ProgrammeStep(at=0, line_speed=5.0), ProgrammeStep(at=1.0, line_speed=6.0, ramp=1.0),
-        ProgrammeStep(at=1.0, draw={"n2": 0.002}, ramp=0.5)])
+    prog = r2rsim.Programme.from_steps(
+        line,
+        [
+            ProgrammeStep(at=0, line_speed=5.0),
+            ProgrammeStep(at=1.0, line_speed=6.0, ramp=1.0),
+            ProgrammeStep(at=1.0, draw={"n2": 0.002}, ramp=0.5),
+        ],
+    )
     cl = r2rsim.compile_line(line, prog)
     cl.set_segment_start(1.0)
     t, V, d = 1.2, 5.2, 0.0014
@@ -358,29 +388,42 @@ def test_speed_pi_feedforward_includes_the_draw_slope(tmp_path, tff):
     out = cl.outputs(t, y[None, :])[0]
     assert out[cl.aux_index("n2_speed.error_rad_s")] == pytest.approx(0.0, abs=1e-12)
     expected = 0.1 * (1.0 * (1 + d) + V * 0.002) / 0.1 if tff == "true" else 0.0
-    assert out[cl.aux_index("n2.torque_command_N_m")] == pytest.approx(expected, rel=1e-12,
-                                                                       abs=1e-12)
+    assert out[cl.aux_index("n2.torque_command_N_m")] == pytest.approx(
+        expected, rel=1e-12, abs=1e-12
+    )
     if tff == "true":
         assert expected == pytest.approx(1.0118, abs=1e-9)
 
 
 # ------------------------------------------------------------------ validation
-@pytest.mark.parametrize("step,path,words", [
-    ({"draw": {"nope": 0.001}}, "programme[1].draw.nope", "no element 'nope'"),
-    ({"draw": {"idler1": 0.001}}, "programme[1].draw.idler1", "(idler) has no drive"),
-    ({"draw": {"unwind": 0.001}}, "programme[1].draw.unwind",
-     "tension-controlled in torque mode (controllers[3])"),
-    ({"draw": {"pull": 0.001}}, "programme[1].draw.pull", "master speed node"),
-    ({"torque": {"nope": 1}}, "programme[1].torque.nope", "no element 'nope'"),
-    ({"torque": {"swrapA": 1}}, "programme[1].torque.swrapA",
-     "commanded by speed_pi 'swrapA_speed'"),
-    ({"torque": {"idler1": 1}}, "programme[1].torque.idler1", "(idler) has no drive"),
-])
+@pytest.mark.parametrize(
+    "step,path,words",
+    [
+        ({"draw": {"nope": 0.001}}, "programme[1].draw.nope", "no element 'nope'"),
+        ({"draw": {"idler1": 0.001}}, "programme[1].draw.idler1", "(idler) has no drive"),
+        (
+            {"draw": {"unwind": 0.001}},
+            "programme[1].draw.unwind",
+            "tension-controlled in torque mode (controllers[3])",
+        ),
+        ({"draw": {"pull": 0.001}}, "programme[1].draw.pull", "master speed node"),
+        ({"torque": {"nope": 1}}, "programme[1].torque.nope", "no element 'nope'"),
+        (
+            {"torque": {"swrapA": 1}},
+            "programme[1].torque.swrapA",
+            "commanded by speed_pi 'swrapA_speed'",
+        ),
+        ({"torque": {"idler1": 1}}, "programme[1].torque.idler1", "(idler) has no drive"),
+    ],
+)
 def test_bad_programme_keys_name_file_and_path(tmp_path, capsys, step, path, words):
     from r2rsim.cli import main
 
-    scen = {"line": str(REPO / "lines" / "pet_film_line.yaml"), "duration": 1,
-            "programme": [{"at": 0, "line_speed": 1.0}, {"at": 0.5, **step}]}
+    scen = {
+        "line": str(REPO / "lines" / "pet_film_line.yaml"),
+        "duration": 1,
+        "programme": [{"at": 0, "line_speed": 1.0}, {"at": 0.5, **step}],
+    }
     (tmp_path / "scen.yaml").write_text(yaml.safe_dump(scen))
     out = tmp_path / "out"
     assert main(["run", str(tmp_path / "scen.yaml"), "-o", str(out), "-q"]) != 0
@@ -394,26 +437,49 @@ def test_bad_programme_keys_name_file_and_path(tmp_path, capsys, step, path, wor
         r2rsim.Programme.from_steps(line, [ProgrammeStep(**s) for s in scen["programme"]])
 
 
-@pytest.mark.parametrize("mutate,path,words", [
-    (lambda d: d["elements"][4]["drive"].update(torque_command="3 N*m"),
-     "elements[4].drive.torque_command", "commanded by speed_pi 'pull_speed'"),
-    (lambda d: d["elements"][5]["drive"].update(torque_command=3),
-     "elements[5].drive.torque_command", "commanded by tension_pi 'rewind_tension'"),
-    (lambda d: d["controllers"][3].update(feedforward={"inertia": {"factor": 1, "value": 2}}),
-     "controllers[3].feedforward.inertia", "factor or as value"),
-    (lambda d: d["controllers"][3].update(feedforward={"inertia": {"factor": -1}}),
-     "controllers[3].feedforward.inertia.factor", "must be >= 0"),
-    (lambda d: d["controllers"][3].update(feedforward={"frictoin": False}),
-     "controllers[3].feedforward.frictoin", "unknown key"),
-])
+@pytest.mark.parametrize(
+    "mutate,path,words",
+    [
+        (
+            lambda d: d["elements"][4]["drive"].update(torque_command="3 N*m"),
+            "elements[4].drive.torque_command",
+            "commanded by speed_pi 'pull_speed'",
+        ),
+        (
+            lambda d: d["elements"][5]["drive"].update(torque_command=3),
+            "elements[5].drive.torque_command",
+            "commanded by tension_pi 'rewind_tension'",
+        ),
+        (
+            lambda d: d["controllers"][3].update(
+                feedforward={"inertia": {"factor": 1, "value": 2}}
+            ),
+            "controllers[3].feedforward.inertia",
+            "factor or as value",
+        ),
+        (
+            lambda d: d["controllers"][3].update(feedforward={"inertia": {"factor": -1}}),
+            "controllers[3].feedforward.inertia.factor",
+            "must be >= 0",
+        ),
+        (
+            lambda d: d["controllers"][3].update(feedforward={"frictoin": False}),
+            "controllers[3].feedforward.frictoin",
+            "unknown key",
+        ),
+    ],
+)
 def test_bad_line_keys_name_file_and_path(tmp_path, mutate, path, words):
     d = yaml.safe_load((REPO / "lines" / "pet_film_line.yaml").read_text())
     mutate(d)
     (tmp_path / "line.yaml").write_text(yaml.safe_dump(d))
     with pytest.raises(r2rsim.InputError) as exc:
         r2rsim.load_line(tmp_path / "line.yaml")
-    assert re.match(rf"{re.escape(str(tmp_path / 'line.yaml'))}: (line \d+: )?"
-                    rf"{re.escape(path)}: ", str(exc.value)), str(exc.value)
+    assert re.match(
+        rf"{re.escape(str(tmp_path / 'line.yaml'))}: (line \d+: )?"
+        rf"{re.escape(path)}: ",
+        str(exc.value),
+    ), str(exc.value)
     assert words in str(exc.value)
 
 
@@ -422,12 +488,23 @@ def test_feedforward_terms_on_a_speed_trim_are_rejected(tmp_path):
     d = yaml.safe_load(text)
     d["elements"][4]["drive"] = {"type": "ideal_speed"}
     d["controllers"] = [c for c in d["controllers"] if c["id"] != "pull_speed"]
-    d["controllers"].append({"id": "pt", "type": "tension_pi", "element": "pull",
-                             "sensor": "lc_rewind", "setpoint": 200, "kp": 1e-4,
-                             "feedforward": {"friction": False}})
+    d["controllers"].append(
+        {
+            "id": "pt",
+            "type": "tension_pi",
+            "element": "pull",
+            "sensor": "lc_rewind",
+            "setpoint": 200,
+            "kp": 1e-4,
+            "feedforward": {"friction": False},
+        }
+    )
     (tmp_path / "line.yaml").write_text(yaml.safe_dump(d))
-    with pytest.raises(r2rsim.InputError, match=r"controllers\[4\]\.feedforward: "
-                                                r"feed-forward terms apply to torque mode"):
+    with pytest.raises(
+        r2rsim.InputError,
+        match=r"controllers\[4\]\.feedforward: "
+        r"feed-forward terms apply to torque mode",
+    ):
         r2rsim.load_line(tmp_path / "line.yaml")
     d["controllers"][-1]["feedforward"] = False  # the old master switch stays accepted
     (tmp_path / "line.yaml").write_text(yaml.safe_dump(d))
@@ -446,8 +523,20 @@ def test_shipped_example_runs_through_the_cli(tmp_path):
     from r2rsim.cli import main
 
     out = tmp_path / "out"
-    assert main(["run", str(REPO / "scenarios" / "torque_modes.yaml"), "-o", str(out), "-q",
-                 "--duration", "5"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                str(REPO / "scenarios" / "torque_modes.yaml"),
+                "-o",
+                str(out),
+                "-q",
+                "--duration",
+                "5",
+            ]
+        )
+        == 0
+    )
     df = pd.read_parquet(out / "samples")
     first, last = df.iloc[0], df.iloc[-1]
     assert last["t_s"] == pytest.approx(5.0)

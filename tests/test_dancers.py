@@ -15,9 +15,23 @@ from conftest import write
 G = 9.81
 
 
-def dancer_line(tmp_path, *, EA, mass, force_total, draw_in=0.0, draw_out=0.0, T=260.0,
-                inertia=1e-2, L=1.0, outer=10.0, direction="[0, -1]", damping=0.0,
-                model="exact", name="dancer_line"):
+def dancer_line(
+    tmp_path,
+    *,
+    EA,
+    mass,
+    force_total,
+    draw_in=0.0,
+    draw_out=0.0,
+    T=260.0,
+    inertia=1e-2,
+    L=1.0,
+    outer=10.0,
+    direction="[0, -1]",
+    damping=0.0,
+    model="exact",
+    name="dancer_line",
+):
     """Kinematic nodes around a vertical translating dancer, spans parallel to its travel.
 
     Rollers of radius 0.05 m at (-0.1, 0) and (0.1, 0); the dancer roller at (0, -L) hangs in
@@ -57,21 +71,22 @@ def dancer_line(tmp_path, *, EA, mass, force_total, draw_in=0.0, draw_out=0.0, T
 
 def _run(path, V, duration, T0, rtol=1e-10, atol_scale=1e-4, rate=100.0, y_edit=None):
     line = r2rsim.load_line(path)
-    prog = r2rsim.Programme.from_steps(
-        line, [ProgrammeStep(at=0.0, line_speed=V)])
+    prog = r2rsim.Programme.from_steps(line, [ProgrammeStep(at=0.0, line_speed=V)])
     cl = r2rsim.compile_line(line, prog)
     y0 = r2rsim.nominal_state(cl, T0)
     if y_edit:
         y_edit(cl, y0)
-    res = r2rsim.simulate(cl, duration, rate, y0,
-                          r2rsim.SolverSettings(rtol=rtol, atol_scale=atol_scale))
+    res = r2rsim.simulate(
+        cl, duration, rate, y0, r2rsim.SolverSettings(rtol=rtol, atol_scale=atol_scale)
+    )
     assert not res.terminated, res.termination_reason
     return cl, res
 
 
 def test_geometry_gives_the_free_span_lengths(tmp_path):
-    cl = r2rsim.compile_line(r2rsim.load_line(dancer_line(tmp_path, EA=2.25e5, mass=10,
-                                                          force_total=520, L=1.0)))
+    cl = r2rsim.compile_line(
+        r2rsim.load_line(dancer_line(tmp_path, EA=2.25e5, mass=10, force_total=520, L=1.0))
+    )
     y = r2rsim.nominal_state(cl, 260.0)
     out = cl.outputs(0.0, y[None, :])[0]
     # vertical spans from the tangent points: free length = centre drop = 1 m
@@ -86,8 +101,11 @@ def test_geometry_gives_the_free_span_lengths(tmp_path):
 def test_geometry_path_length_rate_is_exact_for_slanted_spans(tmp_path):
     # dancer moving sideways: the spans slant, and dL/dq must equal the pulley identity
     # -e·dC/dq (physics.md eq. 1.14) with e from the current tangent geometry
-    cl = r2rsim.compile_line(r2rsim.load_line(dancer_line(
-        tmp_path, EA=2.25e5, mass=10, force_total=520, direction="[1, -1]")))
+    cl = r2rsim.compile_line(
+        r2rsim.load_line(
+            dancer_line(tmp_path, EA=2.25e5, mass=10, force_total=520, direction="[1, -1]")
+        )
+    )
     y = r2rsim.nominal_state(cl, 260.0)
     iq = cl.index("dancer.position")
 
@@ -133,10 +151,13 @@ def test_v14_dancer_integrates_the_speed_mismatch(tmp_path):
     assert res["span2.tension_N"][-1] == pytest.approx(260.0, rel=1e-6)
 
 
-@pytest.mark.parametrize("V, expected", [
-    (0.0, [0.0, 0.0, 199.90j, -199.90j]),
-    (5.0, [0.0, -7.4988, -1.2506 + 199.9117j, -1.2506 - 199.9117j]),
-])
+@pytest.mark.parametrize(
+    "V, expected",
+    [
+        (0.0, [0.0, 0.0, 199.90j, -199.90j]),
+        (5.0, [0.0, -7.4988, -1.2506 + 199.9117j, -1.2506 - 199.9117j]),
+    ],
+)
 @pytest.mark.parametrize("model", ["linear", "exact"])
 # the 1 km outer spans are meant (see below); the loader warns about them
 @pytest.mark.filterwarnings("ignore::r2rsim.errors.PlausibilityWarning")
@@ -144,16 +165,34 @@ def test_v15_dancer_web_spring_mode(tmp_path, V, expected, model):
     # V15: m_d = 5 kg, L_u = L_d = 1 m, EA = 1e5 N, T = 100 N, constant force, kinematic
     # nodes. V15's dancer roller turns at web speed: here a very heavy roller (J = 1e8) is
     # that limit. The outer spans are long so their transport eigenvalues (-v/L) stay away.
-    path = dancer_line(tmp_path, EA=1e5, mass=5.0, force_total=200.0, T=100.0, inertia=1e8,
-                       outer=1000.0, model=model)
+    path = dancer_line(
+        tmp_path,
+        EA=1e5,
+        mass=5.0,
+        force_total=200.0,
+        T=100.0,
+        inertia=1e8,
+        outer=1000.0,
+        model=model,
+    )
     line = r2rsim.load_line(path)
     prog = r2rsim.Programme.from_steps(line, [ProgrammeStep(at=0.0, line_speed=V)])
     cl = r2rsim.compile_line(line, prog)
     y = r2rsim.nominal_state(cl, 100.0)
-    assert np.max(np.abs(cl.rhs(0.0, y))[[cl.index("dancer.velocity"),
-                                          cl.index("span2.strain")]]) < 1e-9
-    idx = [cl.index(n) for n in ("dancer.position", "dancer.velocity", "span2.strain",
-                                 "span3.strain", "dancer.speed")]
+    assert (
+        np.max(np.abs(cl.rhs(0.0, y))[[cl.index("dancer.velocity"), cl.index("span2.strain")]])
+        < 1e-9
+    )
+    idx = [
+        cl.index(n)
+        for n in (
+            "dancer.position",
+            "dancer.velocity",
+            "span2.strain",
+            "span3.strain",
+            "dancer.speed",
+        )
+    ]
     ev = np.linalg.eigvals(cl.jacobian(0.0, y)[np.ix_(idx, idx)])
     eps = 100.0 / 1e5
     # the exact model's span stiffness is EA/l = EA(1 + eps)/L (eq. 1.20 with T = EA·eps);
@@ -222,10 +261,14 @@ def _linear_dancer_matrix(EA, m, L, eps, v):
     states [x, dx/dt, eps_u, eps_d]; both spans lengthen at dx/dt (vertical spans along the
     travel), m·x'' = F - EA(eps_u + eps_d), L·eps_u' = -v·eps_u + (1 - eps)·x' (the inflow
     strain is fixed), L·eps_d' = v·eps_u - v·eps_d + (1 - eps)·x'."""
-    return np.array([[0.0, 1.0, 0.0, 0.0],
-                     [0.0, 0.0, -EA / m, -EA / m],
-                     [0.0, (1 - eps) / L, -v / L, 0.0],
-                     [0.0, (1 - eps) / L, v / L, -v / L]])
+    return np.array(
+        [
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, -EA / m, -EA / m],
+            [0.0, (1 - eps) / L, -v / L, 0.0],
+            [0.0, (1 - eps) / L, v / L, -v / L],
+        ]
+    )
 
 
 @pytest.mark.parametrize("V", [0.0, 4.0])
@@ -236,14 +279,25 @@ def test_v15_linear_form_web_spring_mode_against_its_closed_form(tmp_path, V):
     # w = sqrt(EA(1 - eps)(1/L_u + 1/L_d)/m) = 157.321 rad/s; without the factor 158.114.
     EA, T, m, L = 2.0e4, 200.0, 2.0, 0.8
     eps = T / EA
-    path = dancer_line(tmp_path, EA=EA, mass=m, force_total=2 * T, T=T, inertia=1e8, L=L,
-                       outer=1000.0, model="linear")
+    path = dancer_line(
+        tmp_path,
+        EA=EA,
+        mass=m,
+        force_total=2 * T,
+        T=T,
+        inertia=1e8,
+        L=L,
+        outer=1000.0,
+        model="linear",
+    )
     line = r2rsim.load_line(path)
-    cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(
-        line, [ProgrammeStep(at=0.0, line_speed=V)]))
+    cl = r2rsim.compile_line(
+        line, r2rsim.Programme.from_steps(line, [ProgrammeStep(at=0.0, line_speed=V)])
+    )
     y = r2rsim.nominal_state(cl, T)
-    idx = [cl.index(n) for n in ("dancer.position", "dancer.velocity", "span2.strain",
-                                 "span3.strain")]
+    idx = [
+        cl.index(n) for n in ("dancer.position", "dancer.velocity", "span2.strain", "span3.strain")
+    ]
     assert np.max(np.abs(cl.rhs(0.0, y)[idx])) < 1e-9  # an equilibrium
     got = np.sort_complex(np.linalg.eigvals(cl.jacobian(0.0, y)[np.ix_(idx, idx)]))
     want = np.sort_complex(np.linalg.eigvals(_linear_dancer_matrix(EA, m, L, eps, V)))
@@ -258,19 +312,42 @@ def test_v13_linear_form_material_balance_with_a_moving_dancer(tmp_path):
     # (1.4) conserves d/dt[L(1 - eps)] = v_in(1 - eps_in) - v_out(1 - eps): with the fluxes
     # q = v(1 - eps) paid out (U_0) and taken up (U_N), sum L_i(1 - eps_i) + U_N - U_0 is
     # constant while the dancer drifts (v_in > v_out) and rings after a speed change.
-    path = dancer_line(tmp_path, EA=2.25e5, mass=10.0, force_total=520.0, draw_in=0.001,
-                       damping=50.0, model="linear")
+    path = dancer_line(
+        tmp_path,
+        EA=2.25e5,
+        mass=10.0,
+        force_total=520.0,
+        draw_in=0.001,
+        damping=50.0,
+        model="linear",
+    )
     line = r2rsim.load_line(path)
-    cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(line, [
-        ProgrammeStep(at=0.0, line_speed=5.0), ProgrammeStep(at=10.0, line_speed=3.0, ramp=1.0)]))
-    res = r2rsim.simulate(cl, 30.0, 100.0, r2rsim.nominal_state(cl, 260.0),
-                          r2rsim.SolverSettings(rtol=1e-10, atol_scale=1e-4))
+    cl = r2rsim.compile_line(
+        line,
+        r2rsim.Programme.from_steps(
+            line,
+            [
+                ProgrammeStep(at=0.0, line_speed=5.0),
+                ProgrammeStep(at=10.0, line_speed=3.0, ramp=1.0),
+            ],
+        ),
+    )
+    res = r2rsim.simulate(
+        cl,
+        30.0,
+        100.0,
+        r2rsim.nominal_state(cl, 260.0),
+        r2rsim.SolverSettings(rtol=1e-10, atol_scale=1e-4),
+    )
     assert not res.terminated
     L = {s: res[f"{s}.length_m"] for s in cl.span_ids}
     eps = {s: res[f"{s}.geometric_strain"] for s in cl.span_ids}
     ell = sum(L[s] * (1 - eps[s]) for s in cl.span_ids)
-    inv = (ell + res.states[:, cl.index("sink.unstretched_length")]
-           - res.states[:, cl.index("src.unstretched_length")])
+    inv = (
+        ell
+        + res.states[:, cl.index("sink.unstretched_length")]
+        - res.states[:, cl.index("src.unstretched_length")]
+    )
     scale = sum(L[s][0] for s in cl.span_ids)
     assert np.ptp(res["dancer.position_m"]) > 0.05  # the dancer really moved
     assert np.max(np.abs(inv - inv[0])) < 1e-9 * scale
@@ -279,15 +356,27 @@ def test_v13_linear_form_material_balance_with_a_moving_dancer(tmp_path):
     assert abs(drift) > 1e3 * 1e-9 * scale
 
 
-@pytest.mark.parametrize("file, old, new, noise, offset", [
-    # a translating dancer reads a length, a pivoted one an angle: units as its dancer fixes
-    ("pet_film_line_dancer.yaml", "noise: 0.0002,", "noise: 0.2 mm, offset: -3 mm,",
-     2e-4, -3e-3),
-    ("battery_foil_line.yaml", "noise: 0.0005,", "noise: 0.5 deg, offset: 1 deg,",
-     math.radians(0.5), math.radians(1.0)),
-])
-def test_dancer_position_readings_take_their_dancers_unit(tmp_path, file, old, new, noise,
-                                                         offset):
+@pytest.mark.parametrize(
+    "file, old, new, noise, offset",
+    [
+        # a translating dancer reads a length, a pivoted one an angle: units as its dancer fixes
+        (
+            "pet_film_line_dancer.yaml",
+            "noise: 0.0002,",
+            "noise: 0.2 mm, offset: -3 mm,",
+            2e-4,
+            -3e-3,
+        ),
+        (
+            "battery_foil_line.yaml",
+            "noise: 0.0005,",
+            "noise: 0.5 deg, offset: 1 deg,",
+            math.radians(0.5),
+            math.radians(1.0),
+        ),
+    ],
+)
+def test_dancer_position_readings_take_their_dancers_unit(tmp_path, file, old, new, noise, offset):
     from conftest import REPO
 
     text = (REPO / "lines" / file).read_text(encoding="utf-8")
@@ -298,12 +387,15 @@ def test_dancer_position_readings_take_their_dancers_unit(tmp_path, file, old, n
     assert s.offset == pytest.approx(offset, rel=1e-12)
 
 
-@pytest.mark.parametrize("value, words", [
-    ("1 deg", "expected a length"),       # an angle on a translating dancer
-    ("-1 mm", "must be >= 0, got -0.001"),
-    (".nan", "not a finite number"),
-    ("true", "got true (a boolean)"),
-])
+@pytest.mark.parametrize(
+    "value, words",
+    [
+        ("1 deg", "expected a length"),  # an angle on a translating dancer
+        ("-1 mm", "must be >= 0, got -0.001"),
+        (".nan", "not a finite number"),
+        ("true", "got true (a boolean)"),
+    ],
+)
 def test_dancer_position_noise_of_the_wrong_kind_is_refused(tmp_path, value, words):
     from r2rsim.errors import InputError
 

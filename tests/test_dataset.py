@@ -20,15 +20,32 @@ from r2rsim.dataset.writer import sha256_file
 @pytest.fixture(scope="module")
 def quick_dataset(tmp_path_factory, repo):
     out = tmp_path_factory.mktemp("ds") / "qs"
-    assert main(["run", str(repo / "scenarios" / "quickstart.yaml"), "-o", str(out),
-                 "--duration", "4", "-q"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                str(repo / "scenarios" / "quickstart.yaml"),
+                "-o",
+                str(out),
+                "--duration",
+                "4",
+                "-q",
+            ]
+        )
+        == 0
+    )
     return out
 
 
 def test_dataset_layout_and_manifest(quick_dataset):
     ds = quick_dataset
-    for f in ("runs.parquet", "channels.parquet", "faults.parquet", "events.parquet",
-              "manifest.json"):
+    for f in (
+        "runs.parquet",
+        "channels.parquet",
+        "faults.parquet",
+        "events.parquet",
+        "manifest.json",
+    ):
         assert (ds / f).is_file(), f
     parts = list((ds / "samples").glob("run_id=*/part-0.parquet"))
     assert len(parts) == 1 and parts[0].parent.name == "run_id=quickstart__s1"
@@ -42,10 +59,20 @@ def test_dataset_layout_and_manifest(quick_dataset):
 def test_samples_columns_units_and_labels(quick_dataset):
     t = pq.read_table(quick_dataset / "samples" / "run_id=quickstart__s1" / "part-0.parquet")
     cols = set(t.column_names)
-    assert {"k", "t_s", "meas.lc_unwind.tension_N", "true.lc_unwind.tension_N",
-            "state.span3.tension_N", "state.unwind.radius_m", "act.unwind.torque_N_m",
-            "cmd.unwind.torque_N_m", "sp.line_speed_m_s", "label.is_faulty", "label.phase",
-            "label.score_mask"} <= cols
+    assert {
+        "k",
+        "t_s",
+        "meas.lc_unwind.tension_N",
+        "true.lc_unwind.tension_N",
+        "state.span3.tension_N",
+        "state.unwind.radius_m",
+        "act.unwind.torque_N_m",
+        "cmd.unwind.torque_N_m",
+        "sp.line_speed_m_s",
+        "label.is_faulty",
+        "label.phase",
+        "label.score_mask",
+    } <= cols
     assert t.num_rows == 4 * 200 + 1
     k = t["k"].to_numpy()
     np.testing.assert_array_equal(k, np.arange(t.num_rows))
@@ -79,13 +106,15 @@ def test_same_seed_same_data_and_noise_seed_leaves_truth(tmp_path, repo):
     outs = []
     for name, seed in (("a", 5), ("b", 5), ("c", 6)):
         out = tmp_path / name
-        assert main(["run", scen, "-o", str(out), "--duration", "3", "--seed", str(seed),
-                     "-q"]) == 0
+        assert (
+            main(["run", scen, "-o", str(out), "--duration", "3", "--seed", str(seed), "-q"]) == 0
+        )
         outs.append(pq.read_table(next((out / "samples").glob("*/part-0.parquet"))))
     a, b, c = outs
     assert a.equals(b)
-    assert not np.array_equal(a["meas.lc_unwind.tension_N"].to_numpy(),
-                              c["meas.lc_unwind.tension_N"].to_numpy())
+    assert not np.array_equal(
+        a["meas.lc_unwind.tension_N"].to_numpy(), c["meas.lc_unwind.tension_N"].to_numpy()
+    )
     for col in a.column_names:
         if not col.startswith("meas."):
             assert a[col].equals(c[col]), col
@@ -108,8 +137,20 @@ def test_refuses_to_overwrite_a_foreign_directory(tmp_path, repo, capsys):
     out = tmp_path / "mine"
     out.mkdir()
     (out / "thesis.tex").write_text("precious")
-    assert main(["run", str(repo / "scenarios" / "quickstart.yaml"), "-o", str(out),
-                 "--duration", "1", "-q"]) == 2
+    assert (
+        main(
+            [
+                "run",
+                str(repo / "scenarios" / "quickstart.yaml"),
+                "-o",
+                str(out),
+                "--duration",
+                "1",
+                "-q",
+            ]
+        )
+        == 2
+    )
     assert (out / "thesis.tex").read_text() == "precious"
     assert "is not an r2rsim dataset" in capsys.readouterr().err
 
@@ -117,7 +158,8 @@ def test_refuses_to_overwrite_a_foreign_directory(tmp_path, repo, capsys):
 def test_web_break_ends_run_and_is_recorded(tmp_path, repo):
     line = (repo / "lines" / "single_span.yaml").read_text().replace("draw: 0.001", "draw: 0.01")
     (tmp_path / "line.yaml").write_text(line)
-    (tmp_path / "s.yaml").write_text(textwrap.dedent("""\
+    (tmp_path / "s.yaml").write_text(
+        textwrap.dedent("""\
         name: breaks
         line: line.yaml
         duration: 5 s
@@ -125,7 +167,8 @@ def test_web_break_ends_run_and_is_recorded(tmp_path, repo):
         initial: {state: nominal, tension: 0 N}
         programme: [{at: 0, line_speed: 1 m/s}]
         expect: {termination: web_break}
-        """))
+        """)
+    )
     out = tmp_path / "ds"
     assert main(["run", str(tmp_path / "s.yaml"), "-o", str(out), "-q"]) == 0
     runs = pq.read_table(out / "runs.parquet").to_pylist()[0]
@@ -161,16 +204,22 @@ print("ok")
 def test_readable_without_r2rsim(quick_dataset, tmp_path):
     script = tmp_path / "read.py"
     script.write_text(READER)
-    p = subprocess.run([sys.executable, str(script), str(quick_dataset)], capture_output=True,
-                       text=True, cwd=tmp_path)
+    p = subprocess.run(
+        [sys.executable, str(script), str(quick_dataset)],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+    )
     assert p.returncode == 0 and p.stdout.strip() == "ok", p.stderr
 
 
 def test_pyarrow_dataset_reads_all_tables(quick_dataset):
     from r2rsim.dataset.writer import EVENTS_SCHEMA, FAULTS_SCHEMA
 
-    tables = {name: pads.dataset(quick_dataset / f"{name}.parquet").to_table()
-              for name in ("runs", "channels", "faults", "events")}
+    tables = {
+        name: pads.dataset(quick_dataset / f"{name}.parquet").to_table()
+        for name in ("runs", "channels", "faults", "events")
+    }
     runs = tables["runs"].to_pylist()
     assert len(runs) == 1 and runs[0]["run_id"] == "quickstart__s1"
     assert runs[0]["n_samples"] == 801 and not runs[0]["terminated"]
@@ -185,8 +234,19 @@ def test_pyarrow_dataset_reads_all_tables(quick_dataset):
 def test_progress_bar_on_a_terminal(tmp_path, repo, capsys, monkeypatch):
     # the bar appears only on a terminal; its total is the scenario's simulated duration
     monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
-    assert main(["run", str(repo / "scenarios" / "quickstart.yaml"), "-o",
-                 str(tmp_path / "p"), "--duration", "2"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                str(repo / "scenarios" / "quickstart.yaml"),
+                "-o",
+                str(tmp_path / "p"),
+                "--duration",
+                "2",
+            ]
+        )
+        == 0
+    )
     err = capsys.readouterr().err
     assert "simulating: 2.0/2.0 s sim" in err, err[-300:]
 

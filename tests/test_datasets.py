@@ -35,8 +35,11 @@ def test_first_benchmark_split(first_benchmark_home):
     faulty = [r for r in split.test if is_faulty(r)]
     assert len(faulty) == 30
     types = {(r.faults["fault_type"].iloc[0], r.faults["target_id"].iloc[0]) for r in faulty}
-    assert types == {("sensor.offset", "sensor_A"), ("sensor.gain", "sensor_B"),
-                     ("process.draw_error", "reg_drive")}
+    assert types == {
+        ("sensor.offset", "sensor_A"),
+        ("sensor.gain", "sensor_B"),
+        ("process.draw_error", "reg_drive"),
+    }
     assert len({r.run_id for r in data.runs}) == 40
     assert all(r.samples["t_s"].iloc[-1] == pytest.approx(20.0) for r in data.runs)
     assert data.paths == [first_benchmark_home / "first_benchmark"]
@@ -54,9 +57,20 @@ def test_a_second_load_reuses_the_cache(first_benchmark_home, capsys):
 
 def test_same_data_as_the_command_line(first_benchmark_home, tmp_path):
     out = tmp_path / "cli"
-    subprocess.run([sys.executable, "-m", "r2rsim.cli", "sweep",
-                    str(REPO / "sweeps/first_benchmark.yaml"), "-o", str(out), "-q"],
-                   check=True, cwd=tmp_path)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "r2rsim.cli",
+            "sweep",
+            str(REPO / "sweeps/first_benchmark.yaml"),
+            "-o",
+            str(out),
+            "-q",
+        ],
+        check=True,
+        cwd=tmp_path,
+    )
     cached = _sha256s(first_benchmark_home / "first_benchmark")
     assert len(cached) == 40
     assert _sha256s(out) == cached
@@ -74,9 +88,12 @@ def test_a_changed_cache_is_simulated_again(first_benchmark_home, tmp_path, caps
     data = datasets.load_first_benchmark(data_home=home, quiet=True)
     assert len(data.runs) == 40
     assert _sha256s(home / "first_benchmark") == _sha256s(first_benchmark_home / "first_benchmark")
-    assert hashlib.sha256(part.read_bytes()).hexdigest() == _sha256s(
-        first_benchmark_home / "first_benchmark")[part.relative_to(home / "first_benchmark")
-                                                  .as_posix()]
+    assert (
+        hashlib.sha256(part.read_bytes()).hexdigest()
+        == _sha256s(first_benchmark_home / "first_benchmark")[
+            part.relative_to(home / "first_benchmark").as_posix()
+        ]
+    )
 
 
 def test_data_home(tmp_path, monkeypatch):
@@ -124,8 +141,7 @@ methods: [{{method: pca}}]
 
 
 def test_the_loaders_need_the_source_tree(monkeypatch, tmp_path):
-    monkeypatch.setitem(datasets.DATASETS, "first_benchmark",
-                        ("sweeps/not_there.yaml", "gone"))
+    monkeypatch.setitem(datasets.DATASETS, "first_benchmark", ("sweeps/not_there.yaml", "gone"))
     with pytest.raises(InputError, match="install r2rsim from a checkout"):
         datasets.load_first_benchmark(data_home=tmp_path)
     assert os.listdir(tmp_path) == []

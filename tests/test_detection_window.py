@@ -26,13 +26,17 @@ def run(n, alarm_on=(), fault=None, period=1.0, severity=None, scored=None) -> M
     """n samples at ``period``; alarms on the inclusive index ranges; fault (lo, hi)."""
     a = np.zeros(n, bool)
     for lo, hi in alarm_on:
-        a[lo: hi + 1] = True
+        a[lo : hi + 1] = True
     f = np.zeros(n, bool)
     if fault is not None:
-        f[fault[0]: fault[1] + 1] = True
-    return M.RunData(t=period * np.arange(n), faulty=f,
-                     scored=np.ones(n, bool) if scored is None else scored, alarm=a,
-                     severity=severity)
+        f[fault[0] : fault[1] + 1] = True
+    return M.RunData(
+        t=period * np.arange(n),
+        faulty=f,
+        scored=np.ones(n, bool) if scored is None else scored,
+        alarm=a,
+        severity=severity,
+    )
 
 
 # ----------------------------------------------------------------------------- the window
@@ -128,10 +132,12 @@ def test_pd_null_and_mdm90_in_the_harness():
     noisy = healthy(1, [0, 0, 0, 9, 9, 9, 9] + [0] * 13)
     quiet = healthy(2, flat)
     big = [make_run([0] * 4 + [9] * 16, onset=4, seed=10 + i, magnitude=2.0) for i in range(5)]
-    small = [make_run([0] * 4 + [9] * 16, onset=4, seed=20 + i, magnitude=1.0)
-             for i in range(4)] + [make_run(flat, onset=4, seed=30, magnitude=1.0)]
-    ev = evaluate(Passthrough(), train, [noisy, quiet, *big, *small], n_boot=0, m=2,
-                  own_threshold="fit")
+    small = [
+        make_run([0] * 4 + [9] * 16, onset=4, seed=20 + i, magnitude=1.0) for i in range(4)
+    ] + [make_run(flat, onset=4, seed=30, magnitude=1.0)]
+    ev = evaluate(
+        Passthrough(), train, [noisy, quiet, *big, *small], n_boot=0, m=2, own_threshold="fit"
+    )
     assert value(ev, "pd") == pytest.approx(9 / 10)
     assert value(ev, "pd_null") == pytest.approx(0.5)
     assert value(ev, "pd", magnitude=2.0) == 1.0 and value(ev, "pd", magnitude=1.0) == 0.8
@@ -139,8 +145,9 @@ def test_pd_null_and_mdm90_in_the_harness():
     # magnitude 2: 5 of 5 against p0 = 1/2, p = 1/32 < 0.05: the MDM90
     assert value(ev, "mdm90") == 2.0
     # four runs of 4 are not enough against p0 = 1/2 (p = 1/16): no MDM90
-    ev4 = evaluate(Passthrough(), train, [noisy, quiet, *big[:4], *small], n_boot=0, m=2,
-                   own_threshold="fit")
+    ev4 = evaluate(
+        Passthrough(), train, [noisy, quiet, *big[:4], *small], n_boot=0, m=2, own_threshold="fit"
+    )
     assert value(ev4, "pd", magnitude=2.0) == 1.0
     assert (ev4.metrics["metric"] == "mdm90").sum() == 0
     # without fault-free test runs there is no null rate, and so no MDM90
@@ -154,7 +161,7 @@ def test_detectability_with_a_null_rate():
     curve = M.detectability(mag, det, null={1.0: 0.2, 2.0: 0.95, 3.0: 0.5})
     t = curve.table.set_index("magnitude")
     assert t.loc[1.0, "p_value"] == pytest.approx(binom.sf(8, 10, 0.2))
-    assert t.loc[2.0, "p_value"] == pytest.approx(0.95 ** 10)
+    assert t.loc[2.0, "p_value"] == pytest.approx(0.95**10)
     assert list(t["significant"]) == [True, False, True]
     assert curve.mdm == 1.0
     assert M.detectability(mag, det, null={1.0: 0.9, 2.0: 0.95, 3.0: 0.5}).mdm == 3.0
@@ -201,8 +208,9 @@ def test_a_random_detector_scores_its_null_rate(rate, m):
         tau = int(rng.integers(500, 1500))
         f = np.arange(n) >= tau
         faulty.append(M.RunData(t=t, faulty=f, scored=ok, alarm=rng.random(n) < rate))
-        clean.append(M.RunData(t=t, faulty=np.zeros(n, bool), scored=ok,
-                               alarm=rng.random(n) < rate))
+        clean.append(
+            M.RunData(t=t, faulty=np.zeros(n, bool), scored=ok, alarm=rng.random(n) < rate)
+        )
     pd_ = M.detection_probability(faulty, m=m)
     p0 = M.null_detection_rate(clean, M.detection_windows(faulty), m=m)
     # expected: 1 - P(no confirmed event in a window of ~1500-2500 samples)
@@ -220,13 +228,24 @@ def test_a_random_plugin_gets_its_null_rate_and_no_mdm90():
     train = [healthy(100 + i, x(), dt=0.01) for i in range(2)]
     val = [healthy(200 + i, x(), dt=0.01) for i in range(3)]
     test = [healthy(300 + i, x(), dt=0.01) for i in range(80)]
-    test += [make_run(x(), onset=int(rng.integers(300, 800)), seed=400 + i, dt=0.01,
-                      magnitude=float(1 + i % 3)) for i in range(120)]
+    test += [
+        make_run(
+            x(),
+            onset=int(rng.integers(300, 800)),
+            seed=400 + i,
+            dt=0.01,
+            magnitude=float(1 + i % 3),
+        )
+        for i in range(120)
+    ]
     ev = evaluate(RandomAlarm(), train, test, val, alpha=0.001, m=1, n_boot=200)
     pd_, p0 = value(ev, "pd"), value(ev, "pd_null")
-    row = ev.metrics[(ev.metrics.metric == "pd_null") & ev.metrics.magnitude.isna()
-                     & (ev.metrics.condition == "OC1")
-                     & (ev.metrics.fault == "sensor.offset:s1")].iloc[0]
+    row = ev.metrics[
+        (ev.metrics.metric == "pd_null")
+        & ev.metrics.magnitude.isna()
+        & (ev.metrics.condition == "OC1")
+        & (ev.metrics.fault == "sensor.offset:s1")
+    ].iloc[0]
     # P_D and the null rate differ by no more than the binomial scatter of both: 120 faulty
     # runs, and 80 fault-free runs (the pretend windows on one run overlap, so the null rate
     # is worth about one trial per run); its bootstrap interval is reported
@@ -268,8 +287,10 @@ def test_an_offline_method_is_marked_in_every_output():
 def test_the_own_threshold_is_recalibrated_on_the_val_runs():
     train = [healthy(100), healthy(101)]
     val = [healthy(50, np.arange(100.0))]
-    test = [healthy(1, [0, 0, 97.5, 98.5, 0, 0, 0, 0]),
-            make_run([0, 0, 0, 0, 99, 99, 0, 0], onset=4, seed=2)]
+    test = [
+        healthy(1, [0, 0, 97.5, 98.5, 0, 0, 0, 0]),
+        make_run([0, 0, 0, 0, 99, 99, 0, 0], onset=4, seed=2),
+    ]
     kept = evaluate(Passthrough(level=1000.0), train, test, val, n_boot=0, own_threshold="fit")
     moved = evaluate(Passthrough(level=1000.0), train, test, val, n_boot=0)
     assert value(kept, "pd") == 0.0 and value(moved, "pd") == 1.0
@@ -311,8 +332,7 @@ def test_roc_auc_and_average_precision_agree_with_scikit_learn():
         y = rng.random(500) < 0.3
         s = np.round(rng.normal(size=500) + y, 1)  # ties on purpose
         assert M.roc_auc(s, y) == pytest.approx(roc_auc_score(y, s), abs=1e-12)
-        assert M.average_precision(s, y) == pytest.approx(average_precision_score(y, s),
-                                                          abs=1e-12)
+        assert M.average_precision(s, y) == pytest.approx(average_precision_score(y, s), abs=1e-12)
 
 
 def test_pd_steady_has_its_null_rate():
@@ -326,7 +346,15 @@ def test_pd_steady_has_its_null_rate():
     f.samples["label.severity"] = np.where(np.arange(20) >= 4, sev, 0.0)
     h = healthy(1, [0] * 4 + [9] * 3 + [0] * 13)
     h.samples["label.severity"] = 0.0
-    ev = evaluate(Passthrough(), train, [h, f], n_boot=0, m=2, window="steady",
-                  detection_window=2.0, own_threshold="fit")
+    ev = evaluate(
+        Passthrough(),
+        train,
+        [h, f],
+        n_boot=0,
+        m=2,
+        window="steady",
+        detection_window=2.0,
+        own_threshold="fit",
+    )
     assert value(ev, "pd") == 1.0 and value(ev, "pd_null") == 1.0
     assert value(ev, "pd_steady") == 1.0 and value(ev, "pd_steady_null") == 0.0

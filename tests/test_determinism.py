@@ -27,8 +27,10 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 #: (scenario, simulated seconds): the quick-start line, and the calibrated thesis set's base
 #: run (variability, disturbances, realistic sensors, a steady-state start)
-SCENARIOS = [("scenarios/quickstart.yaml", 20), ("scenarios/thesis_realistic/registration.yaml",
-                                                  20)]
+SCENARIOS = [
+    ("scenarios/quickstart.yaml", 20),
+    ("scenarios/thesis_realistic/registration.yaml", 20),
+]
 #: other machines, as far as this one can play them
 OTHER_MACHINES = {
     "openblas-haswell": {"OPENBLAS_CORETYPE": "Haswell"},
@@ -40,9 +42,24 @@ OTHER_MACHINES = {
 def samples_sha256(scenario: str, seconds: float, out: Path, env: dict) -> str:
     """sha256 of the samples file of a run made in a fresh process with ``env`` added."""
     proc = subprocess.run(
-        [sys.executable, "-m", "r2rsim.cli", "run", str(ROOT / scenario), "-o", str(out),
-         "--duration", str(seconds), "-q"], cwd=ROOT, capture_output=True, text=True,
-        env={**os.environ, **env}, timeout=1800)
+        [
+            sys.executable,
+            "-m",
+            "r2rsim.cli",
+            "run",
+            str(ROOT / scenario),
+            "-o",
+            str(out),
+            "--duration",
+            str(seconds),
+            "-q",
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        env={**os.environ, **env},
+        timeout=1800,
+    )
     assert proc.returncode == 0, proc.stderr
     (part,) = out.glob("samples/*/part-0.parquet")
     return hashlib.sha256(part.read_bytes()).hexdigest()
@@ -57,17 +74,21 @@ def plain(tmp_path_factory):
 
 @pytest.mark.parametrize("machine", sorted(OTHER_MACHINES))
 @pytest.mark.parametrize("scenario, seconds", SCENARIOS)
-def test_same_samples_with_another_machines_libraries(plain, tmp_path, machine, scenario,
-                                                      seconds):
+def test_same_samples_with_another_machines_libraries(plain, tmp_path, machine, scenario, seconds):
     got = samples_sha256(scenario, seconds, tmp_path / "ds", OTHER_MACHINES[machine])
     assert got == plain[scenario], f"{scenario} differs under {machine}"
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("scenario, seconds", SCENARIOS)
-def test_same_samples_with_kernels_compiled_for_a_generic_cpu(plain, tmp_path_factory,
-                                                               scenario, seconds):
+def test_same_samples_with_kernels_compiled_for_a_generic_cpu(
+    plain, tmp_path_factory, scenario, seconds
+):
     cache = tmp_path_factory.getbasetemp() / "numba-generic"  # shared by both scenarios
-    got = samples_sha256(scenario, seconds, tmp_path_factory.mktemp("generic") / "ds",
-                         {"NUMBA_CPU_NAME": "generic", "NUMBA_CACHE_DIR": str(cache)})
+    got = samples_sha256(
+        scenario,
+        seconds,
+        tmp_path_factory.mktemp("generic") / "ds",
+        {"NUMBA_CPU_NAME": "generic", "NUMBA_CACHE_DIR": str(cache)},
+    )
     assert got == plain[scenario]

@@ -36,10 +36,13 @@ DURATION = 22.0  # the sensor-A offset starts at 20 s
 def data(tmp_path_factory):
     """Healthy OC1 runs h1, h2 (train) and h3 (test), and sensor A +15 % from 20 s (f5)."""
     d = tmp_path_factory.mktemp("robust_data")
-    for name, scen, seed in (("h1", "oc1_nominal", 1), ("h2", "oc1_nominal", 2),
-                             ("h3", "oc1_nominal", 3), ("f5", "sensor_a_offset_P15", 5)):
-        r2rsim.run_scenario(THESIS / f"{scen}.yaml", output=d / name, seed=seed,
-                            duration=DURATION)
+    for name, scen, seed in (
+        ("h1", "oc1_nominal", 1),
+        ("h2", "oc1_nominal", 2),
+        ("h3", "oc1_nominal", 3),
+        ("f5", "sensor_a_offset_P15", 5),
+    ):
+        r2rsim.run_scenario(THESIS / f"{scen}.yaml", output=d / name, seed=seed, duration=DURATION)
     return d
 
 
@@ -52,9 +55,24 @@ def samples_file(ds):
 
 
 def diagnose(data, test, out, *extra, method="pca"):
-    return main(["diagnose", "--method", method, "--train", str(data / "h1"), str(data / "h2"),
-                 "--test", str(data / "h3"), str(test), "--n-boot", "20", "-o", str(out),
-                 *extra])
+    return main(
+        [
+            "diagnose",
+            "--method",
+            method,
+            "--train",
+            str(data / "h1"),
+            str(data / "h2"),
+            "--test",
+            str(data / "h3"),
+            str(test),
+            "--n-boot",
+            "20",
+            "-o",
+            str(out),
+            *extra,
+        ]
+    )
 
 
 def one_error_line(capsys, *words):
@@ -86,8 +104,9 @@ def test_tampered_labels_are_refused_unless_no_verify(data, tmp_path, capsys):
     tamper_labels_and_onset(ds)
     # before: diagnose used the tampered labels silently (far_ff 0.0188 -> 0.216 in the issue)
     assert diagnose(data, ds, tmp_path / "out") == 2
-    err = one_error_line(capsys, ds, "faults.parquet", "manifest.json", "--no-verify",
-                         "r2rsim validate")
+    err = one_error_line(
+        capsys, ds, "faults.parquet", "manifest.json", "--no-verify", "r2rsim validate"
+    )
     assert "refusing" in err
     assert not (tmp_path / "out").exists()
     with pytest.raises(InputError, match="manifest.json"):
@@ -97,8 +116,10 @@ def test_tampered_labels_are_refused_unless_no_verify(data, tmp_path, capsys):
     assert diagnose(data, data / "f5", tmp_path / "clean") == 0
     capsys.readouterr()
     m = {k: pd.read_parquet(tmp_path / k / "metrics.parquet") for k in ("forced", "clean")}
-    far = {k: v.loc[(v.metric == "far_ff") & (v.condition == "OC1"), "value"].iloc[0]
-           for k, v in m.items()}
+    far = {
+        k: v.loc[(v.metric == "far_ff") & (v.condition == "OC1"), "value"].iloc[0]
+        for k, v in m.items()
+    }
     assert far["forced"] != far["clean"]
 
 
@@ -109,8 +130,13 @@ def test_same_size_change_is_caught_by_sha256(data, tmp_path, capsys):
     raw[len(raw) // 2] ^= 0xFF  # one byte, same size: only the sha256 sees it
     f.write_bytes(bytes(raw))
     assert diagnose(data, ds, tmp_path / "out") == 2
-    one_error_line(capsys, ds, "run thesis_sensor_a_offset_P15__s5",
-                   f.relative_to(ds).as_posix(), "checksum differs from manifest.json")
+    one_error_line(
+        capsys,
+        ds,
+        "run thesis_sensor_a_offset_P15__s5",
+        f.relative_to(ds).as_posix(),
+        "checksum differs from manifest.json",
+    )
     assert not (tmp_path / "out").exists()
 
 
@@ -163,8 +189,9 @@ def test_missing_faults_file_names_dataset_and_file(data, tmp_path, capsys, veri
     (ds / "faults.parquet").unlink()
     extra = [] if verify else ["--no-verify"]
     assert diagnose(data, ds, tmp_path / "out", *extra) == 2
-    one_error_line(capsys, f"dataset {ds}", "faults.parquet is missing",
-                   "not a complete r2rsim dataset")
+    one_error_line(
+        capsys, f"dataset {ds}", "faults.parquet is missing", "not a complete r2rsim dataset"
+    )
 
 
 def test_missing_manifest_is_refused_unless_no_verify(data, tmp_path, capsys):
@@ -201,8 +228,7 @@ def test_an_oversized_manifest_is_refused_without_reading_it(data, tmp_path, cap
 def test_param_of_the_wrong_type_names_parameter_and_type(data, tmp_path, capsys):
     assert diagnose(data, data / "f5", tmp_path / "out", "--param", "n_components=banana") == 2
     one_error_line(capsys, "--param n_components", "pca", "a number", "'banana'")
-    assert diagnose(data, data / "f5", tmp_path / "out", "--param", "lags=1.5",
-                    method="dpca") == 2
+    assert diagnose(data, data / "f5", tmp_path / "out", "--param", "lags=1.5", method="dpca") == 2
     one_error_line(capsys, "lags", "an integer", "1.5")
     assert not (tmp_path / "out").exists()
 
@@ -211,32 +237,57 @@ def test_unbounded_values_are_refused_before_anything_is_written(data, tmp_path,
     # --n-boot 1e12 ran into a MemoryError traceback; lags 1e12 hung the fit
     assert diagnose(data, data / "f5", tmp_path / "out", "--n-boot", "1000000000000") == 2
     one_error_line(capsys, "n_boot must be from 0 to 100000")
-    assert diagnose(data, data / "f5", tmp_path / "out", "--param", "lags=1000000000000",
-                    method="dpca") == 2
+    assert (
+        diagnose(
+            data, data / "f5", tmp_path / "out", "--param", "lags=1000000000000", method="dpca"
+        )
+        == 2
+    )
     one_error_line(capsys, "dpca", "lags must be an integer from 0 to 50")
     assert not (tmp_path / "out").exists()
 
 
-@pytest.mark.parametrize("flag, value, words", [
-    ("--vus-buffer", "1e9", "vus_buffer must be from 0 to 60 s"),  # hung: 1e11 buffer lengths
-    ("--seed", "-1", "seed must be an integer from 0 to 2**64 - 1, got -1"),  # numpy traceback
-    ("--seed", str(2**64), "seed must be an integer from 0 to 2**64 - 1"),
-])
+@pytest.mark.parametrize(
+    "flag, value, words",
+    [
+        ("--vus-buffer", "1e9", "vus_buffer must be from 0 to 60 s"),  # hung: 1e11 buffer lengths
+        ("--seed", "-1", "seed must be an integer from 0 to 2**64 - 1, got -1"),  # numpy traceback
+        ("--seed", str(2**64), "seed must be an integer from 0 to 2**64 - 1"),
+    ],
+)
 def test_settings_are_refused_before_any_dataset_is_read(tmp_path, capsys, flag, value, words):
     # the test dataset does not exist: a setting checked later would report that instead
-    assert main(["diagnose", "--method", "residual", "--train", str(tmp_path / "nosuch"),
-                 "--test", str(tmp_path / "nosuch"), "-o", str(tmp_path / "out"),
-                 flag, value]) == 2
+    assert (
+        main(
+            [
+                "diagnose",
+                "--method",
+                "residual",
+                "--train",
+                str(tmp_path / "nosuch"),
+                "--test",
+                str(tmp_path / "nosuch"),
+                "-o",
+                str(tmp_path / "out"),
+                flag,
+                value,
+            ]
+        )
+        == 2
+    )
     one_error_line(capsys, *words.split(", "))
     assert not (tmp_path / "out").exists()
 
 
 def test_iforest_seed_is_checked_before_the_fit():
     # scikit-learn refused -1 inside the fit: a plug-in crash, exit 1, parameter not named
-    frame = pd.DataFrame({"t_s": np.arange(50.0),
-                          "meas.x": np.random.default_rng(0).normal(size=50)})
-    with pytest.raises(InputError, match="iforest: random_state must be null or an integer "
-                                         "from 0 to 4294967295, got -1"):
+    frame = pd.DataFrame(
+        {"t_s": np.arange(50.0), "meas.x": np.random.default_rng(0).normal(size=50)}
+    )
+    with pytest.raises(
+        InputError,
+        match="iforest: random_state must be null or an integer from 0 to 4294967295, got -1",
+    ):
         registry.get("iforest")(random_state=-1).fit([frame])
     assert registry.get("iforest")(random_state=2**32 - 1).fit([frame]).threshold_ > 0
 
@@ -256,15 +307,17 @@ def test_check_param_converts_numbers_given_as_text():
 
 def test_bench_spec_param_of_the_wrong_type(tmp_path, capsys):
     spec = tmp_path / "spec.yaml"
-    spec.write_text(textwrap.dedent(f"""\
+    spec.write_text(
+        textwrap.dedent(f"""\
         name: bad
         studies:
           - name: s
-            train: [{{scenario: {THESIS / 'oc1_nominal.yaml'}, seeds: [1]}}]
-            test: [{{scenario: {THESIS / 'oc1_nominal.yaml'}, seeds: [2]}}]
+            train: [{{scenario: {THESIS / "oc1_nominal.yaml"}, seeds: [1]}}]
+            test: [{{scenario: {THESIS / "oc1_nominal.yaml"}, seeds: [2]}}]
         methods:
           - {{method: pca, params: {{n_components: banana}}}}
-        """))
+        """)
+    )
     assert main(["bench", str(spec), "--workdir", str(tmp_path / "w")]) == 2
     one_error_line(capsys, spec, "methods[0].params.n_components", "a number")
     assert not (tmp_path / "w").exists() or not any((tmp_path / "w").iterdir())
@@ -272,7 +325,7 @@ def test_bench_spec_param_of_the_wrong_type(tmp_path, capsys):
 
 # --------------------------------------------------------------------------- broken plug-ins
 
-PLUGINS = '''
+PLUGINS = """
 import pandas as pd
 from r2rsim.diagnostics import Diagnostic
 
@@ -308,13 +361,16 @@ def not_a_class():
 
 class NotADiagnostic:
     pass
-'''
+"""
 
-BROKEN = {"raises-fit": "rt_plugins:RaisesInFit", "raises-score": "rt_plugins:RaisesInScore",
-          "no-statistic": "rt_plugins:NoStatistic",
-          "broken-import": "rt_plugins_no_such_module:Thing",
-          "not-a-class": "rt_plugins:not_a_class",
-          "not-diagnostic": "rt_plugins:NotADiagnostic"}
+BROKEN = {
+    "raises-fit": "rt_plugins:RaisesInFit",
+    "raises-score": "rt_plugins:RaisesInScore",
+    "no-statistic": "rt_plugins:NoStatistic",
+    "broken-import": "rt_plugins_no_such_module:Thing",
+    "not-a-class": "rt_plugins:not_a_class",
+    "not-diagnostic": "rt_plugins:NotADiagnostic",
+}
 
 
 @pytest.fixture
@@ -325,23 +381,35 @@ def extra_plugins(tmp_path, monkeypatch):
     real = registry.entry_points
 
     def eps(group):
-        return [*real(group=group),
-                *(EntryPoint(n, v, group) for n, v in BROKEN.items())]
+        return [*real(group=group), *(EntryPoint(n, v, group) for n, v in BROKEN.items())]
 
     monkeypatch.setattr(registry, "entry_points", eps)
     yield
     sys.modules.pop("rt_plugins", None)
 
 
-@pytest.mark.parametrize("method, words", [
-    ("raises-fit", ["plug-in 'raises-fit'", "fit raised RuntimeError: boom in fit"]),
-    ("raises-score", ["plug-in 'raises-score'", "score (run ", "ZeroDivisionError: boom in score"]),
-    ("no-statistic", ["plug-in 'no-statistic'", "without a 'statistic' column"]),
-    ("broken-import", ["plug-in 'broken-import'", "rt_plugins_no_such_module:Thing",
-                       "cannot be loaded", "ModuleNotFoundError"]),
-    ("not-a-class", ["plug-in 'not-a-class'", "is not a class"]),
-    ("not-diagnostic", ["plug-in 'not-diagnostic'", "not a subclass"]),
-])
+@pytest.mark.parametrize(
+    "method, words",
+    [
+        ("raises-fit", ["plug-in 'raises-fit'", "fit raised RuntimeError: boom in fit"]),
+        (
+            "raises-score",
+            ["plug-in 'raises-score'", "score (run ", "ZeroDivisionError: boom in score"],
+        ),
+        ("no-statistic", ["plug-in 'no-statistic'", "without a 'statistic' column"]),
+        (
+            "broken-import",
+            [
+                "plug-in 'broken-import'",
+                "rt_plugins_no_such_module:Thing",
+                "cannot be loaded",
+                "ModuleNotFoundError",
+            ],
+        ),
+        ("not-a-class", ["plug-in 'not-a-class'", "is not a class"]),
+        ("not-diagnostic", ["plug-in 'not-diagnostic'", "not a subclass"]),
+    ],
+)
 def test_broken_plugin_is_one_error_line(data, tmp_path, capsys, extra_plugins, method, words):
     assert diagnose(data, data / "f5", tmp_path / "out", method=method) == 1
     err = one_error_line(capsys, *words)
@@ -386,23 +454,52 @@ def test_a_broken_installed_plugin_in_a_subprocess(data, tmp_path):
     info.mkdir()
     (info / "METADATA").write_text("Metadata-Version: 2.1\nName: rt-broken\nVersion: 0.1\n")
     (info / "entry_points.txt").write_text(
-        "[r2rsim.diagnostics]\nbroken = rt_broken_missing_module:Detector\n")
+        "[r2rsim.diagnostics]\nbroken = rt_broken_missing_module:Detector\n"
+    )
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(site), env.get("PYTHONPATH")]))
 
     def cli(*args):
-        return subprocess.run([sys.executable, "-m", "r2rsim.cli", *map(str, args)], env=env,
-                              cwd=tmp_path, capture_output=True, text=True, timeout=300)
+        return subprocess.run(
+            [sys.executable, "-m", "r2rsim.cli", *map(str, args)],
+            env=env,
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
 
     ls = cli("list", "plugins")
     assert ls.returncode == 0, ls.stderr
     assert "broken" in ls.stdout and "BROKEN" in ls.stdout and "pca" in ls.stdout
     assert "Traceback" not in ls.stderr
-    ok = cli("diagnose", "--method", "residual", "--train", data / "h1", "--test", data / "f5",
-             "--n-boot", 0, "-o", tmp_path / "out")
+    ok = cli(
+        "diagnose",
+        "--method",
+        "residual",
+        "--train",
+        data / "h1",
+        "--test",
+        data / "f5",
+        "--n-boot",
+        0,
+        "-o",
+        tmp_path / "out",
+    )
     assert ok.returncode == 0, ok.stderr
-    bad = cli("diagnose", "--method", "broken", "--train", data / "h1", "--test", data / "f5",
-              "--n-boot", 0, "-o", tmp_path / "out2")
+    bad = cli(
+        "diagnose",
+        "--method",
+        "broken",
+        "--train",
+        data / "h1",
+        "--test",
+        data / "f5",
+        "--n-boot",
+        0,
+        "-o",
+        tmp_path / "out2",
+    )
     assert bad.returncode == 1 and "Traceback" not in bad.stderr
     assert "plug-in 'broken'" in bad.stderr and "ModuleNotFoundError" in bad.stderr
     assert not (tmp_path / "out2").exists()
@@ -415,17 +512,19 @@ def test_a_broken_installed_plugin_in_a_subprocess(data, tmp_path):
 def bench_spec(tmp_path_factory):
     d = tmp_path_factory.mktemp("robust_bench")
     spec = d / "spec.yaml"
-    spec.write_text(textwrap.dedent(f"""\
+    spec.write_text(
+        textwrap.dedent(f"""\
         name: robust
         duration: {DURATION} s
         studies:
           - name: s
-            train: [{{scenario: {THESIS / 'oc1_nominal.yaml'}, seeds: [1]}}]
-            test: [{{scenario: {THESIS / 'sensor_a_offset_P15.yaml'}, seeds: [5]}}]
+            train: [{{scenario: {THESIS / "oc1_nominal.yaml"}, seeds: [1]}}]
+            test: [{{scenario: {THESIS / "sensor_a_offset_P15.yaml"}, seeds: [5]}}]
         methods:
           - {{method: residual}}
         evaluation: {{n_boot: 0}}
-        """))
+        """)
+    )
     work = d / "work"
     assert main(["bench", str(spec), "--workdir", str(work), "-o", str(d / "r0")]) == 0
     return spec, work, pd.read_csv(d / "r0" / "results.csv")
@@ -451,8 +550,9 @@ def test_bench_resimulates_a_corrupted_workdir_dataset(bench_spec, tmp_path, cap
     after = pd.read_csv(tmp_path / "r1" / "results.csv")
     cols = ["study", "label", "condition", "fault", "metric", "value"]
     timing = ["fit_s", "exec_s_per_sim_h"]
-    pd.testing.assert_frame_equal(after[~after.metric.isin(timing)][cols],
-                                  before[~before.metric.isin(timing)][cols])
+    pd.testing.assert_frame_equal(
+        after[~after.metric.isin(timing)][cols], before[~before.metric.isin(timing)][cols]
+    )
     # an incomplete one (no manifest.json) is simulated again too
     (faulty / "manifest.json").unlink()
     assert main(["bench", str(spec), "--workdir", str(work)]) == 0
@@ -489,8 +589,12 @@ def test_diagnose_output_replaces_only_its_own_results(data, tmp_path, capsys):
     out.mkdir()
     (out / "metrics.csv").write_text("my own notes\n")  # was replaced without a word
     assert diagnose(data, data / "f5", out) == 2
-    one_error_line(capsys, f"output directory '{out}' exists and holds files r2rsim diagnose "
-                   "did not write (metrics.csv)", "choose another directory with -o")
+    one_error_line(
+        capsys,
+        f"output directory '{out}' exists and holds files r2rsim diagnose "
+        "did not write (metrics.csv)",
+        "choose another directory with -o",
+    )
     assert [p.name for p in out.iterdir()] == ["metrics.csv"]
     assert (out / "metrics.csv").read_text() == "my own notes\n"
     (out / "metrics.csv").unlink()  # an empty directory is filled
@@ -523,8 +627,10 @@ def test_bench_output_replaces_only_its_own_results(bench_spec, tmp_path, capsys
     (out / "results.csv").write_text("my own notes\n")
     # refused before anything is simulated
     assert main(["bench", str(spec), "--workdir", str(tmp_path / "w"), "-o", str(out)]) == 2
-    one_error_line(capsys, f"output directory '{out}' exists and holds files r2rsim bench did "
-                   "not write (results.csv)")
+    one_error_line(
+        capsys,
+        f"output directory '{out}' exists and holds files r2rsim bench did not write (results.csv)",
+    )
     assert not (tmp_path / "w").exists()
     assert (out / "results.csv").read_text() == "my own notes\n"
     (out / "results.csv").unlink()
@@ -533,6 +639,5 @@ def test_bench_output_replaces_only_its_own_results(bench_spec, tmp_path, capsys
     capsys.readouterr()
     assert main(["bench", str(spec), "--workdir", str(work), "-o", str(out)]) == 2
     one_error_line(capsys, "holds earlier r2rsim bench results; pass --overwrite")
-    assert main(["bench", str(spec), "--workdir", str(work), "-o", str(out),
-                 "--overwrite"]) == 0
+    assert main(["bench", str(spec), "--workdir", str(work), "-o", str(out), "--overwrite"]) == 0
     assert sorted(p.name for p in out.iterdir()) == ["results.csv", "results.parquet"]

@@ -19,8 +19,11 @@ from conftest import REPO
 
 def _files(tmp_path, line_edit=None, scen_edit=None):
     line = (REPO / "lines" / "pet_film_line.yaml").read_text(encoding="utf-8")
-    scen = (REPO / "scenarios" / "quickstart.yaml").read_text(encoding="utf-8").replace(
-        "../lines/pet_film_line.yaml", "line.yaml")
+    scen = (
+        (REPO / "scenarios" / "quickstart.yaml")
+        .read_text(encoding="utf-8")
+        .replace("../lines/pet_film_line.yaml", "line.yaml")
+    )
     (tmp_path / "line.yaml").write_text(line_edit(line) if line_edit else line)
     (tmp_path / "scen.yaml").write_text(scen_edit(scen) if scen_edit else scen)
     return tmp_path / "scen.yaml"
@@ -41,8 +44,9 @@ def test_misspelt_required_key_leads_with_the_typo(tmp_path, capsys):
     code, err = _run(capsys, "run", scen, "-o", tmp_path / "out", "-q")
     assert code == 2
     first, quoted = err.rstrip("\n").split("\n")
-    assert first == (f"error: {scen}: line {n}: durations: unknown key 'durations' "
-                     "(did you mean 'duration'?)")
+    assert first == (
+        f"error: {scen}: line {n}: durations: unknown key 'durations' (did you mean 'duration'?)"
+    )
     assert quoted == "    durations: 60 s"
     assert "missing required key" not in err
     assert not (tmp_path / "out").exists()
@@ -52,8 +56,9 @@ def test_misspelt_key_in_a_nested_mapping(tmp_path, capsys):
     # elements[2] is the S-wrap roller: radius (required) and wrap_angle (optional) misspelt
     def edit(text):
         head, sep, tail = text.partition("  - id: swrapA\n")
-        tail = tail.replace("    radius: 0.10 m\n",
-                            "    radus: 0.10 m\n    wrap_angel: 180 deg\n", 1)
+        tail = tail.replace(
+            "    radius: 0.10 m\n", "    radus: 0.10 m\n    wrap_angel: 180 deg\n", 1
+        )
         return head + sep + tail
 
     scen = _files(tmp_path, line_edit=edit)
@@ -67,29 +72,43 @@ def test_misspelt_key_in_a_nested_mapping(tmp_path, capsys):
         "    radus: 0.10 m",
         f"{line}: line {_line_no(line, 'wrap_angel:')}: elements[2].wrap_angel: unknown key "
         "'wrap_angel' (did you mean 'wrap_angle'?)",
-        "    wrap_angel: 180 deg"]
+        "    wrap_angel: 180 deg",
+    ]
     # a run of a scenario on that line: the first problem, its line quoted last
     code, err = _run(capsys, "run", scen, "-o", tmp_path / "out", "-q")
     first, quoted = err.rstrip("\n").split("\n")
-    assert code == 2 and "elements[2].radus: unknown key 'radus' (did you mean 'radius'?) " \
-        "(and 1 more problem" in first and quoted == "    radus: 0.10 m"
+    assert (
+        code == 2
+        and "elements[2].radus: unknown key 'radus' (did you mean 'radius'?) (and 1 more problem"
+        in first
+        and quoted == "    radus: 0.10 m"
+    )
 
 
 def test_misspelt_keys_in_a_sweep_file(tmp_path, capsys):
     sweep = (REPO / "sweeps" / "quickstart.yaml").read_text(encoding="utf-8")
-    sweep = sweep.replace("../scenarios/quickstart.yaml",
-                          str(REPO / "scenarios" / "quickstart.yaml"))
+    sweep = sweep.replace(
+        "../scenarios/quickstart.yaml", str(REPO / "scenarios" / "quickstart.yaml")
+    )
     sw = tmp_path / "sw.yaml"
-    sw.write_text(sweep.replace("seeds: 2", "seedz: 2").replace(
-        "values: [3 m/s, 5 m/s]", "vaules: [3 m/s, 5 m/s]"))
+    sw.write_text(
+        sweep.replace("seeds: 2", "seedz: 2").replace(
+            "values: [3 m/s, 5 m/s]", "vaules: [3 m/s, 5 m/s]"
+        )
+    )
     code, err = _run(capsys, "validate", sw)
     assert code == 2
     lines = err.rstrip("\n").split("\n")
-    assert lines[0] == (f"{sw}: line {_line_no(sw, 'vaules:')}: axes[0].vaules: unknown key "
-                        "'vaules' (did you mean 'values'?)")
+    assert lines[0] == (
+        f"{sw}: line {_line_no(sw, 'vaules:')}: axes[0].vaules: unknown key "
+        "'vaules' (did you mean 'values'?)"
+    )
     assert lines[1].startswith("    - {name: top_speed") and "vaules:" in lines[1]
-    assert lines[2:] == [f"{sw}: line {_line_no(sw, 'seedz:')}: seedz: unknown key 'seedz' "
-                         "(did you mean 'seed' or 'seeds'?)", "    seedz: 2"]
+    assert lines[2:] == [
+        f"{sw}: line {_line_no(sw, 'seedz:')}: seedz: unknown key 'seedz' "
+        "(did you mean 'seed' or 'seeds'?)",
+        "    seedz: 2",
+    ]
     assert "missing required key" not in err
     code, err = _run(capsys, "sweep", sw, "-o", tmp_path / "out")
     assert code == 2 and err.startswith(f"error: {sw}: line ") and "'vaules'" in err
@@ -100,8 +119,9 @@ def test_no_close_match_no_suggestion(tmp_path, capsys):
     code, err = _run(capsys, "validate", scen)
     assert code == 2
     first, quoted = err.rstrip("\n").split("\n")
-    assert re.fullmatch(rf"{re.escape(str(scen))}: line \d+: zz_frob: unknown key 'zz_frob'",
-                        first), first
+    assert re.fullmatch(
+        rf"{re.escape(str(scen))}: line \d+: zz_frob: unknown key 'zz_frob'", first
+    ), first
     assert quoted == "    zz_frob: 3" and "did you mean" not in err
 
 
@@ -115,8 +135,9 @@ def test_data_not_from_the_file_has_no_line(tmp_path):
     d["web"]["thicknes"] = d["web"].pop("thickness")
     with pytest.raises(InputError) as exc:
         load_line(d)
-    assert str(exc.value) == ("<line>: web.thicknes: unknown key 'thicknes' "
-                              "(did you mean 'thickness'?)")
+    assert str(exc.value) == (
+        "<line>: web.thicknes: unknown key 'thicknes' (did you mean 'thickness'?)"
+    )
 
 
 def test_allowed_keys_follow_the_schema():

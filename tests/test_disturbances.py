@@ -36,9 +36,16 @@ def run(tmp_path, disturbances, *, seed=1, name="d", noise=False, duration=20.0,
         for s in d["sensors"]:
             s.pop("noise", None)
     line = write(tmp_path / f"line_{name}.yaml", yaml.safe_dump(d))
-    sc = {"name": name, "line": str(line), "duration": duration, "record_rate": rate,
-          "seed": seed, "warmup": 1.0, "programme": [{"at": 0, "line_speed": 5.0}],
-          "disturbances": disturbances}
+    sc = {
+        "name": name,
+        "line": str(line),
+        "duration": duration,
+        "record_rate": rate,
+        "seed": seed,
+        "warmup": 1.0,
+        "programme": [{"at": 0, "line_speed": 5.0}],
+        "disturbances": disturbances,
+    }
     path = write(tmp_path / f"{name}.yaml", yaml.safe_dump(sc))
     out = tmp_path / f"out_{name}"
     r2rsim.run_scenario(path, output=out)
@@ -89,20 +96,43 @@ def test_table_shape_still_acts_as_drawn(tmp_path):
 
 def _realise(tmp_path, dist, seeds, speed=1.0):
     """The realisations of one disturbance for each seed (no simulation)."""
-    path = write(tmp_path / "sc.yaml", yaml.safe_dump({
-        "name": "sc", "line": str(REPO / "lines" / "pet_film_line.yaml"), "duration": 120.0,
-        "record_rate": 100.0, "programme": [{"at": 0, "line_speed": speed}],
-        "disturbances": [dist]}))
+    path = write(
+        tmp_path / "sc.yaml",
+        yaml.safe_dump(
+            {
+                "name": "sc",
+                "line": str(REPO / "lines" / "pet_film_line.yaml"),
+                "duration": 120.0,
+                "record_rate": 100.0,
+                "programme": [{"at": 0, "line_speed": speed}],
+                "disturbances": [dist],
+            }
+        ),
+    )
     scenario, line, _ = load_scenario(path)
-    return [realise_disturbances(scenario, line, np.random.SeedSequence(seed).spawn(3)[0])[0]
-            for seed in seeds]
+    return [
+        realise_disturbances(scenario, line, np.random.SeedSequence(seed).spawn(3)[0])[0]
+        for seed in seeds
+    ]
 
 
-@pytest.mark.parametrize("dist, std, corner, unit", [
-    (DRAG, 0.02, 2.0, "s"),
-    ({"type": "wound_in_strain", "element": "unwind", "std": 3e-5,
-      "correlation_length": "5 m"}, 3e-5, 1.0 / (2 * np.pi * 5.0), "m"),
-])
+@pytest.mark.parametrize(
+    "dist, std, corner, unit",
+    [
+        (DRAG, 0.02, 2.0, "s"),
+        (
+            {
+                "type": "wound_in_strain",
+                "element": "unwind",
+                "std": 3e-5,
+                "correlation_length": "5 m",
+            },
+            3e-5,
+            1.0 / (2 * np.pi * 5.0),
+            "m",
+        ),
+    ],
+)
 def test_sines_have_the_declared_std_and_spectrum(tmp_path, dist, std, corner, unit):
     ds = _realise(tmp_path, dist, range(300))
     d = ds[0]
@@ -168,11 +198,22 @@ def test_jacobian_with_disturbances(tmp_path, model):
     prog = r2rsim.Programme.from_steps(line, [ProgrammeStep(at=0, line_speed=2.0)])
     rng = np.random.default_rng(5)
     n = N_SINES
-    wound = DisturbanceInstance("wound_in_strain", "unwind", "sines",
-                                amplitudes=np.full(n, 1e-3), omegas=rng.uniform(1, 30, n),
-                                phases=rng.uniform(0, 6, n))
-    drag = DisturbanceInstance("bearing_drag", "idler1", "sines", amplitudes=np.full(n, 0.01),
-                               omegas=rng.uniform(1, 60, n), phases=rng.uniform(0, 6, n))
+    wound = DisturbanceInstance(
+        "wound_in_strain",
+        "unwind",
+        "sines",
+        amplitudes=np.full(n, 1e-3),
+        omegas=rng.uniform(1, 30, n),
+        phases=rng.uniform(0, 6, n),
+    )
+    drag = DisturbanceInstance(
+        "bearing_drag",
+        "idler1",
+        "sines",
+        amplitudes=np.full(n, 0.01),
+        omegas=rng.uniform(1, 60, n),
+        phases=rng.uniform(0, 6, n),
+    )
     cl = r2rsim.compile_line(line, prog, (), [wound, drag])
     plain = r2rsim.compile_line(line, prog)
     y = _state(cl, np.random.default_rng(3))
@@ -194,8 +235,14 @@ def test_bearing_drag_cache_never_changes_a_value(tmp_path):
     prog = r2rsim.Programme.from_steps(line, [ProgrammeStep(at=0, line_speed=2.0)])
     rng = np.random.default_rng(8)
     n = N_SINES
-    drag = DisturbanceInstance("bearing_drag", "idler1", "sines", amplitudes=np.full(n, 0.01),
-                               omegas=rng.uniform(1, 60, n), phases=rng.uniform(0, 6, n))
+    drag = DisturbanceInstance(
+        "bearing_drag",
+        "idler1",
+        "sines",
+        amplitudes=np.full(n, 0.01),
+        omegas=rng.uniform(1, 60, n),
+        phases=rng.uniform(0, 6, n),
+    )
     cl = r2rsim.compile_line(line, prog, (), [drag])
     plain = r2rsim.compile_line(line, prog)
     y = _state(cl, np.random.default_rng(3))
@@ -214,9 +261,11 @@ def test_bearing_drag_cache_never_changes_a_value(tmp_path):
 
 
 def test_disturbances_are_seeded_and_apart_from_measurement_noise(tmp_path):
-    both = [DRAG, {"type": "wound_in_strain", "element": "unwind", "std": 1e-5,
-                   "correlation_length": "5 m"},
-            {"type": "out_of_round", "element": "idler1", "eccentricity": "0.02 mm"}]
+    both = [
+        DRAG,
+        {"type": "wound_in_strain", "element": "unwind", "std": 1e-5, "correlation_length": "5 m"},
+        {"type": "out_of_round", "element": "idler1", "eccentricity": "0.02 mm"},
+    ]
     a, _ = run(tmp_path, both, name="a", noise=True, duration=6.0)
     b, _ = run(tmp_path, both, name="b", noise=True, duration=6.0)
     c, _ = run(tmp_path, both, name="c", noise=True, seed=2, duration=6.0)
@@ -235,8 +284,11 @@ def test_disturbances_are_seeded_and_apart_from_measurement_noise(tmp_path):
 
 
 def test_out_of_round_idler_ripples_at_its_rotation_frequency(tmp_path):
-    s, _ = run(tmp_path, [{"type": "out_of_round", "element": "idler1",
-                           "eccentricity": "0.02 mm"}], duration=4.0)
+    s, _ = run(
+        tmp_path,
+        [{"type": "out_of_round", "element": "idler1", "eccentricity": "0.02 mm"}],
+        duration=4.0,
+    )
     t = s.t_s.to_numpy()
     m = t > 1.0
     T = s["state.span1.tension_N"].to_numpy()[m]
@@ -247,21 +299,42 @@ def test_out_of_round_idler_ripples_at_its_rotation_frequency(tmp_path):
     assert np.ptp(T) > 1.0
 
 
-@pytest.mark.parametrize("dist, message", [
-    ({"type": "bearing_drag", "element": "idler1", "std": 0.01}, "needs 'bandwidth'"),
-    ({"type": "bearing_drag", "element": "nope", "std": 0.01, "bandwidth": 1.0},
-     "no element 'nope'"),
-    ({"type": "wound_in_strain", "element": "idler1", "std": 1e-5,
-      "correlation_length": 1.0}, "applies to an unwind"),
-    ({"type": "out_of_round", "element": "idler1", "eccentricity": "6 cm"},
-     "not less than the roller radius"),
-    ({"type": "bearing_drag", "element": "idler1", "std": "2 N", "bandwidth": 1.0},
-     "dimension"),
-])
+@pytest.mark.parametrize(
+    "dist, message",
+    [
+        ({"type": "bearing_drag", "element": "idler1", "std": 0.01}, "needs 'bandwidth'"),
+        (
+            {"type": "bearing_drag", "element": "nope", "std": 0.01, "bandwidth": 1.0},
+            "no element 'nope'",
+        ),
+        (
+            {
+                "type": "wound_in_strain",
+                "element": "idler1",
+                "std": 1e-5,
+                "correlation_length": 1.0,
+            },
+            "applies to an unwind",
+        ),
+        (
+            {"type": "out_of_round", "element": "idler1", "eccentricity": "6 cm"},
+            "not less than the roller radius",
+        ),
+        (
+            {"type": "bearing_drag", "element": "idler1", "std": "2 N", "bandwidth": 1.0},
+            "dimension",
+        ),
+    ],
+)
 def test_bad_disturbances_are_rejected(tmp_path, dist, message):
     line = REPO / "lines" / "pet_film_line.yaml"
-    sc = {"name": "bad", "line": str(line), "duration": 5.0,
-          "programme": [{"at": 0, "line_speed": 5.0}], "disturbances": [dist]}
+    sc = {
+        "name": "bad",
+        "line": str(line),
+        "duration": 5.0,
+        "programme": [{"at": 0, "line_speed": 5.0}],
+        "disturbances": [dist],
+    }
     path = write(tmp_path / "bad.yaml", yaml.safe_dump(sc))
     with pytest.raises(InputError) as exc:
         r2rsim.run_scenario(path, output=tmp_path / "out")

@@ -32,8 +32,18 @@ SELF = Path(__file__).resolve().relative_to(REPO).as_posix()
 
 SUFFIXES = {".md", ".py", ".yaml", ".yml", ".toml", ".txt", ".cfg", ".sh"}
 EXTRA = {".ci/run"}
-SKIP_DIRS = {".git", "__pycache__", ".pytest_cache", ".ruff_cache", "build", "dist", "runs",
-             ".venv", "venv", "node_modules"}
+SKIP_DIRS = {
+    ".git",
+    "__pycache__",
+    ".pytest_cache",
+    ".ruff_cache",
+    "build",
+    "dist",
+    "runs",
+    ".venv",
+    "venv",
+    "node_modules",
+}
 
 #: ``*.md`` names that are not documents of this repository but files that scripts write
 #: into their output directory: bare (``writes report.md``) or under a placeholder
@@ -49,7 +59,11 @@ def _files() -> list[str]:
     try:
         out = subprocess.run(
             ["git", "ls-files", "--cached", "--others", "--exclude-standard", "-z"],
-            cwd=REPO, capture_output=True, check=True, timeout=20).stdout
+            cwd=REPO,
+            capture_output=True,
+            check=True,
+            timeout=20,
+        ).stdout
         names = [n for n in out.decode("utf-8", "replace").split("\0") if n]
     except (OSError, subprocess.SubprocessError):
         names = []
@@ -57,8 +71,9 @@ def _files() -> list[str]:
             dirs[:] = [d for d in dirs if d not in SKIP_DIRS and not d.endswith(".egg-info")]
             for f in files:
                 names.append(Path(root, f).relative_to(REPO).as_posix())
-    return sorted(n for n in names
-                  if (Path(n).suffix in SUFFIXES or n in EXTRA) and (REPO / n).is_file())
+    return sorted(
+        n for n in names if (Path(n).suffix in SUFFIXES or n in EXTRA) and (REPO / n).is_file()
+    )
 
 
 @functools.lru_cache(maxsize=1)
@@ -130,45 +145,56 @@ def test_scan_finds_the_references_it_is_meant_to_check():
 
 def test_every_mentioned_document_is_in_the_repository():
     missing = [f"{f}:{no}: {t}" for f, no, t in _references() if not _resolves(t, f)]
-    assert not missing, ("documents mentioned but not in the repository:\n"
-                         + "\n".join(missing))
+    assert not missing, "documents mentioned but not in the repository:\n" + "\n".join(missing)
 
 
-@pytest.mark.parametrize("target, source, ok", [
-    ("physics.md", "lines/pet_film_line.yaml", True),      # bare name: found in docs/
-    ("dataset.md#3-samples", "docs/model.md", True),        # same directory, anchor dropped
-    ("docs/physics.md", "r2rsim/schema/line.py", True),     # path: against the root
-    ("../shared/docs/physics.md", "docs/model.md", False),  # outside the repository
-    ("DESIGN.md", "README.md", False),
-])
+@pytest.mark.parametrize(
+    "target, source, ok",
+    [
+        ("physics.md", "lines/pet_film_line.yaml", True),  # bare name: found in docs/
+        ("dataset.md#3-samples", "docs/model.md", True),  # same directory, anchor dropped
+        ("docs/physics.md", "r2rsim/schema/line.py", True),  # path: against the root
+        ("../shared/docs/physics.md", "docs/model.md", False),  # outside the repository
+        ("DESIGN.md", "README.md", False),
+    ],
+)
 def test_resolution_rules(target, source, ok):
     assert _resolves(target, source) is ok
 
 
 #: the project's design notes, which are not part of the repository, cited without ``.md``
-DESIGN_NOTES = re.compile(r"\b(?:DESIGN|fdd-benchmarks|thesis-methods)\s*(?:§|\(?B\d)|"
-                          r"\barchitecture\.md\b")
+DESIGN_NOTES = re.compile(
+    r"\b(?:DESIGN|fdd-benchmarks|thesis-methods)\s*(?:§|\(?B\d)|"
+    r"\barchitecture\.md\b"
+)
 
 
 def test_no_section_references_to_design_notes_outside_the_repository():
     bad = []
     for name, text in _texts():
-        bad += [f"{name}:{no}: {line.strip()}" for no, line in enumerate(text.splitlines(), 1)
-                if DESIGN_NOTES.search(line)]
+        bad += [
+            f"{name}:{no}: {line.strip()}"
+            for no, line in enumerate(text.splitlines(), 1)
+            if DESIGN_NOTES.search(line)
+        ]
     assert not bad, "\n".join(bad)
 
 
 #: "physics.md eq. 1.4", "physics.md §2.3", "physics.md 1.10", "physics.md V22(b)",
 #: "solver.md §4.1": the place a mention points at inside the document.
-PLACE = re.compile(r"\b(physics|solver)\.md\W{0,3}\s*"
-                   r"(?:eqs?\.\s*\(?(\d\.\d+)|§\s*(\d+(?:\.\d+)?)|(\d\.\d+)\b|V(\d+))")
+PLACE = re.compile(
+    r"\b(physics|solver)\.md\W{0,3}\s*"
+    r"(?:eqs?\.\s*\(?(\d\.\d+)|§\s*(\d+(?:\.\d+)?)|(\d\.\d+)\b|V(\d+))"
+)
 
 
 def test_cited_sections_equations_and_cases_exist():
-    docs = {d: (REPO / "docs" / f"{d}.md").read_text(encoding="utf-8")
-            for d in ("physics", "solver")}
-    headings = {d: set(re.findall(r"^#{2,4} (\d+(?:\.\d+)?)[. ]", t, re.M))
-                for d, t in docs.items()}
+    docs = {
+        d: (REPO / "docs" / f"{d}.md").read_text(encoding="utf-8") for d in ("physics", "solver")
+    }
+    headings = {
+        d: set(re.findall(r"^#{2,4} (\d+(?:\.\d+)?)[. ]", t, re.M)) for d, t in docs.items()
+    }
     missing = []
     for name, text in _texts():
         for m in PLACE.finditer(text):

@@ -30,8 +30,11 @@ SWEEP = ROOT / "sweeps" / "quickstart.yaml"
 
 def _mount(where: Path, *options: str) -> None:
     where.mkdir(parents=True, exist_ok=True)
-    proc = subprocess.run(["mount", "-t", "tmpfs", "-o", ",".join(options), "tmpfs",
-                           str(where)], capture_output=True, text=True)
+    proc = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", ",".join(options), "tmpfs", str(where)],
+        capture_output=True,
+        text=True,
+    )
     if proc.returncode != 0:
         pytest.skip(f"cannot mount a tmpfs here (needs root): {proc.stderr.strip()}")
 
@@ -47,6 +50,7 @@ def mounts():
         _mount(where, *options)
         made.append(where)
         return where
+
     yield mount
     for where in reversed(made):
         subprocess.run(["umount", "-l", str(where)], capture_output=True)
@@ -56,16 +60,24 @@ def _samples_and_labels(ds: Path) -> dict:
     """What must not differ between two sweeps of the same file: every file's sha256 but
     those of the tables holding wall-clock times, and those tables without the times."""
     files = json.loads((ds / "manifest.json").read_text())["files"]
-    out = {rel: info["sha256"] for rel, info in files.items()
-           if rel not in ("runs.parquet", "manifest.json")}
+    out = {
+        rel: info["sha256"]
+        for rel, info in files.items()
+        if rel not in ("runs.parquet", "manifest.json")
+    }
     runs = pq.read_table(ds / "runs.parquet").to_pylist()
-    out["runs"] = [{k: v for k, v in r.items() if "wall" not in k and "real_time" not in k
-                    and "compile" not in k} for r in runs]
+    out["runs"] = [
+        {
+            k: v
+            for k, v in r.items()
+            if "wall" not in k and "real_time" not in k and "compile" not in k
+        }
+        for r in runs
+    ]
     return out
 
 
-def test_a_full_disk_stops_the_sweep_and_the_same_command_finishes_it(tmp_path, mounts,
-                                                                      capsys):
+def test_a_full_disk_stops_the_sweep_and_the_same_command_finishes_it(tmp_path, mounts, capsys):
     ref = tmp_path / "ref"
     assert main(["sweep", str(SWEEP), "-o", str(ref), "-q", "--workers", "0"]) == 0
     capsys.readouterr()
@@ -93,7 +105,8 @@ def test_a_full_disk_stops_the_sweep_and_the_same_command_finishes_it(tmp_path, 
 
 
 def test_an_unwritable_output_is_refused_before_anything_is_simulated(
-        tmp_path, mounts, monkeypatch, capsys):
+    tmp_path, mounts, monkeypatch, capsys
+):
     import r2rsim.run
 
     def no_simulation(*args, **kwargs):
@@ -104,8 +117,10 @@ def test_an_unwritable_output_is_refused_before_anything_is_simulated(
     for cmd, words in [
         (["run", str(QUICKSTART), "-o", str(ro / "ds")], "is on a read-only file system"),
         (["run", str(QUICKSTART), "-o", str(ro)], "is a mount point"),
-        (["sweep", str(SWEEP), "-o", str(ro / "ds"), "--workers", "0"],
-         "is on a read-only file system"),
+        (
+            ["sweep", str(SWEEP), "-o", str(ro / "ds"), "--workers", "0"],
+            "is on a read-only file system",
+        ),
     ]:
         assert main([*cmd, "-q"]) == 2, cmd
         err = capsys.readouterr().err
@@ -131,8 +146,9 @@ def test_an_output_under_a_file_is_bad_input(tmp_path, command, capsys):
 def test_errors_of_the_machine_are_told_from_errors_of_the_run():
     import errno
 
-    full = OSError(errno.ENOSPC, "Error writing bytes to file. Detail: [errno 28] No space "
-                                 "left on device")  # as pyarrow raises it
+    full = OSError(
+        errno.ENOSPC, "Error writing bytes to file. Detail: [errno 28] No space left on device"
+    )  # as pyarrow raises it
     try:
         try:
             raise full
@@ -169,9 +185,23 @@ def test_errors_of_the_machine_are_told_from_errors_of_the_run():
 @pytest.mark.parametrize("delay_s", [0.15, 0.5, 1.0, 2.0])
 def test_sigterm_at_any_moment_of_a_sweep_says_what_was_kept(tmp_path, delay_s):
     # two worker processes: the sweep takes several seconds (their start, 12 runs)
-    proc = subprocess.Popen([sys.executable, "-m", "r2rsim.cli", "sweep", str(SWEEP), "-o",
-                             str(tmp_path / "ds"), "-q", "--workers", "2"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "r2rsim.cli",
+            "sweep",
+            str(SWEEP),
+            "-o",
+            str(tmp_path / "ds"),
+            "-q",
+            "--workers",
+            "2",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     time.sleep(delay_s)
     proc.send_signal(signal.SIGTERM)
     out, err = proc.communicate(timeout=120)

@@ -98,8 +98,9 @@ def test_timeeval_series_round_trip_exactly(timeeval, runs, dataset):
         df = pd.read_csv(f)
         # first column the time in s, the measured channels in samples order, the label last
         assert list(df.columns) == ["timestamp", *_meas(run), "is_anomaly"]
-        assert not any(c.startswith(("true.", "state.", "act.", "cmd.", "label.", "flag."))
-                       for c in df.columns)
+        assert not any(
+            c.startswith(("true.", "state.", "act.", "cmd.", "label.", "flag.")) for c in df.columns
+        )
         np.testing.assert_array_equal(df["timestamp"].to_numpy(), run.samples["t_s"].to_numpy())
         for c in _meas(run):
             got = df[c].to_numpy(np.float64).astype(np.float32)
@@ -107,10 +108,12 @@ def test_timeeval_series_round_trip_exactly(timeeval, runs, dataset):
             saw_nan |= bool(np.isnan(got).any())
         assert df["is_anomaly"].dtype.kind == "i" and set(df["is_anomaly"]) <= {0, 1}
         t = run.samples["t_s"].to_numpy()
-        np.testing.assert_array_equal(df["is_anomaly"].to_numpy(bool),
-                                      _faults_label(dataset, f.stem, t))
-        np.testing.assert_array_equal(df["is_anomaly"].to_numpy(bool),
-                                      run.samples["label.is_faulty"].to_numpy())
+        np.testing.assert_array_equal(
+            df["is_anomaly"].to_numpy(bool), _faults_label(dataset, f.stem, t)
+        )
+        np.testing.assert_array_equal(
+            df["is_anomaly"].to_numpy(bool), run.samples["label.is_faulty"].to_numpy()
+        )
     assert saw_nan  # the dropout's NaN readings went through
 
 
@@ -147,8 +150,10 @@ def test_split_selects_the_roles(dataset, tmp_path, runs):
     got = {}
     for role in ("train", "val", "test"):
         out = tmp_path / role
-        assert main(["export", str(dataset), "--format", "tsb-ad", "--split", role,
-                     "-o", str(out)]) == 0
+        assert (
+            main(["export", str(dataset), "--format", "tsb-ad", "--split", role, "-o", str(out)])
+            == 0
+        )
         got[role] = set(pd.read_csv(out / "file_list.csv").run_id)
     faulty = {rid for rid, r in runs.items() if len(r.faults)}
     assert got["train"] | got["val"] | got["test"] == set(runs)
@@ -159,8 +164,10 @@ def test_split_selects_the_roles(dataset, tmp_path, runs):
     assert (len(got["train"]), len(got["val"]), len(got["test"])) == (2, 1, 9)
     # the TimeEval export of the test role still writes the training series it names
     out = tmp_path / "te-test"
-    assert main(["export", str(dataset), "--format", "timeeval", "--split", "test",
-                 "-o", str(out)]) == 0
+    assert (
+        main(["export", str(dataset), "--format", "timeeval", "--split", "test", "-o", str(out)])
+        == 0
+    )
     idx = pd.read_csv(out / "datasets.csv")
     assert set(idx.dataset_name) == got["test"]
     train = {Path(p).stem for p in idx.train_path.dropna()}
@@ -171,8 +178,9 @@ def test_split_selects_the_roles(dataset, tmp_path, runs):
 @pytest.mark.parametrize("which", ["sensor.offset", "sensor", "actuator"])
 def test_family_labels_follow_faults_parquet(dataset, tmp_path, runs, which):
     out = tmp_path / "out"
-    assert main(["export", str(dataset), "--format", "tsb-ad", "--label", which,
-                 "-o", str(out)]) == 0
+    assert (
+        main(["export", str(dataset), "--format", "tsb-ad", "--label", which, "-o", str(out)]) == 0
+    )
     lst = pd.read_csv(out / "file_list.csv")
     assert len(lst) == len(runs)
     differs_from_any = False
@@ -190,8 +198,9 @@ def test_family_labels_follow_faults_parquet(dataset, tmp_path, runs, which):
         assert int(fields[-3]) == first and int(fields[-1]) == first
         assert re.fullmatch(r"\d{3}_R2RSIM_id_\d+_Sensor_tr_\d+_1st_\d+\.csv", name)
         for c in _meas(run):
-            np.testing.assert_array_equal(df[c].to_numpy(np.float64).astype(np.float32),
-                                          run.samples[c].to_numpy())
+            np.testing.assert_array_equal(
+                df[c].to_numpy(np.float64).astype(np.float32), run.samples[c].to_numpy()
+            )
     assert differs_from_any  # the family label is not the any-fault label in this sweep
 
 
@@ -202,8 +211,9 @@ def test_drop_warmup_writes_the_scored_rows(dataset, tmp_path, runs):
         run = runs[f.stem]
         df = pd.read_csv(f)
         mask = run.samples["label.score_mask"].to_numpy()
-        np.testing.assert_array_equal(df["timestamp"].to_numpy(),
-                                      run.samples["t_s"].to_numpy()[mask])
+        np.testing.assert_array_equal(
+            df["timestamp"].to_numpy(), run.samples["t_s"].to_numpy()[mask]
+        )
         assert df["timestamp"].iloc[0] == run.info["warmup_s"]
 
 
@@ -218,35 +228,48 @@ def test_channel_selection_protects_ground_truth(runs):
     cols = list(next(iter(runs.values())).samples.columns)
     everything = select_channels(cols, ["*"])
     assert everything and not any(
-        c.startswith(("true.", "state.", "act.", "cmd.", "label.", "flag.")) or "_seen_" in c
-        or c in ("k", "t_s") for c in everything)
+        c.startswith(("true.", "state.", "act.", "cmd.", "label.", "flag."))
+        or "_seen_" in c
+        or c in ("k", "t_s")
+        for c in everything
+    )
     assert any(c.startswith("sp.") for c in everything)
     assert select_channels(cols, ["true.*"]) == [c for c in cols if c.startswith("true.")]
     assert select_channels(cols, ["meas.lc_*", "true.lc_rewind.*"]) == [
-        "meas.lc_unwind.tension_N", "meas.lc_rewind.tension_N", "true.lc_rewind.tension_N"]
+        "meas.lc_unwind.tension_N",
+        "meas.lc_rewind.tension_N",
+        "true.lc_rewind.tension_N",
+    ]
     assert "ctrl.lc_rewind.tension_seen_N" in select_channels(cols, ["ctrl.*_seen_*"])
 
 
 def test_where_selects_runs(dataset, tmp_path):
     out = tmp_path / "out"
-    assert main(["export", str(dataset), "--format", "tsb-ad", "--where", "seed=0,1",
-                 "-o", str(out)]) == 0
+    assert (
+        main(["export", str(dataset), "--format", "tsb-ad", "--where", "seed=0,1", "-o", str(out)])
+        == 0
+    )
     rids = pd.read_csv(out / "file_list.csv").run_id
     assert len(rids) == 6 and all(r.endswith(("__s0", "__s1")) for r in rids)
 
 
-@pytest.mark.parametrize("args, msg", [
-    (["--format", "csv"], "--format 'csv' is not one of timeeval, tsb-ad"),
-    (["--format", "timeeval", "--label", "sensor.ofset"], "--label 'sensor.ofset' is not"),
-    (["--format", "timeeval", "--split", "holdout"], "--split 'holdout' is not one of"),
-    (["--format", "timeeval", "--channels", "state.*", "meas.nope*"],
-     "--channels 'meas.nope*' selects no channel"),
-    (["--format", "timeeval", "--channels", "*tension_N*x"], "selects no channel"),
-    (["--format", "tsb-ad", "--channels", "label.*"], "holds "),
-    (["--format", "timeeval", "--where", "seed=99"], "no run of"),
-    (["--format", "timeeval", "--where", "size=1"], "no column 'size'"),
-    (["--format", "timeeval", "--where", "seed"], "--where expects KEY=VALUE"),
-])
+@pytest.mark.parametrize(
+    "args, msg",
+    [
+        (["--format", "csv"], "--format 'csv' is not one of timeeval, tsb-ad"),
+        (["--format", "timeeval", "--label", "sensor.ofset"], "--label 'sensor.ofset' is not"),
+        (["--format", "timeeval", "--split", "holdout"], "--split 'holdout' is not one of"),
+        (
+            ["--format", "timeeval", "--channels", "state.*", "meas.nope*"],
+            "--channels 'meas.nope*' selects no channel",
+        ),
+        (["--format", "timeeval", "--channels", "*tension_N*x"], "selects no channel"),
+        (["--format", "tsb-ad", "--channels", "label.*"], "holds "),
+        (["--format", "timeeval", "--where", "seed=99"], "no run of"),
+        (["--format", "timeeval", "--where", "size=1"], "no column 'size'"),
+        (["--format", "timeeval", "--where", "seed"], "--where expects KEY=VALUE"),
+    ],
+)
 def test_bad_input_exits_2_and_writes_nothing(dataset, tmp_path, capsys, args, msg):
     out = tmp_path / "out"
     code = main(["export", str(dataset), "-o", str(out), *args])
@@ -257,13 +280,34 @@ def test_bad_input_exits_2_and_writes_nothing(dataset, tmp_path, capsys, args, m
 
 
 def test_hidden_channels_are_named_in_the_message(dataset, tmp_path, capsys):
-    code = main(["export", str(dataset), "-o", str(tmp_path / "o"), "--format", "timeeval",
-                 "--channels", "*.lc_rewind.tension_N", "true.lc_unwind.*x"])
+    code = main(
+        [
+            "export",
+            str(dataset),
+            "-o",
+            str(tmp_path / "o"),
+            "--format",
+            "timeeval",
+            "--channels",
+            "*.lc_rewind.tension_N",
+            "true.lc_unwind.*x",
+        ]
+    )
     assert code == 2
     assert "selects no channel" in capsys.readouterr().err
     # a pattern matching only protected columns says how to name them
-    code = main(["export", str(dataset), "-o", str(tmp_path / "o"), "--format", "timeeval",
-                 "--channels", "*.span1.*"])
+    code = main(
+        [
+            "export",
+            str(dataset),
+            "-o",
+            str(tmp_path / "o"),
+            "--format",
+            "timeeval",
+            "--channels",
+            "*.span1.*",
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 2 and "--channels 'state.*'" in err, err
 
@@ -326,12 +370,18 @@ def test_aeon_reads_the_timeeval_files(timeeval, runs):
 
 
 def test_a_missing_dataset_and_a_comma_list_of_patterns(dataset, tmp_path, capsys):
-    code = main(["export", str(tmp_path / "nope"), "--format", "timeeval",
-                 "-o", str(tmp_path / "out")])
+    code = main(
+        ["export", str(tmp_path / "nope"), "--format", "timeeval", "-o", str(tmp_path / "out")]
+    )
     err = capsys.readouterr().err
     assert code == 2 and "no such dataset directory" in err and not (tmp_path / "out").exists()
-    summary = export_dataset(dataset, tmp_path / "out", "tsb-ad", channels="meas.lc_*,sp.line_*",
-                             split="val")
-    assert summary.channels == ["meas.lc_unwind.tension_N", "meas.lc_rewind.tension_N",
-                                "sp.line_speed_m_s", "sp.line_acceleration_m_s2"]
+    summary = export_dataset(
+        dataset, tmp_path / "out", "tsb-ad", channels="meas.lc_*,sp.line_*", split="val"
+    )
+    assert summary.channels == [
+        "meas.lc_unwind.tension_N",
+        "meas.lc_rewind.tension_N",
+        "sp.line_speed_m_s",
+        "sp.line_acceleration_m_s2",
+    ]
     assert summary.exported == list(summary.files) and len(summary.exported) == 1

@@ -49,10 +49,15 @@ THESIS = REPO / "scenarios" / "thesis"
 DURATION = 22.0  # the thesis faults start at 20 s
 TRAIN = [("h1", "oc1_nominal", 1), ("h2", "oc1_nominal", 2)]
 VAL = [("h3", "oc1_nominal", 3)]
-TEST = [("h4", "oc1_nominal", 4), ("oP05", "sensor_a_offset_P05", 5),
-        ("oN05", "sensor_a_offset_N05", 6), ("bP05", "sensor_b_gain_P05", 7),
-        ("bN05", "sensor_b_gain_N05", 8), ("bP15", "sensor_b_gain_P15", 9),
-        ("bN15", "sensor_b_gain_N15", 10)]
+TEST = [
+    ("h4", "oc1_nominal", 4),
+    ("oP05", "sensor_a_offset_P05", 5),
+    ("oN05", "sensor_a_offset_N05", 6),
+    ("bP05", "sensor_b_gain_P05", 7),
+    ("bN05", "sensor_b_gain_N05", 8),
+    ("bP15", "sensor_b_gain_P15", 9),
+    ("bN15", "sensor_b_gain_N15", 10),
+]
 UNIT = re.compile(r"\(([^()]+)\)$")
 
 
@@ -90,12 +95,26 @@ def diagnosed(tmp_path_factory):
     offsets of ±6.5 N and sensor-B (pitch camera) gains of ±5.8e-5 and ±1.7e-4 from 20 s."""
     d = tmp_path_factory.mktemp("fig_diag")
     for name, scen, seed in TRAIN + VAL + TEST:
-        r2rsim.run_scenario(THESIS / f"{scen}.yaml", output=d / name, seed=seed,
-                            duration=DURATION)
-    sets = {k: [str(d / n) for n, _, _ in v] for k, v in
-            (("--train", TRAIN), ("--val", VAL), ("--test", TEST))}
-    assert main(["diagnose", "--method", "pca", *[a for k, v in sets.items() for a in (k, *v)],
-                 "--n-boot", "10", "-o", str(d / "res")]) == 0
+        r2rsim.run_scenario(THESIS / f"{scen}.yaml", output=d / name, seed=seed, duration=DURATION)
+    sets = {
+        k: [str(d / n) for n, _, _ in v]
+        for k, v in (("--train", TRAIN), ("--val", VAL), ("--test", TEST))
+    }
+    assert (
+        main(
+            [
+                "diagnose",
+                "--method",
+                "pca",
+                *[a for k, v in sets.items() for a in (k, *v)],
+                "--n-boot",
+                "10",
+                "-o",
+                str(d / "res"),
+            ]
+        )
+        == 0
+    )
     return d
 
 
@@ -122,8 +141,9 @@ def categorical(axis) -> bool:
 def drawn_ticklabels(axis) -> list:
     """The tick labels the axis draws (in its view, visible, not empty)."""
     ticks = axis._update_ticks()  # the ticks draw() draws: those in the view interval
-    return [lab for t in ticks for lab in (t.label1, t.label2)
-            if lab.get_visible() and lab.get_text()]
+    return [
+        lab for t in ticks for lab in (t.label1, t.label2) if lab.get_visible() and lab.get_text()
+    ]
 
 
 def label_problems(fig) -> list[str]:
@@ -134,8 +154,14 @@ def label_problems(fig) -> list[str]:
         for which, axis in (("x", ax.xaxis), ("y", ax.yaxis)):
             label = axis.get_label_text()
             if not label and which == "x":  # a column sharing x: the bottom axes names it
-                label = next((a.get_xlabel() for a in ax.get_shared_x_axes().get_siblings(ax)
-                              if a.get_xlabel()), "")
+                label = next(
+                    (
+                        a.get_xlabel()
+                        for a in ax.get_shared_x_axes().get_siblings(ax)
+                        if a.get_xlabel()
+                    ),
+                    "",
+                )
             if not label:
                 out.append(f"axes {i}: no {which} label")
             elif not categorical(axis) and not UNIT.search(label.strip()):
@@ -150,8 +176,9 @@ def clipped(fig, renderer) -> list[str]:
     ticks, drawn = set(), set()  # every tick label, and those drawn (in the view)
     for ax in fig.axes:
         for axis in (ax.xaxis, ax.yaxis):
-            ticks |= {id(lab) for t in axis.majorTicks + axis.minorTicks
-                      for lab in (t.label1, t.label2)}
+            ticks |= {
+                id(lab) for t in axis.majorTicks + axis.minorTicks for lab in (t.label1, t.label2)
+            }
             drawn |= {id(lab) for lab in drawn_ticklabels(axis)}
     for t in fig.findobj(matplotlib.text.Text):
         if not (t.get_visible() and t.get_text().strip()) or t.get_clip_on() and t.axes:
@@ -163,15 +190,18 @@ def clipped(fig, renderer) -> list[str]:
             out.append(f"{t.get_text()!r} at {bb.bounds} outside {box.bounds}")
     tight = fig.get_tightbbox(renderer)  # inches
     whole = fig.bbox_inches
-    if tight.x0 < -0.02 or tight.y0 < -0.02 or tight.x1 > whole.x1 + 0.02 \
-            or tight.y1 > whole.y1 + 0.02:
+    if (
+        tight.x0 < -0.02
+        or tight.y0 < -0.02
+        or tight.x1 > whole.x1 + 0.02
+        or tight.y1 > whole.y1 + 0.02
+    ):
         out.append(f"the figure's artists span {tight.bounds}, the figure {whole.bounds}")
     return out
 
 
 def _overlap(a, b, pad: float = 0.5) -> bool:
-    return (min(a.x1, b.x1) - max(a.x0, b.x0) > pad) and (min(a.y1, b.y1) - max(a.y0, b.y0)
-                                                          > pad)
+    return (min(a.x1, b.x1) - max(a.x0, b.x0) > pad) and (min(a.y1, b.y1) - max(a.y0, b.y0) > pad)
 
 
 def overprinted(fig, renderer) -> list[str]:
@@ -192,8 +222,10 @@ def overprinted(fig, renderer) -> list[str]:
             for j in range(len(boxes)):
                 for k in range(j + 1, len(boxes)):
                     if _overlap(boxes[j], boxes[k]):
-                        out.append(f"axes {i} {name} tick labels {labels[j].get_text()!r} "
-                                   f"and {labels[k].get_text()!r} overlap")
+                        out.append(
+                            f"axes {i} {name} tick labels {labels[j].get_text()!r} "
+                            f"and {labels[k].get_text()!r} overlap"
+                        )
             texts += [(f"axes {i} {name} tick {lab.get_text()!r}", lab) for lab in labels]
     boxes = [(name, t, t.get_window_extent(renderer)) for name, t in texts]
     for j in range(len(boxes)):
@@ -217,16 +249,22 @@ def assert_printable(fig, what: str) -> None:
 
 def test_run_figures_are_printable(quick, diagnosed):
     assert_printable(plot_run(quick), "run figure of the quick start")
-    assert_printable(plot_run(quick, channels=["meas.*", "sp.*"], t0=9, t1=12),
-                     "zoomed run figure")
+    assert_printable(plot_run(quick, channels=["meas.*", "sp.*"], t0=9, t1=12), "zoomed run figure")
     assert_printable(plot_run(diagnosed / "bP05"), "run figure of the registration line")
 
 
 def test_sweep_figures_are_printable(sweep):
-    for axis, group in (("offset", "top_speed"), ("top_speed", "offset"), ("top_speed", None),
-                        ("fault", None), ("top_speed", "fault")):  # a fault axis: its JSON
-        assert_printable(plot_sweep(sweep, "meas.lc_rewind.tension_N", "mean", axis,
-                                    group=group), f"sweep figure by {axis}")
+    for axis, group in (
+        ("offset", "top_speed"),
+        ("top_speed", "offset"),
+        ("top_speed", None),
+        ("fault", None),
+        ("top_speed", "fault"),
+    ):  # a fault axis: its JSON
+        assert_printable(
+            plot_sweep(sweep, "meas.lc_rewind.tension_N", "mean", axis, group=group),
+            f"sweep figure by {axis}",
+        )
 
 
 def test_report_figures_are_printable(diagnosed):
@@ -289,8 +327,9 @@ def test_encoder_is_drawn_as_its_speed_not_a_barcode(quick):
     assert np.abs(y - 50.0).max() < resolution
     assert ax.get_ylabel() == "angular speed (rad/s)"
     # the band keeps the readings' extremes
-    s = pd.read_parquet(next((quick / "samples").rglob("*.parquet")),
-                        columns=["t_s", "meas.enc_pull.speed_rad_s"])
+    s = pd.read_parquet(
+        next((quick / "samples").rglob("*.parquet")), columns=["t_s", "meas.enc_pull.speed_rad_s"]
+    )
     s = s[s.t_s.between(12, 28)]["meas.enc_pull.speed_rad_s"]
     (band,) = [c for c in ax.collections if c.get_gid() == "band:meas.enc_pull.speed_rad_s"]
     ys = band.get_paths()[0].vertices[:, 1]
@@ -318,8 +357,10 @@ def test_setpoints_are_distinguishable(quick):
     ax = next(ax for ax in fig.axes if ax.get_ylabel().startswith("tension"))
     sps = [ln for ln in ax.get_lines() if ln.get_label().startswith("sp.")]
     assert len(sps) == 2  # the unwind's and the rewind's, both at 260 N
-    styles = {(matplotlib.colors.to_hex(ln.get_color()), str(ln.get_linestyle()),
-               str(ln._dash_pattern)) for ln in sps}
+    styles = {
+        (matplotlib.colors.to_hex(ln.get_color()), str(ln.get_linestyle()), str(ln._dash_pattern))
+        for ln in sps
+    }
     assert len(styles) == 2
     legend = [t.get_text() for t in ax.get_legend().get_texts()]
     assert all(ln.get_label() in legend for ln in sps)
@@ -331,8 +372,7 @@ def test_sweep_axis_has_its_unit(sweep):
     ax = fig.axes[0]
     assert ax.get_xlabel() == "offset (N)"  # a load cell's offset: the fault's unit
     assert ax.get_ylabel() == f"mean of {ch} (N)"
-    assert [ln.get_label() for ln in ax.get_lines()] == ["top_speed = 3 m/s",
-                                                         "top_speed = 5 m/s"]
+    assert [ln.get_label() for ln in ax.get_lines()] == ["top_speed = 3 m/s", "top_speed = 5 m/s"]
     assert plot_sweep(sweep, ch, axis="top_speed").axes[0].get_xlabel() == "top_speed (m/s)"
 
 
@@ -358,8 +398,14 @@ def test_readme_sweep_example_draws_the_channel_the_fault_acts_on(sweep):
 
 
 def _chromium() -> str | None:
-    return next((shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome")
-                 if shutil.which(n)), None)
+    return next(
+        (
+            shutil.which(n)
+            for n in ("chromium", "chromium-browser", "google-chrome")
+            if shutil.which(n)
+        ),
+        None,
+    )
 
 
 def test_browser_renders_the_report_with_every_image(diagnosed, tmp_path):
@@ -375,7 +421,8 @@ def test_browser_renders_the_report_with_every_image(diagnosed, tmp_path):
     assert n_img >= 5
     # a probe page loads the report in an iframe and writes what it finds into its own DOM
     probe = tmp_path / "probe.html"
-    probe.write_text(textwrap.dedent(f"""\
+    probe.write_text(
+        textwrap.dedent(f"""\
         <!DOCTYPE html><html><body><pre id="out">pending</pre>
         <iframe id="r" src="{page.name}" width="1200" height="800"></iframe>
         <script>
@@ -391,12 +438,26 @@ def test_browser_renders_the_report_with_every_image(diagnosed, tmp_path):
             title: doc.title}});
         }});
         </script></body></html>
-        """), encoding="utf-8")
+        """),
+        encoding="utf-8",
+    )
     profile = tmp_path / "profile"
-    cmd = [browser, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
-           "--no-first-run", "--disable-background-networking", "--disable-component-update",
-           "--disable-sync", f"--user-data-dir={profile}", "--allow-file-access-from-files",
-           "--virtual-time-budget=10000", "--dump-dom", probe.as_uri()]
+    cmd = [
+        browser,
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-quic",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        f"--user-data-dir={profile}",
+        "--allow-file-access-from-files",
+        "--virtual-time-budget=10000",
+        "--dump-dom",
+        probe.as_uri(),
+    ]
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stderr[-2000:]
     found = re.search(r"RESULT (\{.*?\})</pre>", res.stdout)

@@ -13,22 +13,29 @@ from r2rsim.cli import main
 from conftest import REPO
 
 README = REPO / "README.md"
-COLUMNS = {"n_runs": "n_runs", "far_ff": "far_ff", "dr": "dr", "pd": "pd",
-           "DD med s": "dd_median_s", "roc_auc": "roc_auc"}
+COLUMNS = {
+    "n_runs": "n_runs",
+    "far_ff": "far_ff",
+    "dr": "dr",
+    "pd": "pd",
+    "DD med s": "dd_median_s",
+    "roc_auc": "roc_auc",
+}
 
 
 def readme_table() -> pd.DataFrame:
     """The pooled rows of the README's first-benchmark table."""
     text = README.read_text(encoding="utf-8")
-    section = text[text.index("## First benchmark"):text.index("## Install")]
+    section = text[text.index("## First benchmark") : text.index("## Install")]
     block = re.search(r"```\n(condition fault .*?)```", section, flags=re.S).group(1)
     rows = []
     for line in block.splitlines()[1:]:
         cells = line.split()
         if cells[0] == "all":
             cells = cells[1:]
-        rows.append({"fault": cells[0], **dict(zip(COLUMNS.values(), map(float, cells[1:]),
-                                                   strict=True))})
+        rows.append(
+            {"fault": cells[0], **dict(zip(COLUMNS.values(), map(float, cells[1:]), strict=True))}
+        )
     return pd.DataFrame(rows).set_index("fault")
 
 
@@ -36,8 +43,20 @@ def test_the_readme_table_is_what_diagnose_gives(first_benchmark_home, tmp_path,
     shown = readme_table()
     assert len(shown) == 3
     out = tmp_path / "pca"
-    assert main(["diagnose", "--method", "pca", "--data",
-                 str(first_benchmark_home / "first_benchmark"), "-o", str(out)]) == 0
+    assert (
+        main(
+            [
+                "diagnose",
+                "--method",
+                "pca",
+                "--data",
+                str(first_benchmark_home / "first_benchmark"),
+                "-o",
+                str(out),
+            ]
+        )
+        == 0
+    )
     metrics = pd.read_csv(out / "metrics.csv")
     pooled = metrics[(metrics["condition"] == "all") & metrics["magnitude"].isna()]
     for fault, row in shown.iterrows():

@@ -28,11 +28,39 @@ N_MUTATIONS = 100
 RUN_EVERY = 4  # every 4th mutation is also run (--duration 0.2 s)
 TIME_LIMIT_S = 30  # per command; the slowest legitimate one takes a few seconds
 
-HOSTILE_NUMBERS = [math.nan, math.inf, -math.inf, True, False, "10**10**10 m", "1/0 m",
-                   "5 m/0", "(5 m", "2**1000000 m", "9" * 400 + " m", "1 " + "m " * 3000,
-                   "banana", "", "\x00", "1e999999", [], {}, [[[[[1]]]]]]
-HOSTILE_STRINGS = ["", "\x00", "../../escape", "x/../../../pwned", "a" * 10000, "é\u202e",
-                   42, None, [], {"a": 1}]
+HOSTILE_NUMBERS = [
+    math.nan,
+    math.inf,
+    -math.inf,
+    True,
+    False,
+    "10**10**10 m",
+    "1/0 m",
+    "5 m/0",
+    "(5 m",
+    "2**1000000 m",
+    "9" * 400 + " m",
+    "1 " + "m " * 3000,
+    "banana",
+    "",
+    "\x00",
+    "1e999999",
+    [],
+    {},
+    [[[[[1]]]]],
+]
+HOSTILE_STRINGS = [
+    "",
+    "\x00",
+    "../../escape",
+    "x/../../../pwned",
+    "a" * 10000,
+    "é\u202e",
+    42,
+    None,
+    [],
+    {"a": 1},
+]
 NEUTRAL_NUMBERS = [0, -1, 1e300, -1e300, 1e-300, 7]
 
 
@@ -86,11 +114,23 @@ def _set(tree, path, value):
 def mutate(rng: random.Random, text: str) -> tuple[str | bytes, str, bool]:
     """One mutation of a YAML text: (new text or bytes, what was done, certainly invalid)."""
     tree = yaml.safe_load(text)
-    kind = rng.choice(["number", "number", "string", "neutral", "drop", "unknown", "duplicate",
-                       "truncate", "bytes"])
+    kind = rng.choice(
+        [
+            "number",
+            "number",
+            "string",
+            "neutral",
+            "drop",
+            "unknown",
+            "duplicate",
+            "truncate",
+            "bytes",
+        ]
+    )
     leaves = list(_leaves(tree))
-    numbers = [(p, v) for p, v in leaves if isinstance(v, (int, float))
-               and not isinstance(v, bool) and p]
+    numbers = [
+        (p, v) for p, v in leaves if isinstance(v, (int, float)) and not isinstance(v, bool) and p
+    ]
     strings = [(p, v) for p, v in leaves if isinstance(v, str) and p]
     if kind == "number" and numbers:
         path, _ = rng.choice(numbers)
@@ -180,8 +220,9 @@ def test_fuzz_shipped_files(tmp_path):
         counts["invalid"] += invalid
         commands = [["validate", str(s_path)]]
         if i % RUN_EVERY == 0 or invalid:
-            commands.append(["run", str(s_path), "-o", str(case / "out"), "-q",
-                             "--duration", "0.2"])
+            commands.append(
+                ["run", str(s_path), "-o", str(case / "out"), "-q", "--duration", "0.2"]
+            )
         for argv in commands:
             try:
                 with time_limit(TIME_LIMIT_S):
@@ -190,8 +231,9 @@ def test_fuzz_shipped_files(tmp_path):
                 failures.append(f"{label}: r2rsim {argv[0]} hangs ({exc})")
                 continue
             except Exception as exc:  # noqa: BLE001 - a traceback is what we look for
-                failures.append(f"{label}: r2rsim {argv[0]} raised {exc.__class__.__name__}: "
-                                f"{str(exc)[:200]}")
+                failures.append(
+                    f"{label}: r2rsim {argv[0]} raised {exc.__class__.__name__}: {str(exc)[:200]}"
+                )
                 continue
             if rc in (0, 1, 2):
                 counts[f"exit{rc}"] += 1
@@ -203,13 +245,20 @@ def test_fuzz_shipped_files(tmp_path):
             if rc == 2:
                 lines = [ln for ln in err.splitlines() if ln.strip()]
                 # (an unknown key's message quotes its line of the file, indented)
-                if not lines or not all(ln.startswith(("error:", str(case), "warning:", "    "))
-                                        for ln in lines) or lines[0].startswith(" "):
-                    failures.append(f"{label}: r2rsim {argv[0]} exit 2 without a clean "
-                                    f"message: {err[:300]!r}")
+                if (
+                    not lines
+                    or not all(
+                        ln.startswith(("error:", str(case), "warning:", "    ")) for ln in lines
+                    )
+                    or lines[0].startswith(" ")
+                ):
+                    failures.append(
+                        f"{label}: r2rsim {argv[0]} exit 2 without a clean message: {err[:300]!r}"
+                    )
                 elif str(case) not in err:
-                    failures.append(f"{label}: r2rsim {argv[0]} message names no file: "
-                                    f"{err[:300]!r}")
+                    failures.append(
+                        f"{label}: r2rsim {argv[0]} message names no file: {err[:300]!r}"
+                    )
                 if leftovers:
                     failures.append(f"{label}: r2rsim {argv[0]} exit 2 left {leftovers}")
             elif rc not in (0, 1):

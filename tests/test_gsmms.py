@@ -96,8 +96,7 @@ def test_growth_terminates_on_adversarial_data(kind):
     else:  # one far outlier: the farthest-point seed lands on it
         S = np.vstack([rng.standard_normal((n, 2)) * 0.01, [[1e6, 1e6]]])
         Z = rng.standard_normal((n + 1, 3))
-    graph, models, history = grown(S, Z, zeta_threshold=0.0, min_improvement=None,
-                                   max_nodes=6)
+    graph, models, history = grown(S, Z, zeta_threshold=0.0, min_improvement=None, max_nodes=6)
     assert 1 <= graph.n_nodes <= 6
     assert len(history) <= 6
     assert history[-1].decision.startswith("stop")
@@ -123,11 +122,14 @@ def node_data(seed=1, n=40_000):
     """A node's data: three correlated channels, standardised, and topological weights."""
     rng = np.random.default_rng(seed)
     t = 3 * rng.standard_normal(n)
-    Z = np.c_[t + 0.3 * rng.standard_normal(n), 2 * t + 0.3 * rng.standard_normal(n),
-              rng.standard_normal(n) + 0.2 * t]
+    Z = np.c_[
+        t + 0.3 * rng.standard_normal(n),
+        2 * t + 0.3 * rng.standard_normal(n),
+        rng.standard_normal(n) + 0.2 * t,
+    ]
     Z = (Z - Z.mean(0)) / Z.std(0) + np.array([0.5, -0.2, 1.0])  # uncentred, as P is
     hops = rng.integers(0, 3, n)
-    w = np.exp(-hops**2 / (2 * 0.8**2))
+    w = np.exp(-(hops**2) / (2 * 0.8**2))
     return Z, w
 
 
@@ -139,8 +141,9 @@ def cosine(a, b):
 def test_minibatch_sgd_matches_the_eigenvector_oracle(lambda1):
     Z, w = node_data()
     oracle = oracle_relations(Z, w, lambda1=lambda1)
-    om, b = fit_relations(Z, w, solver="minibatch", lambda1=lambda1, n_epochs=2.0,
-                          rng=np.random.default_rng(0))
+    om, b = fit_relations(
+        Z, w, solver="minibatch", lambda1=lambda1, n_epochs=2.0, rng=np.random.default_rng(0)
+    )
     assert cosine(om[:, 0], oracle[:, 0]) >= 0.999
     j_sgd, j_or = (objective(o, Z, w, lambda1) for o in (om, oracle))
     assert abs(j_sgd - j_or) <= 0.01 * j_or
@@ -163,8 +166,7 @@ def test_the_oracle_is_the_exact_minimiser():
 def test_several_relations_are_orthogonal_and_match_the_oracle():
     Z, w = node_data(seed=4)
     oracle = oracle_relations(Z, w, n_relations=2)
-    om, _ = fit_relations(Z, w, 2, solver="minibatch", n_epochs=2.0,
-                          rng=np.random.default_rng(0))
+    om, _ = fit_relations(Z, w, 2, solver="minibatch", n_epochs=2.0, rng=np.random.default_rng(0))
     assert abs(om[:, 0] @ om[:, 1]) < 1e-9
     for k in range(2):
         assert cosine(om[:, k], oracle[:, k]) >= 0.999
@@ -175,8 +177,7 @@ def test_fault_normalised_relation_matches_its_oracle():
     F = np.eye(3)[:, [0]]
     oracle = fault_normalised_oracle(Z, w, F)
     assert oracle[0, 0] == pytest.approx(1.0)
-    om, _ = fit_relations(Z, w, F=F, solver="minibatch", n_epochs=2.0,
-                          rng=np.random.default_rng(0))
+    om, _ = fit_relations(Z, w, F=F, solver="minibatch", n_epochs=2.0, rng=np.random.default_rng(0))
     assert om[0, 0] == pytest.approx(1.0, abs=1e-9)  # the constraint holds at every step
     assert cosine(om[:, 0], oracle[:, 0]) >= 0.999
     j_sgd, j_or = (objective(o, Z, w, fault_normalised=True) for o in (om, oracle))
@@ -196,8 +197,7 @@ def test_the_printed_inverse_square_step_stalls():
     # Σ η0/idx² is finite (1.64 η0): from a random start the iterate cannot travel far
     Z, w = node_data(seed=7, n=20_000)
     j_or = objective(oracle_relations(Z, w), Z, w)
-    om, _ = fit_relations(Z, w, solver="minibatch", step="inv_sq",
-                          rng=np.random.default_rng(0))
+    om, _ = fit_relations(Z, w, solver="minibatch", step="inv_sq", rng=np.random.default_rng(0))
     assert objective(om, Z, w) > 1.5 * j_or
 
 
@@ -210,16 +210,14 @@ def run_frame(regime, seed, n=3000, noise=(1.0, 2.0), fault=0.0):
     a = level + 5.0 * np.sin(np.arange(n) / 50.0 + seed) + rng.standard_normal(n)
     b = gain * a + noise[regime % 2] * rng.standard_normal(n)
     a = a + fault
-    return pd.DataFrame({"t_s": np.arange(n) * 0.01, "sp.level": level, "meas.a": a,
-                         "meas.b": b})
+    return pd.DataFrame({"t_s": np.arange(n) * 0.01, "sp.level": level, "meas.a": a, "meas.b": b})
 
 
 PARAMS = dict(smooth_s=0.0, random_state=0, k_max=100)
 
 
 def alarm_rate(est, frames):
-    return float(np.mean(np.concatenate([est.decide(est.score(f)).to_numpy()
-                                         for f in frames])))
+    return float(np.mean(np.concatenate([est.decide(est.score(f)).to_numpy() for f in frames])))
 
 
 def test_gsmms_finds_the_regimes_and_its_threshold_is_regime_aware():
@@ -267,9 +265,14 @@ def test_fault_normalised_relation_sees_a_fault_the_unit_norm_one_misses():
     def frame(seed, level, fault=0.0):
         r = np.random.default_rng(seed)
         n = 3000
-        return pd.DataFrame({"t_s": np.arange(n) * 0.01, "sp.level": level,
-                             "meas.a": level + 3 * r.standard_normal(n) + fault,
-                             "meas.b": level / 2 + r.standard_normal(n)})
+        return pd.DataFrame(
+            {
+                "t_s": np.arange(n) * 0.01,
+                "sp.level": level,
+                "meas.a": level + 3 * r.standard_normal(n) + fault,
+                "meas.b": level / 2 + r.standard_normal(n),
+            }
+        )
 
     train = [frame(s, lv) for s in (1, 2) for lv in (100.0, 130.0)]
     unit = GSMMS(fault_channels=None, **PARAMS).fit(train)  # the thesis's relation
@@ -288,9 +291,14 @@ def held_frame(seed, level, fault_a=0.0, fault_b=0.0, n=3000):
     """meas.b held still within a regime (noise 1), meas.a free (noise 3), both following
     the set-point: the case where one unit-norm relation is blind to a."""
     r = np.random.default_rng(seed)
-    return pd.DataFrame({"t_s": np.arange(n) * 0.01, "sp.level": level,
-                         "meas.a": level + 3 * r.standard_normal(n) + fault_a,
-                         "meas.b": level / 2 + r.standard_normal(n) + fault_b})
+    return pd.DataFrame(
+        {
+            "t_s": np.arange(n) * 0.01,
+            "sp.level": level,
+            "meas.a": level + 3 * r.standard_normal(n) + fault_a,
+            "meas.b": level / 2 + r.standard_normal(n) + fault_b,
+        }
+    )
 
 
 def test_default_sees_a_fault_on_every_model_channel():
@@ -307,8 +315,10 @@ def test_default_sees_a_fault_on_every_model_channel():
     unit.calibrate([held_frame(s, lv) for s in (4, 5) for lv in (100.0, 130.0)])
 
     def shift(e, **fault):  # mean statistic, faulty minus healthy (same noise, seed 9)
-        return float(np.mean(e.score(held_frame(9, 100.0, **fault))["statistic"])
-                     - np.mean(e.score(held_frame(9, 100.0))["statistic"]))
+        return float(
+            np.mean(e.score(held_frame(9, 100.0, **fault))["statistic"])
+            - np.mean(e.score(held_frame(9, 100.0))["statistic"])
+        )
 
     k = 3.0
     # steps of 5σ of each channel's own noise (a: 15, b: 5)
@@ -350,48 +360,58 @@ def test_fault_normalised_oracle_with_a_constant_channel():
         assert abs(om[3, j]) < 1e-9
 
 
-@pytest.mark.parametrize("params, match", [
-    ({"solver": "adam"}, "solver must be one of"),
-    ({"step": "const"}, "step must be one of"),
-    ({"max_nodes": 0}, "max_nodes must be an integer from 1 to 1000"),
-    ({"initial_nodes": 4, "max_nodes": 2}, "initial_nodes"),
-    ({"eta0": 0.0}, "eta0 must be > 0 and at most 2"),
-    ({"eta0": 1e300}, "eta0 must be > 0 and at most 2"),
-    ({"n_epochs": 1e300}, "n_epochs must be > 0 and at most 100"),
-    ({"sigma0": 1e300}, "sigma0 must be > 0 and at most 1000"),
-    ({"k_max": 10**12}, "k_max must be an integer from 1 to 100000"),
-    ({"batch_size": 10**12}, "batch_size must be an integer from 1 to 4096"),
-    ({"batch_size": 128.5}, "batch_size must be an integer"),
-    ({"max_nodes": True}, "max_nodes must be an integer"),
-    ({"k_sigma": float("inf")}, "k_sigma must be a positive finite number"),
-    ({"zeta_threshold": float("nan")}, "zeta_threshold"),
-    ({"smooth_s": -1.0}, "smooth_s"),
-    ({"smooth_s": float("nan")}, "smooth_s must be a finite number"),
-    ({"min_improvement": float("inf")}, "min_improvement"),
-    ({"fault_channels": "meas.zzz"}, "fault_channels"),
-    ({"partition_features": "sp.nothing"}, "no column matching sp.nothing"),
-    # failed inside the fit (numpy's seed, fnmatch) as plug-in crashes, exit 1
-    ({"random_state": -1},
-     "random_state must be null or an integer from 0 to 18446744073709551615, got -1"),
-    ({"random_state": 2**64}, "random_state must be null or an integer"),
-    ({"model_features": [1, 2]}, "model_features must be a glob pattern or a list of them"),
-    ({"partition_features": 3}, "partition_features must be a glob pattern"),
-    ({"fault_channels": [None]}, "fault_channels must be a glob pattern"),
-    ({"fault_channels": 3}, "fault_channels must be a glob pattern or a list of them"),
-    ({"fault_channels": []}, "fault_channels"),
-    # several unit-norm relations need the unit-norm design (the default is fault-normalised)
-    ({"n_relations": 2}, r"n_relations = 2 applies to the unit-norm relations \(fault_channels:"
-                         r" null\); with fault_channels 'all' there is one"),
-    ({"n_relations": 2, "fault_channels": "meas.a"}, "n_relations = 2 applies to the unit"),
-    # accepted before, contradicting the method: a widening neighbourhood, a share above 1
-    # (the map never grew), truthiness deciding a switch ("no" turned derivatives on)
-    ({"sigma0": 1.0, "sigma_final": 5.0}, r"sigma_final \(5.0\) must not exceed sigma0"),
-    ({"zeta_threshold": 5.0}, r"zeta_threshold is a share of the loss, in \(0, 1\)"),
-    ({"derivatives": "no"}, "derivatives must be true or false, got 'no'"),
-    # more relations than the model features leave: a bare ValueError inside the fit
-    ({"n_relations": 10, "fault_channels": None},
-     "n_relations = 10, but the 2 model features leave 2 dimension"),
-])
+@pytest.mark.parametrize(
+    "params, match",
+    [
+        ({"solver": "adam"}, "solver must be one of"),
+        ({"step": "const"}, "step must be one of"),
+        ({"max_nodes": 0}, "max_nodes must be an integer from 1 to 1000"),
+        ({"initial_nodes": 4, "max_nodes": 2}, "initial_nodes"),
+        ({"eta0": 0.0}, "eta0 must be > 0 and at most 2"),
+        ({"eta0": 1e300}, "eta0 must be > 0 and at most 2"),
+        ({"n_epochs": 1e300}, "n_epochs must be > 0 and at most 100"),
+        ({"sigma0": 1e300}, "sigma0 must be > 0 and at most 1000"),
+        ({"k_max": 10**12}, "k_max must be an integer from 1 to 100000"),
+        ({"batch_size": 10**12}, "batch_size must be an integer from 1 to 4096"),
+        ({"batch_size": 128.5}, "batch_size must be an integer"),
+        ({"max_nodes": True}, "max_nodes must be an integer"),
+        ({"k_sigma": float("inf")}, "k_sigma must be a positive finite number"),
+        ({"zeta_threshold": float("nan")}, "zeta_threshold"),
+        ({"smooth_s": -1.0}, "smooth_s"),
+        ({"smooth_s": float("nan")}, "smooth_s must be a finite number"),
+        ({"min_improvement": float("inf")}, "min_improvement"),
+        ({"fault_channels": "meas.zzz"}, "fault_channels"),
+        ({"partition_features": "sp.nothing"}, "no column matching sp.nothing"),
+        # failed inside the fit (numpy's seed, fnmatch) as plug-in crashes, exit 1
+        (
+            {"random_state": -1},
+            "random_state must be null or an integer from 0 to 18446744073709551615, got -1",
+        ),
+        ({"random_state": 2**64}, "random_state must be null or an integer"),
+        ({"model_features": [1, 2]}, "model_features must be a glob pattern or a list of them"),
+        ({"partition_features": 3}, "partition_features must be a glob pattern"),
+        ({"fault_channels": [None]}, "fault_channels must be a glob pattern"),
+        ({"fault_channels": 3}, "fault_channels must be a glob pattern or a list of them"),
+        ({"fault_channels": []}, "fault_channels"),
+        # several unit-norm relations need the unit-norm design (the default is fault-normalised)
+        (
+            {"n_relations": 2},
+            r"n_relations = 2 applies to the unit-norm relations \(fault_channels:"
+            r" null\); with fault_channels 'all' there is one",
+        ),
+        ({"n_relations": 2, "fault_channels": "meas.a"}, "n_relations = 2 applies to the unit"),
+        # accepted before, contradicting the method: a widening neighbourhood, a share above 1
+        # (the map never grew), truthiness deciding a switch ("no" turned derivatives on)
+        ({"sigma0": 1.0, "sigma_final": 5.0}, r"sigma_final \(5.0\) must not exceed sigma0"),
+        ({"zeta_threshold": 5.0}, r"zeta_threshold is a share of the loss, in \(0, 1\)"),
+        ({"derivatives": "no"}, "derivatives must be true or false, got 'no'"),
+        # more relations than the model features leave: a bare ValueError inside the fit
+        (
+            {"n_relations": 10, "fault_channels": None},
+            "n_relations = 10, but the 2 model features leave 2 dimension",
+        ),
+    ],
+)
 def test_parameters_are_validated(params, match):
     with pytest.raises(InputError, match=match):
         GSMMS(**{**PARAMS, **params}).fit([run_frame(0, 1)])
@@ -445,8 +465,9 @@ def test_sgd_minimises_the_penalised_loss_and_the_oracle_is_its_hard_limit(lambd
     Z, w = node_data(seed=9)
     G = np.array([[0.6], [0.8], [0.0]])  # unit norm, as the plug-in gives it
     _, C = weighted_moments(Z, w)
-    soft, _ = fit_relations(Z, w, solver="minibatch", lambda2=lambda2, G=G, n_epochs=2.0,
-                            rng=np.random.default_rng(0))
+    soft, _ = fit_relations(
+        Z, w, solver="minibatch", lambda2=lambda2, G=G, n_epochs=2.0, rng=np.random.default_rng(0)
+    )
     exact = np.linalg.eigh(C + lambda2 * G @ G.T)[1][:, 0]
     assert cosine(soft[:, 0], exact) >= 0.999
     hard, _ = fit_relations(Z, w, solver="eigh", G=G)
@@ -463,8 +484,16 @@ def test_fault_normalised_sgd_minimises_the_penalised_loss(lambda2):
     G = np.array([[0.6], [0.0], [0.8]])
     f = np.eye(3)[:, 0]
     _, C = weighted_moments(Z, w)
-    soft, _ = fit_relations(Z, w, solver="minibatch", lambda2=lambda2, G=G, F=f[:, None],
-                            n_epochs=2.0, rng=np.random.default_rng(0))
+    soft, _ = fit_relations(
+        Z,
+        w,
+        solver="minibatch",
+        lambda2=lambda2,
+        G=G,
+        F=f[:, None],
+        n_epochs=2.0,
+        rng=np.random.default_rng(0),
+    )
     m = np.linalg.solve(C + lambda2 * G @ G.T, f)
     assert soft[0, 0] == pytest.approx(1.0, abs=1e-9)
     assert cosine(soft[:, 0], m / (f @ m)) >= 0.999
@@ -481,13 +510,24 @@ def registration_runs(tmp_path_factory):
     import yaml
 
     d = tmp_path_factory.mktemp("gsmms_physics")
-    base = yaml.safe_load((REPO / "scenarios" / "thesis_realistic" / "registration.yaml")
-                          .read_text(encoding="utf-8"))
+    base = yaml.safe_load(
+        (REPO / "scenarios" / "thesis_realistic" / "registration.yaml").read_text(encoding="utf-8")
+    )
     out = []
     for mode, v, T in (("OC1", 0.5, 130), ("OC2", 1.0, 160)):
-        sc = {**base, "line": REG_LINE, "duration": "20 s", "programme": [
-            {"at": "0 s", "line_speed": f"{v} m/s", "mode": mode,
-             "tension": {"registration_loop": f"{T} N", "unwind_tension": f"{T} N"}}]}
+        sc = {
+            **base,
+            "line": REG_LINE,
+            "duration": "20 s",
+            "programme": [
+                {
+                    "at": "0 s",
+                    "line_speed": f"{v} m/s",
+                    "mode": mode,
+                    "tension": {"registration_loop": f"{T} N", "unwind_tension": f"{T} N"},
+                }
+            ],
+        }
         (d / f"{mode}.yaml").write_text(yaml.safe_dump(sc), encoding="utf-8")
         r2rsim.run_scenario(d / f"{mode}.yaml", output=d / mode, seed=1)
         out.append(read_runs(d / mode)[0])
@@ -495,10 +535,15 @@ def registration_runs(tmp_path_factory):
 
 
 @pytest.mark.parametrize("derivatives", [False, True])
-def test_physics_relations_cancel_the_state_of_the_reduced_model(registration_runs,
-                                                                 derivatives):
-    est = GSMMS(model_features=[A_COL, B_COL], fault_channels=A_COL, derivatives=derivatives,
-                physics={"line": REG_LINE}, solver="eigh", random_state=0)
+def test_physics_relations_cancel_the_state_of_the_reduced_model(registration_runs, derivatives):
+    est = GSMMS(
+        model_features=[A_COL, B_COL],
+        fault_channels=A_COL,
+        derivatives=derivatives,
+        physics={"line": REG_LINE},
+        solver="eigh",
+        random_state=0,
+    )
     est.fit(registration_runs)
     det = est.physics_
     EA, L0 = det.physical_["web_EA_N"], det.physical_["relaxed_pitch_m"]
@@ -511,8 +556,10 @@ def test_physics_relations_cancel_the_state_of_the_reduced_model(registration_ru
         p = np.nanmean(P[bmu == m], axis=0)
         # ∂O_NL/∂x at the node's point by central differences of the observation itself
         h = 1e-3 * abs(p[0])
-        dO = (det.model_.observation_nl(p[:1] + h, p[1:])
-              - det.model_.observation_nl(p[:1] - h, p[1:])) / (2 * h)
+        dO = (
+            det.model_.observation_nl(p[:1] + h, p[1:])
+            - det.model_.observation_nl(p[:1] - h, p[1:])
+        ) / (2 * h)
         g = dO[[0, 2, 1, 3] if derivatives else [0, 2]]  # stack [A, Ȧ, B, Ḃ] -> features
         omega_raw = est.models_.omega[m][:, 0] / est.z_scale_
         assert abs(omega_raw @ g) <= 1e-6 * np.linalg.norm(omega_raw) * np.linalg.norm(g)
@@ -520,17 +567,20 @@ def test_physics_relations_cancel_the_state_of_the_reduced_model(registration_ru
     assert est.decide(est.score(registration_runs[1])).mean() < 0.2
 
 
-@pytest.mark.parametrize("params, match", [
-    ({"physics": "lines/registration_realistic.yaml"}, "physics must be a mapping"),
-    ({"physics": {"line": REG_LINE, "speed": 1}}, "physics has no parameter speed"),
-    ({"physics": {"line": REG_LINE}, "model_features": [A_COL]}, "must be the reduced model"),
-    ({"physics": {"line": REG_LINE, "design": "x"}}, "design must be one of"),
-    ({"physics": {"line": REG_LINE, "drive_speed": "meas.none"}}, "meas.none"),
-    ({"lambda2": -1.0}, "lambda2 must be a finite number >= 0"),
-    ({"lambda2": float("nan")}, "lambda2"),
-    ({"lambda2": True}, "lambda2 must be a number"),
-    ({"physics": {"line": True}}, "line must be the path of a line file"),
-])
+@pytest.mark.parametrize(
+    "params, match",
+    [
+        ({"physics": "lines/registration_realistic.yaml"}, "physics must be a mapping"),
+        ({"physics": {"line": REG_LINE, "speed": 1}}, "physics has no parameter speed"),
+        ({"physics": {"line": REG_LINE}, "model_features": [A_COL]}, "must be the reduced model"),
+        ({"physics": {"line": REG_LINE, "design": "x"}}, "design must be one of"),
+        ({"physics": {"line": REG_LINE, "drive_speed": "meas.none"}}, "meas.none"),
+        ({"lambda2": -1.0}, "lambda2 must be a finite number >= 0"),
+        ({"lambda2": float("nan")}, "lambda2"),
+        ({"lambda2": True}, "lambda2 must be a number"),
+        ({"physics": {"line": True}}, "line must be the path of a line file"),
+    ],
+)
 def test_physics_parameters_are_validated(registration_runs, params, match):
     with pytest.raises(InputError, match=match):
         GSMMS(**{"model_features": [A_COL, B_COL], **params}).fit(registration_runs[:1])
@@ -539,8 +589,9 @@ def test_physics_parameters_are_validated(registration_runs, params, match):
 def test_training_arrays_are_what_the_fit_used():
     # refitting each node's relation on them with the exact solver gives the fitted one
     runs = [run_frame(0, 1), run_frame(1, 2)]
-    est = GSMMS(**{**PARAMS, "solver": "eigh", "max_samples": 4000,
-                   "fault_channels": None}).fit(runs)
+    est = GSMMS(**{**PARAMS, "solver": "eigh", "max_samples": 4000, "fault_channels": None}).fit(
+        runs
+    )
     S, Z = est.training_arrays(runs)
     assert S.shape == (4000, len(est.partition_columns_))
     assert Z.shape == (4000, len(est.model_columns_))
@@ -556,13 +607,21 @@ def test_training_arrays_are_what_the_fit_used():
 def test_the_physics_term_refuses_a_run_of_another_line(registration_runs):
     # fitted with the physics term configured from the runs' own line; a run said to come
     # from a line with a longer registration span is refused, naming the number
-    est = GSMMS(model_features=[A_COL, B_COL], fault_channels=A_COL, physics={},
-                solver="eigh", random_state=0).fit(registration_runs)
+    est = GSMMS(
+        model_features=[A_COL, B_COL],
+        fault_channels=A_COL,
+        physics={},
+        solver="eigh",
+        random_state=0,
+    ).fit(registration_runs)
     assert est.physics_.physical_["span_length_m"] == 1.5
     frame = attach_line(registration_runs[1].visible(), registration_runs[1])
     other = json.loads(frame.attrs[LINE_ATTR])
     next(s for s in other["spans"] if s.get("id") == "registration")["length"] = "2 m"
     frame.attrs[LINE_ATTR] = json.dumps(other)
-    with pytest.raises(InputError, match=r"span_length_m 2 m where the model was fitted "
-                                         r"with 1.5 m"):
+    with pytest.raises(
+        InputError,
+        match=r"span_length_m 2 m where the model was fitted "
+        r"with 1.5 m",
+    ):
         est.score(frame)

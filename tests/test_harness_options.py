@@ -25,8 +25,13 @@ def with_labels(run, **cols):
 def switching(x, onset=None, seed=1, switch=10):
     """A 20-sample run in OC1 until ``switch``, then OC2."""
     r = make_run(x, onset=onset, seed=seed, mode="OC1+OC2")
-    return with_labels(r, **{"label.mode": ["OC1"] * switch + ["OC2"] * (len(x) - switch),
-                             "label.severity": np.where(r.samples["label.is_faulty"], 1.0, 0.0)})
+    return with_labels(
+        r,
+        **{
+            "label.mode": ["OC1"] * switch + ["OC2"] * (len(x) - switch),
+            "label.severity": np.where(r.samples["label.is_faulty"], 1.0, 0.0),
+        },
+    )
 
 
 @pytest.fixture
@@ -72,15 +77,25 @@ def test_mode_strata_at_theta(train):
 def test_options_off_change_nothing(train):
     runs = mode_runs()
     a = evaluate(Passthrough(), train, runs, n_boot=50).metrics
-    b = evaluate(Passthrough(), train, runs, n_boot=50, mode_strata=True, window="steady",
-                 vus_buffer=1.0, isolation=True).metrics
+    b = evaluate(
+        Passthrough(),
+        train,
+        runs,
+        n_boot=50,
+        mode_strata=True,
+        window="steady",
+        vus_buffer=1.0,
+        isolation=True,
+    ).metrics
     keep = ~b.condition.str.startswith("mode:") & ~b.metric.isin(
-        ["dr_steady", "pd_steady", "pd_steady_null", "dd_steady_median_s", "vus_pr"])
+        ["dr_steady", "pd_steady", "pd_steady_null", "dd_steady_median_s", "vus_pr"]
+    )
     cols = [c for c in a.columns if c != "value"]
     drop = a.metric == "fit_s"  # wall times differ
-    pd.testing.assert_frame_equal(a.loc[~drop, cols].reset_index(drop=True),
-                                  b.loc[keep & (b.metric != "fit_s"), cols]
-                                  .reset_index(drop=True))
+    pd.testing.assert_frame_equal(
+        a.loc[~drop, cols].reset_index(drop=True),
+        b.loc[keep & (b.metric != "fit_s"), cols].reset_index(drop=True),
+    )
     assert not a.metric.isin(["dr_steady", "vus_pr", "hit1"]).any()
     assert not a.condition.str.startswith("mode:").any()
 
@@ -117,32 +132,40 @@ def two_channel(a, b, *, onset=None, truth=None, seed=1):
 
 def test_isolation_hit1_of_the_residual_baseline():
     rng = np.random.default_rng(0)
-    train = [two_channel(rng.normal(size=200), rng.normal(size=200), seed=100 + i)
-             for i in range(2)]
+    train = [
+        two_channel(rng.normal(size=200), rng.normal(size=200), seed=100 + i) for i in range(2)
+    ]
     noise = rng.normal(size=(3, 2, 60)) * 0.1
     step = np.r_[np.zeros(30), np.full(30, 8.0)]
-    test = [two_channel(noise[0, 0], noise[0, 1] + step, onset=30, truth="b", seed=1),
-            two_channel(noise[1, 0] + step, noise[1, 1], onset=30, truth="a", seed=2),
-            # labelled on a, but b carries the fault: the ranking (b first) misses
-            two_channel(noise[2, 0], noise[2, 1] + step, onset=30, truth="a", seed=3)]
+    test = [
+        two_channel(noise[0, 0], noise[0, 1] + step, onset=30, truth="b", seed=1),
+        two_channel(noise[1, 0] + step, noise[1, 1], onset=30, truth="a", seed=2),
+        # labelled on a, but b carries the fault: the ranking (b first) misses
+        two_channel(noise[2, 0], noise[2, 1] + step, onset=30, truth="a", seed=3),
+    ]
     ev = evaluate(ResidualThreshold(alpha=0.01), train, test, n_boot=0, isolation=True)
     assert value(ev, "hit1", fault="sensor.offset:s1") == pytest.approx(2 / 3)
     assert value(ev, "hit1_samples", fault="sensor.offset:s1") == pytest.approx(2 / 3)
     assert "hit1" in ev.table().columns
     # a plug-in without a ranking: no hit1
-    ev = evaluate(Passthrough(), [healthy(100)], [make_run([0] * 10, onset=4)], n_boot=0,
-                  isolation=True)
+    ev = evaluate(
+        Passthrough(), [healthy(100)], [make_run([0] * 10, onset=4)], n_boot=0, isolation=True
+    )
     assert "hit1" not in set(ev.metrics.metric)
 
 
 def test_vus_pr_in_the_table(train):
     rng = np.random.default_rng(5)
-    runs = [make_run(rng.random(20) + np.r_[np.zeros(8), np.full(12, 0.5)], onset=8, seed=i)
-            for i in range(3)] + [healthy(9, rng.random(20))]
+    runs = [
+        make_run(rng.random(20) + np.r_[np.zeros(8), np.full(12, 0.5)], onset=8, seed=i)
+        for i in range(3)
+    ] + [healthy(9, rng.random(20))]
     ev = evaluate(Passthrough(), train, runs, n_boot=0, vus_buffer=1.0)  # 2 samples at 0.5 s
     assert ev.settings["vus_max_buffer_samples"] == 2
-    rd = [run_data(r, r.samples["meas.x"].to_numpy(), r.samples["meas.x"].to_numpy() > 5)
-          for r in runs]
+    rd = [
+        run_data(r, r.samples["meas.x"].to_numpy(), r.samples["meas.x"].to_numpy() > 5)
+        for r in runs
+    ]
     s, y = M.pooled_scores(rd)
     groups = np.repeat(np.arange(len(rd)), [r.n for r in rd])
     assert value(ev, "vus_pr") == pytest.approx(M.vus_pr(s, y, 2, groups=groups))
@@ -166,8 +189,11 @@ def test_vus_buffer_is_bounded_before_the_fit(train):
             evaluate(FitRaises(), train, runs, vus_buffer=bad)
     # samples: 50 s at 1 kHz is 50 000 buffer lengths, more than 10 000
     fast = [make_run(np.r_[np.zeros(8), np.ones(12)], onset=8, seed=2, dt=0.001)]
-    with pytest.raises(InputError, match=r"vus_buffer 50 s is 5e\+04 samples .* limit of "
-                                         r"10000 buffer lengths"):
+    with pytest.raises(
+        InputError,
+        match=r"vus_buffer 50 s is 5e\+04 samples .* limit of "
+        r"10000 buffer lengths",
+    ):
         evaluate(FitRaises(), [healthy(100, dt=0.001)], fast, vus_buffer=50.0)
     ev = evaluate(Passthrough(), train, runs, n_boot=0, vus_buffer=60.0)  # 120 samples
     assert ev.settings["vus_max_buffer_samples"] == 120

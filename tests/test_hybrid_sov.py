@@ -24,8 +24,9 @@ def run(tmp_path_factory):
     """90 s of the calibrated test bed: steady running and the first roll change (fill at
     about 67 s, splice at 75 s)."""
     d = tmp_path_factory.mktemp("hsov") / "tb"
-    r2rsim.run_scenario(REPO / "scenarios" / "thesis_realistic" / "testbed.yaml", output=d,
-                        seed=1, duration=90.0)
+    r2rsim.run_scenario(
+        REPO / "scenarios" / "thesis_realistic" / "testbed.yaml", output=d, seed=1, duration=90.0
+    )
     return read_runs(d)[0]
 
 
@@ -34,8 +35,12 @@ def dancer(tmp_path_factory):
     """80 s of the dancer-failure scenario (seed 1): the arm seizes at 40 s, the first fill
     starts at about 67 s; returns the run and the fill's start [s]."""
     d = tmp_path_factory.mktemp("hsov_df") / "df"
-    r2rsim.run_scenario(REPO / "scenarios" / "thesis_realistic" /
-                        "testbed_dancer_failure.yaml", output=d, seed=1, duration=80.0)
+    r2rsim.run_scenario(
+        REPO / "scenarios" / "thesis_realistic" / "testbed_dancer_failure.yaml",
+        output=d,
+        seed=1,
+        duration=80.0,
+    )
     ev = pd.read_parquet(d / "events.parquet")
     fill = float(ev.loc[(ev["kind"] == "splice") & (ev["state"] == "fill"), "t_s"].min())
     return read_runs(d)[0], fill
@@ -57,7 +62,8 @@ def test_stages_from_the_line_file():
     assert st.column("tension") == "meas.lc_stage2.tension_N"
     # J(R) of the unwind: core + (π/2)ρw(R⁴ - Rc⁴)
     assert st.roll_inertia(0.093) == pytest.approx(
-        0.3 + np.pi / 2 * 1390 * 0.5 * (0.093**4 - 0.076**4))
+        0.3 + np.pi / 2 * 1390 * 0.5 * (0.093**4 - 0.076**4)
+    )
     with pytest.raises(InputError, match="stage"):
         load_stages(REPO / "lines" / "registration_realistic.yaml")
 
@@ -94,7 +100,7 @@ def test_physics_regressors_reproduce_true_tensions(run):
 def test_models_fit_and_predict(run):
     st = load_stages(LINE)
     frame = run.visible(drive_data=True)
-    s = F.signals(frame, st, causal=False)        # estimates at their own sample, as the truth
+    s = F.signals(frame, st, causal=False)  # estimates at their own sample, as the truth
     hm = HybridModel(st, kind="tobit").fit([s])
     p = hm.predict(s)
     S = run.samples
@@ -108,40 +114,52 @@ def test_models_fit_and_predict(run):
     assert np.sqrt(np.mean((dd.predict(s)["T_s2"].to_numpy() - s.T2) ** 2)) < 5.0
 
 
-@pytest.mark.parametrize("params, match", [
-    ({"line": "nope.yaml"}, "does not exist"),
-    ({"line": str(LINE), "selection": "t"}, "selection"),
-    ({"line": str(LINE), "denoise": "fft"}, "denoise"),
-    ({"line": str(LINE), "alpha": 2.0}, "alpha"),
-    ({"line": str(LINE), "window_s": 0}, "window_s"),
-    ({"line": str(LINE), "window_s": float("nan")}, "window_s"),
-    ({"line": str(LINE), "censor_at": float("inf")}, "censor_at must be a finite"),
-    ({"line": str(LINE), "censor_at": 1e300}, "within ±1e6 N"),
-    ({"line": str(LINE), "window_s": 1e300}, "at most 60 s"),
-    ({"line": str(LINE), "window_s": True}, "window_s must be a number"),
-    ({"line": str(LINE), "alpha_enter": True}, "alpha_enter must be a number"),
-    ({"line": str(LINE), "alpha_enter": 0.0}, r"alpha_enter must be a number in \(0, 1\)"),
-    ({"line": str(LINE), "alpha": False}, r"alpha must be a number in \(0, 1\)"),
-    ({"line": str(LINE), "censor_at": "0"}, "censor_at must be a number"),
-    ({"line": True}, "line must be the path"),
-    ({"line": "/dev/zero"}, "line file /dev/zero is not a regular file"),
-    ({"line": str(REPO)}, "is not a regular file"),
-    ({"line": str(LINE), "random_state": -1}, "random_state must be null or an integer"),
-    ({"line": str(LINE), "causal": "yes"}, "hybrid-sov: causal must be true or false, got "
-                                           "'yes'"),
-    ({"line": str(LINE), "causal": 1}, "hybrid-sov: causal must be true or false, got 1"),
-    ({"line": str(LINE), "causal": None}, "hybrid-sov: causal must be true or false"),
-    # a role named by a wrong id: the parameter and the line's candidates
-    ({"line": str(LINE), "load_cell": "lc9"}, r"hybrid-sov: load_cell 'lc9' is not a load "
-                                              r"cell of the line \(load cells: lc_stage2\)"),
-    ({"line": str(LINE), "pitch_sensor": 3}, "hybrid-sov: pitch_sensor must be null or the "
-                                             "id of a sensor of the line, got 3"),
-    # a whole-run transform reads later samples: refused by the causal default
-    ({"line": str(LINE), "denoise": "wavelet"}, r"denoise='wavelet' .* needs causal=False"),
-    # every reading censored: no Tobit maximum (statsmodels warned, the fit went on)
-    ({"line": str(LINE), "censor_at": 1e6}, "censor_at=1e\\+06 N censors every stage-2 "
-                                             "load-cell reading of the training runs"),
-])
+@pytest.mark.parametrize(
+    "params, match",
+    [
+        ({"line": "nope.yaml"}, "does not exist"),
+        ({"line": str(LINE), "selection": "t"}, "selection"),
+        ({"line": str(LINE), "denoise": "fft"}, "denoise"),
+        ({"line": str(LINE), "alpha": 2.0}, "alpha"),
+        ({"line": str(LINE), "window_s": 0}, "window_s"),
+        ({"line": str(LINE), "window_s": float("nan")}, "window_s"),
+        ({"line": str(LINE), "censor_at": float("inf")}, "censor_at must be a finite"),
+        ({"line": str(LINE), "censor_at": 1e300}, "within ±1e6 N"),
+        ({"line": str(LINE), "window_s": 1e300}, "at most 60 s"),
+        ({"line": str(LINE), "window_s": True}, "window_s must be a number"),
+        ({"line": str(LINE), "alpha_enter": True}, "alpha_enter must be a number"),
+        ({"line": str(LINE), "alpha_enter": 0.0}, r"alpha_enter must be a number in \(0, 1\)"),
+        ({"line": str(LINE), "alpha": False}, r"alpha must be a number in \(0, 1\)"),
+        ({"line": str(LINE), "censor_at": "0"}, "censor_at must be a number"),
+        ({"line": True}, "line must be the path"),
+        ({"line": "/dev/zero"}, "line file /dev/zero is not a regular file"),
+        ({"line": str(REPO)}, "is not a regular file"),
+        ({"line": str(LINE), "random_state": -1}, "random_state must be null or an integer"),
+        (
+            {"line": str(LINE), "causal": "yes"},
+            "hybrid-sov: causal must be true or false, got 'yes'",
+        ),
+        ({"line": str(LINE), "causal": 1}, "hybrid-sov: causal must be true or false, got 1"),
+        ({"line": str(LINE), "causal": None}, "hybrid-sov: causal must be true or false"),
+        # a role named by a wrong id: the parameter and the line's candidates
+        (
+            {"line": str(LINE), "load_cell": "lc9"},
+            r"hybrid-sov: load_cell 'lc9' is not a load "
+            r"cell of the line \(load cells: lc_stage2\)",
+        ),
+        (
+            {"line": str(LINE), "pitch_sensor": 3},
+            "hybrid-sov: pitch_sensor must be null or the id of a sensor of the line, got 3",
+        ),
+        # a whole-run transform reads later samples: refused by the causal default
+        ({"line": str(LINE), "denoise": "wavelet"}, r"denoise='wavelet' .* needs causal=False"),
+        # every reading censored: no Tobit maximum (statsmodels warned, the fit went on)
+        (
+            {"line": str(LINE), "censor_at": 1e6},
+            "censor_at=1e\\+06 N censors every stage-2 load-cell reading of the training runs",
+        ),
+    ],
+)
 def test_plugin_parameters_are_checked(run, params, match):
     with pytest.raises(InputError, match=match):
         HybridSoV(**params).fit([run])
@@ -151,8 +169,9 @@ def test_a_dead_sensor_in_training_is_refused(run):
     # it was filled with zeros, and the model then alarmed on every healthy sample
     frame = run.visible(drive_data=True)
     col = next(c for c in frame.columns if c.startswith("meas.") and "pitch" in c)
-    with pytest.raises(InputError, match=f"hybrid-sov: training run 1 has no finite sample "
-                                         f"of {col}"):
+    with pytest.raises(
+        InputError, match=f"hybrid-sov: training run 1 has no finite sample of {col}"
+    ):
         HybridSoV(line=str(LINE)).fit([frame.assign(**{col: np.nan})])
 
 
@@ -174,7 +193,7 @@ def test_wavelet_denoising_reduces_noise():
 def test_wavelet_option_without_pywavelets_names_the_extra(monkeypatch):
     import sys
 
-    monkeypatch.setitem(sys.modules, "pywt", None)     # import pywt now raises ImportError
+    monkeypatch.setitem(sys.modules, "pywt", None)  # import pywt now raises ImportError
     with pytest.raises(InputError, match=r"r2rsim\[wavelet\]"):
         F.wavelet_denoise(np.zeros(64))
 
@@ -202,8 +221,13 @@ def test_plugin_detects_the_seized_dancer_at_the_roll_change(run, dancer):
 
 
 def test_roll_index_steps_at_roll_changes():
-    R = np.concatenate([np.linspace(0.093, 0.086, 50), np.linspace(0.0935, 0.086, 50),
-                        np.linspace(0.092, 0.09, 10)])
+    R = np.concatenate(
+        [
+            np.linspace(0.093, 0.086, 50),
+            np.linspace(0.0935, 0.086, 50),
+            np.linspace(0.092, 0.09, 10),
+        ]
+    )
     idx = F.roll_index(R)
     assert idx[0] == 0 and idx[49] == 0 and idx[50] == 1 and idx[-1] == 2
 
@@ -216,21 +240,39 @@ def test_causal_preprocessing_is_the_offline_one_delayed_by_half_a_window(run):
     st = load_stages(LINE)
     frame = run.visible(drive_data=True)
     c, o = F.signals(frame, st), F.signals(frame, st, causal=False)
-    lag = 12                                   # (25 - 1)/2: 0.5 s at 50 Hz is 25 samples
+    lag = 12  # (25 - 1)/2: 0.5 s at 50 Hz is 25 samples
     assert c.delay_s == pytest.approx(0.24, rel=1e-9) and o.delay_s == 0.0
-    for name in ("w1", "dw1", "v", "dv", "w4", "dw4", "tau1", "tau4", "alpha", "dalpha",
-                 "T2s", "T2", "Y"):
+    for name in (
+        "w1",
+        "dw1",
+        "v",
+        "dv",
+        "w4",
+        "dw4",
+        "tau1",
+        "tau4",
+        "alpha",
+        "dalpha",
+        "T2s",
+        "T2",
+        "Y",
+    ):
         off = getattr(o, name)
-        np.testing.assert_allclose(getattr(c, name)[2 * lag:], off[lag:-lag], rtol=0,
-                                   atol=1e-9 * np.max(np.abs(off)), err_msg=name)
+        np.testing.assert_allclose(
+            getattr(c, name)[2 * lag :],
+            off[lag:-lag],
+            rtol=0,
+            atol=1e-9 * np.max(np.abs(off)),
+            err_msg=name,
+        )
     # the radius: a 25-sample trailing median instead of the centred 1 s one, within the
     # reading's noise (0.13 mm per sample); its 8 mm jump at the roll change on the same
     # instant
-    assert np.max(np.abs(c.R[2 * lag:] - o.R[lag:-lag])) < 3e-4
+    assert np.max(np.abs(c.R[2 * lag :] - o.R[lag:-lag])) < 3e-4
     assert np.diff(o.R).max() > 5e-3
     assert np.argmax(np.diff(c.R)) == np.argmax(np.diff(o.R)) + lag
     # no estimate before the window has filled
-    assert not c.valid[: 2 * lag].any() and c.valid[2 * lag:].all() and o.valid.all()
+    assert not c.valid[: 2 * lag].any() and c.valid[2 * lag :].all() and o.valid.all()
 
 
 def test_causal_statistic_uses_no_later_sample(run, dancer):
@@ -239,7 +281,7 @@ def test_causal_statistic_uses_no_later_sample(run, dancer):
     # its last reading, not interpolated towards the next)
     bad, fill = dancer
     frame = bad.visible(drive_data=True).copy()
-    frame.loc[frame.index[1000:1040], "meas.lc_stage2.tension_N"] = np.nan   # 20.0-20.8 s
+    frame.loc[frame.index[1000:1040], "meas.lc_stage2.tension_N"] = np.nan  # 20.0-20.8 s
     k_fill = int(np.searchsorted(frame["t_s"].to_numpy(), fill))
     ks = (8, 24, 30, 1010, 1045, k_fill + 5, k_fill + 30, len(frame) - 1)
     est = HybridSoV(line=str(LINE)).fit([run])
@@ -247,8 +289,14 @@ def test_causal_statistic_uses_no_later_sample(run, dancer):
     for k in ks:
         part = est.score(frame.iloc[: k + 1])
         assert part.index.equals(frame.index[: k + 1])
-        np.testing.assert_allclose(part.to_numpy(float), full.iloc[: k + 1].to_numpy(float),
-                                   rtol=1e-9, atol=0, equal_nan=True, err_msg=f"k={k}")
+        np.testing.assert_allclose(
+            part.to_numpy(float),
+            full.iloc[: k + 1].to_numpy(float),
+            rtol=1e-9,
+            atol=0,
+            equal_nan=True,
+            err_msg=f"k={k}",
+        )
     stat = full["statistic"].to_numpy()
     assert np.isnan(stat[:24]).all() and np.isfinite(stat[24:1012]).all()
     # the drop-out: no residual from 1012 (1000 + the delay) to 1051; the moving average
@@ -305,8 +353,11 @@ def test_causal_scoring_needs_the_training_sample_period(run):
     slow = frame.assign(t_s=2.0 * frame["t_s"])
     est = HybridSoV(line=str(LINE)).fit([run])
     assert est.dt_ == pytest.approx(0.02)
-    with pytest.raises(InputError, match=r"sampled every 0\.04 s, the model was fitted on "
-                                         r"runs sampled every 0\.02 s"):
+    with pytest.raises(
+        InputError,
+        match=r"sampled every 0\.04 s, the model was fitted on "
+        r"runs sampled every 0\.02 s",
+    ):
         est.score(slow)
     with pytest.raises(InputError, match=r"training run 2 is sampled every 0\.04 s"):
         HybridSoV(line=str(LINE)).fit([frame, slow])

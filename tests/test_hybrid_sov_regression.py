@@ -27,7 +27,7 @@ def test_tobit_recovers_coefficients_within_3_se():
     X = _design(4000, rng)
     beta, sigma = np.array([0.4, 1.2, -2.0]), 1.5
     y = np.maximum(X @ beta + rng.normal(scale=sigma, size=len(X)), 0.0)
-    assert 0.3 < np.mean(y <= 0) < 0.6                      # heavily censored
+    assert 0.3 < np.mean(y <= 0) < 0.6  # heavily censored
     f = fit_tobit(X, y, censor_at=0.0)
     assert np.all(np.abs(f.beta - beta) < 3 * f.se)
     assert abs(f.sigma - sigma) < 0.1
@@ -87,8 +87,7 @@ def test_regression_input_errors():
 
 def test_defect_classifier_separates_slack_from_normal():
     rng = np.random.default_rng(4)
-    T = np.concatenate([rng.normal(300, 10, 200), rng.normal(5, 3, 50),
-                        rng.normal(600, 10, 50)])
+    T = np.concatenate([rng.normal(300, 10, 200), rng.normal(5, 3, 50), rng.normal(600, 10, 50)])
     labels = np.array(["normal"] * 200 + ["slack"] * 50 + ["over_stretch"] * 50)
     clf = fit_defect_classifier(T[:, None], labels, random_state=0)
     assert (clf.predict(T[:, None]) == labels).mean() > 0.99

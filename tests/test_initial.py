@@ -14,8 +14,14 @@ from r2rsim.solve.initial import condition_1, lu_factor, lu_solve, norm2, taut_g
 from conftest import write
 
 # one scenario per shipped line with tension loops, dancers or a festoon
-SCENARIOS = ["quickstart.yaml", "line_a_faults.yaml", "newsprint_splice.yaml",
-             "thesis_normal_cycles.yaml", "thesis/oc1_nominal.yaml", "torque_modes.yaml"]
+SCENARIOS = [
+    "quickstart.yaml",
+    "line_a_faults.yaml",
+    "newsprint_splice.yaml",
+    "thesis_normal_cycles.yaml",
+    "thesis/oc1_nominal.yaml",
+    "torque_modes.yaml",
+]
 
 
 @pytest.mark.parametrize("name", SCENARIOS)
@@ -25,8 +31,9 @@ def test_steady_state_from_spans_at_zero_tension(repo, name):
     # on every shipped line and `r2rsim run` quietly started from the nominal state
     scen, line, _ = r2rsim.load_scenario(repo / "scenarios" / name)
     cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(line, scen.programme))
-    good = r2rsim.steady_state(cl, r2rsim.nominal_state(cl, scen.initial.tension,
-                                                         scen.initial.span_tension))
+    good = r2rsim.steady_state(
+        cl, r2rsim.nominal_state(cl, scen.initial.tension, scen.initial.span_tension)
+    )
     assert good is not None
     zero = r2rsim.nominal_state(cl, 0.0)
     assert taut_guess(cl, zero) is not None
@@ -54,13 +61,16 @@ def test_taut_guess_leaves_a_taut_state_alone(repo):
     y[cl.index("span2.strain")] = 0.0
     taut = taut_guess(cl, y)
     assert taut[cl.index("span2.strain")] * line.web.EA == pytest.approx(260.0, rel=1e-12)
-    assert np.array_equal(np.delete(taut, cl.index("span2.strain")),
-                          np.delete(y, cl.index("span2.strain")))
+    assert np.array_equal(
+        np.delete(taut, cl.index("span2.strain")), np.delete(y, cl.index("span2.strain"))
+    )
 
 
 def test_run_says_when_no_steady_state_is_found(tmp_path, repo, capsys):
     # a line at rest between kinematic nodes: the span strain is not determined
-    scen = write(tmp_path / "rest.yaml", f"""\
+    scen = write(
+        tmp_path / "rest.yaml",
+        f"""\
         name: rest
         line: {repo / "lines" / "single_span.yaml"}
         duration: 0.5 s
@@ -68,7 +78,8 @@ def test_run_says_when_no_steady_state_is_found(tmp_path, repo, capsys):
         initial: {{state: steady}}
         programme:
           - {{at: 0 s, line_speed: 0 m/s}}
-        """)
+        """,
+    )
     assert main(["run", str(scen), "-o", str(tmp_path / "out"), "-q"]) == 0
     cap = capsys.readouterr()
     assert cap.err.count("warning:") == 1
@@ -78,8 +89,20 @@ def test_run_says_when_no_steady_state_is_found(tmp_path, repo, capsys):
     runs = pq.read_table(tmp_path / "out" / "runs.parquet").to_pylist()[0]
     assert runs["initial_state"].startswith("nominal (no steady state")
     # a steady state found: no warning
-    assert main(["run", str(repo / "scenarios" / "quickstart.yaml"), "-o",
-                 str(tmp_path / "qs"), "-q", "--duration", "0.5"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                str(repo / "scenarios" / "quickstart.yaml"),
+                "-o",
+                str(tmp_path / "qs"),
+                "-q",
+                "--duration",
+                "0.5",
+            ]
+        )
+        == 0
+    )
     cap = capsys.readouterr()
     assert "warning" not in cap.err.lower() and "WARNING" not in cap.out
 
@@ -92,8 +115,11 @@ def _startup_variant(tmp_path, repo, initial: str, name="s.yaml"):
     text = (repo / STARTUP).read_text()
     head, rest = text.split("initial:\n", 1)
     rest = rest.split("programme:\n", 1)[1]
-    text = head.replace("../../lines/", str(repo / "lines") + "/") + \
-        f"initial: {initial}\nprogramme:\n" + rest
+    text = (
+        head.replace("../../lines/", str(repo / "lines") + "/")
+        + f"initial: {initial}\nprogramme:\n"
+        + rest
+    )
     return write(tmp_path / name, text)
 
 
@@ -115,18 +141,24 @@ def test_slack_start_closed_form(repo):
     assert y[cl.index("span8.strain")] == 0.0  # not slack: at the nominal 0 N
 
 
-@pytest.mark.parametrize("initial, path, words", [
-    ("{state: steady, slack: {span1: 5 cm}}", "initial", "state: nominal"),
-    ("{state: nominal, slack: {nope: 5 cm}}", "initial.slack.nope", "no span 'nope'"),
-    ("{state: nominal, slack: {span1: -5 cm}}", "initial.slack.span1", "must be > 0"),
-    ("{state: nominal, slack: {span1: 5 N}}", "initial.slack.span1", "length"),
-    ("{state: nominal, slack: {span1: 0.6 m}}", "initial.slack.span1", "half the span"),
-    ("{state: nominal, position: {s2a: 0.1}}", "initial.position.s2a", "no dancer or festoon"),
-    ("{state: nominal, position: {dancer: -45 deg}}", "initial.position.dancer",
-     "strictly inside"),
-    ("{state: nominal, position: {dancer: 5 cm}}", "initial.position.dancer", "angle"),
-    ("{state: nominal, position: {dancer: .nan}}", "initial.position.dancer", "finite"),
-])
+@pytest.mark.parametrize(
+    "initial, path, words",
+    [
+        ("{state: steady, slack: {span1: 5 cm}}", "initial", "state: nominal"),
+        ("{state: nominal, slack: {nope: 5 cm}}", "initial.slack.nope", "no span 'nope'"),
+        ("{state: nominal, slack: {span1: -5 cm}}", "initial.slack.span1", "must be > 0"),
+        ("{state: nominal, slack: {span1: 5 N}}", "initial.slack.span1", "length"),
+        ("{state: nominal, slack: {span1: 0.6 m}}", "initial.slack.span1", "half the span"),
+        ("{state: nominal, position: {s2a: 0.1}}", "initial.position.s2a", "no dancer or festoon"),
+        (
+            "{state: nominal, position: {dancer: -45 deg}}",
+            "initial.position.dancer",
+            "strictly inside",
+        ),
+        ("{state: nominal, position: {dancer: 5 cm}}", "initial.position.dancer", "angle"),
+        ("{state: nominal, position: {dancer: .nan}}", "initial.position.dancer", "finite"),
+    ],
+)
 def test_bad_slack_or_position(tmp_path, repo, capsys, initial, path, words):
     scen = _startup_variant(tmp_path, repo, initial)
     out = tmp_path / "out"
@@ -137,14 +169,20 @@ def test_bad_slack_or_position(tmp_path, repo, capsys, initial, path, words):
     assert not out.exists()
 
 
-@pytest.mark.parametrize("line, mover, value, si, bad", [
-    ("newsprint_line.yaml", "festoon", "2.5 m", 2.5, "4 m"),          # festoon stroke [0, 4] m
-    ("pet_film_line_dancer.yaml", "dancer", "-5 cm", -0.05, "0.15 m"),  # travel ±0.15 m
-])
-def test_position_of_a_festoon_and_a_linear_dancer(tmp_path, repo, capsys, line, mover, value,
-                                                   si, bad):
+@pytest.mark.parametrize(
+    "line, mover, value, si, bad",
+    [
+        ("newsprint_line.yaml", "festoon", "2.5 m", 2.5, "4 m"),  # festoon stroke [0, 4] m
+        ("pet_film_line_dancer.yaml", "dancer", "-5 cm", -0.05, "0.15 m"),  # travel ±0.15 m
+    ],
+)
+def test_position_of_a_festoon_and_a_linear_dancer(
+    tmp_path, repo, capsys, line, mover, value, si, bad
+):
     def scenario(pos):
-        return write(tmp_path / "p.yaml", f"""\
+        return write(
+            tmp_path / "p.yaml",
+            f"""\
             name: p
             line: {repo / "lines" / line}
             duration: 0.1 s
@@ -152,7 +190,9 @@ def test_position_of_a_festoon_and_a_linear_dancer(tmp_path, repo, capsys, line,
             initial: {{state: nominal, position: {{{mover}: {pos}}}}}
             programme:
               - {{at: 0 s, line_speed: 1 m/s}}
-            """)
+            """,
+        )
+
     scen, ln, _ = r2rsim.load_scenario(scenario(value))
     assert scen.initial.position[mover] == pytest.approx(si, rel=1e-12)
     cl = r2rsim.compile_line(ln, r2rsim.Programme.from_steps(ln, scen.programme))
@@ -172,11 +212,11 @@ def test_the_steady_states_linear_algebra_against_lapack(n):
     a = rng.normal(size=(n, n)) + n * np.eye(n) * (n > 2)
     b = rng.normal(size=n)
     factors = lu_factor(a)
-    np.testing.assert_allclose(lu_solve(factors, b), np.linalg.solve(a, b), rtol=1e-12,
-                               atol=1e-13)
+    np.testing.assert_allclose(lu_solve(factors, b), np.linalg.solve(a, b), rtol=1e-12, atol=1e-13)
     rhs = rng.normal(size=(n, 3))
-    np.testing.assert_allclose(lu_solve(factors, rhs), np.linalg.solve(a, rhs), rtol=1e-12,
-                               atol=1e-13)
+    np.testing.assert_allclose(
+        lu_solve(factors, rhs), np.linalg.solve(a, rhs), rtol=1e-12, atol=1e-13
+    )
     assert condition_1(a, factors) == pytest.approx(np.linalg.cond(a, 1), rel=1e-10)
     assert norm2(b) == pytest.approx(float(np.linalg.norm(b)), rel=1e-15)
     # a zero pivot column: singular, no factors

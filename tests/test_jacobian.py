@@ -63,8 +63,15 @@ controllers:
 
 def _state(cl, rng, *, slack=(), reverse=False):
     y = np.zeros(cl.n_states)
-    typical = {"strain": 1.1e-3, "speed": 50.0, "roll_length": 200.0, "material": 199.0,
-               "torque": 20.0, "controller": 3.0, "sensor_filter": 250.0}
+    typical = {
+        "strain": 1.1e-3,
+        "speed": 50.0,
+        "roll_length": 200.0,
+        "material": 199.0,
+        "torque": 20.0,
+        "controller": 3.0,
+        "sensor_filter": 250.0,
+    }
     for i, (name, kind) in enumerate(zip(cl.state_names, cl.state_kinds, strict=True)):
         y[i] = typical[kind] * (1 + 0.2 * rng.standard_normal())
         if name == "dia.filtered":
@@ -113,13 +120,15 @@ def test_every_element_jacobian_against_finite_differences(tmp_path, model, case
     limit = 1e-3 if case == "saturated" else 200
     path = write(tmp_path / "full.yaml", FULL.format(model=model, limit=limit))
     line = r2rsim.load_line(path)
-    prog = r2rsim.Programme.from_steps(line, [
-        ProgrammeStep(at=0, line_speed=2.0), ProgrammeStep(at=0.5, line_speed=5.0, ramp=4.0)])
+    prog = r2rsim.Programme.from_steps(
+        line, [ProgrammeStep(at=0, line_speed=2.0), ProgrammeStep(at=0.5, line_speed=5.0, ramp=4.0)]
+    )
     cl = r2rsim.compile_line(line, prog)
     cl.set_segment_start(0.5)
     rng = np.random.default_rng(3)
-    y = _state(cl, rng, slack=("span2", "span4") if case == "slack" else (),
-               reverse=case == "reverse")
+    y = _state(
+        cl, rng, slack=("span2", "span4") if case == "slack" else (), reverse=case == "reverse"
+    )
     _assert_jacobian_matches_fd(cl, 1.7, y, floor=1e-7)
 
 
@@ -133,14 +142,19 @@ def test_band_of_line_a(repo):
 
 def test_chain_band_does_not_grow_with_length(tmp_path):
     def chain(n):
-        idlers = "\n".join(f"  - {{id: i{k}, type: idler, radius: 0.05, inertia: 0.001}}"
-                           for k in range(n))
-        text = ("web: {material: PET, thickness: 50 um, width: 1 m}\nelements:\n"
-                "  - {id: u, type: unwind, roll: {core_radius: 0.07, outer_radius: 0.3, "
-                "core_inertia: 0.5}}\n" + idlers +
-                "\n  - {id: r, type: rewind, roll: {core_radius: 0.07, outer_radius: 0.1, "
-                "core_inertia: 0.5}}\nspans:\n" + "\n".join("  - {length: 1}"
-                                                             for _ in range(n + 1)) + "\n")
+        idlers = "\n".join(
+            f"  - {{id: i{k}, type: idler, radius: 0.05, inertia: 0.001}}" for k in range(n)
+        )
+        text = (
+            "web: {material: PET, thickness: 50 um, width: 1 m}\nelements:\n"
+            "  - {id: u, type: unwind, roll: {core_radius: 0.07, outer_radius: 0.3, "
+            "core_inertia: 0.5}}\n"
+            + idlers
+            + "\n  - {id: r, type: rewind, roll: {core_radius: 0.07, outer_radius: 0.1, "
+            "core_inertia: 0.5}}\nspans:\n"
+            + "\n".join("  - {length: 1}" for _ in range(n + 1))
+            + "\n"
+        )
         cl = r2rsim.compile_line(r2rsim.load_line(write(tmp_path / f"c{n}.yaml", text)))
         return cl.lband, cl.uband
 
@@ -224,8 +238,9 @@ controllers:
 @pytest.mark.parametrize("case", ["moving", "latched", "saturated"])
 def test_dancer_festoon_and_loop_jacobian_against_finite_differences(tmp_path, model, case):
     limit = 1e-4 if case == "saturated" else 0.5
-    line = r2rsim.load_line(write(tmp_path / "movers.yaml", MOVERS.format(model=model,
-                                                                          limit=limit)))
+    line = r2rsim.load_line(
+        write(tmp_path / "movers.yaml", MOVERS.format(model=model, limit=limit))
+    )
     prog = r2rsim.Programme.from_steps(line, [ProgrammeStep(at=0, line_speed=3.0)])
     cl = r2rsim.compile_line(line, prog)
     y = r2rsim.nominal_state(cl, 250.0)
@@ -237,6 +252,7 @@ def test_dancer_festoon_and_loop_jacobian_against_finite_differences(tmp_path, m
             y[i] += 0.02 * rng.standard_normal()
     if case == "latched":
         from r2rsim.compile.layout import H_OFF_MP, MP_MODE, NMP
+
         cl.P[cl.I[H_OFF_MP] + 0 * NMP + MP_MODE] = -1.0
         cl.P[cl.I[H_OFF_MP] + 2 * NMP + MP_MODE] = 2.0
     _assert_jacobian_matches_fd(cl, 0.3, y, floor=1e-6)
@@ -292,16 +308,30 @@ def test_feedforward_torque_command_and_draw_jacobian(tmp_path, model, case):
     if case == "saturated":
         text = text.replace("torque_max: 0.5", "torque_max: 0.01")
     line = r2rsim.load_line(write(tmp_path / "controls.yaml", text))
-    prog = r2rsim.Programme.from_steps(line, [
-        ProgrammeStep(at=0, line_speed=2.0), ProgrammeStep(at=0.5, line_speed=5.0, ramp=4.0),
-        ProgrammeStep(at=0.5, draw={"s1": 0.002, "trim_roll": -0.001},
-                      torque={"helper": 0.2}, ramp=2.0)])
-    assert prog.names == ["line_speed", "c_unw", "c_trim", "c_rew", "torque:helper",
-                          "draw:s1", "draw:trim_roll"]
+    prog = r2rsim.Programme.from_steps(
+        line,
+        [
+            ProgrammeStep(at=0, line_speed=2.0),
+            ProgrammeStep(at=0.5, line_speed=5.0, ramp=4.0),
+            ProgrammeStep(
+                at=0.5, draw={"s1": 0.002, "trim_roll": -0.001}, torque={"helper": 0.2}, ramp=2.0
+            ),
+        ],
+    )
+    assert prog.names == [
+        "line_speed",
+        "c_unw",
+        "c_trim",
+        "c_rew",
+        "torque:helper",
+        "draw:s1",
+        "draw:trim_roll",
+    ]
     cl = r2rsim.compile_line(line, prog)
     cl.set_segment_start(0.5)
     rng = np.random.default_rng(7)
-    y = _state(cl, rng, slack=("span2", "span4") if case == "slack" else (),
-               reverse=case == "reverse")
+    y = _state(
+        cl, rng, slack=("span2", "span4") if case == "slack" else (), reverse=case == "reverse"
+    )
     y[cl.index("enc.filtered")] = 48.0
     _assert_jacobian_matches_fd(cl, 1.7, y, floor=1e-7)

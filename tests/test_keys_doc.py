@@ -39,7 +39,8 @@ def _row(text: str, table: str, key: str) -> list[str]:
 
 def test_the_page_is_the_generated_reference(text):
     assert PAGE.read_text(encoding="utf-8") == text, (
-        "docs/keys.md is out of date: run `r2rsim schema --markdown > docs/keys.md`")
+        "docs/keys.md is out of date: run `r2rsim schema --markdown > docs/keys.md`"
+    )
 
 
 def test_every_key_has_a_description_of_its_own():
@@ -47,25 +48,29 @@ def test_every_key_has_a_description_of_its_own():
 
 
 def test_rows_say_what_the_models_accept(text):
-    assert _row(text, "line: Idler", "radius") == ["`radius`", "length [m]", "required",
-                                                 "roller radius [m]"]
+    assert _row(text, "line: Idler", "radius") == [
+        "`radius`",
+        "length [m]",
+        "required",
+        "roller radius [m]",
+    ]
     assert _row(text, "line: Friction", "viscous")[1:3] == ["viscous torque [N*m*s]", "`0.0`"]
     # defaults made by a factory, which the JSON Schema leaves out
     assert _row(text, "sweep: Sweep", "axes")[2] == "`[]`"
     assert _row(text, "line: Unwind", "drive")[2] == "its defaults"
     # a dimensionless quantity has no unit; integer bounds are exact
     assert _row(text, "line: SpeedPI", "draw")[1] == "dimensionless"
-    assert _row(text, "scenario: Scenario", "seed")[1] == \
-        "integer (≥ 0, ≤ 18446744073709551615)"
+    assert _row(text, "scenario: Scenario", "seed")[1] == "integer (≥ 0, ≤ 18446744073709551615)"
     assert _row(text, "scenario: ProgrammeStep", "tension")[1] == "mapping of ids to force [N]"
     assert _row(text, "sweep: Sweep", "set")[1] == "mapping of paths to any"
-    assert _row(text, "scenario: Initial", "state")[1:3] == ["`steady` \\| `nominal`",
-                                                            '`"steady"`']
+    assert _row(text, "scenario: Initial", "state")[1:3] == ["`steady` \\| `nominal`", '`"steady"`']
 
 
 def test_every_link_leads_to_a_table(text):
-    anchors = {re.sub(r"[^a-z0-9 -]", "", h.lower()).replace(" ", "-")
-               for h in re.findall(r"^### (.+)$", text, flags=re.M)}
+    anchors = {
+        re.sub(r"[^a-z0-9 -]", "", h.lower()).replace(" ", "-")
+        for h in re.findall(r"^### (.+)$", text, flags=re.M)
+    }
     links = set(re.findall(r"\]\(#([^)]+)\)", text))
     assert links and links <= anchors, sorted(links - anchors)
     # every definition of each file's schema has its table
@@ -92,12 +97,15 @@ def test_the_cli_prints_the_reference(capsys, text):
     assert json.loads(capsys.readouterr().out)["title"] == "Line"
 
 
-@pytest.mark.parametrize("argv, words", [
-    (["schema"], "name one of line, scenario, sweep"),
-    (["schema", "line", "sweep"], "name one of line, scenario, sweep"),
-    (["schema", "lines"], "unknown file kind 'lines'"),
-    (["schema", "--markdown", "bogus"], "unknown file kind 'bogus'"),
-])
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["schema"], "name one of line, scenario, sweep"),
+        (["schema", "line", "sweep"], "name one of line, scenario, sweep"),
+        (["schema", "lines"], "unknown file kind 'lines'"),
+        (["schema", "--markdown", "bogus"], "unknown file kind 'bogus'"),
+    ],
+)
 def test_the_cli_refuses_what_it_cannot_print(capsys, argv, words):
     assert main(argv) == 2
     captured = capsys.readouterr()

@@ -74,8 +74,24 @@ POINTS = ["start", "chunk", *(f"table:{t}" for t in RUN_TABLES), "text", "manife
 
 def _killed_run(point: str, out: Path, *extra: str) -> None:
     proc = subprocess.run(
-        [sys.executable, "-c", _CHILD, point, "run", str(QUICKSTART), "-o", str(out),
-         "--duration", "1", "-q", *extra], capture_output=True, text=True, timeout=300)
+        [
+            sys.executable,
+            "-c",
+            _CHILD,
+            point,
+            "run",
+            str(QUICKSTART),
+            "-o",
+            str(out),
+            "--duration",
+            "1",
+            "-q",
+            *extra,
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == -signal.SIGKILL, (point, proc.returncode, proc.stderr)
 
 
@@ -96,8 +112,9 @@ def test_a_run_killed_while_writing_leaves_what_the_next_run_cleans(tmp_path, po
     for p in tmp.rglob("*"):
         if p.is_file():
             assert layout_problem(p.relative_to(tmp).as_posix(), sweep=False) is None, p
-    assert main(["run", str(QUICKSTART), "-o", str(out.parent / "next"), "--duration", "1",
-                 "-q"]) == 0
+    assert (
+        main(["run", str(QUICKSTART), "-o", str(out.parent / "next"), "--duration", "1", "-q"]) == 0
+    )
     assert _temporaries(out.parent) == []
     assert sorted(p.name for p in out.parent.iterdir()) == ["next"]
 
@@ -109,8 +126,7 @@ def test_a_run_killed_while_replacing_a_dataset_leaves_a_dataset(tmp_path, point
     assert main(["run", str(QUICKSTART), "-o", str(out), "--duration", "1", "-q"]) == 0
     _killed_run(point, out, "--overwrite")
     assert any(".old-" in n for n in _temporaries(parent)), _temporaries(parent)
-    assert main(["run", str(QUICKSTART), "-o", str(parent / "next"), "--duration", "1",
-                 "-q"]) == 0
+    assert main(["run", str(QUICKSTART), "-o", str(parent / "next"), "--duration", "1", "-q"]) == 0
     assert _temporaries(parent) == []
     # the swap that did not finish is undone; one that did keeps the new dataset
     assert validate_dataset(out) == []
@@ -143,8 +159,11 @@ def test_validate_reports_a_listed_file_outside_the_layout(tmp_path):
     out = tmp_path / "ds"
     assert main(["run", str(QUICKSTART), "-o", str(out), "--duration", "1", "-q"]) == 0
     assert validate_dataset(out) == []
-    extra = {"notes.txt": out / "notes.txt", "failures.parquet": out / "failures.parquet",
-             "scenario/deep/x.yaml": out / "scenario" / "deep" / "x.yaml"}
+    extra = {
+        "notes.txt": out / "notes.txt",
+        "failures.parquet": out / "failures.parquet",
+        "scenario/deep/x.yaml": out / "scenario" / "deep" / "x.yaml",
+    }
     manifest = json.loads((out / "manifest.json").read_text())
     for rel, p in extra.items():
         p.parent.mkdir(parents=True, exist_ok=True)
@@ -153,5 +172,6 @@ def test_validate_reports_a_listed_file_outside_the_layout(tmp_path):
     (out / "manifest.json").write_text(json.dumps(manifest))
     problems = validate_dataset(out)
     for rel in extra:  # failures.parquet belongs to a sweep's layout, not a run's
-        assert f"{rel}: not a file of the r2rsim dataset layout (manifest.json lists it)" \
-            in problems, problems
+        assert (
+            f"{rel}: not a file of the r2rsim dataset layout (manifest.json lists it)" in problems
+        ), problems

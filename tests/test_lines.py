@@ -16,10 +16,18 @@ from conftest import REPO, write
 # operating speeds [m/s] of the shipped lines (physics.md §2.3; thesis testbed and the
 # registration line run at the thesis scenarios' speeds). single_span.yaml is left out: it is
 # the open-loop line of the verification tests and has no operating point of its own.
-SPEEDS = {"pet_film_line": 5.0, "pet_film_line_dancer": 5.0, "newsprint_line": 12.0,
-          "battery_foil_line": 1.0, "thesis_testbed": 0.5, "registration": 0.5,
-          "pet_film_line_torque_modes": 5.0, "registration_realistic": 0.5,
-          "thesis_testbed_realistic": 0.5, "second_registration_line": 1.5}
+SPEEDS = {
+    "pet_film_line": 5.0,
+    "pet_film_line_dancer": 5.0,
+    "newsprint_line": 12.0,
+    "battery_foil_line": 1.0,
+    "thesis_testbed": 0.5,
+    "registration": 0.5,
+    "pet_film_line_torque_modes": 5.0,
+    "registration_realistic": 0.5,
+    "thesis_testbed_realistic": 0.5,
+    "second_registration_line": 1.5,
+}
 
 
 def test_every_shipped_line_is_listed():
@@ -35,8 +43,9 @@ def test_shipped_line_is_linearly_stable(tmp_path, name, roll):
         core = r2rsim.Line.model_validate(d).elements[0].roll.core_radius
         d["elements"][0]["roll"]["outer_radius"] = 1.2 * core
     line = r2rsim.load_line(write(tmp_path / f"{name}.yaml", yaml.safe_dump(d)))
-    cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(
-        line, [ProgrammeStep(at=0, line_speed=SPEEDS[name])]))
+    cl = r2rsim.compile_line(
+        line, r2rsim.Programme.from_steps(line, [ProgrammeStep(at=0, line_speed=SPEEDS[name])])
+    )
     y = r2rsim.steady_state(cl, r2rsim.nominal_state(cl))
     assert y is not None
     _, lam = cl.linearise(0.0, y)

@@ -20,8 +20,9 @@ def _listed(capsys, path) -> list[str]:
     return [r.split()[0] for r in rows[1:]]
 
 
-@pytest.mark.parametrize("scenario", ["quickstart.yaml", "torque_modes.yaml",
-                                      "roll_variability.yaml"])
+@pytest.mark.parametrize(
+    "scenario", ["quickstart.yaml", "torque_modes.yaml", "roll_variability.yaml"]
+)
 def test_scenario_channels_are_the_columns_of_its_run(tmp_path, capsys, scenario):
     path = REPO / "scenarios" / scenario
     listed = _listed(capsys, path)
@@ -46,12 +47,17 @@ def test_scenario_dependent_columns(capsys):
     varied = _listed(capsys, REPO / "scenarios" / "roll_variability.yaml")
     line = _listed(capsys, REPO / "lines" / "newsprint_line.yaml")
     assert {c for c in set(varied) - set(line)} == {
-        f"state.splice_joint{i}.{q}" for i in (3, 4) for q in ("lead_m", "span_index")}
+        f"state.splice_joint{i}.{q}" for i in (3, 4) for q in ("lead_m", "span_index")
+    }
 
 
-@pytest.mark.parametrize("text,words", [
-    ("name: x\naxes: []\n", "this is a sweep file"),
-    ("name: x\nfoo: 1\n", "neither a line file (elements: ...) nor a scenario (line: ...)")])
+@pytest.mark.parametrize(
+    "text,words",
+    [
+        ("name: x\naxes: []\n", "this is a sweep file"),
+        ("name: x\nfoo: 1\n", "neither a line file (elements: ...) nor a scenario (line: ...)"),
+    ],
+)
 def test_neither_line_nor_scenario(tmp_path, capsys, text, words):
     f = tmp_path / "other.yaml"
     f.write_text(text)

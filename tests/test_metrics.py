@@ -37,18 +37,38 @@ def bits(s: str) -> np.ndarray:
     return np.array([c == "1" for c in s], dtype=bool)
 
 
-def mk(alarm: str, fault: str | None = None, *, warm: int = 0, period: float = 1.0,
-       score=None, diag=None, fault_type: str = "A", magnitude: float = math.nan) -> RunData:
+def mk(
+    alarm: str,
+    fault: str | None = None,
+    *,
+    warm: int = 0,
+    period: float = 1.0,
+    score=None,
+    diag=None,
+    fault_type: str = "A",
+    magnitude: float = math.nan,
+) -> RunData:
     a = bits(alarm)
     f = bits(fault) if fault is not None else np.zeros(a.size, dtype=bool)
     assert f.size == a.size
-    return RunData(t=period * np.arange(a.size), faulty=f, scored=np.arange(a.size) >= warm,
-                   alarm=a, score=score, diagnosis=diag,
-                   true_type=np.where(f, fault_type, "normal"), magnitude=magnitude)
+    return RunData(
+        t=period * np.arange(a.size),
+        faulty=f,
+        scored=np.arange(a.size) >= warm,
+        alarm=a,
+        score=score,
+        diagnosis=diag,
+        true_type=np.where(f, fault_type, "normal"),
+        magnitude=magnitude,
+    )
 
 
-def long_run(n: int, alarm_on: list[tuple[int, int]], fault: tuple[int, int] | None = None,
-             period: float = 1.0) -> RunData:
+def long_run(
+    n: int,
+    alarm_on: list[tuple[int, int]],
+    fault: tuple[int, int] | None = None,
+    period: float = 1.0,
+) -> RunData:
     """A run of n samples with alarms on the inclusive index ranges in alarm_on."""
     a = np.zeros(n, dtype=bool)
     for lo, hi in alarm_on:
@@ -88,8 +108,8 @@ def test_rundata_validates_shapes():
 
 def test_far_strata_ff_vs_pre():
     runs = [
-        mk("0100010000"),                  # fault-free: 2 alarms / 10 samples
-        mk("0010001111", "0000001111"),    # faulty, tau=6: pre-onset 0..5 has 1 alarm / 6
+        mk("0100010000"),  # fault-free: 2 alarms / 10 samples
+        mk("0010001111", "0000001111"),  # faulty, tau=6: pre-onset 0..5 has 1 alarm / 6
     ]
     r = far(runs)
     assert (r.alarms_ff, r.n_ff) == (2, 10)
@@ -109,8 +129,8 @@ def test_fa_per_hour_two_events_on_fault_free_run():
     fa = false_alarm_events([run])
     assert fa.n_events == 2
     assert fa.hours == pytest.approx(0.5)
-    assert fa.per_hour == pytest.approx(2 / 0.5)    # 4 events per hour
-    assert fa.mtbfa_h == pytest.approx(0.25)        # 1 / 4 h
+    assert fa.per_hour == pytest.approx(2 / 0.5)  # 4 events per hour
+    assert fa.mtbfa_h == pytest.approx(0.25)  # 1 / 4 h
 
 
 def test_fa_per_hour_counts_events_by_start_sample():
@@ -122,7 +142,7 @@ def test_fa_per_hour_counts_events_by_start_sample():
     fa = false_alarm_events([faulty])
     assert fa.n_events == 2
     assert fa.hours == pytest.approx(0.25)
-    assert fa.per_hour == pytest.approx(8.0)        # 2 / 0.25
+    assert fa.per_hour == pytest.approx(8.0)  # 2 / 0.25
     # pooled with the 0.5 h fault-free run above (2 events): 4 events / 0.75 h
     both = false_alarm_events([faulty, long_run(1800, [(100, 104), (700, 700)])])
     assert both.per_hour == pytest.approx(4 / 0.75)
@@ -171,9 +191,9 @@ def test_warmup_excluded_from_detection_rate():
 
 def test_detection_rate_pooled_over_fault_windows():
     runs = [
-        mk("0100110110", "0001111100"),   # window 3..7 (5 samples): alarms at 4,5,7 -> 3
-        mk("1000000001", "0000011111"),   # window 5..9 (5 samples): alarm at 9      -> 1
-        mk("1111111111"),                 # fault-free: ignored
+        mk("0100110110", "0001111100"),  # window 3..7 (5 samples): alarms at 4,5,7 -> 3
+        mk("1000000001", "0000011111"),  # window 5..9 (5 samples): alarm at 9      -> 1
+        mk("1111111111"),  # fault-free: ignored
     ]
     assert detection_rate(runs) == pytest.approx((3 + 1) / (5 + 5))
     assert math.isnan(detection_rate([runs[2]]))
@@ -193,7 +213,7 @@ def test_an_alarm_on_at_the_onset_detects_with_delay_zero():
     # run 2: the early event 1..2 ended before tau; a new one starts at 7 inside the window
     new_event = mk("0110000110", "0000111100")
     assert detect_run(new_event).k_star == 7
-    assert detect_run(new_event).delay == pytest.approx(3.0)           # t7 - t4
+    assert detect_run(new_event).delay == pytest.approx(3.0)  # t7 - t4
     # run 3: nothing in the window
     missed = mk("0110000001", "0000111100")
     assert not detect_run(missed).detected and detect_run(missed).k_star is None
@@ -224,10 +244,10 @@ def test_grace_period_extends_window():
     # fault 2..4, alarm only at 6; period 0.5 s so t[eps] = 2.0 s and t[6] = 3.0 s
     run = mk("0000001000", "0011100000", period=0.5)
     assert not detect_run(run, h=0.0).detected
-    assert detect_run(run, h=0.5).horizon == pytest.approx(1.5)         # t5 - t2, still a miss
+    assert detect_run(run, h=0.5).horizon == pytest.approx(1.5)  # t5 - t2, still a miss
     assert not detect_run(run, h=0.5).detected
-    d = detect_run(run, h=1.0)                                          # window 2..6
-    assert d.detected and d.delay == pytest.approx(2.0)                 # t6 - t2 = 3.0 - 1.0
+    d = detect_run(run, h=1.0)  # window 2..6
+    assert d.detected and d.delay == pytest.approx(2.0)  # t6 - t2 = 3.0 - 1.0
     # the window is cut at the last sample: 2.0 + 100 s -> horizon t9 - t2 = 3.5 s
     assert detect_run(run, h=100.0).horizon == pytest.approx(3.5)
 
@@ -241,12 +261,12 @@ def test_delay_stats_with_a_miss():
         mk("000010000000", "001111111110"),  # tau=2, onset 4  -> DD = 2
         mk("000000001000", "011111111110"),  # tau=1, onset 8  -> DD = 7
         mk("100000000000", "000111111100"),  # tau=3, eps=9: miss, horizon t9 - t3 = 6
-        mk("010000000000"),                  # fault-free: not part of DD
+        mk("010000000000"),  # fault-free: not part of DD
     ]
     dd = detection_delay(runs)
     assert (dd.n_detected, dd.n_missed) == (3, 1)
-    assert dd.median == pytest.approx(2.0)                   # median of [2, 2, 7]
-    assert dd.mean == pytest.approx((2 + 2 + 7) / 3)         # misses are not in the mean
+    assert dd.median == pytest.approx(2.0)  # median of [2, 2, 7]
+    assert dd.mean == pytest.approx((2 + 2 + 7) / 3)  # misses are not in the mean
     # p90 by linear interpolation: position 0.9 * 2 = 1.8 -> 2 + 0.8 * (7 - 2) = 6
     assert dd.p90 == pytest.approx(6.0)
     # censored mean: the miss contributes its horizon 6 -> (2 + 2 + 7 + 6) / 4
@@ -266,8 +286,15 @@ def test_calibrated_threshold_far_below_alpha():
     for _ in range(2):
         s = rng.normal(size=500)
         s[:2] = 1e6
-        runs.append(RunData(t=np.arange(500.0), faulty=np.zeros(500, bool),
-                            scored=np.arange(500) >= 2, alarm=np.zeros(500, bool), score=s))
+        runs.append(
+            RunData(
+                t=np.arange(500.0),
+                faulty=np.zeros(500, bool),
+                scored=np.arange(500) >= 2,
+                alarm=np.zeros(500, bool),
+                score=s,
+            )
+        )
     pool = fault_free_scores(runs)
     assert pool.size == 996 and pool.max() < 1e6
     for alpha in (0.01, 0.05, 0.29):
@@ -313,13 +340,18 @@ def test_roc_auc_and_average_precision_with_a_tie():
 
 def test_ranking_metrics_pooled_over_scored_samples():
     # the unscored warm-up sample of run A (score 0.9, negative) must not enter the pool
-    a = RunData(t=[0.0, 1.0, 2.0], faulty=[0, 0, 0], scored=[0, 1, 1], alarm=[0, 0, 0],
-                score=[0.9, 0.1, 0.4])
+    a = RunData(
+        t=[0.0, 1.0, 2.0],
+        faulty=[0, 0, 0],
+        scored=[0, 1, 1],
+        alarm=[0, 0, 0],
+        score=[0.9, 0.1, 0.4],
+    )
     b = RunData(t=[0.0, 1.0], faulty=[1, 1], scored=[1, 1], alarm=[0, 0], score=[0.4, 0.8])
     s, y = pooled_scores([a, b])
     np.testing.assert_array_equal(s, [0.1, 0.4, 0.4, 0.8])
     np.testing.assert_array_equal(y, [False, False, True, True])
-    assert roc_auc(s, y) == pytest.approx(0.875)      # with 0.9 included it would be 3.5 / 6
+    assert roc_auc(s, y) == pytest.approx(0.875)  # with 0.9 included it would be 3.5 / 6
 
 
 # ----------------------------------------------------------------------------- M9
@@ -334,7 +366,7 @@ def test_isolation_accuracy_sample_weighted():
         # fault B at 1..3; alarms at 2, 3 diagnosed B, B -> 2 of 2; the unalarmed sample 1
         # (diagnosed A) does not count
         mk("0011000", "0111000", fault_type="B", diag=[n, "A", "B", "B", n, n, n]),
-        mk("1100000", diag=["A"] * 7),     # fault-free: ignored
+        mk("1100000", diag=["A"] * 7),  # fault-free: ignored
     ]
     assert isolation_accuracy(runs) == pytest.approx((2 + 2) / (4 + 2))
 
@@ -359,7 +391,7 @@ def test_detectability_mdm90():
     np.testing.assert_allclose(res.table["magnitude"], [0.5, 1.0, 2.0])
     np.testing.assert_allclose(res.table["p_d"], [0.5, 0.9, 1.0])
     assert res.table["n_runs"].tolist() == [10, 10, 10]
-    assert res.mdm == 1.0                               # 0.9 >= 0.9 counts
+    assert res.mdm == 1.0  # 0.9 >= 0.9 counts
     assert detectability(mags, det, level=0.95).mdm == 2.0
     # sorted by |m|: a negative magnitude -0.8 with P_D 1 beats +1.0
     signed = detectability(mags + [-0.8] * 4, det + [True] * 4)
@@ -369,8 +401,11 @@ def test_detectability_mdm90():
 
 
 def test_detectability_from_run_detections():
-    runs = [mk("0011000", "0011100", magnitude=1.0), mk("0000000", "0011100", magnitude=1.0),
-            mk("0010000", "0011100", magnitude=3.0)]
+    runs = [
+        mk("0011000", "0011100", magnitude=1.0),
+        mk("0000000", "0011100", magnitude=1.0),
+        mk("0010000", "0011100", magnitude=3.0),
+    ]
     dets = [detect_run(r) for r in runs]
     res = detectability([d.magnitude for d in dets], [d.detected for d in dets])
     # 1.0 -> 1/2, 3.0 -> 1/1
@@ -396,8 +431,10 @@ def test_bootstrap_ci_deterministic_and_brackets_estimate():
     assert (c.low, c.high) == (0.5, 0.5)
     # two runs {0, 1}: replicate means 0, 1/2, 1 with probabilities 1/4, 1/2, 1/4, so the
     # 30th and 70th percentiles (level 0.4) are both 1/2, and the 95% interval is [0, 1]
-    assert (bootstrap_ci([0.0, 1.0], n_boot=4000, level=0.4).low,
-            bootstrap_ci([0.0, 1.0], n_boot=4000, level=0.4).high) == (0.5, 0.5)
+    assert (
+        bootstrap_ci([0.0, 1.0], n_boot=4000, level=0.4).low,
+        bootstrap_ci([0.0, 1.0], n_boot=4000, level=0.4).high,
+    ) == (0.5, 0.5)
     wide = bootstrap_ci([0.0, 1.0], n_boot=4000)
     assert (wide.low, wide.high) == (0.0, 1.0)
 
@@ -414,7 +451,7 @@ def test_bootstrap_ci_resamples_runs_with_a_callable():
 
     ci = bootstrap_ci(p_d, runs, n_boot=200, seed=1)
     assert ci.estimate == pytest.approx(3 / 4)
-    assert set(sizes) == {4}                     # each replicate draws 4 runs, not samples
+    assert set(sizes) == {4}  # each replicate draws 4 runs, not samples
     assert ci.low <= 0.75 <= ci.high and ci.n_valid == 200
     assert ci == bootstrap_ci(detection_probability, runs, n_boot=200, seed=1)
     # a replicate without a faulty run gives nan and is left out of the percentiles

@@ -58,9 +58,13 @@ def reference_vus(score, y, max_buffer, groups):
         for th in sorted(set(score), reverse=True):
             pred = [x >= th for x in score]
             tp = sum(wk for wk, p in zip(w, pred, strict=True) if p)
-            exist = sum(any(pred[j] and groups[j] == groups[a]
-                            for j in range(max(0, a - ell), min(n, b + ell + 1)))
-                        for a, b in ranges)
+            exist = sum(
+                any(
+                    pred[j] and groups[j] == groups[a]
+                    for j in range(max(0, a - ell), min(n, b + ell + 1))
+                )
+                for a, b in ranges
+            )
             recall = min(tp / sum(y), 1.0) * exist / len(ranges)
             area += (recall - prev) * tp / sum(pred)
             prev = recall
@@ -75,7 +79,7 @@ def test_vus_pr_matches_a_brute_force_reference(case):
     y = np.zeros(n, bool)
     for _ in range(int(rng.integers(1, 4))):  # a few anomaly ranges
         a = int(rng.integers(0, n - 3))
-        y[a:a + int(rng.integers(1, 8))] = True
+        y[a : a + int(rng.integers(1, 8))] = True
     score = np.round(rng.random(n) + 0.6 * y * rng.random(), 1)  # rounding makes ties
     groups = np.sort(rng.integers(0, 3, n))  # up to three runs
     buf = int(rng.integers(0, 6))
@@ -109,8 +113,9 @@ def test_vus_pr_properties():
     # ranges and buffers do not cross groups: in another run the early alarm earns nothing,
     # as if it were not there
     two_runs = [0] * 3 + [1] * 13
-    assert range_pr_auc(early, y1, 1, groups=two_runs) \
-        == pytest.approx(range_pr_auc(np.zeros(16), y1, 1, groups=two_runs), abs=1e-12)
+    assert range_pr_auc(early, y1, 1, groups=two_runs) == pytest.approx(
+        range_pr_auc(np.zeros(16), y1, 1, groups=two_runs), abs=1e-12
+    )
     assert range_pr_auc(early, y1, 1) > range_pr_auc(early, y1, 1, groups=two_runs)
     with pytest.raises(ValueError, match="max_buffer"):
         vus_pr(s, y, -1)
@@ -132,10 +137,16 @@ def test_vus_pr_refuses_more_buffer_lengths_than_the_limit():
 def channel_run(alarm, fault, truth_a, truth_b, top, **kw):
     """A run over channels ('a', 'b'): per-sample truth of each and the top-ranked index."""
     n = len(alarm)
-    return RunData(t=np.arange(n, dtype=float), faulty=bits(fault), scored=np.ones(n, bool),
-                   alarm=bits(alarm), channels=("a", "b"),
-                   channel_truth=np.c_[bits(truth_a), bits(truth_b)],
-                   ranking=np.array([[int(c)] for c in top]), **kw)
+    return RunData(
+        t=np.arange(n, dtype=float),
+        faulty=bits(fault),
+        scored=np.ones(n, bool),
+        alarm=bits(alarm),
+        channels=("a", "b"),
+        channel_truth=np.c_[bits(truth_a), bits(truth_b)],
+        ranking=np.array([[int(c)] for c in top]),
+        **kw,
+    )
 
 
 def test_hit_at_1_at_the_first_detection_onset():
@@ -168,28 +179,48 @@ def test_localization_counts_per_alarmed_sample():
 def test_steady_window_leaves_the_ramp_out():
     # onset k=2, ramp to k=4, steady from k=5 to k=11
     sev = [0, 0, 0.25, 0.5, 0.75] + [1.0] * 7
-    r = RunData(t=np.arange(12.0), faulty=bits("001111111111"), scored=np.ones(12, bool),
-                alarm=bits("000110011011"), severity=sev)
+    r = RunData(
+        t=np.arange(12.0),
+        faulty=bits("001111111111"),
+        scored=np.ones(12, bool),
+        alarm=bits("000110011011"),
+        severity=sev,
+    )
     assert steady_counts(r) == (4, 7)  # k=7, 8, 10, 11; the ramp alarms k=3, 4 are left out
     assert steady_detection_rate([r]) == pytest.approx(4 / 7)
     # the alarm event from the ramp ends at k=4; the next one starts at k=7: delay 2 s
     d = steady_detection(r, m=1)
     assert d.detected and d.k_star == 7 and d.delay == 2.0
     # an alarm running from the ramp into the steady state detects at once (lenient)
-    r2 = RunData(t=np.arange(12.0), faulty=r.faulty, scored=r.scored,
-                 alarm=bits("000111100000"), severity=sev)
+    r2 = RunData(
+        t=np.arange(12.0),
+        faulty=r.faulty,
+        scored=r.scored,
+        alarm=bits("000111100000"),
+        severity=sev,
+    )
     assert steady_detection(r2, m=2).delay == 0.0
     # a run that never reaches severity 1 has no steady window
-    r3 = RunData(t=np.arange(4.0), faulty=bits("0111"), scored=np.ones(4, bool),
-                 alarm=bits("0111"), severity=[0, 0.2, 0.4, 0.6])
+    r3 = RunData(
+        t=np.arange(4.0),
+        faulty=bits("0111"),
+        scored=np.ones(4, bool),
+        alarm=bits("0111"),
+        severity=[0, 0.2, 0.4, 0.6],
+    )
     assert steady_counts(r3) == (0, 0) and steady_detection(r3) is None
     with pytest.raises(ValueError, match="severity"):
         steady_counts(RunData(t=[0.0], faulty=[True], scored=[True], alarm=[True]))
 
 
 def test_restrict_to_mode_keeps_the_truth():
-    r = RunData(t=np.arange(6.0), faulty=bits("000111"), scored=bits("011111"),
-                alarm=bits("111111"), mode=["OC1"] * 4 + ["OC2"] * 2)
+    r = RunData(
+        t=np.arange(6.0),
+        faulty=bits("000111"),
+        scored=bits("011111"),
+        alarm=bits("111111"),
+        mode=["OC1"] * 4 + ["OC2"] * 2,
+    )
     oc2 = restrict_to_mode(r, "OC2")
     assert list(oc2.scored) == [False] * 4 + [True] * 2
     assert oc2.onset == 3 and oc2.is_faulty

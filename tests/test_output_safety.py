@@ -36,8 +36,11 @@ def run(out, *extra, scenario=QUICK):
 
 def tree(root: Path) -> dict[str, bytes]:
     """Every file under ``root`` (hidden ones too) with its bytes."""
-    return {p.relative_to(root).as_posix(): p.read_bytes()
-            for p in sorted(root.rglob("*")) if p.is_file()}
+    return {
+        p.relative_to(root).as_posix(): p.read_bytes()
+        for p in sorted(root.rglob("*"))
+        if p.is_file()
+    }
 
 
 def scenario_copy(where: Path, **keys) -> Path:
@@ -77,13 +80,16 @@ def remanifest(root: Path) -> None:
     """Rewrite manifest.json to list the files now present (a consistent but forged
     dataset, as an old r2rsim or a tool could leave)."""
     m = json.loads((root / "manifest.json").read_text())
-    m["files"] = {p.relative_to(root).as_posix(): {"sha256": sha256_file(p),
-                                                    "bytes": p.stat().st_size}
-                  for p in sorted(root.rglob("*")) if p.is_file() and p.name != "manifest.json"}
+    m["files"] = {
+        p.relative_to(root).as_posix(): {"sha256": sha256_file(p), "bytes": p.stat().st_size}
+        for p in sorted(root.rglob("*"))
+        if p.is_file() and p.name != "manifest.json"
+    }
     (root / "manifest.json").write_text(json.dumps(m))
 
 
 # 1. output directories: no clobber, --overwrite replaces only r2rsim datasets -------------
+
 
 def test_directory_with_a_foreign_manifest_is_never_replaced(tmp_path, capsys):
     # the reported data loss: {} in manifest.json was enough to delete the directory
@@ -116,8 +122,9 @@ def test_existing_dataset_needs_overwrite(dataset, tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["qs"]
 
 
-@pytest.mark.parametrize("change", ["added file", "same-size edit", "empty dir", "symlink",
-                                    "missing file"])
+@pytest.mark.parametrize(
+    "change", ["added file", "same-size edit", "empty dir", "symlink", "missing file"]
+)
 def test_changed_dataset_is_not_replaced(dataset, tmp_path, capsys, change):
     out = copy(dataset, tmp_path / "qs")
     normalised = next((out / "scenario").glob("*.normalised.yaml"))
@@ -156,8 +163,7 @@ def test_empty_directory_is_filled_files_and_links_are_refused(tmp_path, capsys)
     assert validate_dataset(empty) == []
 
 
-def test_a_directory_that_changes_during_the_run_is_checked_again_at_commit(dataset,
-                                                                           tmp_path):
+def test_a_directory_that_changes_during_the_run_is_checked_again_at_commit(dataset, tmp_path):
     meta = {"r2rsim.schema_version": "0.1"}
     # a dataset, overwrite asked for; a file appears in it while the run writes
     out = copy(dataset, tmp_path / "qs")
@@ -190,9 +196,9 @@ def test_failed_run_removes_the_parent_directories_it_made(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
-def test_output_key_is_relative_to_the_scenario_and_stays_in_its_directory(tmp_path,
-                                                                           monkeypatch,
-                                                                           capsys):
+def test_output_key_is_relative_to_the_scenario_and_stays_in_its_directory(
+    tmp_path, monkeypatch, capsys
+):
     proj = tmp_path / "proj"
     elsewhere = tmp_path / "cwd"
     elsewhere.mkdir()
@@ -223,8 +229,10 @@ def test_output_key_is_relative_to_the_scenario_and_stays_in_its_directory(tmp_p
 
 # 2. names are identifiers; every path stays inside the dataset ---------------------------
 
-@pytest.mark.parametrize("name", ["../../../r2r_escape", "x/../../../../pwned", "a b", "",
-                                  "/etc/r2r", "ok.name"])
+
+@pytest.mark.parametrize(
+    "name", ["../../../r2r_escape", "x/../../../../pwned", "a b", "", "/etc/r2r", "ok.name"]
+)
 def test_scenario_name_is_an_identifier(tmp_path, capsys, name):
     scen = scenario_copy(tmp_path / "p" / "q" / "r", name=name)
     before = tree(tmp_path)
@@ -255,8 +263,13 @@ def test_writer_keeps_every_path_inside_its_temporary_directory(tmp_path):
         with pytest.raises(R2RError):
             DatasetWriter(base / "ds", run_id, {})
     w = DatasetWriter(base / "ds", "x__s0", {})
-    for rel in ("scenario/../../escape.yaml", "../escape.yaml", "/tmp/escape.yaml",
-                "scenario/../../../escape.normalised.yaml", "scenario/leak/escape.yaml"):
+    for rel in (
+        "scenario/../../escape.yaml",
+        "../escape.yaml",
+        "/tmp/escape.yaml",
+        "scenario/../../../escape.normalised.yaml",
+        "scenario/leak/escape.yaml",
+    ):
         with pytest.raises(R2RError, match="not where the dataset layout keeps"):
             w.write_text(rel, "x")
     with pytest.raises(R2RError, match="not a table of the dataset layout"):
@@ -279,8 +292,9 @@ def test_validator_flags_a_layout_that_escapes(dataset, tmp_path):
     runs = runs.set_column(0, "run_id", pa.array([rid]))
     pq.write_table(runs, ds / "runs.parquet")
     (ds / "r2r_escape__s1").mkdir()
-    os.replace(next((ds / "samples").glob("*/part-0.parquet")),
-               ds / "r2r_escape__s1" / "part-0.parquet")
+    os.replace(
+        next((ds / "samples").glob("*/part-0.parquet")), ds / "r2r_escape__s1" / "part-0.parquet"
+    )
     (ds / "samples" / "run_id=quickstart__s1").rmdir()
     (ds / "samples" / "run_id=..").mkdir()
     m = json.loads((ds / "manifest.json").read_text())
@@ -294,8 +308,7 @@ def test_validator_flags_a_layout_that_escapes(dataset, tmp_path):
     ds2 = copy(dataset, tmp_path / "ds2")
     (tmp_path / "outside.txt").write_text("x")
     m = json.loads((ds2 / "manifest.json").read_text())
-    m["files"]["../outside.txt"] = {"sha256": sha256_file(tmp_path / "outside.txt"),
-                                    "bytes": 1}
+    m["files"]["../outside.txt"] = {"sha256": sha256_file(tmp_path / "outside.txt"), "bytes": 1}
     (ds2 / "manifest.json").write_text(json.dumps(m))
     (ds2 / "extra.bin").write_bytes(b"?")
     problems = validate_dataset(ds2)
@@ -308,6 +321,7 @@ def test_validator_flags_a_layout_that_escapes(dataset, tmp_path):
 
 
 # 7. signals and stale temporary directories ----------------------------------------------
+
 
 def _dead_pid() -> int:
     """A process id that no process has now."""
@@ -326,8 +340,13 @@ def _dead_pid() -> int:
 
 
 def _cli(*args, cwd):
-    return subprocess.Popen([sys.executable, "-m", "r2rsim.cli", *args], cwd=cwd,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(
+        [sys.executable, "-m", "r2rsim.cli", *args],
+        cwd=cwd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
 
 
 @pytest.mark.parametrize("sig, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
@@ -378,7 +397,8 @@ def test_stale_temporaries_of_dead_processes_are_removed_and_nothing_else(tmp_pa
     _, err = p.communicate(timeout=300)
     assert p.returncode == 0, err
     assert sorted(x.name for x in tmp_path.iterdir()) == sorted(
-        [".foo", f".notes.tmp-{dead}", f".out.tmp-{mine}", "out"])
+        [".foo", f".notes.tmp-{dead}", f".out.tmp-{mine}", "out"]
+    )
     assert (foreign / "thesis.tex").read_text() == "precious"
     assert (tmp_path / ".foo" / "keep.txt").read_text() == "keep"
 
@@ -412,9 +432,9 @@ def test_own_pid_temporary_is_stale_unless_a_writer_uses_it(tmp_path):
 
 # 8. memory flat in run length: row groups and a validator that streams -----------------
 
+
 @pytest.mark.parametrize("group_bytes, groups", [(None, 1), (20_000, (2, 50))])
-def test_small_chunks_are_collected_into_row_groups(tmp_path, monkeypatch, group_bytes,
-                                                     groups):
+def test_small_chunks_are_collected_into_row_groups(tmp_path, monkeypatch, group_bytes, groups):
     # solver chunks end at every event, some a few rows long: one row group each made the
     # footer the writer keeps in memory grow with the run
     if group_bytes:
@@ -424,9 +444,15 @@ def test_small_chunks_are_collected_into_row_groups(tmp_path, monkeypatch, group
     chunks = []
     for i in range(300):
         k = np.arange(10 * i, 10 * i + 10)
-        chunks.append({"k": k, "t_s": k / 100.0, "a": rng.random(10).astype(np.float32),
-                       "label.phase": np.array(["normal", "faulty"] * 5, dtype=object),
-                       "label.fault_ids": [["f1"], []] * 5})
+        chunks.append(
+            {
+                "k": k,
+                "t_s": k / 100.0,
+                "a": rng.random(10).astype(np.float32),
+                "label.phase": np.array(["normal", "faulty"] * 5, dtype=object),
+                "label.fault_ids": [["f1"], []] * 5,
+            }
+        )
         w.write_chunk(chunks[-1])
     w.commit({})
     pf = pq.ParquetFile(tmp_path / "ds" / "samples" / "run_id=x__s0" / "part-0.parquet")
@@ -437,8 +463,7 @@ def test_small_chunks_are_collected_into_row_groups(tmp_path, monkeypatch, group
         assert pf.num_row_groups == groups
     t = pf.read()
     np.testing.assert_array_equal(t["k"].to_numpy(), np.arange(3000))
-    np.testing.assert_array_equal(t["a"].to_numpy(),
-                                  np.concatenate([c["a"] for c in chunks]))
+    np.testing.assert_array_equal(t["a"].to_numpy(), np.concatenate([c["a"] for c in chunks]))
     assert t["label.phase"].to_pylist() == ["normal", "faulty"] * 1500
     assert t["label.fault_ids"].to_pylist() == [["f1"], []] * 1500
 
@@ -466,8 +491,11 @@ def test_validator_reads_the_samples_in_batches(tmp_path, monkeypatch):
     flags = table.column("label.phase").to_pylist()
     flags[k_bad] = "warmup"
     i = table.column_names.index("label.phase")
-    table = table.set_column(i, table.schema.field(i), pa.array(flags).dictionary_encode()
-                             .cast(table.schema.field(i).type))
+    table = table.set_column(
+        i,
+        table.schema.field(i),
+        pa.array(flags).dictionary_encode().cast(table.schema.field(i).type),
+    )
     pq.write_table(table, part, row_group_size=500)
     problems = validate_dataset(out)
     assert any(f"label.phase at k = {k_bad} is 'warmup'" in p for p in problems), problems
@@ -475,6 +503,8 @@ def test_validator_reads_the_samples_in_batches(tmp_path, monkeypatch):
     assert len(faults) == 3 and all(f["onset_k"] > 300 for f in faults)
     ft = real(out / "faults.parquet")
     j = ft.column_names.index("onset_k")
-    pq.write_table(ft.set_column(j, "onset_k", pa.array(np.asarray(ft.column("onset_k")) + 1)),
-                   out / "faults.parquet")
+    pq.write_table(
+        ft.set_column(j, "onset_k", pa.array(np.asarray(ft.column("onset_k")) + 1)),
+        out / "faults.parquet",
+    )
     assert sum("onset_k" in p for p in validate_dataset(out)) == len(faults)

@@ -55,16 +55,16 @@ def test_lie_derivatives_and_gradient_match_finite_differences(model):
 
 def test_input_part_E_U_on_a_model_whose_sensor_reads_the_input():
     # h depends on u, so L_f h carries (∂h/∂u)·u̇: the E·U term of eqs. 3.7/3.13
-    m = NonlinearModel(lambda x, u: [-2.0 * x[0] + u[0]],
-                       lambda x, u: [x[0] * (1 + 0.1 * u[0]), x[0] ** 2], 1, 1)
+    m = NonlinearModel(
+        lambda x, u: [-2.0 * x[0] + u[0]], lambda x, u: [x[0] * (1 + 0.1 * u[0]), x[0] ** 2], 1, 1
+    )
     x, u, du = np.array([3.0]), np.array([0.5]), np.array([0.7])
     O = m.observation(x, u, [du])
     f = -2 * 3.0 + 0.5
     np.testing.assert_allclose(O, [3 * 1.05, 1.05 * f + 0.3 * 0.7, 9.0, 6.0 * f], rtol=1e-14)
     np.testing.assert_allclose(m.input_part(x, u, [du]), [0, 0.3 * 0.7, 0, 0], atol=1e-15)
     np.testing.assert_allclose(m.input_matrix(x, u)[:, 0], [0, 0.3, 0, 0], atol=1e-15)
-    np.testing.assert_allclose(O - m.observation_nl(x, u), m.input_part(x, u, [du]),
-                               atol=1e-15)
+    np.testing.assert_allclose(O - m.observation_nl(x, u), m.input_part(x, u, [du]), atol=1e-15)
     # the registration sensors do not read the inputs: E·U is identically zero there
     reg = registration_model(EA, L, L0, RD, RO)
     assert np.all(reg.input_part(X0, U0, [np.array([1.0, 2.0, 3.0])]) == 0)
@@ -75,8 +75,9 @@ def test_number_of_relations_is_n_minus_N(model):
     assert model.n_outputs == 4
     assert model.n_relations(X0, U0) == 3
     assert model.parity_space(X0, U0).shape == (3, 4)
-    two = NonlinearModel(lambda x, u: [x[1], -x[0] + u[0]], lambda x, u: [x[0], x[0] + x[1]],
-                         2, 1, orders=(1, 1))
+    two = NonlinearModel(
+        lambda x, u: [x[1], -x[0] + u[0]], lambda x, u: [x[0], x[0] + x[1]], 2, 1, orders=(1, 1)
+    )
     assert two.n_outputs == 4 and two.n_relations([0.3, 0.1], [0.0]) == 2
 
 
@@ -103,7 +104,7 @@ def test_zero_pattern_of_table_3_2_falls_out_of_the_null_space(model):
 
         c = null_space(W[:, zero_cols].T)
         assert c.shape[1] == 1
-        w = (c[:, 0] @ W)
+        w = c[:, 0] @ W
         w = w / np.linalg.norm(w) * np.sign(w[keep[1]])
         assert np.max(np.abs(w[zero_cols])) <= 1e-12
         # the closed form: ẏ − f_x·y within the sensor's block (rows in N-equivalents)
@@ -133,8 +134,9 @@ F_A = np.array([[1.0], [0.0], [0.0], [0.0]])
 F_AB = np.array([[1.0, 0.0], [0.0, 0.0], [0.0, 1.0], [0.0, 0.0]])
 
 
-@pytest.mark.parametrize("kind,F", [("fault_normalised", F_A), ("fault_normalised", F_AB),
-                                    ("unit_norm", None)])
+@pytest.mark.parametrize(
+    "kind,F", [("fault_normalised", F_A), ("fault_normalised", F_AB), ("unit_norm", None)]
+)
 def test_min_max_matches_a_second_solver(model, kind, F):
     S = _scenarios()
     a = design_relation(S, _N(model, P0), F, kind, solver="slsqp")
@@ -208,11 +210,11 @@ def test_savitzky_golay_derivatives_and_group_delay():
     np.testing.assert_allclose(Dc[1][k, 1], np.cos(td), atol=2e-5)
     # no full window behind the first w - 1 samples: no estimate (the centred filter's
     # edge fit there would read samples up to w - 1)
-    assert np.all(np.isnan(Dc[:, :w - 1])) and np.all(np.isfinite(Dc[:, w - 1:]))
+    assert np.all(np.isnan(Dc[:, : w - 1])) and np.all(np.isfinite(Dc[:, w - 1 :]))
     # causality: the estimates from samples 0..k are those of the whole record
     for k in (w - 1, w, 200, len(t) - 2):
-        Dk, _ = savgol_derivatives(X[:k + 1], dt, w, 3, 1, causal=True)
-        np.testing.assert_array_equal(Dk, Dc[:, :k + 1])
+        Dk, _ = savgol_derivatives(X[: k + 1], dt, w, 3, 1, causal=True)
+        np.testing.assert_array_equal(Dk, Dc[:, : k + 1])
     # the centred filter reads half a window ahead: cutting the record changes its end
     Dk, _ = savgol_derivatives(X[:201], dt, w, 3, 1)
     assert np.max(np.abs(Dk[1][-25:, 1] - D[1][175:201, 1][-25:])) > 1e-4
@@ -226,7 +228,8 @@ def test_savitzky_golay_derivatives_and_group_delay():
     assert np.all(np.isnan(Dn[:, 200, 0])) and np.all(np.isfinite(Dn[:, 200, 1]))
     assert np.all(np.isfinite(Dn[:, 201:]))
     for k in (200, 201, 230):
-        np.testing.assert_array_equal(savgol_derivatives(Xn[:k + 1], dt, w, 3, 1, True)[0],
-                                      Dn[:, :k + 1])
+        np.testing.assert_array_equal(
+            savgol_derivatives(Xn[: k + 1], dt, w, 3, 1, True)[0], Dn[:, : k + 1]
+        )
     with pytest.raises(InputError, match="odd"):
         savgol_derivatives(X, dt, 50, 3)

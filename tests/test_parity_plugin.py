@@ -63,8 +63,10 @@ def fitted(dataset):
     1-2, threshold from seed 3 (the contract's ``calibrate`` at alpha = 1 %)."""
     healthy = _case(dataset, "healthy OC1")
     configs = {"model": {}, "literal": {"mode": "literal"}, "offline": {"causal": False}}
-    return {name: ParitySpaceDetector(**kw).fit(healthy[:2]).calibrate(healthy[2:], 0.01)
-            for name, kw in configs.items()}
+    return {
+        name: ParitySpaceDetector(**kw).fit(healthy[:2]).calibrate(healthy[2:], 0.01)
+        for name, kw in configs.items()
+    }
 
 
 def test_zero_pattern_and_null_space_of_the_fitted_relations(fitted):
@@ -97,9 +99,13 @@ def _shift(est, run, onset=15.0):
     return z[post].mean(axis=0) - z[pre].mean(axis=0), sc, post
 
 
-@pytest.mark.parametrize("case,moved,still,top", [
-    ("A offset +15 %", [0, 2], 1, "meas.sensor_A.tension_N"),
-    ("B gain +15 % record-only", [0, 1], 2, "meas.sensor_B.pitch_m")])
+@pytest.mark.parametrize(
+    "case,moved,still,top",
+    [
+        ("A offset +15 %", [0, 2], 1, "meas.sensor_A.tension_N"),
+        ("B gain +15 % record-only", [0, 1], 2, "meas.sensor_B.pitch_m"),
+    ],
+)
 def test_signatures_isolate_the_faulty_sensor(dataset, fitted, case, moved, still, top):
     est = fitted["model"]
     for run in _case(dataset, case):
@@ -114,8 +120,7 @@ def test_signatures_isolate_the_faulty_sensor(dataset, fitted, case, moved, stil
 
 def test_literal_mode_fails_off_the_design_point_and_model_does_not(dataset, fitted):
     oc2 = _case(dataset, "healthy OC2")
-    far = {m: np.mean([est.decide(est.score(r)).mean() for r in oc2])
-           for m, est in fitted.items()}
+    far = {m: np.mean([est.decide(est.score(r)).mean() for r in oc2]) for m, est in fitted.items()}
     # the thesis's linearised residual keeps the OC1 linearisation constant: at 160 N and
     # 1 m/s it alarms everywhere (thesis: 91.51 %)
     assert far["literal"] > 0.9
@@ -158,22 +163,23 @@ def test_the_default_is_causal_and_the_offline_filter_is_not(dataset, fitted):
     assert est.delay_s_ == pytest.approx(1.5, abs=1e-9) and off.delay_s_ == 0.0
     for run in (_case(dataset, "healthy OC1")[2], _case(dataset, "A offset +15 %")[0]):
         frame = run.visible()
-        full = {name: d.score(frame)["statistic"].to_numpy() for name, d in
-                (("causal", est), ("offline", off))}
+        full = {
+            name: d.score(frame)["statistic"].to_numpy()
+            for name, d in (("causal", est), ("offline", off))
+        }
         # the first window − 1 = 300 samples have no full window behind them
         assert np.all(np.isnan(full["causal"][:300])) and np.isfinite(full["causal"][300])
         for k in (300, 1000, 1499, 1500, 1650, 2500):
-            part = est.score(frame.iloc[:k + 1])["statistic"].to_numpy()
-            np.testing.assert_array_equal(np.isnan(part), np.isnan(full["causal"][:k + 1]))
-            np.testing.assert_allclose(part, full["causal"][:k + 1], rtol=1e-9, atol=0)
-            part = off.score(frame.iloc[:k + 1])["statistic"].to_numpy()
+            part = est.score(frame.iloc[: k + 1])["statistic"].to_numpy()
+            np.testing.assert_array_equal(np.isnan(part), np.isnan(full["causal"][: k + 1]))
+            np.testing.assert_allclose(part, full["causal"][: k + 1], rtol=1e-9, atol=0)
+            part = off.score(frame.iloc[: k + 1])["statistic"].to_numpy()
             tail = slice(k - 149, k + 1)  # the centred filter's last half window
             rel = np.abs(part[tail] - full["offline"][tail]) / full["offline"][tail]
             assert rel.max() > 1e-2, (k, rel.max())
 
 
-def test_a_step_offset_on_sensor_a_moves_no_causal_residual_before_its_onset(dataset,
-                                                                              fitted):
+def test_a_step_offset_on_sensor_a_moves_no_causal_residual_before_its_onset(dataset, fitted):
     """Sensor A (+19.5 N from 15 s) against the same run with the offset taken out again:
     every sample before the onset is the same in both, so a causal residual cannot move
     before the onset; the centred filter's moves 1.5 s early (9σ on the A-only r3) and
@@ -223,32 +229,35 @@ def test_sensitivity_along_a_run(dataset, fitted):
 
 def test_parameters_and_channels_are_checked(dataset):
     run = _case(dataset, "healthy OC1")[0]
-    for kw, msg in (({"mode": "linear"}, "mode must be one of"),
-                    # removed: it equalled mode="model" (see the test of the relations)
-                    ({"mode": "scheduled"}, "mode must be one of literal, model, got"),
-                    ({"design": "rayleigh"}, "design must be one of"),
-                    ({"savgol_window_s": 0}, "savgol_window_s must be a positive"),
-                    ({"savgol_window_s": 1e300}, "savgol_window_s must be from 0 to 600 s"),
-                    ({"savgol_order": 10**6}, "savgol_order must be an integer from 2 to 10"),
-                    ({"modulus_spread": 1e300}, "modulus_spread must be from 0 to 0.5"),
-                    ({"pitch_spread_m": float("nan")}, "pitch_spread_m must be from 0"),
-                    ({"alpha": 1.5}, "alpha must be a number in"),
-                    ({"savgol_window_s": True}, "savgol_window_s must be a number"),
-                    ({"line": True}, "line must be the path of a line file"),
-                    ({"time_base": "space"}, "time_base must be one of"),
-                    ({"sensor_b": "meas.vision.pitch_m"}, "no column matching meas.vision"),
-                    # accepted, then failed inside numpy ("SVD did not converge"), exit 1
-                    ({"relaxed_pitch_m": float("inf")},
-                     "relaxed_pitch_m must be from 0.001 to 100 m or null, got inf"),
-                    ({"web_EA_N": 1e308}, r"web_EA_N must be from 0.1 to 2.7e\+10 N"),
-                    ({"web_EA_N": 1e-300}, r"web_EA_N must be from 0.1 to 2.7e\+10 N"),
-                    ({"span_length_m": 1e-300}, "span_length_m must be from 0.001 to 100 m"),
-                    ({"drive_radius_m": 1e300}, "drive_radius_m must be from 0.001 to 10 m"),
-                    # truthiness decided; a number as a column name crashed with TypeError
-                    ({"causal": "yes"}, "causal must be true or false, got 'yes'"),
-                    ({"sensor_a": 5}, "sensor_a must be a column name"),
-                    ({"line": "/nonexistent.yaml"},
-                     "parity: line: /nonexistent.yaml: file not found")):
+    for kw, msg in (
+        ({"mode": "linear"}, "mode must be one of"),
+        # removed: it equalled mode="model" (see the test of the relations)
+        ({"mode": "scheduled"}, "mode must be one of literal, model, got"),
+        ({"design": "rayleigh"}, "design must be one of"),
+        ({"savgol_window_s": 0}, "savgol_window_s must be a positive"),
+        ({"savgol_window_s": 1e300}, "savgol_window_s must be from 0 to 600 s"),
+        ({"savgol_order": 10**6}, "savgol_order must be an integer from 2 to 10"),
+        ({"modulus_spread": 1e300}, "modulus_spread must be from 0 to 0.5"),
+        ({"pitch_spread_m": float("nan")}, "pitch_spread_m must be from 0"),
+        ({"alpha": 1.5}, "alpha must be a number in"),
+        ({"savgol_window_s": True}, "savgol_window_s must be a number"),
+        ({"line": True}, "line must be the path of a line file"),
+        ({"time_base": "space"}, "time_base must be one of"),
+        ({"sensor_b": "meas.vision.pitch_m"}, "no column matching meas.vision"),
+        # accepted, then failed inside numpy ("SVD did not converge"), exit 1
+        (
+            {"relaxed_pitch_m": float("inf")},
+            "relaxed_pitch_m must be from 0.001 to 100 m or null, got inf",
+        ),
+        ({"web_EA_N": 1e308}, r"web_EA_N must be from 0.1 to 2.7e\+10 N"),
+        ({"web_EA_N": 1e-300}, r"web_EA_N must be from 0.1 to 2.7e\+10 N"),
+        ({"span_length_m": 1e-300}, "span_length_m must be from 0.001 to 100 m"),
+        ({"drive_radius_m": 1e300}, "drive_radius_m must be from 0.001 to 10 m"),
+        # truthiness decided; a number as a column name crashed with TypeError
+        ({"causal": "yes"}, "causal must be true or false, got 'yes'"),
+        ({"sensor_a": 5}, "sensor_a must be a column name"),
+        ({"line": "/nonexistent.yaml"}, "parity: line: /nonexistent.yaml: file not found"),
+    ):
         with pytest.raises(InputError, match=msg):
             ParitySpaceDetector(**kw).fit([run])
     # frames without their run's line: the line= file gives the model
@@ -257,8 +266,11 @@ def test_parameters_and_channels_are_checked(dataset):
         ParitySpaceDetector(line=REG_LINE).fit([frame])
     # a run shorter than the window, a dead sensor: messages that name the plug-in and what
     short = run.visible().iloc[:50]
-    with pytest.raises(InputError, match=r"parity: 50 samples are fewer than the Savitzky-"
-                                         r"Golay window \(301\) \(savgol_window_s = 3.0 s\)"):
+    with pytest.raises(
+        InputError,
+        match=r"parity: 50 samples are fewer than the Savitzky-"
+        r"Golay window \(301\) \(savgol_window_s = 3.0 s\)",
+    ):
         ParitySpaceDetector(line=REG_LINE).fit([short])
     dead = run.visible().assign(**{"meas.sensor_A.tension_N": np.nan})
     with pytest.raises(InputError, match="parity: meas.sensor_A.tension_N has no finite sample"):
@@ -266,12 +278,22 @@ def test_parameters_and_channels_are_checked(dataset):
 
 
 def test_line_file_parameters():
-    ids = {"span": "registration", "drive": "reg_drive", "downstream": "reg_idler",
-           "pitch_sensor": "sensor_B"}
+    ids = {
+        "span": "registration",
+        "drive": "reg_drive",
+        "downstream": "reg_idler",
+        "pitch_sensor": "sensor_B",
+    }
     p = registration_parameters(REG_LINE, **ids)
-    assert p == pytest.approx({"web_EA_N": 112.5e3, "span_length_m": 1.5,
-                               "relaxed_pitch_m": 0.25, "drive_radius_m": 0.10,
-                               "downstream_radius_m": 0.05})
+    assert p == pytest.approx(
+        {
+            "web_EA_N": 112.5e3,
+            "span_length_m": 1.5,
+            "relaxed_pitch_m": 0.25,
+            "drive_radius_m": 0.10,
+            "downstream_radius_m": 0.05,
+        }
+    )
     with pytest.raises(InputError, match="span 'reg' is not a span of the line"):
         registration_parameters(REG_LINE, **{**ids, "span": "reg"})
     with pytest.raises(TypeError):  # no thesis ids by default
@@ -281,15 +303,48 @@ def test_line_file_parameters():
 def test_diagnose_cli_on_a_sweep(dataset, tmp_path, capsys):
     out = {}
     for mode in ("literal", "model"):
-        code = main(["diagnose", "--method", "parity", "--data", str(dataset), "--split",
-                     "condition", "--train-mode", "OC1", "--test-mode", "OC2",
-                     "--val-fraction", "0.1", "--param", f"mode={mode}", "--n-boot", "0",
-                     "-o", str(tmp_path / mode)])
+        code = main(
+            [
+                "diagnose",
+                "--method",
+                "parity",
+                "--data",
+                str(dataset),
+                "--split",
+                "condition",
+                "--train-mode",
+                "OC1",
+                "--test-mode",
+                "OC2",
+                "--val-fraction",
+                "0.1",
+                "--param",
+                f"mode={mode}",
+                "--n-boot",
+                "0",
+                "-o",
+                str(tmp_path / mode),
+            ]
+        )
         assert code == 0, capsys.readouterr().err
         m = pd.read_csv(tmp_path / mode / "metrics.csv")
         out[mode] = float(m.query("metric == 'far_ff'")["value"].iloc[0])
     assert out["literal"] > 0.9 and out["model"] < 0.15
-    code = main(["diagnose", "--method", "parity", "--data", str(dataset), "--split",
-                 "condition", "--val-fraction", "0.1", "--param", "mode=affine",
-                 "-o", str(tmp_path / "bad")])
+    code = main(
+        [
+            "diagnose",
+            "--method",
+            "parity",
+            "--data",
+            str(dataset),
+            "--split",
+            "condition",
+            "--val-fraction",
+            "0.1",
+            "--param",
+            "mode=affine",
+            "-o",
+            str(tmp_path / "bad"),
+        ]
+    )
     assert code == 2 and "mode must be one of" in capsys.readouterr().err

@@ -28,10 +28,17 @@ def data(tmp_path_factory):
     """Two healthy OC1 runs (seeds 1, 2) and one with sensor A offset +15 % at 20 s."""
     d = tmp_path_factory.mktemp("plugin_data")
     out = {}
-    for name, scen, seed in (("h1", "oc1_nominal", 1), ("h2", "oc1_nominal", 2),
-                             ("f", "sensor_a_offset_P15", 3)):
-        r2rsim.run_scenario(REPO / "scenarios" / "thesis" / f"{scen}.yaml", output=d / name,
-                            seed=seed, duration=30.0)
+    for name, scen, seed in (
+        ("h1", "oc1_nominal", 1),
+        ("h2", "oc1_nominal", 2),
+        ("f", "sensor_a_offset_P15", 3),
+    ):
+        r2rsim.run_scenario(
+            REPO / "scenarios" / "thesis" / f"{scen}.yaml",
+            output=d / name,
+            seed=seed,
+            duration=30.0,
+        )
         out[name] = read_runs(d / name)[0]
     return out
 
@@ -44,8 +51,11 @@ def testbed_data(tmp_path_factory):
     d = tmp_path_factory.mktemp("plugin_testbed")
     scen = REPO / "scenarios" / "thesis_realistic"
     out = {}
-    for name, file, seed in (("h1", "testbed", 1), ("h2", "testbed", 2),
-                             ("f", "testbed_dancer_failure", 3)):
+    for name, file, seed in (
+        ("h1", "testbed", 1),
+        ("h2", "testbed", 2),
+        ("f", "testbed_dancer_failure", 3),
+    ):
         r2rsim.run_scenario(scen / f"{file}.yaml", output=d / name, seed=seed, duration=30.0)
         out[name] = read_runs(d / name)[0]
     return out
@@ -58,16 +68,31 @@ def realistic_data(tmp_path_factory):
     import yaml
 
     d = tmp_path_factory.mktemp("plugin_data_realistic")
-    base = yaml.safe_load((REPO / "scenarios" / "thesis_realistic" / "registration.yaml")
-                          .read_text(encoding="utf-8"))
+    base = yaml.safe_load(
+        (REPO / "scenarios" / "thesis_realistic" / "registration.yaml").read_text(encoding="utf-8")
+    )
     base.update(line=str(REPO / "lines" / "registration_realistic.yaml"), duration="30 s")
     out = {}
-    for name, seed, faults in (("h1", 1, []), ("h2", 2, []),
-                               ("f", 3, [{"id": "a", "type": "sensor.offset",
-                                          "target": "sensor_A", "onset": "20 s",
-                                          "magnitude": "19.5 N"}])):
-        (d / f"{name}.yaml").write_text(yaml.safe_dump({**base, "faults": faults}),
-                                        encoding="utf-8")
+    for name, seed, faults in (
+        ("h1", 1, []),
+        ("h2", 2, []),
+        (
+            "f",
+            3,
+            [
+                {
+                    "id": "a",
+                    "type": "sensor.offset",
+                    "target": "sensor_A",
+                    "onset": "20 s",
+                    "magnitude": "19.5 N",
+                }
+            ],
+        ),
+    ):
+        (d / f"{name}.yaml").write_text(
+            yaml.safe_dump({**base, "faults": faults}), encoding="utf-8"
+        )
         r2rsim.run_scenario(d / f"{name}.yaml", output=d / name, seed=seed)
         out[name] = read_runs(d / name)[0]
     return out
@@ -82,8 +107,16 @@ def _setup(name, request):
 
 
 def test_baselines_are_registered():
-    assert {"residual", "pca", "dpca", "iforest", "parity", "gsmms", "gsmms_global",
-            "hybrid-sov"} <= set(PLUGINS)
+    assert {
+        "residual",
+        "pca",
+        "dpca",
+        "iforest",
+        "parity",
+        "gsmms",
+        "gsmms_global",
+        "hybrid-sov",
+    } <= set(PLUGINS)
 
 
 @pytest.mark.parametrize("name", PLUGINS)
@@ -91,8 +124,9 @@ def test_plugin_conformance(name, request):
     # the checks r2rsim ships for plug-in authors (r2rsim.evaluate.check_plugin), on data
     # with the channels each plug-in requires
     _, params, data = _setup(name, request)
-    done = check_plugin(name, [data["h1"], data["h2"]], data["f"], params=params,
-                        drive_data=name in USES_DRIVE_DATA)
+    done = check_plugin(
+        name, [data["h1"], data["h2"]], data["f"], params=params, drive_data=name in USES_DRIVE_DATA
+    )
     assert len(done) == 9, done
 
 
@@ -110,18 +144,21 @@ def test_baseline_detects_the_sensor_a_offset(name, data):
     assert np.isfinite(est.threshold_)
 
 
-@pytest.mark.parametrize("name, params, match", [
-    ("residual", {"alpha": float("nan")}, "alpha must be a number in"),
-    ("residual", {"alpha": 1e300}, "alpha must be a number in"),
-    ("pca", {"n_components": 1e300}, "n_components must be a fraction"),
-    ("pca", {"n_components": 2.5}, "n_components must be a fraction"),
-    ("pca", {"limits": "exact"}, "limits must be 'analytic' or 'empirical'"),
-    ("pca", {"alpha": 0.0}, "alpha must be a number in"),
-    ("dpca", {"lags": 10**12}, "lags must be an integer from 0 to 50"),  # hung before
-    ("dpca", {"lags": 1.5}, "lags must be an integer"),
-    ("iforest", {"n_estimators": 10**12}, "n_estimators must be an integer from 1"),
-    ("iforest", {"max_samples": True}, "max_samples must be an integer"),
-])
+@pytest.mark.parametrize(
+    "name, params, match",
+    [
+        ("residual", {"alpha": float("nan")}, "alpha must be a number in"),
+        ("residual", {"alpha": 1e300}, "alpha must be a number in"),
+        ("pca", {"n_components": 1e300}, "n_components must be a fraction"),
+        ("pca", {"n_components": 2.5}, "n_components must be a fraction"),
+        ("pca", {"limits": "exact"}, "limits must be 'analytic' or 'empirical'"),
+        ("pca", {"alpha": 0.0}, "alpha must be a number in"),
+        ("dpca", {"lags": 10**12}, "lags must be an integer from 0 to 50"),  # hung before
+        ("dpca", {"lags": 1.5}, "lags must be an integer"),
+        ("iforest", {"n_estimators": 10**12}, "n_estimators must be an integer from 1"),
+        ("iforest", {"max_samples": True}, "max_samples must be an integer"),
+    ],
+)
 def test_baseline_parameters_are_bounded(name, params, match, data):
     with pytest.raises(InputError, match=match):
         get(name)(**params).fit([data["h1"]])

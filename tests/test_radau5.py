@@ -51,9 +51,11 @@ def test_method_constants_are_correctly_rounded_and_machine_independent():
     assert radau.T[0, 2] == 3.0029194105147424492e-02
     assert radau.T[1, 2] == -0.38294211275726193779
     # its first column is scaled to T31 = 0.966...; ours to a last component of 1
-    np.testing.assert_allclose(radau.T[:2, 0] * 0.96604818261509293619,
-                               [9.1232394870892942792e-02, 0.24171793270710701896],
-                               rtol=2e-16)
+    np.testing.assert_allclose(
+        radau.T[:2, 0] * 0.96604818261509293619,
+        [9.1232394870892942792e-02, 0.24171793270710701896],
+        rtol=2e-16,
+    )
     # nothing of the derivation goes through LAPACK/BLAS: recomputing gives the same bytes
     # in any process, whatever kernel OpenBLAS picked (tests/test_determinism.py runs the
     # simulator under several)
@@ -96,16 +98,14 @@ def _line_a(repo):
 
 
 def _max_tension_error(cl, res, ref):
-    return max(np.max(np.abs(res[f"{s}.tension_N"] - ref[f"{s}.tension_N"]))
-               for s in cl.span_ids)
+    return max(np.max(np.abs(res[f"{s}.tension_N"] - ref[f"{s}.tension_N"])) for s in cl.span_ids)
 
 
 def test_same_method_as_scipy_radau_and_step_count_guard(repo):
     cl, y0, scen = _line_a(repo)
 
     def run(**kw):
-        return r2rsim.simulate(cl, scen.duration, scen.record_rate, y0,
-                               r2rsim.SolverSettings(**kw))
+        return r2rsim.simulate(cl, scen.duration, scen.record_rate, y0, r2rsim.SolverSettings(**kw))
 
     ref = run(backend="cvode", rtol=1e-10, atol_scale=1e-4)  # an independent integrator
     r5, sp, cv = run(backend="radau5"), run(backend="radau"), run(backend="cvode")
@@ -131,19 +131,20 @@ def test_events_match_a_tight_reference(repo):
     unwind["spare_roll"] = dict(unwind["roll"])
     unwind["splicer"] = {"type": "flying", "speed_match_error": 0.001}
     line = r2rsim.Line.model_validate(d)
-    cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(
-        line, [ProgrammeStep(at=0, line_speed=5.0)]))
+    cl = r2rsim.compile_line(
+        line, r2rsim.Programme.from_steps(line, [ProgrammeStep(at=0, line_speed=5.0)])
+    )
     y0 = r2rsim.steady_state(cl, r2rsim.nominal_state(cl))
     splices = [ScenarioEvent(at=2.0 + 3.0 * i, type="splice") for i in range(3)]
 
     def run(**kw):
-        return r2rsim.simulate(cl, 12.0, 1000.0, y0, r2rsim.SolverSettings(**kw),
-                               events=splices)
+        return r2rsim.simulate(cl, 12.0, 1000.0, y0, r2rsim.SolverSettings(**kw), events=splices)
 
     ref, r5 = run(backend="cvode", rtol=1e-10, atol_scale=1e-4), run(backend="radau5")
     assert len(ref.events) == 21
     assert [(e.kind, e.component, e.state) for e in r5.events] == [
-        (e.kind, e.component, e.state) for e in ref.events]
+        (e.kind, e.component, e.state) for e in ref.events
+    ]
     # measured: event times within 6e-10 s. Tensions: the largest error is the ringing
     # just after a joint crosses a node, and its size depends on where the steps fall around
     # the restart (0.006 N before the straddled node was latched by the events, 0.020 N
@@ -164,11 +165,13 @@ def test_events_match_a_tight_reference(repo):
     first = [e for e in ref.events if e.t < 4.0]
     assert len(first) == 7
     for rtol in (1e-5, 1e-6, 1e-7):
-        sp = r2rsim.simulate(cl, 4.0, 1000.0, y0,
-                             r2rsim.SolverSettings(backend="radau", rtol=rtol), events=splices)
+        sp = r2rsim.simulate(
+            cl, 4.0, 1000.0, y0, r2rsim.SolverSettings(backend="radau", rtol=rtol), events=splices
+        )
         assert not sp.terminated, (rtol, sp.termination_reason)
         assert [(e.kind, e.component, e.state) for e in sp.events] == [
-            (e.kind, e.component, e.state) for e in first], rtol
+            (e.kind, e.component, e.state) for e in first
+        ], rtol
         # measured: within 1.2e-8 s at rtol 1e-5, 4.5e-10 s at 1e-6
         assert max(abs(a.t - b.t) for a, b in zip(sp.events, first, strict=True)) < 1e-6
 
@@ -188,8 +191,11 @@ def test_shipped_radau5_scenario_runs_reproducibly(tmp_path, repo, capsys):
     assert tables[0].equals(tables[1])
     # an unknown backend: one line naming the file and the key, exit 2, nothing written
     bad = tmp_path / "bad.yaml"
-    bad.write_text(scen.read_text().replace("backend: radau5", "backend: radau6")
-                   .replace("../lines", str(repo / "lines")))
+    bad.write_text(
+        scen.read_text()
+        .replace("backend: radau5", "backend: radau6")
+        .replace("../lines", str(repo / "lines"))
+    )
     capsys.readouterr()
     assert main(["run", str(bad), "-o", str(tmp_path / "bad_out"), "-q"]) == 2
     err = capsys.readouterr().err.strip()
@@ -201,12 +207,18 @@ def test_memory_chunks_continue_warm_and_keep_the_answer(repo):
     cl, y0, scen = _line_a(repo)
 
     def run(**kw):
-        return r2rsim.simulate(cl, scen.duration, scen.record_rate, y0,
-                               r2rsim.SolverSettings(backend="radau5", **kw))
+        return r2rsim.simulate(
+            cl, scen.duration, scen.record_rate, y0, r2rsim.SolverSettings(backend="radau5", **kw)
+        )
 
     one, many = run(), run(chunk_memory_mb=0.05)  # ~ 100-sample chunks
-    ref = r2rsim.simulate(cl, scen.duration, scen.record_rate, y0,
-                          r2rsim.SolverSettings(backend="cvode", rtol=1e-10, atol_scale=1e-4))
+    ref = r2rsim.simulate(
+        cl,
+        scen.duration,
+        scen.record_rate,
+        y0,
+        r2rsim.SolverSettings(backend="cvode", rtol=1e-10, atol_scale=1e-4),
+    )
     assert many.stats["restarts"] > 100 > one.stats["restarts"]
     # warm: the Jacobian and step size carry over. A cold restart evaluates a Jacobian every
     # time (>= 395 here); measured 151 (390 of 395 calls warm; the rest are Newton's own

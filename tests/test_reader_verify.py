@@ -56,14 +56,43 @@ def data(tmp_path_factory):
     and a diagnose result scored on the test run and the sweep (for ``report --data``)."""
     d = tmp_path_factory.mktemp("verify")
     for name, seed in (("train", 1), ("run", 2)):
-        assert main(["run", str(QUICK), "--duration", "10", "--seed", str(seed), "-o",
-                     str(d / name), "-q"]) == 0
-    summary = run_sweep(sweep_file(d / "sw", SWEEP_BODY, name="vsw"), output=d / "sweep",
-                        workers=0)
+        assert (
+            main(
+                [
+                    "run",
+                    str(QUICK),
+                    "--duration",
+                    "10",
+                    "--seed",
+                    str(seed),
+                    "-o",
+                    str(d / name),
+                    "-q",
+                ]
+            )
+            == 0
+        )
+    summary = run_sweep(sweep_file(d / "sw", SWEEP_BODY, name="vsw"), output=d / "sweep", workers=0)
     assert summary.ok and summary.done == 2
-    assert main(["diagnose", "--method", "residual", "--train", str(d / "train"), "--test",
-                 str(d / "run"), str(d / "sweep"), "--n-boot", "5", "-o",
-                 str(d / "results")]) == 0
+    assert (
+        main(
+            [
+                "diagnose",
+                "--method",
+                "residual",
+                "--train",
+                str(d / "train"),
+                "--test",
+                str(d / "run"),
+                str(d / "sweep"),
+                "--n-boot",
+                "5",
+                "-o",
+                str(d / "results"),
+            ]
+        )
+        == 0
+    )
     return d
 
 
@@ -103,8 +132,9 @@ def move_onset(ds: Path, by: float = 0.5) -> str:
     onset = t.column("onset_t_s").to_pylist()
     onset[0] += by
     i = t.column_names.index("onset_t_s")
-    pq.write_table(t.set_column(i, "onset_t_s", pa.array(onset, pa.float64())),
-                   ds / "faults.parquet")
+    pq.write_table(
+        t.set_column(i, "onset_t_s", pa.array(onset, pa.float64())), ds / "faults.parquet"
+    )
     rehash(ds)
     return t.column("run_id")[0].as_py()
 
@@ -146,8 +176,9 @@ def err_line(capsys, *words) -> str:
     return err
 
 
-CASES = [(name, how) for name in ("run", "sweep")
-         for how in ("samples byte", "faults byte", "labels")]
+CASES = [
+    (name, how) for name in ("run", "sweep") for how in ("samples byte", "faults byte", "labels")
+]
 
 
 # ---- the untouched datasets -----------------------------------------------------------------
@@ -158,13 +189,42 @@ def test_untouched_datasets_pass_every_reader(data, tmp_path, capsys):
         assert len(read_runs(data / name)) == (1 if name == "run" else 2)
         assert main(["validate", str(data / name)]) == 0
         assert main(["plot", str(data / name), "-o", str(tmp_path / f"{name}.png")]) == 0
-    assert main(["plot", str(data / "sweep"), "--sweep", CHANNEL, "-o",
-                 str(tmp_path / "sw.png")]) == 0
-    assert main(["diagnose", "--method", "residual", "--train", str(data / "train"), "--test",
-                 str(data / "run"), str(data / "sweep"), "--n-boot", "5", "-o",
-                 str(tmp_path / "res")]) == 0
-    assert main(["report", str(data / "results"), "--data", str(data / "run"),
-                 str(data / "sweep"), "-o", str(tmp_path / "r.html")]) == 0
+    assert (
+        main(["plot", str(data / "sweep"), "--sweep", CHANNEL, "-o", str(tmp_path / "sw.png")]) == 0
+    )
+    assert (
+        main(
+            [
+                "diagnose",
+                "--method",
+                "residual",
+                "--train",
+                str(data / "train"),
+                "--test",
+                str(data / "run"),
+                str(data / "sweep"),
+                "--n-boot",
+                "5",
+                "-o",
+                str(tmp_path / "res"),
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "report",
+                str(data / "results"),
+                "--data",
+                str(data / "run"),
+                str(data / "sweep"),
+                "-o",
+                str(tmp_path / "r.html"),
+            ]
+        )
+        == 0
+    )
     assert "error" not in capsys.readouterr().err
 
 
@@ -187,8 +247,24 @@ def test_changed_dataset_is_refused_by_every_reader(name, how, data, tmp_path, c
         assert w in str(exc.value), (w, str(exc.value))
     out = tmp_path / "out"
     train = str(data / "train")
-    assert main(["diagnose", "--method", "residual", "--train", train, "--test", str(ds),
-                 "--n-boot", "5", "-o", str(out)]) == 2
+    assert (
+        main(
+            [
+                "diagnose",
+                "--method",
+                "residual",
+                "--train",
+                train,
+                "--test",
+                str(ds),
+                "--n-boot",
+                "5",
+                "-o",
+                str(out),
+            ]
+        )
+        == 2
+    )
     err_line(capsys, *words)
     assert not out.exists()
     html = tmp_path / "r.html"
@@ -199,8 +275,7 @@ def test_changed_dataset_is_refused_by_every_reader(name, how, data, tmp_path, c
     # validate lists it (every problem, one per line)
     assert main(["validate", str(ds)]) == 2
     err = capsys.readouterr().err
-    assert ("checksum differs from manifest.json" if checksum else "faults.parquet gives") \
-        in err
+    assert ("checksum differs from manifest.json" if checksum else "faults.parquet gives") in err
     # the figures: a changed file is refused; the run figure, which shades the fault
     # windows, also checks the labels of the run it draws (the sweep figure reads no label
     # and no fault: an edited faults.parquet is refused there by its checksum only)
@@ -211,30 +286,52 @@ def test_changed_dataset_is_refused_by_every_reader(name, how, data, tmp_path, c
     for args in figures:
         if checksum:
             assert main(args) == 2
-            err_line(capsys, f"dataset {ds}", what, "checksum differs from manifest.json",
-                     "--no-verify")
+            err_line(
+                capsys, f"dataset {ds}", what, "checksum differs from manifest.json", "--no-verify"
+            )
             assert not png.exists()
         elif "--sweep" not in args:
             assert main(args) == 2
-            err_line(capsys, f"dataset {ds}", f"run {run}", "faults.parquet gives",
-                     "--no-verify")
+            err_line(capsys, f"dataset {ds}", f"run {run}", "faults.parquet gives", "--no-verify")
             assert not png.exists()
         assert main([*args, "--no-verify", "--overwrite"]) == 0
         assert png.exists()
         png.unlink()
         capsys.readouterr()
     # --no-verify reads it
-    assert main(["diagnose", "--method", "residual", "--train", train, "--test", str(ds),
-                 "--n-boot", "5", "-o", str(out), "--no-verify"]) == 0
-    assert main(["report", str(data / "results"), "--data", *scored, "-o", str(html),
-                 "--no-verify"]) == 0
+    assert (
+        main(
+            [
+                "diagnose",
+                "--method",
+                "residual",
+                "--train",
+                train,
+                "--test",
+                str(ds),
+                "--n-boot",
+                "5",
+                "-o",
+                str(out),
+                "--no-verify",
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(["report", str(data / "results"), "--data", *scored, "-o", str(html), "--no-verify"])
+        == 0
+    )
     assert len(read_runs(ds, verify=False)) == len(read_runs(data / name))
 
 
 def test_forged_labels_name_the_run_column_k_and_both_values(data, tmp_path):
     ds, _, run = changed(data, tmp_path, "run", "labels")
-    with pytest.raises(InputError, match=rf"run {run}: label\.is_faulty at k = 1000 is True; "
-                       rf"faults\.parquet gives False: .*`r2rsim validate {ds}`"):
+    with pytest.raises(
+        InputError,
+        match=rf"run {run}: label\.is_faulty at k = 1000 is True; "
+        rf"faults\.parquet gives False: .*`r2rsim validate {ds}`",
+    ):
         read_runs(ds)
     # the checksums alone pass; check_labels=False skips the label check
     assert read_runs(ds, check_labels=False)[0].samples["label.is_faulty"].iloc[1000]
@@ -246,8 +343,7 @@ def test_a_moved_onset_is_refused_though_the_samples_are_untouched(data, tmp_pat
         read_runs(ds)
     other = [r for r in read_runs(data / "sweep") if r.run_id != run]
     # where= selects the other run: its labels are right, so it is read
-    assert [r.run_id for r in read_runs(ds, where={"run_id": other[0].run_id})] == \
-        [other[0].run_id]
+    assert [r.run_id for r in read_runs(ds, where={"run_id": other[0].run_id})] == [other[0].run_id]
 
 
 # ---- what the figures check -----------------------------------------------------------------
@@ -288,15 +384,19 @@ def test_a_damaged_file_is_refused_by_its_size_or_checksum_first(data, tmp_path,
     f.write_bytes(f.read_bytes()[:100])
     png = tmp_path / "fig.png"
     assert main(["plot", str(ds), "--sweep", CHANNEL, "-o", str(png)]) == 2
-    err_line(capsys, f.relative_to(ds).as_posix(), f"has 100 bytes, manifest.json says {size}",
-             "--no-verify")
+    err_line(
+        capsys,
+        f.relative_to(ds).as_posix(),
+        f"has 100 bytes, manifest.json says {size}",
+        "--no-verify",
+    )
     ds2 = shutil.copytree(data / "run", tmp_path / "ds2")
     f = samples_file(ds2)
     meta = pq.read_metadata(f)
     cc = meta.row_group(0).column(meta.schema.names.index("t_s"))
     raw = bytearray(f.read_bytes())  # the page header of t_s overwritten: unreadable
     start = cc.dictionary_page_offset or cc.data_page_offset
-    raw[start:start + 16] = b"\xff" * 16
+    raw[start : start + 16] = b"\xff" * 16
     f.write_bytes(bytes(raw))
     assert main(["plot", str(ds2), "-o", str(png)]) == 2
     err_line(capsys, "checksum differs from manifest.json")
@@ -315,8 +415,7 @@ def test_an_unlisted_file_is_never_read(data, tmp_path, capsys):
         read_runs(ds)
 
 
-def test_a_listed_file_gone_is_refused_though_the_figure_does_not_read_it(data, tmp_path,
-                                                                            capsys):
+def test_a_listed_file_gone_is_refused_though_the_figure_does_not_read_it(data, tmp_path, capsys):
     ds = shutil.copytree(data / "sweep", tmp_path / "ds")
     (ds / "events.parquet").unlink()
     assert main(["plot", str(ds), "--sweep", CHANNEL, "-o", str(tmp_path / "f.png")]) == 2

@@ -34,10 +34,16 @@ THESIS = REPO / "scenarios" / "thesis"
 DURATION = 21.0  # faults from 20 s: the sensor-A degradation ramps in over 10 s, so 1 s of it
 TRAIN = [("h1", "oc1_nominal", 1), ("h2", "oc1_nominal", 2), ("g1", "oc2_nominal", 11)]
 VAL = [("h3", "oc1_nominal", 3), ("g2", "oc2_nominal", 12)]
-TEST = [("h4", "oc1_nominal", 4), ("g3", "oc2_nominal", 13),
-        ("o1", "sensor_a_offset_P05", 5), ("o2", "sensor_a_offset_N05", 6),
-        ("d05", "sensor_a_degradation_P05_OC1", 20), ("d10", "sensor_a_degradation_P10_OC1", 22),
-        ("d20", "sensor_a_degradation_P20_OC1", 24), ("e10", "sensor_a_degradation_P10_OC2", 23)]
+TEST = [
+    ("h4", "oc1_nominal", 4),
+    ("g3", "oc2_nominal", 13),
+    ("o1", "sensor_a_offset_P05", 5),
+    ("o2", "sensor_a_offset_N05", 6),
+    ("d05", "sensor_a_degradation_P05_OC1", 20),
+    ("d10", "sensor_a_degradation_P10_OC1", 22),
+    ("d20", "sensor_a_degradation_P20_OC1", 24),
+    ("e10", "sensor_a_degradation_P10_OC2", 23),
+]
 METHODS = ("pca", "residual")
 
 
@@ -47,8 +53,7 @@ def data(tmp_path_factory):
     and sensor-A gain degradations of 0.05, 0.1 and 0.2 (OC1) and 0.1 (OC2)."""
     d = tmp_path_factory.mktemp("report_data")
     for name, scen, seed in TRAIN + VAL + TEST:
-        r2rsim.run_scenario(THESIS / f"{scen}.yaml", output=d / name, seed=seed,
-                            duration=DURATION)
+        r2rsim.run_scenario(THESIS / f"{scen}.yaml", output=d / name, seed=seed, duration=DURATION)
     return d
 
 
@@ -62,10 +67,25 @@ def diagnosed(data):
     out = {}
     for method in METHODS:
         out[method] = data / f"out_{method}"
-        code = main(["diagnose", "--method", method, "--train",
-                     *[str(data / n) for n, _, _ in TRAIN], "--val",
-                     *[str(data / n) for n, _, _ in VAL], "--test", *scored_sets(data),
-                     "--n-boot", "20", "-m", "5", "-o", str(out[method])])
+        code = main(
+            [
+                "diagnose",
+                "--method",
+                method,
+                "--train",
+                *[str(data / n) for n, _, _ in TRAIN],
+                "--val",
+                *[str(data / n) for n, _, _ in VAL],
+                "--test",
+                *scored_sets(data),
+                "--n-boot",
+                "20",
+                "-m",
+                "5",
+                "-o",
+                str(out[method]),
+            ]
+        )
         assert code == 0
     return out
 
@@ -76,9 +96,13 @@ def benched(tmp_path_factory):
     magnitudes."""
     d = tmp_path_factory.mktemp("report_bench")
     spec = d / "spec.yaml"
-    test = "\n".join(f"      - {{scenario: {THESIS}/{s}.yaml, seeds: [{seed}]}}"
-                     for _, s, seed in TEST if "OC2" not in s and "oc2" not in s)
-    spec.write_text(textwrap.dedent(f"""\
+    test = "\n".join(
+        f"      - {{scenario: {THESIS}/{s}.yaml, seeds: [{seed}]}}"
+        for _, s, seed in TEST
+        if "OC2" not in s and "oc2" not in s
+    )
+    spec.write_text(
+        textwrap.dedent(f"""\
         name: report_tiny
         duration: {DURATION} s
         studies:
@@ -86,10 +110,14 @@ def benched(tmp_path_factory):
             train: [{{scenario: {THESIS}/oc1_nominal.yaml, seeds: [1, 2]}}]
             val: [{{scenario: {THESIS}/oc1_nominal.yaml, seeds: [3]}}]
             test:
-        """) + test + textwrap.dedent("""
+        """)
+        + test
+        + textwrap.dedent("""
         methods: [{method: pca}, {method: residual}]
         evaluation: {n_boot: 20, persistence: 5}
-        """), encoding="utf-8")
+        """),
+        encoding="utf-8",
+    )
     assert main(["bench", str(spec), "--workdir", str(d / "work"), "-o", str(d / "res")]) == 0
     return d / "res"
 
@@ -154,12 +182,30 @@ def test_statistic_shades_a_fault_that_ends(data, tmp_path):
     """A fault with an end is shaded from its onset to its end, not to the end of the run."""
     scen = tmp_path / "ends.yaml"
     text = (THESIS / "sensor_a_offset_P05.yaml").read_text(encoding="utf-8")
-    scen.write_text(text.replace("line: ../../", f"line: {REPO}/").replace(
-        "magnitude: 6.5 N}", "magnitude: 6.5 N, end: 16 s}").replace("onset: 20 s",
-                                                                    "onset: 12 s"))
+    scen.write_text(
+        text.replace("line: ../../", f"line: {REPO}/")
+        .replace("magnitude: 6.5 N}", "magnitude: 6.5 N, end: 16 s}")
+        .replace("onset: 20 s", "onset: 12 s")
+    )
     r2rsim.run_scenario(scen, output=tmp_path / "ends", seed=7, duration=DURATION)
-    assert main(["diagnose", "--method", "residual", "--train", str(data / "h1"), "--test",
-                 str(tmp_path / "ends"), "--n-boot", "0", "-o", str(tmp_path / "res")]) == 0
+    assert (
+        main(
+            [
+                "diagnose",
+                "--method",
+                "residual",
+                "--train",
+                str(data / "h1"),
+                "--test",
+                str(tmp_path / "ends"),
+                "--n-boot",
+                "0",
+                "-o",
+                str(tmp_path / "res"),
+            ]
+        )
+        == 0
+    )
     faults = pd.read_parquet(tmp_path / "ends" / "faults.parquet")
     assert faults[["onset_t_s", "end_t_s"]].to_numpy().tolist() == [[12.0, 16.0]]
     ax = plot_statistic(tmp_path / "res", tmp_path / "ends").axes[0]
@@ -177,8 +223,10 @@ def test_roc_pr_ranks_nan_statistics_lowest(data, diagnosed, tmp_path):
     # the same area, computed independently from the labels of the scored samples
     truth = []
     for ds in scored_sets(data):
-        s = pd.read_parquet(next((Path(ds) / "samples").rglob("*.parquet")),
-                            columns=["k", "label.is_faulty", "label.score_mask"])
+        s = pd.read_parquet(
+            next((Path(ds) / "samples").rglob("*.parquet")),
+            columns=["k", "label.is_faulty", "label.score_mask"],
+        )
         rid = pd.read_parquet(Path(ds) / "runs.parquet")["run_id"].iloc[0]
         truth.append(s.assign(run_id=rid))
     merged = preds.merge(pd.concat(truth), on=["run_id", "k"])
@@ -208,9 +256,10 @@ def trapezoid(x, y):
     return float(np.sum(np.diff(x) * (y[1:] + y[:-1]) / 2))
 
 
-@pytest.mark.parametrize("condition, fault", [("all", "all"),
-                                              ("OC1", "sensor.gain:sensor_A"),
-                                              ("all", "sensor.offset:sensor_A")])
+@pytest.mark.parametrize(
+    "condition, fault",
+    [("all", "all"), ("OC1", "sensor.gain:sensor_A"), ("all", "sensor.offset:sensor_A")],
+)
 def test_roc_pr_areas_are_the_metrics_table(data, diagnosed, condition, fault):
     fig = plot_roc_pr(list(diagnosed.values()), scored_sets(data), condition, fault)
     assert len(fig.axes) == 2
@@ -230,8 +279,11 @@ def test_roc_pr_areas_are_the_metrics_table(data, diagnosed, condition, fault):
 
 
 def bars(ax):
-    return {c.get_label(): [p.get_height() for p in c] for c in ax.containers
-            if isinstance(c, BarContainer)}
+    return {
+        c.get_label(): [p.get_height() for p in c]
+        for c in ax.containers
+        if isinstance(c, BarContainer)
+    }
 
 
 def test_metric_bars_by_condition_and_fault_are_the_table_values(diagnosed):
@@ -248,8 +300,9 @@ def test_metric_bars_by_condition_and_fault_are_the_table_values(diagnosed):
     ax = fig.axes[0]
     faults = [t.get_text() for t in ax.get_xticklabels()]
     assert faults == ["sensor.gain:sensor_A", "sensor.offset:sensor_A", "all"]
-    assert bars(ax)["pca"] == [value(metrics(diagnosed["pca"]), "dd_median_s", "OC1", f)
-                               for f in faults]
+    assert bars(ax)["pca"] == [
+        value(metrics(diagnosed["pca"]), "dd_median_s", "OC1", f) for f in faults
+    ]
     assert ax.get_ylabel() == "dd_median_s (s)"
 
 
@@ -258,8 +311,7 @@ def test_detection_probability_bars_carry_their_null_rate(diagnosed):
     ax = fig.axes[0]
     faults = [t.get_text() for t in ax.get_xticklabels()]
     null = by_gid(ax, "null:pca").get_ydata()
-    assert list(null) == [value(metrics(diagnosed["pca"]), "pd_null", "OC1", f)
-                          for f in faults]
+    assert list(null) == [value(metrics(diagnosed["pca"]), "pd_null", "OC1", f) for f in faults]
 
 
 def test_metric_by_magnitude_and_bad_arguments(diagnosed):
@@ -269,8 +321,9 @@ def test_metric_by_magnitude_and_bad_arguments(diagnosed):
     assert set(lines) == {"residual|sensor.gain:sensor_A", "residual|sensor.offset:sensor_A"}
     gain = lines["residual|sensor.gain:sensor_A"]
     np.testing.assert_array_equal(gain.get_xdata(), [0.05, 0.1, 0.2])
-    assert list(gain.get_ydata()) == [value(table, "far_pre", "all", "sensor.gain:sensor_A", m)
-                                      for m in (0.05, 0.1, 0.2)]
+    assert list(gain.get_ydata()) == [
+        value(table, "far_pre", "all", "sensor.gain:sensor_A", m) for m in (0.05, 0.1, 0.2)
+    ]
     with pytest.raises(InputError, match="no metric 'nosuch'.*far_ff"):
         plot_metric(diagnosed["residual"], "nosuch")
     with pytest.raises(InputError, match="by must be one of condition, fault, magnitude"):
@@ -279,8 +332,7 @@ def test_metric_by_magnitude_and_bad_arguments(diagnosed):
 
 def test_mdm_points_are_the_detection_probabilities(diagnosed):
     fig = plot_mdm(list(diagnosed.values()))
-    assert [ax.get_title() for ax in fig.axes] == ["sensor.gain:sensor_A",
-                                                   "sensor.offset:sensor_A"]
+    assert [ax.get_title() for ax in fig.axes] == ["sensor.gain:sensor_A", "sensor.offset:sensor_A"]
     ax = fig.axes[0]
     for method, d in diagnosed.items():
         table = metrics(d)
@@ -289,21 +341,25 @@ def test_mdm_points_are_the_detection_probabilities(diagnosed):
         pds = [value(table, "pd", "all", "sensor.gain:sensor_A", m) for m in (0.05, 0.1, 0.2)]
         assert list(line.get_ydata()) == pds
         null = by_gid(ax, f"null:{method}|sensor.gain:sensor_A")
-        assert list(null.get_ydata()) == [value(table, "pd_null", "all",
-                                                "sensor.gain:sensor_A", m)
-                                          for m in (0.05, 0.1, 0.2)]
-        mdm = [li for li in ax.get_lines() if li.get_gid() == f"mdm:{method}|sensor.gain:"
-               f"sensor_A"]
+        assert list(null.get_ydata()) == [
+            value(table, "pd_null", "all", "sensor.gain:sensor_A", m) for m in (0.05, 0.1, 0.2)
+        ]
+        mdm = [li for li in ax.get_lines() if li.get_gid() == f"mdm:{method}|sensor.gain:sensor_A"]
         if mdm:
-            assert mdm[0].get_xdata()[0] == value(table, "mdm90", "all",
-                                                  "sensor.gain:sensor_A")
+            assert mdm[0].get_xdata()[0] == value(table, "mdm90", "all", "sensor.gain:sensor_A")
         else:  # no magnitude reached 0.9 significantly above chance
-            assert not ((table.metric == "mdm90") & (table.fault == "sensor.gain:sensor_A")
-                        & (table.condition == "all")).any()
+            assert not (
+                (table.metric == "mdm90")
+                & (table.fault == "sensor.gain:sensor_A")
+                & (table.condition == "all")
+            ).any()
     assert pds[0] < 0.9  # a real curve: the smallest gain is missed
     # ±6.5 N offsets: the MDM90 is marked on both sides
-    offs = [li.get_xdata()[0] for li in fig.axes[1].get_lines()
-            if li.get_gid() == "mdm:pca|sensor.offset:sensor_A"]
+    offs = [
+        li.get_xdata()[0]
+        for li in fig.axes[1].get_lines()
+        if li.get_gid() == "mdm:pca|sensor.offset:sensor_A"
+    ]
     assert sorted(offs) == [-6.5, 6.5]
     assert any(li.get_ydata()[0] == 0.9 for li in ax.get_lines() if li.get_label() == "P_D = 0.9")
 
@@ -315,16 +371,18 @@ def test_bench_results_are_plotted_per_label(benched):
     for label in METHODS:
         r = res[res.label == label]
         line = by_gid(ax, f"{label}|sensor.gain:sensor_A")
-        assert list(line.get_ydata()) == [value(r, "pd_cal", "OC1", "sensor.gain:sensor_A", m)
-                                          for m in line.get_xdata()]
+        assert list(line.get_ydata()) == [
+            value(r, "pd_cal", "OC1", "sensor.gain:sensor_A", m) for m in line.get_xdata()
+        ]
     heights = bars(plot_metric(benched, "far_ff", by="fault").axes[0])
     assert set(heights) == set(METHODS)
 
 
 def test_figures_need_matplotlib(diagnosed, monkeypatch):
     monkeypatch.setitem(sys.modules, "matplotlib.figure", None)
-    with pytest.raises(InputError,
-                       match=r"pip install matplotlib \(or pip install -e \"\.\[plot\]\""):
+    with pytest.raises(
+        InputError, match=r"pip install matplotlib \(or pip install -e \"\.\[plot\]\""
+    ):
         plot_metric(diagnosed["pca"], "pd")
 
 
@@ -381,7 +439,10 @@ def assert_every_row(page, table):
     col = {name: i for i, name in enumerate(header)}
     for row, r in zip(rows, table.itertuples(index=False), strict=True):
         assert [row[col[c]] for c in ("condition", "fault", "metric")] == [
-            r.condition, r.fault, r.metric]
+            r.condition,
+            r.fault,
+            r.metric,
+        ]
         assert float(row[col["value"]]) == pytest.approx(r.value, rel=1e-5, abs=1e-12)
 
 
@@ -399,13 +460,23 @@ def test_report_of_a_diagnose_result(data, diagnosed, tmp_path):
     # one row per stratum: OC1 (gain, offset, all), OC2 (gain), all (gain, offset, all)
     assert summary[0][:4] == ["method", "condition", "fault", "far_ff"]
     assert [r[1:3] for r in summary[1:]] == [
-        ["OC1", "sensor.gain:sensor_A"], ["OC1", "sensor.offset:sensor_A"], ["OC1", "all"],
-        ["OC2", "sensor.gain:sensor_A"], ["all", "sensor.gain:sensor_A"],
-        ["all", "sensor.offset:sensor_A"], ["all", "all"]]
+        ["OC1", "sensor.gain:sensor_A"],
+        ["OC1", "sensor.offset:sensor_A"],
+        ["OC1", "all"],
+        ["OC2", "sensor.gain:sensor_A"],
+        ["all", "sensor.gain:sensor_A"],
+        ["all", "sensor.offset:sensor_A"],
+        ["all", "all"],
+    ]
     assert list(tmp_path.iterdir()) == [out]  # no temporary file left
     # which threshold the columns use is said under the table
-    assert html.escape("Columns without _cal are at each plug-in's own threshold (pca: "
-                       "recalibrated on the val runs at alpha); _cal columns at theta") in text
+    assert (
+        html.escape(
+            "Columns without _cal are at each plug-in's own threshold (pca: "
+            "recalibrated on the val runs at alpha); _cal columns at theta"
+        )
+        in text
+    )
 
 
 def test_report_finds_the_recorded_datasets(data, diagnosed, tmp_path):
@@ -483,8 +554,9 @@ def test_report_output_rules(diagnosed, tmp_path):
 
 def test_cli_report(data, diagnosed, tmp_path, capsys):
     out = tmp_path / "r.html"
-    assert main(["report", str(diagnosed["pca"]), "-o", str(out), "--data",
-                 *scored_sets(data)]) == 0
+    assert (
+        main(["report", str(diagnosed["pca"]), "-o", str(out), "--data", *scored_sets(data)]) == 0
+    )
     assert capsys.readouterr().out == f"report written: {out}\n"
     assert len(parse(out)[1].imgs) == 13
 
@@ -504,8 +576,7 @@ def test_cli_errors(data, diagnosed, tmp_path, capsys, monkeypatch):
     (tmp_path / "other" / "x.csv").write_text("a\n")
     assert main(["report", str(tmp_path / "other"), "-o", str(out)]) == 2
     one_error(capsys, "not an r2rsim results directory", "metrics.parquet", "results.parquet")
-    assert main(["report", str(diagnosed["pca"]), "-o", str(out), "--data",
-                 str(data / "h4")]) == 2
+    assert main(["report", str(diagnosed["pca"]), "-o", str(out), "--data", str(data / "h4")]) == 2
     one_error(capsys, "of the predictions is in none of the datasets")
     monkeypatch.setitem(sys.modules, "matplotlib.figure", None)
     assert main(["report", str(diagnosed["pca"]), "-o", str(out)]) == 2
@@ -526,6 +597,9 @@ def test_damaged_results_files_are_one_line_naming_the_file(diagnosed, tmp_path,
     d = shutil.copytree(diagnosed["pca"], tmp_path / "shape")
     pd.DataFrame({"x": [1]}).to_parquet(d / "metrics.parquet")
     assert main(["report", str(d), "-o", str(out)]) == 2
-    one_error(capsys, f"error: {d / 'metrics.parquet'}: not a results table of r2rsim",
-              "no column condition")
+    one_error(
+        capsys,
+        f"error: {d / 'metrics.parquet'}: not a results table of r2rsim",
+        "no column condition",
+    )
     assert not out.exists()

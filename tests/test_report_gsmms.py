@@ -33,7 +33,7 @@ def fitted():
 def test_map_colours_samples_by_node_and_draws_the_nodes(fitted):
     runs = [run_frame(0, 5), run_frame(1, 6)]
     fig = plot_gsmms_map(fitted, runs, "sp.level", "meas.a", max_points=500)
-    ax, = fig.axes
+    (ax,) = fig.axes
     labels = [c.get_label() for c in ax.collections]
     assert labels == ["node 0", "node 1"]
     # the points of each node are the samples of one regime (levels 100 and 150)
@@ -48,15 +48,16 @@ def test_map_colours_samples_by_node_and_draws_the_nodes(fitted):
     np.testing.assert_allclose(xs, [100.0, 150.0], atol=2.0)
     # both axes partition features: node markers and the map's one edge
     fig = plot_gsmms_map(fitted, runs, "sp.level", "sp.level")
-    ax, = fig.axes
+    (ax,) = fig.axes
     assert ax.collections[-1].get_label() == "nodes" and len(ax.lines) == 1
     np.testing.assert_allclose(sorted(ax.collections[-1].get_offsets()[:, 0]), book)
 
 
 def test_map_without_partition_axes_draws_no_nodes(fitted):
     fig = plot_gsmms_map(fitted, [run_frame(0, 5)], "meas.a", "meas.b")
-    assert [c.get_label() for c in fig.axes[0].collections] == ["node 0"] \
-        or [c.get_label() for c in fig.axes[0].collections] == ["node 1"]
+    assert [c.get_label() for c in fig.axes[0].collections] == ["node 0"] or [
+        c.get_label() for c in fig.axes[0].collections
+    ] == ["node 1"]
     assert not fig.axes[0].lines
     with pytest.raises(InputError, match="no column"):
         plot_gsmms_map(fitted, [run_frame(0, 5)], "meas.zz", "meas.b")
@@ -72,7 +73,7 @@ def test_residuals_per_run_with_thresholds_and_fault_window(fitted):
         np.testing.assert_allclose(line.get_ydata(), fitted.score(f)["z.0"], equal_nan=True)
         assert sorted(ax.lines[i].get_ydata()[0] for i in (1, 2)) == [-2.0, 2.0]
     assert not fig.axes[0].patches  # no fault window in the healthy run
-    span, = fig.axes[1].patches
+    (span,) = fig.axes[1].patches
     # an axvspan is a Polygon in matplotlib 3.7 and a Rectangle later: read its extent
     ext = span.get_patch_transform().transform_path(span.get_path()).get_extents()
     assert ext.x0 == pytest.approx(10.0)
@@ -82,7 +83,7 @@ def test_residuals_per_run_with_thresholds_and_fault_window(fitted):
 def test_severity_lines_per_condition():
     vals = {"OC1": {0.2: 4.0, 0.05: 1.0, 0.1: 2.0}, "OC2": {0.05: 1.5, 0.2: 5.0}}
     fig = plot_severity(vals, threshold=2.0)
-    ax, = fig.axes
+    (ax,) = fig.axes
     lines = [ln for ln in ax.lines if ln.get_label() in vals]
     assert [ln.get_label() for ln in lines] == ["OC1", "OC2"]
     np.testing.assert_allclose(lines[0].get_xdata(), [0.05, 0.1, 0.2])

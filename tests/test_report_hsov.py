@@ -17,8 +17,11 @@ matplotlib.use("Agg")
 def test_virtual_sensor_panels_curves_and_spans():
     t = np.linspace(0, 10, 101)
     meas, est, true = np.sin(t), np.sin(t) + 0.1, np.cos(t)
-    fig = plot_virtual_sensor(t, [("T_s2 [N]", {"measured": meas, "estimated": est}),
-                                  ("T_s3 [N]", {"true": true})], spans=[(2, 3), (6, 7.5)])
+    fig = plot_virtual_sensor(
+        t,
+        [("T_s2 [N]", {"measured": meas, "estimated": est}), ("T_s3 [N]", {"true": true})],
+        spans=[(2, 3), (6, 7.5)],
+    )
     fig.canvas.draw()
     ax0, ax1 = fig.axes
     assert len(fig.axes) == 2
@@ -28,10 +31,14 @@ def test_virtual_sensor_panels_curves_and_spans():
     assert len(spans) == 2
     # the span's corners in data coordinates (a Rectangle or, in older matplotlib, a Polygon)
     corners = ax1.transData.inverted().transform(
-        spans[1].get_transform().transform(spans[1].get_path().vertices))
+        spans[1].get_transform().transform(spans[1].get_path().vertices)
+    )
     np.testing.assert_allclose([corners[:, 0].min(), corners[:, 0].max()], [6, 7.5])
     assert [tx.get_text() for tx in ax0.get_legend().get_texts()] == [
-        "transient", "measured", "estimated"]
+        "transient",
+        "measured",
+        "estimated",
+    ]
     with pytest.raises(InputError, match="values for"):
         plot_virtual_sensor(t, [("x", {"bad": t[:5]})])
 
@@ -57,11 +64,12 @@ def test_residual_qq_against_normal_quantiles():
 
 def test_profiles_one_axes_per_group_shared_y():
     x = np.linspace(-5, 5, 11)
-    fig = plot_profiles({"normal": [(x, x), (x, 2 * x)], "dancer failure": [(x, -x)]},
-                        ylabel="T_s3 [N]")
+    fig = plot_profiles(
+        {"normal": [(x, x), (x, 2 * x)], "dancer failure": [(x, -x)]}, ylabel="T_s3 [N]"
+    )
     fig.canvas.draw()
     a, b = fig.axes
-    assert len([ln for ln in a.lines if ln.get_gid() is None]) == 3   # 2 + the t = 0 line
+    assert len([ln for ln in a.lines if ln.get_gid() is None]) == 3  # 2 + the t = 0 line
     np.testing.assert_array_equal(b.lines[0].get_ydata(), -x)
     assert a.get_ylim() == b.get_ylim()
     assert b.get_title() == "dancer failure"

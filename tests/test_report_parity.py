@@ -28,8 +28,14 @@ def _span_x(patch):
 
 def test_residual_panels_data_threshold_and_spans():
     series = {"a": _frame(1.0), "b": _frame(2.0)}
-    fig = plot_residuals(series, ["r1", "r2"], scale={"r1": 2.0}, threshold=3.0,
-                         spans=[(4.0, 10.0, "fault")], title="x")
+    fig = plot_residuals(
+        series,
+        ["r1", "r2"],
+        scale={"r1": 2.0},
+        threshold=3.0,
+        spans=[(4.0, 10.0, "fault")],
+        title="x",
+    )
     axes = fig.get_axes()
     assert len(axes) == 2
     lines = [ln for ln in axes[0].get_lines() if ln.get_gid() != "threshold"]
@@ -39,8 +45,7 @@ def test_residual_panels_data_threshold_and_spans():
     # r2 is not scaled
     l2 = [ln for ln in axes[1].get_lines() if ln.get_gid() != "threshold"]
     np.testing.assert_allclose(l2[0].get_ydata(), series["a"]["r2"])
-    thr = sorted(ln.get_ydata()[0] for ln in axes[0].get_lines()
-                 if ln.get_gid() == "threshold")
+    thr = sorted(ln.get_ydata()[0] for ln in axes[0].get_lines() if ln.get_gid() == "threshold")
     assert thr == [-3.0, 3.0]
     for ax in axes:
         spans = [p for p in ax.patches if str(p.get_gid()).startswith("span:")]
@@ -53,24 +58,33 @@ def test_residual_panels_data_threshold_and_spans():
 
 
 def test_signature_matrix_cells_and_fired_outlines():
-    table = pd.DataFrame([[4.0, 0.2, 5.0], [-3.5, 3.1, 0.1]], index=["A +15 %", "B +15 %"],
-                         columns=["r1", "r2", "r3"])
+    table = pd.DataFrame(
+        [[4.0, 0.2, 5.0], [-3.5, 3.1, 0.1]],
+        index=["A +15 %", "B +15 %"],
+        columns=["r1", "r2", "r3"],
+    )
     fig = plot_signature(table, threshold=3.0)
     ax = fig.get_axes()[0]
     np.testing.assert_allclose(ax.get_images()[0].get_array(), table.to_numpy())
     texts = [t.get_text() for t in ax.texts]
     assert texts == ["+4.0", "+0.2", "+5.0", "-3.5", "+3.1", "+0.1"]
     fired = [p for p in ax.patches if p.get_gid() == "fired"]
-    assert sorted((p.get_x() + 0.5, p.get_y() + 0.5) for p in fired) == \
-        [(0.0, 0.0), (0.0, 1.0), (1.0, 1.0), (2.0, 0.0)]
+    assert sorted((p.get_x() + 0.5, p.get_y() + 0.5) for p in fired) == [
+        (0.0, 0.0),
+        (0.0, 1.0),
+        (1.0, 1.0),
+        (2.0, 0.0),
+    ]
     assert [t.get_text() for t in ax.get_yticklabels()] == ["A +15 %", "B +15 %"]
     with pytest.raises(InputError, match="empty"):
         plot_signature(pd.DataFrame())
 
 
 def test_sensitivity_panels():
-    s = {"OC1": pd.DataFrame({"t_s": [0.0, 1.0, 2.0], "dJ/dx": [1.0, 1.0, 1.1]}),
-         "OC2": pd.DataFrame({"t_s": [0.0, 1.0, 2.0], "dJ/dx": [2.0, 3.0, 1.0]})}
+    s = {
+        "OC1": pd.DataFrame({"t_s": [0.0, 1.0, 2.0], "dJ/dx": [1.0, 1.0, 1.1]}),
+        "OC2": pd.DataFrame({"t_s": [0.0, 1.0, 2.0], "dJ/dx": [2.0, 3.0, 1.0]}),
+    }
     fig = plot_sensitivity(s, ["dJ/dx"])
     ax = fig.get_axes()[0]
     assert len(fig.get_axes()) == 1 and len(ax.get_lines()) == 2

@@ -37,8 +37,9 @@ def faults_ds(tmp_path_factory):
     """line_a_faults for 35 s: pull_draw 10-25 s, idler_bearing from 30 s without an end,
     unwind_drive (onset 40 s) beyond the run."""
     out = tmp_path_factory.mktemp("plot") / "faults"
-    r2rsim.run_scenario(REPO / "scenarios" / "line_a_faults.yaml", output=out, duration=35.0,
-                        overwrite=True)
+    r2rsim.run_scenario(
+        REPO / "scenarios" / "line_a_faults.yaml", output=out, duration=35.0, overwrite=True
+    )
     return out
 
 
@@ -47,8 +48,9 @@ def splice_ds(tmp_path_factory):
     """newsprint_splice for 30 s: a zero-speed splice (fill, brake, dwell, swap...) and the
     joint passing the spans."""
     out = tmp_path_factory.mktemp("plot") / "splice"
-    r2rsim.run_scenario(REPO / "scenarios" / "newsprint_splice.yaml", output=out,
-                        duration=30.0, overwrite=True)
+    r2rsim.run_scenario(
+        REPO / "scenarios" / "newsprint_splice.yaml", output=out, duration=30.0, overwrite=True
+    )
     return out
 
 
@@ -64,8 +66,9 @@ def sweep_ds(tmp_path_factory):
 @pytest.fixture(scope="module")
 def long_ds(tmp_path_factory):
     """The benchmark's synthetic run, 200 s at 1 kHz: five row groups, one spike."""
-    spec = importlib.util.spec_from_file_location("bench_plot",
-                                                  REPO / "benchmarks" / "bench_plot.py")
+    spec = importlib.util.spec_from_file_location(
+        "bench_plot", REPO / "benchmarks" / "bench_plot.py"
+    )
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
     root = bench.make_dataset(tmp_path_factory.mktemp("plot") / "long", 200.0, 1000.0)
@@ -108,8 +111,9 @@ def test_decimate_envelope_is_each_buckets_min_and_max():
     td, yd = decimate_minmax(t, y, 10)  # buckets of 1000 samples
     for b in range(10):
         got = yd[(td >= 1000 * b) & (td < 1000 * (b + 1))]
-        assert sorted(got) == sorted([y[1000 * b:1000 * (b + 1)].min(),
-                                      y[1000 * b:1000 * (b + 1)].max()])
+        assert sorted(got) == sorted(
+            [y[1000 * b : 1000 * (b + 1)].min(), y[1000 * b : 1000 * (b + 1)].max()]
+        )
 
 
 def test_decimate_short_series_whole_and_nan_buckets_break_the_line():
@@ -145,8 +149,14 @@ def test_chunks_sharing_bucket_edges_give_the_whole_envelope():
 def test_default_run_figure_groups_quantities_and_draws_setpoints(faults_ds):
     fig = plot_run(faults_ds)
     labels = [ax.get_ylabel() for ax in fig.axes]
-    assert labels == ["tension (N)", "angular speed (rad/s)", "diameter (mm)", "speed (m/s)",
-                      "radius (mm)", "torque (N*m)"]
+    assert labels == [
+        "tension (N)",
+        "angular speed (rad/s)",
+        "diameter (mm)",
+        "speed (m/s)",
+        "radius (mm)",
+        "torque (N*m)",
+    ]
     lines = lines_by_label(fig)
     # set-points are drawn (dashed), however constant; an idler's constant radius is not
     assert lines["sp.unwind_tension.tension_N"].get_linestyle() == "--"
@@ -155,8 +165,7 @@ def test_default_run_figure_groups_quantities_and_draws_setpoints(faults_ds):
 
 
 def test_axes_follow_the_globs(faults_ds):
-    fig = plot_run(faults_ds, channels=["state.span*.tension_N", "meas.lc_*",
-                                        "state.*.radius_m"])
+    fig = plot_run(faults_ds, channels=["state.span*.tension_N", "meas.lc_*", "state.*.radius_m"])
     assert [ax.get_ylabel() for ax in fig.axes] == ["tension (N)", "radius (mm)"]
     assert len(fig.axes[0].get_lines()) == 5 + 2
     assert len(fig.axes[1].get_lines()) == 6  # explicit globs keep constant channels
@@ -166,12 +175,18 @@ def test_fault_spans_match_faults_parquet(faults_ds):
     fig = plot_run(faults_ds, channels="state.span*.tension_N")
     faults = pd.read_parquet(faults_ds / "faults.parquet")
     end = samples(faults_ds)["t_s"].max()
-    want = {f.fault_id: (f.onset_t_s, end if pd.isna(f.end_t_s) else f.end_t_s)
-            for f in faults.itertuples() if f.onset_t_s <= end}
+    want = {
+        f.fault_id: (f.onset_t_s, end if pd.isna(f.end_t_s) else f.end_t_s)
+        for f in faults.itertuples()
+        if f.onset_t_s <= end
+    }
     assert set(want) == {"pull_draw", "idler_bearing"}  # unwind_drive starts after the run
     for ax in fig.axes:
-        got = {p.get_gid()[len("fault:"):]: span_x(p) for p in ax.patches
-               if (p.get_gid() or "").startswith("fault:")}
+        got = {
+            p.get_gid()[len("fault:") :]: span_x(p)
+            for p in ax.patches
+            if (p.get_gid() or "").startswith("fault:")
+        }
         assert got.keys() == want.keys()
         for fid, (lo, hi) in want.items():
             assert got[fid] == pytest.approx((lo, hi))
@@ -183,8 +198,11 @@ def test_event_lines_match_events_parquet(splice_ds):
     ev = ev[(ev.kind != "fault") & ev.t_s.between(4.0, 30.0)]
     assert {"splice", "splice_joint"} <= set(ev.kind)
     ax = fig.axes[0]
-    drawn = {c.get_gid()[len("event:"):]: sorted(s[0][0] for s in c.get_segments())
-             for c in ax.collections if (c.get_gid() or "").startswith("event:")}
+    drawn = {
+        c.get_gid()[len("event:") :]: sorted(s[0][0] for s in c.get_segments())
+        for c in ax.collections
+        if (c.get_gid() or "").startswith("event:")
+    }
     assert drawn.keys() == set(ev.kind)
     for kind, rows in ev.groupby("kind"):
         assert drawn[kind] == pytest.approx(sorted(rows.t_s))
@@ -194,8 +212,9 @@ def test_event_lines_match_events_parquet(splice_ds):
 
 def test_lines_hold_the_true_extremes_of_the_window(faults_ds):
     t0, t1 = 26.0, 31.0
-    fig = plot_run(faults_ds, channels=["state.span4.tension_N", "meas.enc_pull.*"],
-                   t0=t0, t1=t1, n_buckets=50)
+    fig = plot_run(
+        faults_ds, channels=["state.span4.tension_N", "meas.enc_pull.*"], t0=t0, t1=t1, n_buckets=50
+    )
     s = samples(faults_ds)
     window = s[s.t_s.between(t0, t1)]
     for name, line in lines_by_label(fig).items():
@@ -203,14 +222,17 @@ def test_lines_hold_the_true_extremes_of_the_window(faults_ds):
         assert x.min() >= t0 and x.max() <= t1
         assert len(x) <= 100 < len(window)  # decimated
         if name.startswith("meas.enc_"):  # an encoder: its mean per bucket in a min-max band
-            (band,) = [c for ax in fig.axes for c in ax.collections
-                       if c.get_gid() == f"band:{name}"]
+            (band,) = [
+                c for ax in fig.axes for c in ax.collections if c.get_gid() == f"band:{name}"
+            ]
             y = band.get_paths()[0].vertices[:, 1]
         assert np.nanmax(y) == window[name].max() and np.nanmin(y) == window[name].min()
     assert fig.axes[0].get_xlim() == (t0, t1)
     # the window leaves out the draw-error peak of span 4 (about 490 N at 15-25 s)
-    assert lines_by_label(fig)["state.span4.tension_N"].get_ydata().max() < s[
-        "state.span4.tension_N"].max() - 50
+    assert (
+        lines_by_label(fig)["state.span4.tension_N"].get_ydata().max()
+        < s["state.span4.tension_N"].max() - 50
+    )
 
 
 def test_long_run_streams_row_groups_and_keeps_the_spike(long_ds):
@@ -221,25 +243,29 @@ def test_long_run_streams_row_groups_and_keeps_the_spike(long_ds):
     assert pq.ParquetFile(part).metadata.num_row_groups > 3
     # verify=False: the synthetic dataset's tables hold only what the figure reads, so its
     # labels cannot be checked against faults.parquet (tests/test_reader_verify.py does)
-    fig = plot_run(root, channels=["state.span3.tension_N", "meas.*"], n_buckets=300,
-                   verify=False)
+    fig = plot_run(root, channels=["state.span3.tension_N", "meas.*"], n_buckets=300, verify=False)
     lines = lines_by_label(fig)
     s = pd.read_parquet(part, columns=["state.span3.tension_N", "meas.lc_unwind.tension_N"])
     assert lines["state.span3.tension_N"].get_ydata().max() == bench.SPIKE_N
     y = lines["meas.lc_unwind.tension_N"].get_ydata()
-    assert (y.min(), y.max()) == (s["meas.lc_unwind.tension_N"].min(),
-                                  s["meas.lc_unwind.tension_N"].max())
+    assert (y.min(), y.max()) == (
+        s["meas.lc_unwind.tension_N"].min(),
+        s["meas.lc_unwind.tension_N"].max(),
+    )
     assert len(y) <= 2 * 300 + 2 * pq.ParquetFile(part).metadata.num_row_groups
 
 
 def test_constant_columns_from_the_row_group_statistics(faults_ds):
     run = open_run(faults_ds, "line_a_faults__s7")
-    cols = ["label.severity", "label.ch.lc_unwind.tension_N", "state.idler1.radius_m",
-            "state.unwind.radius_m"]
+    cols = [
+        "label.severity",
+        "label.ch.lc_unwind.tension_N",
+        "state.idler1.radius_m",
+        "state.unwind.radius_m",
+    ]
     s = samples(faults_ds)
     assert constant_columns(run, cols) == {c for c in cols if s[c].nunique() == 1}
-    assert constant_columns(run, cols) == {"label.ch.lc_unwind.tension_N",
-                                           "state.idler1.radius_m"}
+    assert constant_columns(run, cols) == {"label.ch.lc_unwind.tension_N", "state.idler1.radius_m"}
 
 
 def test_run_figure_errors_name_the_problem(faults_ds, tmp_path):
@@ -264,7 +290,7 @@ def per_run_stat(root, channel, stat, t0=None):
         if t0 is not None:
             s = s[s.t_s >= t0]
         v = s[channel].astype(float)  # stored as float32; the figure computes in float64
-        out.append(float(np.sqrt((v ** 2).mean())) if stat == "rms" else getattr(v, stat)())
+        out.append(float(np.sqrt((v**2).mean())) if stat == "rms" else getattr(v, stat)())
     return runs.assign(value=out)
 
 
@@ -282,10 +308,10 @@ def test_sweep_points_are_the_per_run_statistic(sweep_ds, stat):
 
 
 def test_sweep_groups_by_a_second_axis(sweep_ds):
-    fig = plot_sweep(sweep_ds, "state.rewind.speed_rad_s", "mean", axis="axis.offset",
-                     group="top_speed")
-    want = per_run_stat(sweep_ds, "state.rewind.speed_rad_s", "mean").dropna(
-        subset=["axis.offset"])
+    fig = plot_sweep(
+        sweep_ds, "state.rewind.speed_rad_s", "mean", axis="axis.offset", group="top_speed"
+    )
+    want = per_run_stat(sweep_ds, "state.rewind.speed_rad_s", "mean").dropna(subset=["axis.offset"])
     lines = fig.axes[0].get_lines()
     assert [ln.get_label() for ln in lines] == ["top_speed = 3 m/s", "top_speed = 5 m/s"]
     for line, (_, rows) in zip(lines, want.groupby("axis.top_speed"), strict=True):
@@ -302,8 +328,9 @@ def test_sweep_runs_without_an_x_value_are_left_out_and_counted(sweep_ds):
 
 
 def test_sweep_errors(sweep_ds, faults_ds):
-    with pytest.raises(InputError,
-                       match=r"no sweep axis 'speed' \(axes: top_speed, fault, offset\)"):
+    with pytest.raises(
+        InputError, match=r"no sweep axis 'speed' \(axes: top_speed, fault, offset\)"
+    ):
         plot_sweep(sweep_ds, "meas.lc_rewind.tension_N", axis="speed")
     with pytest.raises(InputError, match="no numeric channel 'meas.lc_rewind'"):
         plot_sweep(sweep_ds, "meas.lc_rewind")
@@ -318,11 +345,41 @@ def test_sweep_errors(sweep_ds, faults_ds):
 
 def test_cli_writes_the_run_and_sweep_figures(faults_ds, sweep_ds, tmp_path, capsys):
     png, svg = tmp_path / "run.png", tmp_path / "sweep.svg"
-    assert main(["plot", str(faults_ds), "--channels", "state.span*.tension_N", "--t0", "5",
-                 "--t1", "20 s", "-o", str(png)]) == 0
+    assert (
+        main(
+            [
+                "plot",
+                str(faults_ds),
+                "--channels",
+                "state.span*.tension_N",
+                "--t0",
+                "5",
+                "--t1",
+                "20 s",
+                "-o",
+                str(png),
+            ]
+        )
+        == 0
+    )
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert main(["plot", str(sweep_ds), "--sweep", "meas.lc_rewind.tension_N", "--axis",
-                 "offset", "--group", "top_speed", "-o", str(svg)]) == 0
+    assert (
+        main(
+            [
+                "plot",
+                str(sweep_ds),
+                "--sweep",
+                "meas.lc_rewind.tension_N",
+                "--axis",
+                "offset",
+                "--group",
+                "top_speed",
+                "-o",
+                str(svg),
+            ]
+        )
+        == 0
+    )
     assert b"<svg" in svg.read_bytes()[:500]
     assert capsys.readouterr().out.splitlines() == [f"wrote {png}", f"wrote {svg}"]
 
@@ -341,8 +398,7 @@ def test_cli_keeps_an_existing_file_unless_overwrite(faults_ds, tmp_path, capsys
     err = capsys.readouterr().err
     assert err.count("error") == 1 and "pass --overwrite" in err
     assert mine.read_bytes() == b"not r2rsim's"
-    assert main(["plot", str(faults_ds), "--channels", "sp.*", "-o", str(mine),
-                 "--overwrite"]) == 0
+    assert main(["plot", str(faults_ds), "--channels", "sp.*", "-o", str(mine), "--overwrite"]) == 0
     assert mine.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -357,26 +413,35 @@ def no_matplotlib(monkeypatch):
         monkeypatch.setitem(sys.modules, name, None)
 
 
-@pytest.mark.parametrize("case, needle", [
-    ("missing", "no such dataset directory"),
-    ("run", "no run 'nope__s0' (runs: line_a_faults__s7)"),
-    ("glob", "channel glob 'meas.nothing*' matches no numeric column"),
-    ("extension", "unknown figure format '.jpg' (use .png, .svg, .pdf)"),
-    ("inside", "inside the dataset"),
-    ("directory", "no directory"),
-    ("matplotlib", 'plotting needs matplotlib, which is not installed: pip install matplotlib '
-                   '(or pip install -e ".[plot]" in the r2rsim checkout)'),
-])
-def test_cli_errors_exit_2_with_one_message_and_no_file(case, needle, faults_ds, tmp_path,
-                                                        capsys, request):
+@pytest.mark.parametrize(
+    "case, needle",
+    [
+        ("missing", "no such dataset directory"),
+        ("run", "no run 'nope__s0' (runs: line_a_faults__s7)"),
+        ("glob", "channel glob 'meas.nothing*' matches no numeric column"),
+        ("extension", "unknown figure format '.jpg' (use .png, .svg, .pdf)"),
+        ("inside", "inside the dataset"),
+        ("directory", "no directory"),
+        (
+            "matplotlib",
+            "plotting needs matplotlib, which is not installed: pip install matplotlib "
+            '(or pip install -e ".[plot]" in the r2rsim checkout)',
+        ),
+    ],
+)
+def test_cli_errors_exit_2_with_one_message_and_no_file(
+    case, needle, faults_ds, tmp_path, capsys, request
+):
     out = tmp_path / "fig.png"
-    args = {"missing": [str(tmp_path / "nothing")],
-            "run": [str(faults_ds), "--run", "nope__s0"],
-            "glob": [str(faults_ds), "--channels", "sp.*", "meas.nothing*"],
-            "extension": [str(faults_ds), "-o", str(tmp_path / "fig.jpg")],
-            "inside": [str(faults_ds), "-o", str(faults_ds / "fig.png")],
-            "directory": [str(faults_ds), "-o", str(tmp_path / "no" / "fig.png")],
-            "matplotlib": [str(faults_ds)]}[case]
+    args = {
+        "missing": [str(tmp_path / "nothing")],
+        "run": [str(faults_ds), "--run", "nope__s0"],
+        "glob": [str(faults_ds), "--channels", "sp.*", "meas.nothing*"],
+        "extension": [str(faults_ds), "-o", str(tmp_path / "fig.jpg")],
+        "inside": [str(faults_ds), "-o", str(faults_ds / "fig.png")],
+        "directory": [str(faults_ds), "-o", str(tmp_path / "no" / "fig.png")],
+        "matplotlib": [str(faults_ds)],
+    }[case]
     if "-o" not in args:
         args += ["-o", str(out)]
     if case == "matplotlib":
@@ -405,14 +470,26 @@ def _damage(ds, how: str):
         pq.write_table(pq.read_table(samples).drop(["t_s"]), samples)
     else:  # channels / faults / events of the wrong shape
         pq.write_table(small, ds / f"{how.split()[0]}.parquet")
-    return {"runs truncated": "runs.parquet", "samples truncated": samples.relative_to(ds),
-            "runs without run_id": "runs.parquet", "samples without t_s":
-            samples.relative_to(ds)}.get(how, f"{how.split()[0]}.parquet")
+    return {
+        "runs truncated": "runs.parquet",
+        "samples truncated": samples.relative_to(ds),
+        "runs without run_id": "runs.parquet",
+        "samples without t_s": samples.relative_to(ds),
+    }.get(how, f"{how.split()[0]}.parquet")
 
 
-@pytest.mark.parametrize("how", ["runs truncated", "samples truncated", "runs without run_id",
-                                 "samples without t_s", "channels of the wrong shape",
-                                 "faults of the wrong shape", "events of the wrong shape"])
+@pytest.mark.parametrize(
+    "how",
+    [
+        "runs truncated",
+        "samples truncated",
+        "runs without run_id",
+        "samples without t_s",
+        "channels of the wrong shape",
+        "faults of the wrong shape",
+        "events of the wrong shape",
+    ],
+)
 def test_a_damaged_dataset_is_one_error_naming_the_file(how, faults_ds, tmp_path, capsys):
     """With --no-verify, plot reads only what it draws and does not check checksums: a
     damaged file (it gave ArrowInvalid, KeyError or StopIteration tracebacks) is one error

@@ -27,8 +27,14 @@ def test_sweep_subsets_are_valid_sweeps(study, tmp_path):
 
     plan = study.Plan(quick=True)
     cases = {f"{c} OC1" for c in plan.cases}
-    path = study._subset_sweep(study.SET / "faults.yaml", tmp_path / "f.yaml",
-                               lambda v: v["case"] in cases, [101, 102], 60.0, 30.0)
+    path = study._subset_sweep(
+        study.SET / "faults.yaml",
+        tmp_path / "f.yaml",
+        lambda v: v["case"] in cases,
+        [101, 102],
+        60.0,
+        30.0,
+    )
     # r2rsim makes and validates every run of the subset
     runs = plan_sweep(path).runs
     assert len(runs) == len(plan.cases) * 2
@@ -36,31 +42,49 @@ def test_sweep_subsets_are_valid_sweeps(study, tmp_path):
     assert {str(f["onset"]) for r in runs for f in r.scenario_data["faults"]} == {"30.0 s"}
     text = path.read_text(encoding="utf-8")
     assert "onset: 30.0 s" in text and "duration: 60.0 s" in text
-    h = study._subset_sweep(study.SET / "healthy.yaml", tmp_path / "h.yaml",
-                            lambda v: v["mode"] in ("OC1", "OC2"), [1, 16], 60.0)
+    h = study._subset_sweep(
+        study.SET / "healthy.yaml",
+        tmp_path / "h.yaml",
+        lambda v: v["mode"] in ("OC1", "OC2"),
+        [1, 16],
+        60.0,
+    )
     assert len(plan_sweep(h).runs) == 4
 
 
 def _result(**over):
-    far = pd.DataFrame({"OC1": {"model": 0.001, "literal": 0.01,
-                                "model, per-second time base": 0.001},
-                        "OC2": {"model": 0.02, "literal": 0.95,
-                                "model, per-second time base": 0.15}})
+    far = pd.DataFrame(
+        {
+            "OC1": {"model": 0.001, "literal": 0.01, "model, per-second time base": 0.001},
+            "OC2": {"model": 0.02, "literal": 0.95, "model, per-second time base": 0.15},
+        }
+    )
     sig = pd.DataFrame(
-        {"r1": [-4, -1, 1, 4, 4, 1, -1, -4], "r2": [0, 0, 0, 0, -4, -1, 1, 4],
-         "r3": [-5, -2, 2, 5, 0, 0, 0, 0]},
-        index=study_cases(), dtype=float)
+        {
+            "r1": [-4, -1, 1, 4, 4, 1, -1, -4],
+            "r2": [0, 0, 0, 0, -4, -1, 1, 4],
+            "r3": [-5, -2, 2, 5, 0, 0, 0, 0],
+        },
+        index=study_cases(),
+        dtype=float,
+    )
     iso = pd.DataFrame({"hit@1 (alarmed samples)": [0.95] * 8}, index=study_cases())
-    res = {"far": far, "signature": sig, "isolation": iso,
-           "sens_spread": {"OC1": 1.0, "OC2": 2.5}}
+    res = {"far": far, "signature": sig, "isolation": iso, "sens_spread": {"OC1": 1.0, "OC2": 2.5}}
     res.update(over)
     return res
 
 
 def study_cases():
-    return ["A offset -15 %", "A offset -5 %", "A offset +5 %", "A offset +15 %",
-            "B gain -15 % record-only", "B gain -5 % record-only", "B gain +5 % record-only",
-            "B gain +15 % record-only"]
+    return [
+        "A offset -15 %",
+        "A offset -5 %",
+        "A offset +5 %",
+        "A offset +15 %",
+        "B gain -15 % record-only",
+        "B gain -5 % record-only",
+        "B gain +5 % record-only",
+        "B gain +15 % record-only",
+    ]
 
 
 def test_assertions_pass_and_fail_on_the_numbers(study):
@@ -78,7 +102,8 @@ def test_assertions_pass_and_fail_on_the_numbers(study):
     assert len(failed) == 2 and not c.ok
     assert any("literal" in f for f in failed) and any("sensitivity" in f for f in failed)
     assert [r["result"] for r in c.rows if "B gain +15 %" in r["assertion"]] == [
-        "XFAIL (documented)"]
+        "XFAIL (documented)"
+    ]
     # the OC1 design's model residual at OC2: bounded like OC1 (0.02), however low the OC1
     # FAR (0.001 here: 20 × it passes)
     bad = _result()

@@ -43,10 +43,13 @@ def test_quick_sweeps_are_valid_and_hold_what_the_study_reads(ch4, tmp_path):
 
 
 def test_md_table(ch4):
-    df = pd.DataFrame({"x": [0.12345, np.nan], "n": [1, 2]}, index=pd.Index(["a", "b"],
-                                                                          name="row"))
+    df = pd.DataFrame({"x": [0.12345, np.nan], "n": [1, 2]}, index=pd.Index(["a", "b"], name="row"))
     assert ch4.md_table(df).splitlines() == [  # the default format: 4 decimals
-        "| row | x | n |", "|---|---|---|", "| a | 0.1235 | 1 |", "| b | – | 2 |"]
+        "| row | x | n |",
+        "|---|---|---|",
+        "| a | 0.1235 | 1 |",
+        "| b | – | 2 |",
+    ]
 
 
 def test_four_cell_and_check_results(ch4):
@@ -71,8 +74,23 @@ def test_configurations_are_pinned_and_fault_groups_parse(ch4):
         def __init__(self, case):
             self.info = {"axis.case": case}
 
-    assert [ch4._group(R(c)) for c in (
-        "A offset -15 % OC1", "A degradation P05 over 120 s OC2", "A drift 0.02 N/s OC1",
-        "B gain -5 % in loop OC2", "B gain +15 % record-only OC1", "fault-free OC2",
-        "something else")] == ["A offset", "A degradation", "A drift", "B gain in loop",
-                               "B gain record-only", "fault-free", None]
+    assert [
+        ch4._group(R(c))
+        for c in (
+            "A offset -15 % OC1",
+            "A degradation P05 over 120 s OC2",
+            "A drift 0.02 N/s OC1",
+            "B gain -5 % in loop OC2",
+            "B gain +15 % record-only OC1",
+            "fault-free OC2",
+            "something else",
+        )
+    ] == [
+        "A offset",
+        "A degradation",
+        "A drift",
+        "B gain in loop",
+        "B gain record-only",
+        "fault-free",
+        None,
+    ]

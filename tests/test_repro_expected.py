@@ -17,7 +17,8 @@ STUDIES = {"ch2_hybrid_sov": "hybrid_sov", "ch3_parity": "parity", "ch4_gsmms": 
 
 def _load(name):
     spec = importlib.util.spec_from_file_location(
-        name, REPO / "benchmarks" / "reproduction" / f"{name}.py")
+        name, REPO / "benchmarks" / "reproduction" / f"{name}.py"
+    )
     mod = importlib.util.module_from_spec(spec)
     sys.modules[name] = mod  # dataclasses look their module up
     spec.loader.exec_module(mod)
@@ -32,8 +33,11 @@ def expected():
 def _committed(report: str) -> dict[str, str]:
     """check name -> result of the assertion table of a committed report.md."""
     out = {}
-    for line in (REPO / "docs" / "reproduction" / report / "report.md").read_text(
-            encoding="utf-8").splitlines():
+    for line in (
+        (REPO / "docs" / "reproduction" / report / "report.md")
+        .read_text(encoding="utf-8")
+        .splitlines()
+    ):
         cells = [c.strip() for c in line.strip().strip("|").split(" | ")]
         if len(cells) >= 4 and cells[-1] in ("PASS", "FAIL", "XFAIL (documented)"):
             out[cells[0]] = cells[-1]
@@ -54,33 +58,51 @@ def test_expected_failures_are_the_committed_reports_failures(script, report):
 def test_verdicts_and_exit_status(expected):
     ex = {"known": "why"}
     v = expected.verdict
-    assert [v("known", False, True, ex), v("known", True, True, ex), v("other", False, True, ex),
-            v("other", True, True, ex), v("known", True, False, ex),
-            v("other", False, False, ex)] == [
-        "XFAIL (documented)", "XPASS", "FAIL", "PASS", "(pass)", "(fail)"]
+    assert [
+        v("known", False, True, ex),
+        v("known", True, True, ex),
+        v("other", False, True, ex),
+        v("other", True, True, ex),
+        v("known", True, False, ex),
+        v("other", False, False, ex),
+    ] == ["XFAIL (documented)", "XPASS", "FAIL", "PASS", "(pass)", "(fail)"]
     assert expected.exit_status(["PASS", "XFAIL (documented)", "(fail)"]) == 0
     assert expected.exit_status(["PASS", "FAIL"]) == 3
     assert expected.exit_status(["PASS", "XPASS"]) == 3
     text = expected.summary(["known", "other"], ["XFAIL (documented)", "PASS"], ex)
     assert "XFAIL (documented): known: why" in text and text.endswith(
         "1 PASS, 1 XFAIL (documented), 0 FAIL, 0 XPASS; exit status 0 (every asserted check "
-        "reproduces the committed report)")
+        "reproduces the committed report)"
+    )
     text = expected.summary(["known"], ["XPASS"], ex)
     assert text.startswith("XPASS: known: passes") and "exit status 3" in text
 
 
 def _parity_result(b_r2: float):
-    far = pd.DataFrame({"OC1": {"model": 0.001, "literal": 0.01},
-                        "OC2": {"model": 0.02, "literal": 0.95}})
-    cases = ["A offset -15 %", "A offset -5 %", "A offset +5 %", "A offset +15 %",
-             "B gain -15 % record-only", "B gain -5 % record-only", "B gain +5 % record-only",
-             "B gain +15 % record-only"]
-    sig = pd.DataFrame({"r1": [-4, -1, 1, 4, 4, 1, -1, -4],
-                        "r2": [0, 0, 0, 0, -b_r2, -b_r2 / 3, b_r2 / 3, b_r2],
-                        "r3": [-5, -2, 2, 5, 0, 0, 0, 0]}, index=cases, dtype=float)
+    far = pd.DataFrame(
+        {"OC1": {"model": 0.001, "literal": 0.01}, "OC2": {"model": 0.02, "literal": 0.95}}
+    )
+    cases = [
+        "A offset -15 %",
+        "A offset -5 %",
+        "A offset +5 %",
+        "A offset +15 %",
+        "B gain -15 % record-only",
+        "B gain -5 % record-only",
+        "B gain +5 % record-only",
+        "B gain +15 % record-only",
+    ]
+    sig = pd.DataFrame(
+        {
+            "r1": [-4, -1, 1, 4, 4, 1, -1, -4],
+            "r2": [0, 0, 0, 0, -b_r2, -b_r2 / 3, b_r2 / 3, b_r2],
+            "r3": [-5, -2, 2, 5, 0, 0, 0, 0],
+        },
+        index=cases,
+        dtype=float,
+    )
     iso = pd.DataFrame({"hit@1 (alarmed samples)": [0.95] * 8}, index=cases)
-    return {"far": far, "signature": sig, "isolation": iso,
-            "sens_spread": {"OC1": 1.0, "OC2": 2.5}}
+    return {"far": far, "signature": sig, "isolation": iso, "sens_spread": {"OC1": 1.0, "OC2": 2.5}}
 
 
 def test_parity_study_as_its_report(tmp_path):

@@ -13,7 +13,8 @@ import pytest
 from conftest import REPO
 
 _spec = importlib.util.spec_from_file_location(
-    "ch2_hybrid_sov", REPO / "benchmarks" / "reproduction" / "ch2_hybrid_sov.py")
+    "ch2_hybrid_sov", REPO / "benchmarks" / "reproduction" / "ch2_hybrid_sov.py"
+)
 ch2 = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(ch2)
 
@@ -23,18 +24,22 @@ def test_arguments():
     assert a.quick and a.n_boot == 500 and a.data is None
     assert ch2.parse_args(["-o", "x"]).n_boot == 2000
     with pytest.raises(SystemExit):
-        ch2.parse_args(["--quick"])                     # -o is required
+        ch2.parse_args(["--quick"])  # -o is required
     with pytest.raises(SystemExit):
         ch2.parse_args(["-o", "x", "--n-boot", "5"])
 
 
 def test_cycles_and_windows_from_events():
-    ev = pd.DataFrame({"t_s": [10, 16, 17, 18, 22, 60, 66, 67, 68, 72, 110, 116, 117, 118],
-                       "state": ["fill", "brake", "dwell", "swap", "complete"] * 2
-                       + ["fill", "brake", "dwell", "swap"]})
+    ev = pd.DataFrame(
+        {
+            "t_s": [10, 16, 17, 18, 22, 60, 66, 67, 68, 72, 110, 116, 117, 118],
+            "state": ["fill", "brake", "dwell", "swap", "complete"] * 2
+            + ["fill", "brake", "dwell", "swap"],
+        }
+    )
     t = np.arange(0, 130, 0.5)
     cyc = ch2.cycles_of(t, ev)
-    assert len(cyc) == 2                                  # swap to swap: 18-68, 68-118
+    assert len(cyc) == 2  # swap to swap: 18-68, 68-118
     assert t[cyc[0]].min() == 18 and t[cyc[0]].max() == 67.5
     assert ch2.windows(ev, "fill", "brake") == [(10, 16), (60, 66), (110, 116)]
     assert ch2.windows(ev, "fill", "complete") == [(10, 22), (60, 72)]
@@ -83,15 +88,21 @@ def test_diagnose_runs_hybrid_sov_offline_unless_told(monkeypatch, tmp_path):
         calls.append(argv)
         out = tmp_path / f"o{len(calls)}"
         out.mkdir()
-        pd.DataFrame({"fault": ["dancer.arm_stuck:dancer"] * 3 + ["none"],
-                      "metric": ["pd", "dd_median_s", "far_pre", "pd"],
-                      "value": [1.0, 27.22, 0.0, 0.0]}).to_csv(out / "metrics.csv")
+        pd.DataFrame(
+            {
+                "fault": ["dancer.arm_stuck:dancer"] * 3 + ["none"],
+                "metric": ["pd", "dd_median_s", "far_pre", "pd"],
+                "value": [1.0, 27.22, 0.0, 0.0],
+            }
+        ).to_csv(out / "metrics.csv")
         return 0
 
     monkeypatch.setattr(r2rsim.cli, "main", fake_main)
     assert ch2.CAUSAL is False
-    res = [ch2.diagnose("hybrid-sov", tmp_path, tmp_path, tmp_path / f"o{i}", True, **kw)
-           for i, kw in ((1, {}), (2, {"causal": True}))]
+    res = [
+        ch2.diagnose("hybrid-sov", tmp_path, tmp_path, tmp_path / f"o{i}", True, **kw)
+        for i, kw in ((1, {}), (2, {"causal": True}))
+    ]
     res.append(ch2.diagnose("residual", tmp_path, tmp_path, tmp_path / "o3", False))
     assert res[0] == {"pd": 1.0, "dd_median_s": 27.22, "far_pre": 0.0}
     params = [[a for k, a in enumerate(c[1:]) if c[k] == "--param"] for c in calls]

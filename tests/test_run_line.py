@@ -33,7 +33,8 @@ programme:
 def sweep(tmp_path_factory):
     d = tmp_path_factory.mktemp("line")
     (d / "tiny.yaml").write_text(SCENARIO, encoding="utf-8")
-    (d / "sweep.yaml").write_text(textwrap.dedent("""\
+    (d / "sweep.yaml").write_text(
+        textwrap.dedent("""\
         name: tiny_sweep
         scenario: tiny.yaml
         set:
@@ -41,7 +42,9 @@ def sweep(tmp_path_factory):
         axes:
           - {name: thickness, path: line.web.thickness, values: [100 um, 200 um]}
         seeds: [1, 2]
-        """), encoding="utf-8")
+        """),
+        encoding="utf-8",
+    )
     run_sweep(d / "sweep.yaml", output=d / "data", workers=0)
     run_scenario(d / "tiny.yaml", output=d / "single")
     return d
@@ -84,8 +87,9 @@ def test_a_sweep_run_carries_set_and_axis_values(sweep):
     for r in runs:
         data = run_line_data(r)
         assert data["web"]["width"] == "0.5 m"
-        assert data["web"]["thickness"] == json.loads(r.info["overrides_json"])[
-            "line.web.thickness"]
+        assert (
+            data["web"]["thickness"] == json.loads(r.info["overrides_json"])["line.web.thickness"]
+        )
     # what a plug-in sees: E·A = 1 GPa x thickness x 0.5 m, per run, in fit and in score
     train = [r for r in runs if r.info["seed"] == 1]
     test = [r for r in runs if r.info["seed"] == 2]

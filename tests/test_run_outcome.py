@@ -42,8 +42,20 @@ def test_step_budget_ends_a_run_as_a_solver_failure(tmp_path, repo, capsys):
     assert len(t) == runs["n_samples"]
     assert runs["termination_t_s"] - 1 / 200 - 1e-9 < t[-1] <= runs["termination_t_s"]
     # the default budget (5e4 steps per simulated second) lets it run to the end
-    assert main(["run", str(repo / "scenarios" / "quickstart.yaml"), "-o",
-                 str(tmp_path / "ok"), "-q", "--duration", "3"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                str(repo / "scenarios" / "quickstart.yaml"),
+                "-o",
+                str(tmp_path / "ok"),
+                "-q",
+                "--duration",
+                "3",
+            ]
+        )
+        == 0
+    )
     runs = _runs(tmp_path / "ok")
     assert runs["ended_as_expected"] and runs["nonfinite_from_t_s"] is None
 
@@ -91,15 +103,28 @@ def test_states_that_are_not_finite_fail_the_run(tmp_path, repo, monkeypatch, ca
 
     monkeypatch.setattr(run_module, "steady_state", poisoned)
     out = tmp_path / "out"
-    assert main(["run", str(repo / "scenarios" / "quickstart.yaml"), "-o", str(out), "-q",
-                 "--duration", "1"]) == 1
+    assert (
+        main(
+            [
+                "run",
+                str(repo / "scenarios" / "quickstart.yaml"),
+                "-o",
+                str(out),
+                "-q",
+                "--duration",
+                "1",
+            ]
+        )
+        == 1
+    )
     cap = capsys.readouterr()
     assert "FAILED       states not finite (nan or inf) from t = 0.0000 s" in cap.out
     runs = _runs(out)
     assert runs["nonfinite_from_t_s"] == 0.0 and not runs["ended_as_expected"]
     assert runs["termination_reason"].startswith("solver_failure: ")
-    summary = r2rsim.run_scenario(repo / "scenarios" / "quickstart.yaml",
-                                  output=tmp_path / "api", duration=1.0)
+    summary = r2rsim.run_scenario(
+        repo / "scenarios" / "quickstart.yaml", output=tmp_path / "api", duration=1.0
+    )
     assert not summary.ok and summary.nonfinite_t == 0.0
 
 
@@ -112,7 +137,8 @@ def test_wall_clock_budget(tmp_path, repo):
 
 
 def test_an_arithmetic_error_in_the_compiled_integrator_is_a_solver_failure(
-        tmp_path, repo, monkeypatch, capsys):
+    tmp_path, repo, monkeypatch, capsys
+):
     """numba raises ZeroDivisionError as Python does; inputs whose values overflowed the
     arithmetic (a friction of 1e300 N m, before the plausibility bounds) ended in a traceback.
     Now the run ends as a solver failure, its dataset written and marked."""
@@ -123,8 +149,20 @@ def test_an_arithmetic_error_in_the_compiled_integrator_is_a_solver_failure(
 
     monkeypatch.setattr(radau, "integrate", broken)
     out = tmp_path / "out"
-    assert main(["run", str(repo / "scenarios" / "quickstart.yaml"), "-o", str(out), "-q",
-                 "--duration", "1"]) == 1
+    assert (
+        main(
+            [
+                "run",
+                str(repo / "scenarios" / "quickstart.yaml"),
+                "-o",
+                str(out),
+                "-q",
+                "--duration",
+                "1",
+            ]
+        )
+        == 1
+    )
     cap = capsys.readouterr()
     assert "Traceback" not in cap.err
     assert "solver_failure: ZeroDivisionError in the compiled integrator" in cap.out

@@ -46,10 +46,14 @@ def test_the_line_differs_from_the_thesis_lines():
     web = new.web
     for other in ("registration_realistic", "thesis_testbed_realistic"):
         old = load_line(REPO / "lines" / f"{other}.yaml")
-        assert (web.modulus, web.thickness, web.width) != (old.web.modulus, old.web.thickness,
-                                                           old.web.width)
-        assert sorted(s.length for s in new.spans if s.length) != \
-            sorted(s.length for s in old.spans if s.length)
+        assert (web.modulus, web.thickness, web.width) != (
+            old.web.modulus,
+            old.web.thickness,
+            old.web.width,
+        )
+        assert sorted(s.length for s in new.spans if s.length) != sorted(
+            s.length for s in old.spans if s.length
+        )
     kinds = {e.id: e.type for e in new.elements}
     assert kinds["dancer"] == "dancer" and kinds["infeed"] == "driven"
     sensors = {s.id: s.type for s in new.sensors}
@@ -57,10 +61,21 @@ def test_the_line_differs_from_the_thesis_lines():
     # encoders on the driven roller and the idlers around it (the parity model's inputs), and
     # on the reel and the guide roller (with the reel's diameter and the guide's load cell:
     # what the hybrid stage model adds)
-    assert {s.element for s in new.sensors if s.type == "encoder"} == \
-        {"infeed", "lc_roll", "print_idler", "unwind", "guide_in"}
+    assert {s.element for s in new.sensors if s.type == "encoder"} == {
+        "infeed",
+        "lc_roll",
+        "print_idler",
+        "unwind",
+        "guide_in",
+    }
     assert {e.id: e.stage for e in new.elements if e.stage is not None} == {
-        "unwind": 1, "guide_in": 2, "dancer": 3, "lc_roll": 3, "infeed": 4, "print_idler": 5}
+        "unwind": 1,
+        "guide_in": 2,
+        "dancer": 3,
+        "lc_roll": 3,
+        "infeed": 4,
+        "print_idler": 5,
+    }
     loop = next(c for c in new.controllers if c.id == "registration_loop")
     assert (loop.sensor, loop.element) == ("sensor_B", "infeed")
 
@@ -76,8 +91,9 @@ def test_the_line_is_linearly_stable(tmp_path, roll, speed):
     path = tmp_path / "line.yaml"
     path.write_text(yaml.safe_dump(d), encoding="utf-8")
     line = r2rsim.load_line(path)
-    cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(
-        line, [ProgrammeStep(at=0, line_speed=speed)]))
+    cl = r2rsim.compile_line(
+        line, r2rsim.Programme.from_steps(line, [ProgrammeStep(at=0, line_speed=speed)])
+    )
     y = r2rsim.steady_state(cl, r2rsim.nominal_state(cl))
     assert y is not None
     _, lam = cl.linearise(0.0, y)
@@ -107,8 +123,7 @@ def test_the_healthy_sweep_is_healthy_and_the_fault_sweep_shares_its_seeds():
     # a fault-free case per condition, with the fault runs' seeds (their plants)
     for mode in ("L1", "L2"):
         seeds_free = {r.seed for r in free if r.scenario_data["programme"][0]["mode"] == mode}
-        seeds_faulty = {r.seed for r in faulty
-                        if r.scenario_data["programme"][0]["mode"] == mode}
+        seeds_faulty = {r.seed for r in faulty if r.scenario_data["programme"][0]["mode"] == mode}
         assert seeds_free == seeds_faulty == {101, 102, 103}
     assert not {r.seed for r in runs} & {r.seed for r in healthy}
     types = {r.scenario_data["faults"][0]["type"] for r in faulty}
@@ -172,8 +187,10 @@ def test_the_base_run_reaches_its_set_points(steady_run):
         assert abs(s[f"state.{span}.tension_N"].mean() - t_dancer) < dancer.coulomb / 2 + 0.2
     assert abs(s["state.dancer.position_m"]).max() < 0.01
     # the rewind at its set-point (torque mode + load-cell trim): 1 N
-    assert abs(s["state.span7.tension_N"].mean()
-               - float(step["tension"]["rewind_tension"].split()[0])) < 1.0
+    assert (
+        abs(s["state.span7.tension_N"].mean() - float(step["tension"]["rewind_tension"].split()[0]))
+        < 1.0
+    )
 
 
 # ---- the plug-ins on short runs of the line -------------------------------------------------
@@ -192,10 +209,25 @@ def short_runs(tmp_path_factory):
     base = yaml.safe_load((SET / "production.yaml").read_text(encoding="utf-8"))
     base["line"] = str(LINE)
     faults = {
-        6: [{"id": "a_offset", "type": "sensor.offset", "target": "sensor_A", "onset": "15 s",
-             "magnitude": "20 N"}],
-        7: [{"id": "b_gain", "type": "sensor.gain", "target": "sensor_B", "onset": "15 s",
-             "magnitude": -5.2056e-05}]}
+        6: [
+            {
+                "id": "a_offset",
+                "type": "sensor.offset",
+                "target": "sensor_A",
+                "onset": "15 s",
+                "magnitude": "20 N",
+            }
+        ],
+        7: [
+            {
+                "id": "b_gain",
+                "type": "sensor.gain",
+                "target": "sensor_B",
+                "onset": "15 s",
+                "magnitude": -5.2056e-05,
+            }
+        ],
+    }
     runs = {}
     for seed in range(1, 8):
         scen = {**base, "seed": seed, "faults": faults.get(seed, [])}
@@ -206,8 +238,16 @@ def short_runs(tmp_path_factory):
 
 
 def test_the_spec_has_the_baselines_and_thesis_methods():
-    assert set(METHODS) == {"residual", "pca", "dpca", "iforest", "parity", "gsmms",
-                            "gsmms_physics", "gsmms_global"}
+    assert set(METHODS) == {
+        "residual",
+        "pca",
+        "dpca",
+        "iforest",
+        "parity",
+        "gsmms",
+        "gsmms_physics",
+        "gsmms_global",
+    }
     for method, params in METHODS.values():
         get(method)(**params)  # documented parameters only: the constructor takes them
 
@@ -229,20 +269,32 @@ def test_every_method_fits_and_scores_on_the_line(short_runs, key):
         assert (m.loc[sel, "value"] == 1.0).all()
 
 
-def test_hybrid_sov_configures_itself_from_the_line_and_sees_a_seized_dancer(short_runs,
-                                                                             tmp_path):
+def test_hybrid_sov_configures_itself_from_the_line_and_sees_a_seized_dancer(short_runs, tmp_path):
     # no role, no line file: the stages, sensors and constants come from the line each run
     # carries. selection="F" (OLS): this line's load cell is never censored, and the Tobit
     # likelihood's Hessian is singular without a censored sample
     train, val, _ = short_runs
     base = yaml.safe_load((SET / "production.yaml").read_text(encoding="utf-8"))
-    scen = {**base, "line": str(LINE), "seed": 8, "faults": [
-        {"id": "seized", "type": "dancer.arm_stuck", "target": "dancer", "onset": "12 s"}]}
+    scen = {
+        **base,
+        "line": str(LINE),
+        "seed": 8,
+        "faults": [
+            {"id": "seized", "type": "dancer.arm_stuck", "target": "dancer", "onset": "12 s"}
+        ],
+    }
     (tmp_path / "s8.yaml").write_text(yaml.safe_dump(scen), encoding="utf-8")
     out = run_scenario(tmp_path / "s8.yaml", tmp_path / "run8", duration=30.0).output
     seized = read_runs(out, verify=False)[0]
-    ev = evaluate(get("hybrid-sov")(selection="F"), train, [val[0], seized], [], m=3,
-                  n_boot=0, drive_data=True)
+    ev = evaluate(
+        get("hybrid-sov")(selection="F"),
+        train,
+        [val[0], seized],
+        [],
+        m=3,
+        n_boot=0,
+        drive_data=True,
+    )
     m = ev.metrics
     pd_ = m[(m.fault == "dancer.arm_stuck:dancer") & (m.metric == "pd")]["value"]
     assert pd_.tolist() == [1.0]

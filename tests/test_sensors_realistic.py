@@ -22,8 +22,8 @@ from r2rsim.solve.initial import nominal_state
 from conftest import REPO, SMALL_LINE, SMALL_SCENARIO
 
 REG = yaml.safe_load((REPO / "lines" / "registration.yaml").read_text())
-Q0, Q1 = 0.25, 0.02          # L0(R) = q0 + q1·R³ [m, 1/m²]
-STD, ELL = 8e-6, 2.0         # printing variation: std [m], correlation length [m]
+Q0, Q1 = 0.25, 0.02  # L0(R) = q0 + q1·R³ [m, 1/m²]
+STD, ELL = 8e-6, 2.0  # printing variation: std [m], correlation length [m]
 
 
 def _reg_line(pitch=None, extra_sensors=()):
@@ -37,8 +37,13 @@ def _reg_line(pitch=None, extra_sensors=()):
 
 
 def _encoder_model(speed, cpr=4096, rate=200.0, window=None, seed=3, duration=60.0):
-    enc = {"id": "enc", "type": "encoder", "element": "reg_drive", "counts_per_rev": cpr,
-           "rate": rate}
+    enc = {
+        "id": "enc",
+        "type": "encoder",
+        "element": "reg_drive",
+        "counts_per_rev": cpr,
+        "rate": rate,
+    }
     if window is not None:
         enc["window"] = window
     cl = compile_line(load_line(_reg_line(extra_sensors=[enc]), "line.yaml"))
@@ -53,7 +58,7 @@ def _encoder_model(speed, cpr=4096, rate=200.0, window=None, seed=3, duration=60
 def _chunked(model, t, aux, sizes):
     out, i = [], 0
     for n in sizes:
-        out.append(model.measure(t[i:i + n], aux[i:i + n]))
+        out.append(model.measure(t[i : i + n], aux[i : i + n]))
         i += n
     out.append(model.measure(t[i:], aux[i:]))
     return {k: np.concatenate([o[k] for o in out]) for k in out[0]}
@@ -66,14 +71,14 @@ def test_encoder_counts_unbiased_at_constant_speed():
     cpr, rate, true = 4096, 200.0, 5.0
     _, t, aux, make = _encoder_model(lambda t: np.full_like(t, true), cpr, rate)
     m = make().measure(t, aux)["meas.enc.speed_rad_s"]
-    q = 2 * math.pi / cpr * rate          # one count per window (window = 1/rate)
+    q = 2 * math.pi / cpr * rate  # one count per window (window = 1/rate)
     old = np.round(true / q) * q
-    assert abs(old - true) > 0.05         # the bias the old rounding had
+    assert abs(old - true) > 0.05  # the bias the old rounding had
     n = len(m)
     assert abs(m.mean() - true) < q / n + 1e-9
-    assert np.abs(m - true).max() <= q + 1e-9   # within one count per window
+    assert np.abs(m - true).max() <= q + 1e-9  # within one count per window
     assert set(np.round(m / q).astype(int)) <= {16, 17}  # 16.30 counts per window
-    assert m.std() > 0                    # quantisation noise, not a fixed offset
+    assert m.std() > 0  # quantisation noise, not a fixed offset
 
 
 def test_encoder_non_integer_ratio_and_random_phase():
@@ -83,8 +88,9 @@ def test_encoder_non_integer_ratio_and_random_phase():
     q = 2 * math.pi / cpr * rate
     seqs = []
     for seed in (1, 2, 3):
-        _, t, aux, make = _encoder_model(lambda t: np.full_like(t, 5.0), cpr, rate, seed=seed,
-                                         duration=10.0)
+        _, t, aux, make = _encoder_model(
+            lambda t: np.full_like(t, 5.0), cpr, rate, seed=seed, duration=10.0
+        )
         m = make().measure(t, aux)["meas.enc.speed_rad_s"]
         assert abs(m.mean() - 5.0) < q / len(m) + 1e-9
         seqs.append(m[:50])
@@ -117,8 +123,13 @@ def test_encoder_window_varying_speed_and_chunking():
 
 def test_encoder_window_needs_counts(tmp_path, capsys):
     enc = {"id": "enc", "type": "encoder", "element": "pull", "window": "10 ms"}
-    _expect_error(tmp_path, capsys, _line_with(sensors=[enc]), "sensors[1]",
-                  "window applies to an encoder with counts_per_rev")
+    _expect_error(
+        tmp_path,
+        capsys,
+        _line_with(sensors=[enc]),
+        "sensors[1]",
+        "window applies to an encoder with counts_per_rev",
+    )
 
 
 # ---------------------------------------------------------------------------- pitch
@@ -142,11 +153,11 @@ def test_relaxed_pitch_law():
     law = {"relaxed_pitch_law": {"q0": f"{Q0} m", "q1": f"{Q1} 1/m^2", "unwind": "unwind"}}
     cl = compile_line(load_line(_reg_line(law), "line.yaml"))
     EA = cl.line.web.EA
-    s = np.linspace(0.0, 4000.0, 9)       # unwind radius 0.30 m down towards the core
+    s = np.linspace(0.0, 4000.0, 9)  # unwind radius 0.30 m down towards the core
     for strain in (0.0, 1.2e-3):
         R, T, pitch, _ = _pitch_rows(cl, s, np.zeros_like(s), strain)
         assert R[0] > R[-1] + 0.05
-        np.testing.assert_allclose(pitch, (T / EA + 1) * (Q0 + Q1 * R ** 3), rtol=1e-13)
+        np.testing.assert_allclose(pitch, (T / EA + 1) * (Q0 + Q1 * R**3), rtol=1e-13)
     # the controller reads it as tension through the same law: at the set-point the loop error
     # is zero where the pitch equals (T_ref/EA + 1)·L0(R)
     assert (Q0 + Q1 * R[0] ** 3) - (Q0 + Q1 * R[-1] ** 3) > 1e-4
@@ -156,9 +167,12 @@ def test_relaxed_pitch_law():
 def test_pitch_variation_statistics(seed):
     """Over 4000 correlation lengths of web, the variation has the declared std and
     correlation length (correlation 1/e at lag ℓ) within sampling error; a seed repeats."""
-    d = _reg_line({"relaxed_pitch": f"{Q0} m",
-                   "pitch_variation": {"std": f"{STD * 1e6:g} um",
-                                       "correlation_length": f"{ELL} m"}})
+    d = _reg_line(
+        {
+            "relaxed_pitch": f"{Q0} m",
+            "pitch_variation": {"std": f"{STD * 1e6:g} um", "correlation_length": f"{ELL} m"},
+        }
+    )
     line = load_line(d, "line.yaml")
     var = realise_pitch_variations(line, np.random.SeedSequence(seed))
     again = realise_pitch_variations(line, np.random.SeedSequence(seed))
@@ -166,8 +180,9 @@ def test_pitch_variation_statistics(seed):
     # its stream is at a fixed key: streams spawned before (the disturbances') do not move it
     spawned = np.random.SeedSequence(seed)
     spawned.spawn(3)
-    np.testing.assert_array_equal(var["sensor_B"],
-                                  realise_pitch_variations(line, spawned)["sensor_B"])
+    np.testing.assert_array_equal(
+        var["sensor_B"], realise_pitch_variations(line, spawned)["sensor_B"]
+    )
     cl = compile_line(line, pitch_variations=var)
     du = 0.05
     u = np.arange(0.0, 4000 * ELL, du)
@@ -181,8 +196,9 @@ def test_pitch_variation_statistics(seed):
     acf = np.array([np.dot(x[: len(x) - k], x[k:]) / (len(x) - k) for k in lags]) / x.var()
     ell_est = du * np.argmax(acf < math.exp(-1))
     assert abs(ell_est / ELL - 1) < 0.08
-    np.testing.assert_allclose(acf[:: int(0.5 / du)], np.exp(-(lags[:: int(0.5 / du)] * du
-                                                              / ELL) ** 2), atol=0.08)
+    np.testing.assert_allclose(
+        acf[:: int(0.5 / du)], np.exp(-((lags[:: int(0.5 / du)] * du / ELL) ** 2)), atol=0.08
+    )
     # smooth: no knots (the second difference is tiny compared with the signal)
     assert np.abs(np.diff(delta, 2)).max() < 0.01 * STD
 
@@ -192,13 +208,22 @@ def test_pitch_in_a_run_law_variation_and_loop(tmp_path):
     pitch: same seed gives identical data, another seed other data; the true pitch follows
     (T/EA + 1)·L0 with L0 - L0(R) the zero-mean variation, and the loop turns the variation
     into a real tension disturbance (T - T_ref ≈ -EA·δ/L0)."""
-    d = _reg_line({"relaxed_pitch_law": {"q0": f"{Q0} m", "q1": f"{Q1} 1/m^2"},
-                   "pitch_variation": {"std": "8 um", "correlation_length": "3 m"},
-                   "noise": "2 um"})
+    d = _reg_line(
+        {
+            "relaxed_pitch_law": {"q0": f"{Q0} m", "q1": f"{Q1} 1/m^2"},
+            "pitch_variation": {"std": "8 um", "correlation_length": "3 m"},
+            "noise": "2 um",
+        }
+    )
     (tmp_path / "line.yaml").write_text(yaml.safe_dump(d, sort_keys=False))
-    scen = {"line": "line.yaml", "duration": "20 s", "record_rate": "50 Hz", "seed": 7,
-            "initial": {"state": "steady"},
-            "programme": [{"at": 0, "line_speed": "0.5 m/s"}]}
+    scen = {
+        "line": "line.yaml",
+        "duration": "20 s",
+        "record_rate": "50 Hz",
+        "seed": 7,
+        "initial": {"state": "steady"},
+        "programme": [{"at": 0, "line_speed": "0.5 m/s"}],
+    }
     (tmp_path / "s.yaml").write_text(yaml.safe_dump(scen, sort_keys=False))
     frames = []
     for name, seed in (("a", 7), ("b", 7), ("c", 8)):
@@ -211,7 +236,7 @@ def test_pitch_in_a_run_law_variation_and_loop(tmp_path):
     T = a["state.registration.tension_N"].to_numpy()
     R = a["state.unwind.radius_m"].to_numpy()
     L0 = a["true.sensor_B.pitch_m"].to_numpy() / (T / EA + 1)
-    delta = L0 - (Q0 + Q1 * R ** 3)
+    delta = L0 - (Q0 + Q1 * R**3)
     k = a["t_s"].to_numpy() > 1.0
     assert 3e-6 < delta[k].std() < 15e-6
     # the pitch loop holds the pitch: the variation shows up in the tension
@@ -221,12 +246,25 @@ def test_pitch_in_a_run_law_variation_and_loop(tmp_path):
 
 
 # ---------------------------------------------------------------------------- vibration
-@pytest.mark.parametrize("sensor, col", [
-    ({"id": "lcx", "type": "load_cell", "element": "reg_idler", "noise_per_speed": 0.8},
-     "tension_N"),
-    ({"id": "px", "type": "pitch_length", "span": "registration", "relaxed_pitch": "0.25 m",
-      "noise_per_speed": 4e-6}, "pitch_m"),
-])
+@pytest.mark.parametrize(
+    "sensor, col",
+    [
+        (
+            {"id": "lcx", "type": "load_cell", "element": "reg_idler", "noise_per_speed": 0.8},
+            "tension_N",
+        ),
+        (
+            {
+                "id": "px",
+                "type": "pitch_length",
+                "span": "registration",
+                "relaxed_pitch": "0.25 m",
+                "noise_per_speed": 4e-6,
+            },
+            "pitch_m",
+        ),
+    ],
+)
 def test_noise_per_speed_scales_with_speed(sensor, col):
     """The added noise std is noise_per_speed·|v| at two speeds (20 000 samples each: ~0.5 %
     sampling error)."""
@@ -256,8 +294,7 @@ def test_new_streams_leave_old_noise_alone():
     outs = []
     for extra in ({}, {"noise_per_speed": 0.0}):
         enc = {"id": "enc", "type": "encoder", "element": "reg_drive", "counts_per_rev": 512}
-        cl = compile_line(load_line(_reg_line(extra_sensors=[{**base, **extra}, enc]),
-                                    "line.yaml"))
+        cl = compile_line(load_line(_reg_line(extra_sensors=[{**base, **extra}, enc]), "line.yaml"))
         t = np.arange(500) / 100.0
         aux = np.zeros((500, len(cl.aux_names)))
         outs.append(MeasurementModel(cl, 100.0, np.random.SeedSequence(9)).measure(t, aux))
@@ -287,38 +324,80 @@ def _expect_error(tmp_path, capsys, line, ypath, words):
 PITCH = {"id": "pb", "type": "pitch_length", "span": "span2"}
 BAD = [
     ("no relaxed pitch", {**PITCH}, "sensors[1]", "exactly one of them"),
-    ("both relaxed pitches", {**PITCH, "relaxed_pitch": 0.25,
-                              "relaxed_pitch_law": {"q0": 0.25, "q1": 0.0}},
-     "sensors[1]", "exactly one of them"),
-    ("law on a rewind", {**PITCH, "relaxed_pitch_law": {"q0": 0.25, "q1": 0.0,
-                                                        "unwind": "rewind"}},
-     "sensors[1].relaxed_pitch_law.unwind", "not an unwind"),
-    ("law on a missing element", {**PITCH, "relaxed_pitch_law": {"q0": 0.25, "q1": 0.0,
-                                                                 "unwind": "nope"}},
-     "sensors[1].relaxed_pitch_law.unwind", "'nope'"),
-    ("law not positive", {**PITCH, "relaxed_pitch_law": {"q0": 0.25, "q1": "-20 1/m^2"}},
-     "sensors[1].relaxed_pitch_law.q1", "must stay positive"),
-    ("q1 of the wrong unit", {**PITCH, "relaxed_pitch_law": {"q0": 0.25, "q1": "2 m"}},
-     "sensors[1].relaxed_pitch_law.q1", ""),
-    ("variation std zero", {**PITCH, "relaxed_pitch": 0.25,
-                            "pitch_variation": {"std": 0, "correlation_length": 2}},
-     "sensors[1].pitch_variation.std", "> 0"),
-    ("variation without correlation length", {**PITCH, "relaxed_pitch": 0.25,
-                                              "pitch_variation": {"std": "8 um"}},
-     "sensors[1].pitch_variation", "correlation_length"),
-    ("variation as large as the pitch", {**PITCH, "relaxed_pitch": 0.25,
-                                         "pitch_variation": {"std": "5 cm",
-                                                             "correlation_length": 2}},
-     "sensors[1]", "a tenth of the relaxed pitch"),
-    ("variation correlation length too short", {**PITCH, "relaxed_pitch": 0.25,
-                                                "pitch_variation": {"std": "8 um",
-                                                                    "correlation_length": "1 um"}},
-     "sensors[1].pitch_variation.correlation_length", ">= 0.001"),
-    ("negative noise_per_speed", {"id": "e2", "type": "encoder", "element": "pull",
-                                  "noise_per_speed": -1.0},
-     "sensors[1].noise_per_speed", ">= 0"),
-    ("zero window", {"id": "e2", "type": "encoder", "element": "pull", "counts_per_rev": 100,
-                     "window": 0}, "sensors[1].window", "> 0"),
+    (
+        "both relaxed pitches",
+        {**PITCH, "relaxed_pitch": 0.25, "relaxed_pitch_law": {"q0": 0.25, "q1": 0.0}},
+        "sensors[1]",
+        "exactly one of them",
+    ),
+    (
+        "law on a rewind",
+        {**PITCH, "relaxed_pitch_law": {"q0": 0.25, "q1": 0.0, "unwind": "rewind"}},
+        "sensors[1].relaxed_pitch_law.unwind",
+        "not an unwind",
+    ),
+    (
+        "law on a missing element",
+        {**PITCH, "relaxed_pitch_law": {"q0": 0.25, "q1": 0.0, "unwind": "nope"}},
+        "sensors[1].relaxed_pitch_law.unwind",
+        "'nope'",
+    ),
+    (
+        "law not positive",
+        {**PITCH, "relaxed_pitch_law": {"q0": 0.25, "q1": "-20 1/m^2"}},
+        "sensors[1].relaxed_pitch_law.q1",
+        "must stay positive",
+    ),
+    (
+        "q1 of the wrong unit",
+        {**PITCH, "relaxed_pitch_law": {"q0": 0.25, "q1": "2 m"}},
+        "sensors[1].relaxed_pitch_law.q1",
+        "",
+    ),
+    (
+        "variation std zero",
+        {**PITCH, "relaxed_pitch": 0.25, "pitch_variation": {"std": 0, "correlation_length": 2}},
+        "sensors[1].pitch_variation.std",
+        "> 0",
+    ),
+    (
+        "variation without correlation length",
+        {**PITCH, "relaxed_pitch": 0.25, "pitch_variation": {"std": "8 um"}},
+        "sensors[1].pitch_variation",
+        "correlation_length",
+    ),
+    (
+        "variation as large as the pitch",
+        {
+            **PITCH,
+            "relaxed_pitch": 0.25,
+            "pitch_variation": {"std": "5 cm", "correlation_length": 2},
+        },
+        "sensors[1]",
+        "a tenth of the relaxed pitch",
+    ),
+    (
+        "variation correlation length too short",
+        {
+            **PITCH,
+            "relaxed_pitch": 0.25,
+            "pitch_variation": {"std": "8 um", "correlation_length": "1 um"},
+        },
+        "sensors[1].pitch_variation.correlation_length",
+        ">= 0.001",
+    ),
+    (
+        "negative noise_per_speed",
+        {"id": "e2", "type": "encoder", "element": "pull", "noise_per_speed": -1.0},
+        "sensors[1].noise_per_speed",
+        ">= 0",
+    ),
+    (
+        "zero window",
+        {"id": "e2", "type": "encoder", "element": "pull", "counts_per_rev": 100, "window": 0},
+        "sensors[1].window",
+        "> 0",
+    ),
 ]
 
 
@@ -331,8 +410,14 @@ def test_bad_sensor_options(tmp_path, capsys, case):
 def test_schema_output_documents_new_fields(capsys):
     assert main(["schema", "line"]) == 0
     out = capsys.readouterr().out
-    for words in ("relaxed_pitch_law", "pitch_variation", "noise_per_speed", "window",
-                  "counts_per_rev", "correlation length"):
+    for words in (
+        "relaxed_pitch_law",
+        "pitch_variation",
+        "noise_per_speed",
+        "window",
+        "counts_per_rev",
+        "correlation length",
+    ):
         assert words in out, words
 
 
@@ -340,8 +425,12 @@ def test_pitch_law_jacobian_in_the_loop():
     """With the law and the variation, the analytic Jacobian of the pitch filter and of the
     pitch loop (calibrated with L0(R)) matches central differences in the unwind's radius
     (its length s) and unwound length u."""
-    d = _reg_line({"relaxed_pitch_law": {"q0": f"{Q0} m", "q1": f"{Q1} 1/m^2"},
-                   "pitch_variation": {"std": "8 um", "correlation_length": "2 m"}})
+    d = _reg_line(
+        {
+            "relaxed_pitch_law": {"q0": f"{Q0} m", "q1": f"{Q1} 1/m^2"},
+            "pitch_variation": {"std": "8 um", "correlation_length": "2 m"},
+        }
+    )
     cl = compile_line(load_line(d, "line.yaml"))
     y = nominal_state(cl, 130.0)
     y = y + 1e-3 * np.random.default_rng(1).standard_normal(len(y)) * np.abs(y).clip(1e-3)

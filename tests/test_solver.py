@@ -29,8 +29,9 @@ def _line_a_run(repo, **settings):
     cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(line, scen.programme))
     y0 = r2rsim.steady_state(cl, r2rsim.nominal_state(cl))
     settings = {"backend": "cvode", **settings}
-    return cl, r2rsim.simulate(cl, scen.duration, scen.record_rate, y0,
-                               r2rsim.SolverSettings(**settings))
+    return cl, r2rsim.simulate(
+        cl, scen.duration, scen.record_rate, y0, r2rsim.SolverSettings(**settings)
+    )
 
 
 def _guard_passes(steps: int) -> bool:
@@ -57,8 +58,9 @@ def test_radau_backend_agrees_with_cvode(repo):
     cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(line, scen.programme))
     y0 = r2rsim.steady_state(cl, r2rsim.nominal_state(cl))
     kw = dict(duration=12.0, record_rate=100.0, y0=y0)
-    ref = r2rsim.simulate(cl, settings=r2rsim.SolverSettings(backend="cvode", rtol=1e-9,
-                                                             atol_scale=1e-3), **kw)
+    ref = r2rsim.simulate(
+        cl, settings=r2rsim.SolverSettings(backend="cvode", rtol=1e-9, atol_scale=1e-3), **kw
+    )
     cv = r2rsim.simulate(cl, settings=r2rsim.SolverSettings(backend="cvode", rtol=1e-6), **kw)
     ra = r2rsim.simulate(cl, settings=r2rsim.SolverSettings(backend="radau", rtol=1e-6), **kw)
     # measured max errors against rtol 1e-9: CVODE BDF2 0.18 N, Radau 0.005 N (BDF2 is
@@ -78,15 +80,19 @@ def test_chunking_stays_within_the_error_budget(repo):
     assert many.stats["restarts"] > 100 > one.stats["restarts"]
     assert np.array_equal(one.t, many.t)
     for res in (one, many):
-        err = max(np.max(np.abs(res[f"{s}.tension_N"] - ref[f"{s}.tension_N"]))
-                  for s in ref.compiled.span_ids)
+        err = max(
+            np.max(np.abs(res[f"{s}.tension_N"] - ref[f"{s}.tension_N"]))
+            for s in ref.compiled.span_ids
+        )
         assert err < 0.4, err  # measured: 0.28 N (one chunk), see test_radau for the scale
 
 
 def test_scheduled_breakpoints_are_hit_exactly(tmp_path, repo):
     line = r2rsim.load_line(repo / "lines" / "single_span.yaml")
-    prog = r2rsim.Programme.from_steps(line, [ProgrammeStep(at=0, line_speed=1.0),
-                                             ProgrammeStep(at=0.3333, line_speed=2.0, ramp=0.5)])
+    prog = r2rsim.Programme.from_steps(
+        line,
+        [ProgrammeStep(at=0, line_speed=1.0), ProgrammeStep(at=0.3333, line_speed=2.0, ramp=0.5)],
+    )
     assert prog.breakpoints == pytest.approx([0.3333, 0.8333], abs=1e-12)
     cl = r2rsim.compile_line(line, prog)
     res = r2rsim.simulate(cl, 1.0, 1000.0, r2rsim.nominal_state(cl, 100.0))
@@ -100,9 +106,14 @@ def test_scheduled_breakpoints_are_hit_exactly(tmp_path, repo):
 def test_overlapping_ramps_are_rejected(repo):
     line = r2rsim.load_line(repo / "lines" / "single_span.yaml")
     with pytest.raises(r2rsim.InputError, match=r"programme\[2\].at: starts at 1 s, before"):
-        r2rsim.Programme.from_steps(line, [ProgrammeStep(at=0, line_speed=1.0),
-                                           ProgrammeStep(at=0.5, line_speed=2.0, ramp=1.0),
-                                           ProgrammeStep(at=1.0, line_speed=3.0)])
+        r2rsim.Programme.from_steps(
+            line,
+            [
+                ProgrammeStep(at=0, line_speed=1.0),
+                ProgrammeStep(at=0.5, line_speed=2.0, ramp=1.0),
+                ProgrammeStep(at=1.0, line_speed=3.0),
+            ],
+        )
 
 
 def test_drive_torque_ripple_forces_the_roller_span_mode(tmp_path):
@@ -112,12 +123,27 @@ def test_drive_torque_ripple_forces_the_roller_span_mode(tmp_path):
     from conftest import kinematic_line, run_line
 
     A, f = 0.5, 7.0
-    roller = ("type: driven, radius: 0.05, inertia: 0.01, "
-              f"drive: {{torque_lag: 0, torque_ripple: {{amplitude: {A}, frequency: {f} Hz}}}}")
-    path = kinematic_line(tmp_path, model="linear", EA=1e5, spans=[1.0, 1.0], draws=[0, 0, 0],
-                          wound_strain=1e-3, middle=[roller])
-    _, res = run_line(path, duration=20.0, rate=1000.0, steps=[{"at": 0, "line_speed": 5.0}],
-                      tension=100.0, rtol=1e-8)
+    roller = (
+        "type: driven, radius: 0.05, inertia: 0.01, "
+        f"drive: {{torque_lag: 0, torque_ripple: {{amplitude: {A}, frequency: {f} Hz}}}}"
+    )
+    path = kinematic_line(
+        tmp_path,
+        model="linear",
+        EA=1e5,
+        spans=[1.0, 1.0],
+        draws=[0, 0, 0],
+        wound_strain=1e-3,
+        middle=[roller],
+    )
+    _, res = run_line(
+        path,
+        duration=20.0,
+        rate=1000.0,
+        steps=[{"at": 0, "line_speed": 5.0}],
+        tension=100.0,
+        rtol=1e-8,
+    )
     late = res.t > 10.0  # transients (time constant L/v = 0.2 s) have died out
     dT = (res["span2.tension_N"] - res["span1.tension_N"])[late]
     spec = np.abs(np.fft.rfft(dT - dT.mean()))
@@ -159,8 +185,9 @@ def test_solver_failure_is_recorded_in_runs_and_summary(tmp_path, repo, monkeypa
         return y
 
     monkeypatch.setattr(run_module, "steady_state", poisoned)
-    summary = r2rsim.run_scenario(repo / "scenarios" / "quickstart.yaml",
-                                  output=tmp_path / "out", duration=1.0)
+    summary = r2rsim.run_scenario(
+        repo / "scenarios" / "quickstart.yaml", output=tmp_path / "out", duration=1.0
+    )
     assert summary.terminated and summary.termination_reason.startswith("solver_failure: ")
     assert "TERMINATED   solver_failure: " in summary.format()
     runs = pq.read_table(tmp_path / "out" / "runs.parquet").to_pylist()[0]

@@ -36,9 +36,14 @@ DT_S = 0.5
 def _samples(onset: int | None) -> pd.DataFrame:
     k = np.arange(N_SAMPLES)
     faulty = k >= onset if onset is not None else np.zeros(N_SAMPLES, bool)
-    return pd.DataFrame({"k": k, "t_s": k * DT_S, "label.is_faulty": faulty,
-                         "label.score_mask": np.ones(N_SAMPLES, bool)}).set_index("k",
-                                                                                 drop=False)
+    return pd.DataFrame(
+        {
+            "k": k,
+            "t_s": k * DT_S,
+            "label.is_faulty": faulty,
+            "label.score_mask": np.ones(N_SAMPLES, bool),
+        }
+    ).set_index("k", drop=False)
 
 
 #: shared by the fault-free runs (a split never changes a run): thousands of runs stay cheap
@@ -46,20 +51,50 @@ HEALTHY_SAMPLES = _samples(None)
 NO_FAULTS = pd.DataFrame({"fault_type": [], "target_id": [], "onset_t_s": []})
 
 
-def make_run(seed: int, *, mode: str | None = "OC1", onset: int | None = None,
-             split: str | None = None, rid: str | None = None,
-             fault_onset_s: float | None = None) -> Run:
+def make_run(
+    seed: int,
+    *,
+    mode: str | None = "OC1",
+    onset: int | None = None,
+    split: str | None = None,
+    rid: str | None = None,
+    fault_onset_s: float | None = None,
+) -> Run:
     """A run of N_SAMPLES samples. ``onset``: faulty from that sample on (labels and a fault
     row); ``fault_onset_s``: a fault row with that onset time and no faulty sample."""
-    onsets = [onset * DT_S] if onset is not None else \
-        [fault_onset_s] if fault_onset_s is not None else []
-    faults = pd.DataFrame({"fault_type": ["sensor.offset"] * len(onsets),
-                           "target_id": ["s1"] * len(onsets), "onset_t_s": onsets}) \
-        if onsets else NO_FAULTS
+    onsets = (
+        [onset * DT_S]
+        if onset is not None
+        else [fault_onset_s]
+        if fault_onset_s is not None
+        else []
+    )
+    faults = (
+        pd.DataFrame(
+            {
+                "fault_type": ["sensor.offset"] * len(onsets),
+                "target_id": ["s1"] * len(onsets),
+                "onset_t_s": onsets,
+            }
+        )
+        if onsets
+        else NO_FAULTS
+    )
     samples = _samples(onset) if onset is not None else HEALTHY_SAMPLES
     rid = rid or f"{mode}_{'f' if onset is not None else 'h'}_s{seed}"
-    return Run(rid, samples, faults, {"run_id": rid, "seed": seed, "operating_mode": mode,
-                                      "scenario_sha256": "x", "split": split}, Path("."))
+    return Run(
+        rid,
+        samples,
+        faults,
+        {
+            "run_id": rid,
+            "seed": seed,
+            "operating_mode": mode,
+            "scenario_sha256": "x",
+            "split": split,
+        },
+        Path("."),
+    )
 
 
 def counts(split: Split) -> tuple[int, int, int]:
@@ -82,10 +117,23 @@ def by_mode(runs) -> dict[str, int]:
 #: train/val/test of n runs at 60/20/20, by hand: shares 0.6n, 0.2n, 0.2n rounded down, the
 #: rest to the largest fractional parts (train before val before test on a tie), then at
 #: least one run per role as far as n allows (n = 3: 2/1/0 becomes 1/1/1)
-BY_HAND_60_20_20 = {0: (0, 0, 0), 1: (1, 0, 0), 2: (1, 1, 0), 3: (1, 1, 1), 4: (2, 1, 1),
-                    5: (3, 1, 1), 6: (4, 1, 1), 7: (4, 2, 1), 8: (5, 2, 1), 9: (5, 2, 2),
-                    10: (6, 2, 2), 11: (7, 2, 2), 13: (8, 3, 2), 20: (12, 4, 4),
-                    40: (24, 8, 8)}
+BY_HAND_60_20_20 = {
+    0: (0, 0, 0),
+    1: (1, 0, 0),
+    2: (1, 1, 0),
+    3: (1, 1, 1),
+    4: (2, 1, 1),
+    5: (3, 1, 1),
+    6: (4, 1, 1),
+    7: (4, 2, 1),
+    8: (5, 2, 1),
+    9: (5, 2, 2),
+    10: (6, 2, 2),
+    11: (7, 2, 2),
+    13: (8, 3, 2),
+    20: (12, 4, 4),
+    40: (24, 8, 8),
+}
 
 
 @pytest.mark.parametrize("n,expected", sorted(BY_HAND_60_20_20.items()))
@@ -93,9 +141,18 @@ def test_apportion_by_hand(n, expected):
     assert tuple(apportion(n, (0.6, 0.2, 0.2))) == expected
 
 
-@pytest.mark.parametrize("n,expected", [(1, (1, 0, 0)), (2, (1, 1, 0)), (4, (3, 1, 0)),
-                                        (5, (4, 1, 0)), (6, (5, 1, 0)), (7, (5, 2, 0)),
-                                        (20, (15, 5, 0))])
+@pytest.mark.parametrize(
+    "n,expected",
+    [
+        (1, (1, 0, 0)),
+        (2, (1, 1, 0)),
+        (4, (3, 1, 0)),
+        (5, (4, 1, 0)),
+        (6, (5, 1, 0)),
+        (7, (5, 2, 0)),
+        (20, (15, 5, 0)),
+    ],
+)
 def test_apportion_a_two_way_split(n, expected):
     # 6 runs at 75/25: 4.5 and 1.5, the tie of the remainders goes to train
     assert tuple(apportion(n, (0.75, 0.25, 0.0))) == expected
@@ -129,8 +186,10 @@ def check_counts(split: Split, n: int, fractions) -> None:
         assert got[i] >= want_min[i], (n, got)
 
 
-@pytest.mark.parametrize("fractions", [(0.6, 0.2, 0.2), (0.5, 0.25, 0.25), (0.7, 0.3, 0.0),
-                                       (0.8, 0.1, 0.1), (1 / 3, 1 / 3, 1 / 3)])
+@pytest.mark.parametrize(
+    "fractions",
+    [(0.6, 0.2, 0.2), (0.5, 0.25, 0.25), (0.7, 0.3, 0.0), (0.8, 0.1, 0.1), (1 / 3, 1 / 3, 1 / 3)],
+)
 def test_seeds_1_to_n_meet_the_fractions_within_one_run(fractions):
     for n in range(1, 41):
         split = split_by_seed([make_run(s) for s in range(1, n + 1)], *fractions)
@@ -139,7 +198,7 @@ def test_seeds_1_to_n_meet_the_fractions_within_one_run(fractions):
         assert sum(counts(split)) == n
         served = [len(getattr(split, role)) > 0 for role in ("train", "val", "test")]
         positive = [f > 0 for f in fractions]
-        assert served[:min(n, sum(positive))] == positive[:min(n, sum(positive))], (n, served)
+        assert served[: min(n, sum(positive))] == positive[: min(n, sum(positive))], (n, served)
 
 
 def test_random_seed_sets_meet_the_fractions_within_one_run():
@@ -159,8 +218,9 @@ def test_a_small_pool_serves_train_first():
 
 def test_the_order_within_a_condition_is_that_of_a_hash_of_the_seed():
     # seeds 1-5 ordered by sha256("r2rsim.split:<seed>"): the first 3 train, then 1 val, 1 test
-    order = sorted(range(1, 6),
-                   key=lambda s: hashlib.sha256(f"r2rsim.split:{s}".encode()).hexdigest())
+    order = sorted(
+        range(1, 6), key=lambda s: hashlib.sha256(f"r2rsim.split:{s}".encode()).hexdigest()
+    )
     assert order == [3, 1, 2, 4, 5]
     split = split_by_seed([make_run(s) for s in range(1, 6)])
     assert (seeds(split.train), seeds(split.val), seeds(split.test)) == ({1, 2, 3}, {4}, {5})
@@ -175,9 +235,11 @@ def test_runs_of_one_seed_stay_together():
 
 
 def test_the_split_does_not_depend_on_the_order_of_the_runs():
-    pool = ([make_run(s, mode="OC1") for s in range(1, 12)]
-            + [make_run(s, mode="OC2") for s in range(30, 37)]
-            + [make_run(s, onset=2) for s in range(3)])
+    pool = (
+        [make_run(s, mode="OC1") for s in range(1, 12)]
+        + [make_run(s, mode="OC2") for s in range(30, 37)]
+        + [make_run(s, onset=2) for s in range(3)]
+    )
     expected = ids(split_by_seed(pool))
     rng = random.Random(3)
     for _ in range(20):
@@ -192,10 +254,12 @@ def test_the_split_does_not_depend_on_the_order_of_the_runs():
 
 
 def test_every_condition_is_in_every_role():
-    pool = ([make_run(s, mode="OC1") for s in range(1, 8)]      # 7: 4/2/1
-            + [make_run(s, mode="OC2") for s in range(1, 4)]    # 3: 1/1/1
-            + [make_run(s, mode="P2") for s in range(50, 55)]   # 5: 3/1/1
-            + [make_run(s, mode=None) for s in range(1, 3)])    # 2: 1/1/0, no mode: a group
+    pool = (
+        [make_run(s, mode="OC1") for s in range(1, 8)]  # 7: 4/2/1
+        + [make_run(s, mode="OC2") for s in range(1, 4)]  # 3: 1/1/1
+        + [make_run(s, mode="P2") for s in range(50, 55)]  # 5: 3/1/1
+        + [make_run(s, mode=None) for s in range(1, 3)]
+    )  # 2: 1/1/0, no mode: a group
     split = split_by_seed(pool)
     assert by_mode(split.train) == {"OC1": 4, "OC2": 1, "P2": 3, "": 1}
     assert by_mode(split.val) == {"OC1": 2, "OC2": 1, "P2": 1, "": 1}
@@ -205,17 +269,26 @@ def test_every_condition_is_in_every_role():
 def test_a_condition_is_split_the_same_whatever_other_conditions_are_present():
     oc1 = [make_run(s, mode="OC1") for s in range(1, 10)]
     alone = ids(split_by_seed(oc1))
-    for others in ([make_run(s, mode="OC2") for s in range(1, 4)],
-                   [make_run(s, mode="OC3") for s in range(100, 120)] + [make_run(1, mode=None)]):
+    for others in (
+        [make_run(s, mode="OC2") for s in range(1, 4)],
+        [make_run(s, mode="OC3") for s in range(100, 120)] + [make_run(1, mode=None)],
+    ):
         mixed = split_by_seed(oc1 + others)
-        assert tuple({r.run_id for r in getattr(mixed, role) if r.mode == "OC1"}
-                     for role in ("train", "val", "test")) == alone
+        assert (
+            tuple(
+                {r.run_id for r in getattr(mixed, role) if r.mode == "OC1"}
+                for role in ("train", "val", "test")
+            )
+            == alone
+        )
 
 
 def test_a_split_named_by_the_scenario_is_kept_and_not_counted():
-    pool = ([make_run(s) for s in range(1, 6)]                                   # 3/1/1
-            + [make_run(s, split="val", rid=f"v{s}") for s in (1, 2)]
-            + [make_run(9, split="train", rid="t9"), make_run(10, split="test", rid="e10")])
+    pool = (
+        [make_run(s) for s in range(1, 6)]  # 3/1/1
+        + [make_run(s, split="val", rid=f"v{s}") for s in (1, 2)]
+        + [make_run(9, split="train", rid="t9"), make_run(10, split="test", rid="e10")]
+    )
     split = split_by_seed(pool)
     assert counts(split) == (4, 3, 2)
     assert {"t9"} < {r.run_id for r in split.train}
@@ -226,7 +299,7 @@ def test_a_split_named_by_the_scenario_is_kept_and_not_counted():
 
 
 def test_every_faulty_run_is_a_test_run():
-    healthy = [make_run(s) for s in range(1, 11)]                                 # 6/2/2
+    healthy = [make_run(s) for s in range(1, 11)]  # 6/2/2
     faulty = [make_run(s, onset=3, split="train" if s % 2 else None) for s in range(1, 7)]
     split = split_by_seed(healthy + faulty)
     assert counts(split) == (6, 2, 8)
@@ -245,8 +318,11 @@ def test_a_fault_that_never_acted_leaves_the_run_fault_free():
 
 
 def test_fractions_are_checked():
-    with pytest.raises(InputError, match=r"split fractions must lie in \[0, 1\] and sum to 1, "
-                                         r"got train=0.5, val=0.2, test=0.2"):
+    with pytest.raises(
+        InputError,
+        match=r"split fractions must lie in \[0, 1\] and sum to 1, "
+        r"got train=0.5, val=0.2, test=0.2",
+    ):
         split_by_seed([make_run(1)], train=0.5, val=0.2, test=0.2)
     with pytest.raises(InputError, match=r"got train=1.2, test=-0.4"):
         split_by_seed([make_run(1)], train=1.2, val=0.2, test=-0.4)
@@ -258,23 +334,31 @@ def test_why_there_is_no_training_run():
     faulty = [make_run(s, onset=1) for s in range(4)]
     assert no_training_run(faulty) == (
         "split 'seed': all 4 runs have faults, and plug-ins learn from fault-free runs only: "
-        "add fault-free runs (--data), or name the roles with --train/--val/--test")
-    named = faulty + [make_run(1, split="val", rid="v1"), make_run(2, split="val", rid="v2"),
-                      make_run(3, split="test", rid="t3")]
+        "add fault-free runs (--data), or name the roles with --train/--val/--test"
+    )
+    named = faulty + [
+        make_run(1, split="val", rid="v1"),
+        make_run(2, split="val", rid="v2"),
+        make_run(3, split="test", rid="t3"),
+    ]
     assert not split_by_seed(named).train
     assert no_training_run(named) == (
         "split 'seed': each of the 3 fault-free runs has a split of its own in its scenario "
         "(runs.split: 2 val, 1 test), and none is train: add fault-free runs without a "
-        "split: of their own, or name the roles with --train/--val/--test")
+        "split: of their own, or name the roles with --train/--val/--test"
+    )
 
 
 # --------------------------------------------------------------------------- by condition
 def test_five_healthy_runs_of_the_train_mode_give_four_train_one_val():
-    pool = ([make_run(s, mode="OC1") for s in range(1, 6)]
-            + [make_run(s, mode="OC2") for s in range(1, 6)]
-            + [make_run(s, mode="OC2", onset=2) for s in range(6, 26)]
-            + [make_run(s, mode="OC1", onset=2) for s in range(6, 66)]
-            + [make_run(s, mode="OC3") for s in range(1, 4)] + [make_run(9, mode=None)])
+    pool = (
+        [make_run(s, mode="OC1") for s in range(1, 6)]
+        + [make_run(s, mode="OC2") for s in range(1, 6)]
+        + [make_run(s, mode="OC2", onset=2) for s in range(6, 26)]
+        + [make_run(s, mode="OC1", onset=2) for s in range(6, 66)]
+        + [make_run(s, mode="OC3") for s in range(1, 4)]
+        + [make_run(9, mode=None)]
+    )
     split = split_by_condition(pool)
     assert split.name == "condition OC1->OC2"
     assert counts(split) == (4, 1, 25)
@@ -284,10 +368,19 @@ def test_five_healthy_runs_of_the_train_mode_give_four_train_one_val():
     assert (seeds(split.train), seeds(split.val)) == ({1, 2, 3, 4}, {5})
 
 
-@pytest.mark.parametrize("n,val,expected", [(1, 0.25, (1, 0)), (2, 0.25, (1, 1)),
-                                            (5, 0.25, (4, 1)), (6, 0.25, (5, 1)),
-                                            (7, 0.25, (5, 2)), (20, 0.25, (15, 5)),
-                                            (20, 0.0, (20, 0)), (3, 0.5, (2, 1))])
+@pytest.mark.parametrize(
+    "n,val,expected",
+    [
+        (1, 0.25, (1, 0)),
+        (2, 0.25, (1, 1)),
+        (5, 0.25, (4, 1)),
+        (6, 0.25, (5, 1)),
+        (7, 0.25, (5, 2)),
+        (20, 0.25, (15, 5)),
+        (20, 0.0, (20, 0)),
+        (3, 0.5, (2, 1)),
+    ],
+)
 def test_condition_split_counts(n, val, expected):
     pool = [make_run(s, mode="OC1") for s in range(1, n + 1)] + [make_run(1, mode="OC2")]
     split = split_by_condition(pool, train="OC1", test="OC2", val=val)
@@ -295,8 +388,9 @@ def test_condition_split_counts(n, val, expected):
 
 
 def test_the_condition_split_ignores_runs_split_and_the_order():
-    pool = ([make_run(s, mode="OC1", split="test" if s < 3 else None) for s in range(1, 9)]
-            + [make_run(s, mode="OC2", split="train") for s in range(1, 3)])
+    pool = [make_run(s, mode="OC1", split="test" if s < 3 else None) for s in range(1, 9)] + [
+        make_run(s, mode="OC2", split="train") for s in range(1, 3)
+    ]
     split = split_by_condition(pool, val=0.25)
     assert counts(split) == (6, 2, 2)
     assert ids(split_by_condition(pool[::-1], val=0.25)) == ids(split)
@@ -304,8 +398,11 @@ def test_the_condition_split_ignores_runs_split_and_the_order():
 
 def test_a_missing_mode_is_refused():
     pool = [make_run(s, mode="OC1") for s in range(3)] + [make_run(5, mode=None)]
-    with pytest.raises(InputError, match=r"split by condition: no run has the test mode 'OC2' "
-                                         r"\(modes present: \(none\), OC1\)"):
+    with pytest.raises(
+        InputError,
+        match=r"split by condition: no run has the test mode 'OC2' "
+        r"\(modes present: \(none\), OC1\)",
+    ):
         split_by_condition(pool)
     with pytest.raises(InputError, match="no run has the train mode 'OC9'"):
         split_by_condition(pool, train="OC9", test="OC1")
@@ -317,8 +414,11 @@ def test_the_shipped_sweeps_have_fault_free_runs():
     at least three per condition (one for each role of the seed split)."""
     from r2rsim.sweep import plan_sweep
 
-    expected = {"quickstart.yaml": {None: 4}, "thesis_sensor_faults.yaml": {"OC1": 5, "OC2": 5},
-                "first_benchmark.yaml": {"OC1": 5, "OC2": 5}}
+    expected = {
+        "quickstart.yaml": {None: 4},
+        "thesis_sensor_faults.yaml": {"OC1": 5, "OC2": 5},
+        "first_benchmark.yaml": {"OC1": 5, "OC2": 5},
+    }
     assert sorted(p.name for p in (REPO / "sweeps").glob("*.yaml")) == sorted(expected)
     for name, want in expected.items():
         plan = plan_sweep(REPO / "sweeps" / name)

@@ -34,27 +34,52 @@ print(json.dumps([rc, sorted(m for m in json.loads(sys.argv[2]) if m in sys.modu
 
 def _run_cli(argv: list[str], heavy: tuple[str, ...]) -> tuple[int, list[str]]:
     """Run ``r2rsim argv`` in a fresh interpreter: its exit code and the heavy modules loaded."""
-    p = subprocess.run([sys.executable, "-c", PROBE, json.dumps(argv), json.dumps(heavy)],
-                       capture_output=True, text=True, cwd=REPO, check=True)
+    p = subprocess.run(
+        [sys.executable, "-c", PROBE, json.dumps(argv), json.dumps(heavy)],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        check=True,
+    )
     rc, loaded = json.loads(p.stdout.strip().splitlines()[-1])
     return rc, loaded
 
 
-@pytest.mark.parametrize("argv, heavy", [
-    (["--version"], HEAVY + ("numpy", "pydantic", "pint")),
-    (["list", "elements"], HEAVY + ("numpy", "pydantic", "pint")),
-    (["schema", "line"], HEAVY + ("numpy", "pint")),
-    (["schema", "sweep"], HEAVY + ("numpy", "pint")),
-    (["list", "faults"], HEAVY + ("numpy", "pint")),
-    # quantity strings are read by r2rsim.units' own parser; pint only for exotic unit names
-    (["validate", LINE], HEAVY + ("numpy", "pint")),
-    # the plug-ins are listed from their entry points and source (issue 37)
-    (["list", "plugins"], HEAVY + ("r2rsim.diagnostics.base", "r2rsim.diagnostics.baselines",
-                                   "r2rsim.diagnostics.gsmms", "r2rsim.diagnostics.parity",
-                                   "r2rsim.diagnostics.hybrid_sov")),
-    (["--help"], HEAVY + ("numpy", "pydantic")),
-], ids=["version", "list-elements", "schema-line", "schema-sweep", "list-faults",
-        "validate-line", "list-plugins", "help"])
+@pytest.mark.parametrize(
+    "argv, heavy",
+    [
+        (["--version"], HEAVY + ("numpy", "pydantic", "pint")),
+        (["list", "elements"], HEAVY + ("numpy", "pydantic", "pint")),
+        (["schema", "line"], HEAVY + ("numpy", "pint")),
+        (["schema", "sweep"], HEAVY + ("numpy", "pint")),
+        (["list", "faults"], HEAVY + ("numpy", "pint")),
+        # quantity strings are read by r2rsim.units' own parser; pint only for exotic unit names
+        (["validate", LINE], HEAVY + ("numpy", "pint")),
+        # the plug-ins are listed from their entry points and source (issue 37)
+        (
+            ["list", "plugins"],
+            HEAVY
+            + (
+                "r2rsim.diagnostics.base",
+                "r2rsim.diagnostics.baselines",
+                "r2rsim.diagnostics.gsmms",
+                "r2rsim.diagnostics.parity",
+                "r2rsim.diagnostics.hybrid_sov",
+            ),
+        ),
+        (["--help"], HEAVY + ("numpy", "pydantic")),
+    ],
+    ids=[
+        "version",
+        "list-elements",
+        "schema-line",
+        "schema-sweep",
+        "list-faults",
+        "validate-line",
+        "list-plugins",
+        "help",
+    ],
+)
 def test_quick_commands_do_not_import_the_numerical_stack(argv, heavy):
     rc, loaded = _run_cli(argv, heavy)
     assert rc == 0
@@ -62,8 +87,10 @@ def test_quick_commands_do_not_import_the_numerical_stack(argv, heavy):
 
 
 def test_an_unknown_method_is_refused_before_the_heavy_imports(tmp_path):
-    rc, loaded = _run_cli(["diagnose", "--method", "no-such", "--data", str(tmp_path)],
-                          HEAVY + ("r2rsim.diagnostics.base", "r2rsim.evaluate"))
+    rc, loaded = _run_cli(
+        ["diagnose", "--method", "no-such", "--data", str(tmp_path)],
+        HEAVY + ("r2rsim.diagnostics.base", "r2rsim.evaluate"),
+    )
     assert rc == 2 and loaded == []
 
 
@@ -87,15 +114,22 @@ def test_public_names_resolve_through_lazy_access():
     from r2rsim import errors, run, schema, solve
 
     expected = {
-        "load_scenario": schema.load_scenario, "load_line": schema.load_line,
-        "Line": schema.Line, "Scenario": schema.Scenario,
-        "compile_line": compile_stage.compile_line, "Programme": compile_stage.Programme,
+        "load_scenario": schema.load_scenario,
+        "load_line": schema.load_line,
+        "Line": schema.Line,
+        "Scenario": schema.Scenario,
+        "compile_line": compile_stage.compile_line,
+        "Programme": compile_stage.Programme,
         "CompiledLine": compile_stage.CompiledLine,
-        "simulate": solve.simulate, "steady_state": solve.steady_state,
-        "nominal_state": solve.nominal_state, "SolverSettings": solve.SolverSettings,
+        "simulate": solve.simulate,
+        "steady_state": solve.steady_state,
+        "nominal_state": solve.nominal_state,
+        "SolverSettings": solve.SolverSettings,
         "SimulationResult": solve.SimulationResult,
-        "run_scenario": run.run_scenario, "RunSummary": run.RunSummary,
-        "InputError": errors.InputError, "R2RError": errors.R2RError,
+        "run_scenario": run.run_scenario,
+        "RunSummary": run.RunSummary,
+        "InputError": errors.InputError,
+        "R2RError": errors.R2RError,
         "SimulationError": errors.SimulationError,
     }
     assert set(expected) | {"__version__"} == set(r2rsim.__all__)

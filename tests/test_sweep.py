@@ -55,12 +55,20 @@ seeds: 2
 
 # helpers ------------------------------------------------------------------------------------
 
-def sweep_file(where: Path, body: str, *, name: str = "t", scenario: Path | str = QUICK,
-               file: str = "sweep.yaml") -> Path:
+
+def sweep_file(
+    where: Path,
+    body: str,
+    *,
+    name: str = "t",
+    scenario: Path | str = QUICK,
+    file: str = "sweep.yaml",
+) -> Path:
     where.mkdir(parents=True, exist_ok=True)
     path = where / file
-    path.write_text(f"name: {name}\nscenario: {scenario}\n" + textwrap.dedent(body),
-                    encoding="utf-8")
+    path.write_text(
+        f"name: {name}\nscenario: {scenario}\n" + textwrap.dedent(body), encoding="utf-8"
+    )
     return path
 
 
@@ -92,8 +100,7 @@ def sha(path: Path) -> str:
 def hashes(root: Path, under: str = "") -> dict[str, str]:
     """sha256 of every file under ``root`` (hidden ones too), by relative path."""
     base = root / under if under else root
-    return {p.relative_to(root).as_posix(): sha(p) for p in sorted(base.rglob("*"))
-            if p.is_file()}
+    return {p.relative_to(root).as_posix(): sha(p) for p in sorted(base.rglob("*")) if p.is_file()}
 
 
 def snapshot(root: Path) -> dict[str, tuple]:
@@ -102,7 +109,10 @@ def snapshot(root: Path) -> dict[str, tuple]:
     for p in sorted([root, *root.rglob("*")]):
         st = p.stat()
         out[p.relative_to(root).as_posix()] = (
-            sha(p) if p.is_file() else "dir", st.st_ino, st.st_mtime_ns)
+            sha(p) if p.is_file() else "dir",
+            st.st_ino,
+            st.st_mtime_ns,
+        )
     return out
 
 
@@ -118,8 +128,7 @@ def assert_same_dataset(a: Path, b: Path) -> None:
     assert sorted(ha) == sorted(hb)
     samples = [f for f in ha if f.startswith("samples/")]
     assert samples and all(f.endswith("/part-0.parquet") for f in samples)
-    for f in [*samples, "faults.parquet", "events.parquet", "channels.parquet",
-              "failures.parquet"]:
+    for f in [*samples, "faults.parquet", "events.parquet", "channels.parquet", "failures.parquet"]:
         assert ha[f] == hb[f], f
     ra, rb = runs_table(a), runs_table(b)
     assert list(ra) == list(rb)
@@ -138,8 +147,7 @@ def finished_runs(out: Path) -> list[str]:
     work = out / ".work"
     if not work.is_dir():
         return []
-    return sorted(e.name for e in os.scandir(work)
-                  if not e.name.startswith(".") and e.is_dir())
+    return sorted(e.name for e in os.scandir(work) if not e.name.startswith(".") and e.is_dir())
 
 
 def children(pid: int) -> list[int]:
@@ -163,10 +171,14 @@ def sweep_process():
     started: list[tuple[subprocess.Popen, list[int]]] = []
 
     def start(sweep: Path, out: Path, *args) -> subprocess.Popen:
-        proc = subprocess.Popen([sys.executable, "-m", "r2rsim.cli", "sweep", str(sweep), "-o",
-                                 str(out), "-q", *args], cwd=sweep.parent,
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                start_new_session=True)
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "r2rsim.cli", "sweep", str(sweep), "-o", str(out), "-q", *args],
+            cwd=sweep.parent,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            start_new_session=True,
+        )
         started.append((proc, []))
         return proc
 
@@ -197,6 +209,7 @@ def wait_for_runs(proc: subprocess.Popen, out: Path, n: int, timeout: float = 12
 
 # shared datasets ----------------------------------------------------------------------------
 
+
 @pytest.fixture(scope="module")
 def qs(tmp_path_factory):
     """The 8-run quick-start sweep file and its dataset, run serially (workers=0)."""
@@ -219,20 +232,28 @@ def many(tmp_path_factory):
 
 # 1. expansion -------------------------------------------------------------------------------
 
+
 def test_grid_crosses_axes_and_seeds_in_order(tmp_path):
-    plan = plan_of(tmp_path, """\
+    plan = plan_of(
+        tmp_path,
+        """\
         set: {duration: 2 s}
         axes:
           - {name: speed, path: 'programme[0].line_speed', values: [1 m/s, 2 m/s]}
           - {name: rate, path: 'programme[1].rate', values: [0.25 m/s^2, 0.5 m/s^2, 1 m/s^2]}
         seed: 7
         seeds: 2
-        """)
+        """,
+    )
     assert plan.n_combinations == 6 and plan.seeds == [7, 8] and len(plan.runs) == 12
-    got = [(r.combination, r.seed, r.columns["axis.speed"], r.columns["axis.rate"])
-           for r in plan.runs]
-    want = [(k, s, v, a) for k, (v, a) in enumerate(
-        [(v, a) for v in (1.0, 2.0) for a in (0.25, 0.5, 1.0)]) for s in (7, 8)]
+    got = [
+        (r.combination, r.seed, r.columns["axis.speed"], r.columns["axis.rate"]) for r in plan.runs
+    ]
+    want = [
+        (k, s, v, a)
+        for k, (v, a) in enumerate([(v, a) for v in (1.0, 2.0) for a in (0.25, 0.5, 1.0)])
+        for s in (7, 8)
+    ]
     assert got == want
     # the values reach the scenario each run simulates
     r = plan.runs[11]
@@ -242,23 +263,30 @@ def test_grid_crosses_axes_and_seeds_in_order(tmp_path):
     assert all(s.scenario_data["duration"] == "2 s" for s in plan.runs)
     ids = [r.run_id for r in plan.runs]
     assert len(set(ids)) == 12
-    assert all(i.startswith("t__") and i.endswith(f"__s{r.seed}")
-               for i, r in zip(ids, plan.runs, strict=True))
+    assert all(
+        i.startswith("t__") and i.endswith(f"__s{r.seed}")
+        for i, r in zip(ids, plan.runs, strict=True)
+    )
     assert [a["column"] for a in plan.axes] == ["axis.speed", "axis.rate"]
 
 
 def test_zip_takes_the_ith_values_together(tmp_path):
-    plan = plan_of(tmp_path, """\
+    plan = plan_of(
+        tmp_path,
+        """\
         set: {duration: 2 s}
         combine: zip
         axes:
           - {path: 'programme[0].line_speed', values: [1 m/s, 120 m/min, 3 m/s]}
           - {path: 'programme[1].line_speed', values: [4 m/s, 5 m/s, 6 m/s]}
-        """)
+        """,
+    )
     # one seed: the base scenario's (1); default column names from the paths
     assert plan.seeds == [1] and plan.n_combinations == 3
-    assert [(r.columns["axis.programme.0.line_speed"], r.columns["axis.programme.1.line_speed"])
-            for r in plan.runs] == [(1.0, 4.0), (2.0, 5.0), (3.0, 6.0)]
+    assert [
+        (r.columns["axis.programme.0.line_speed"], r.columns["axis.programme.1.line_speed"])
+        for r in plan.runs
+    ] == [(1.0, 4.0), (2.0, 5.0), (3.0, 6.0)]
 
 
 def test_random_draws_are_seeded(tmp_path):
@@ -276,8 +304,10 @@ def test_random_draws_are_seeded(tmp_path):
     def draws(seed, where):
         plan = plan_of(tmp_path / where, body.replace("{seed}", str(seed)))
         assert len(plan.runs) == 6 and plan.seeds == [1]  # seed: seeds the draws only
-        return [(r.columns["axis.speed"], r.columns["axis.rtol"], r.columns["axis.top"])
-                for r in plan.runs]
+        return [
+            (r.columns["axis.speed"], r.columns["axis.rtol"], r.columns["axis.top"])
+            for r in plan.runs
+        ]
 
     a, b, c = draws(3, "a"), draws(3, "b"), draws(4, "c")
     more = plan_of(tmp_path / "f", body.replace("{seed}", "3").replace("n: 6", "n: 9"))
@@ -294,24 +324,31 @@ def test_random_draws_are_seeded(tmp_path):
     assert logs.min() < -6.3 and logs.max() > -5.7
 
 
-@pytest.mark.parametrize("rng,want", [
-    ("{start: 1 m/s, stop: 2 m/s, num: 5}", [1.0, 1.25, 1.5, 1.75, 2.0]),
-    ("{start: 60 m/min, stop: 180 m/min, step: 30 m/min}", [1.0, 1.5, 2.0, 2.5, 3.0]),
-    ("{start: 1 m/s, stop: 2 m/s, step: 0.3 m/s}", [1.0, 1.3, 1.6, 1.9]),
-    ("{start: 3, stop: 1, step: -1}", [3.0, 2.0, 1.0]),
-    ("{start: 2 m/s, stop: 2 m/s, num: 1}", [2.0]),
-])
+@pytest.mark.parametrize(
+    "rng,want",
+    [
+        ("{start: 1 m/s, stop: 2 m/s, num: 5}", [1.0, 1.25, 1.5, 1.75, 2.0]),
+        ("{start: 60 m/min, stop: 180 m/min, step: 30 m/min}", [1.0, 1.5, 2.0, 2.5, 3.0]),
+        ("{start: 1 m/s, stop: 2 m/s, step: 0.3 m/s}", [1.0, 1.3, 1.6, 1.9]),
+        ("{start: 3, stop: 1, step: -1}", [3.0, 2.0, 1.0]),
+        ("{start: 2 m/s, stop: 2 m/s, num: 1}", [2.0]),
+    ],
+)
 def test_range(tmp_path, rng, want):
-    plan = plan_of(tmp_path, f"""\
+    plan = plan_of(
+        tmp_path,
+        f"""\
         set: {{duration: 2 s}}
         axes:
           - {{name: v, path: 'programme[0].line_speed', range: {rng}}}
-        """)
+        """,
+    )
     got = [r.columns["axis.v"] for r in plan.runs]
     assert got == pytest.approx(want, abs=1e-12)
     # the values are set as SI numbers: the scenario reads them as m/s
-    assert [r.scenario_data["programme"][0]["line_speed"] for r in plan.runs] == \
-        pytest.approx(want, abs=1e-12)
+    assert [r.scenario_data["programme"][0]["line_speed"] for r in plan.runs] == pytest.approx(
+        want, abs=1e-12
+    )
 
 
 def test_seeds_as_a_count_a_list_or_the_base_scenario_seed(tmp_path):
@@ -325,20 +362,26 @@ def test_seeds_as_a_count_a_list_or_the_base_scenario_seed(tmp_path):
 
 
 def test_run_ids_depend_on_the_overrides_and_seed_not_on_the_axes_order(tmp_path):
-    a = plan_of(tmp_path / "a", """\
+    a = plan_of(
+        tmp_path / "a",
+        """\
         set: {duration: 2 s}
         axes:
           - {name: speed, path: 'programme[0].line_speed', values: [1 m/s, 2 m/s]}
           - {name: rtol, path: solver.rtol, values: [1.0e-6, 1.0e-5]}
         seeds: 2
-        """)
-    b = plan_of(tmp_path / "b", """\
+        """,
+    )
+    b = plan_of(
+        tmp_path / "b",
+        """\
         set: {duration: 3 s}
         axes:
           - {name: tol, path: solver.rtol, values: [1.0e-5, 1.0e-6]}
           - {name: v, path: 'programme[0].line_speed', values: [2 m/s, 1 m/s]}
         seeds: [1, 0]
-        """)
+        """,
+    )
     ka = {r.run_id: (r.columns["axis.speed"], r.columns["axis.rtol"], r.seed) for r in a.runs}
     kb = {r.run_id: (r.columns["axis.v"], r.columns["axis.tol"], r.seed) for r in b.runs}
     assert len(ka) == len(kb) == 8
@@ -351,7 +394,9 @@ def test_run_ids_depend_on_the_overrides_and_seed_not_on_the_axes_order(tmp_path
 
 def test_null_removes_a_list_element_by_id_and_its_axes_do_not_apply(tmp_path):
     # a grid of [no fault, the fault] x 3 magnitudes: 1 healthy run and 3 faulty ones
-    plan = plan_of(tmp_path, """\
+    plan = plan_of(
+        tmp_path,
+        """\
         set:
           duration: 2 s
           faults: [{id: f, type: sensor.offset, target: lc_rewind, onset: 1 s, magnitude: 5 N}]
@@ -359,7 +404,8 @@ def test_null_removes_a_list_element_by_id_and_its_axes_do_not_apply(tmp_path):
           - {name: fault, path: faults.f, values: [null, {id: f, type: sensor.offset,
               target: lc_rewind, onset: 1 s, magnitude: 1 N}]}
           - {name: magnitude, path: faults.f.magnitude, values: [-10 N, 3 N, 10 N]}
-        """)
+        """,
+    )
     assert plan.n_combinations == 4 and len(plan.runs) == 4
     healthy, *faulty = plan.runs
     assert healthy.scenario_data["faults"] == []
@@ -367,13 +413,14 @@ def test_null_removes_a_list_element_by_id_and_its_axes_do_not_apply(tmp_path):
     assert json.loads(healthy.columns["overrides_json"]) == {"faults.f": None}
     assert [r.columns["axis.magnitude"] for r in faulty] == [-10.0, 3.0, 10.0]
     # each faulty run has its own magnitude (the element given as a value is not shared)
-    assert [r.scenario_data["faults"][0]["magnitude"] for r in faulty] == \
-        ["-10 N", "3 N", "10 N"]
+    assert [r.scenario_data["faults"][0]["magnitude"] for r in faulty] == ["-10 N", "3 N", "10 N"]
     assert [r.combination for r in plan.runs] == [0, 1, 2, 3]
 
 
 def test_null_keeps_healthy_runs_in_the_dataset(tmp_path):
-    sw = sweep_file(tmp_path, """\
+    sw = sweep_file(
+        tmp_path,
+        """\
         set:
           duration: 2 s
           faults: [{id: f, type: sensor.offset, target: lc_rewind, onset: 1 s, magnitude: 5 N}]
@@ -382,15 +429,17 @@ def test_null_keeps_healthy_runs_in_the_dataset(tmp_path):
           - {name: fault, path: faults.f, values: [null, {id: f, type: sensor.offset,
               target: lc_rewind, onset: 1 s, magnitude: 1 N}]}
           - {name: magnitude, path: faults.f.magnitude, values: [-7 N, 7 N]}
-        """)
+        """,
+    )
     s = run_sweep(sw, output=tmp_path / "out", workers=0)
     assert s.ok and s.done == 2
     runs = runs_table(tmp_path / "out")
     assert runs["n_faults"] == [0, 1] and runs["has_fault"] == [False, True]
     assert runs["axis.magnitude"] == [None, 7.0]
     faults = pq.read_table(tmp_path / "out" / "faults.parquet").to_pylist()
-    assert [(f["run_id"], f["magnitude"], f["magnitude_unit"]) for f in faults] == \
-        [(runs["run_id"][1], 7.0, "N")]
+    assert [(f["run_id"], f["magnitude"], f["magnitude_unit"]) for f in faults] == [
+        (runs["run_id"][1], 7.0, "N")
+    ]
     assert validate_dataset(tmp_path / "out") == []
 
 
@@ -403,55 +452,77 @@ def test_axis_columns_hold_si_values_and_reach_the_simulation(qs):
     assert runs["combination"] == [0, 0, 1, 1, 2, 2, 3, 3]
     assert runs["n_samples"] == [401] * 8 and runs["duration_s"] == [2.0] * 8
     assert json.loads(runs["overrides_json"][0]) == {
-        "faults.lc_offset.magnitude": "-10 N", "programme[0].line_speed": "1 m/s"}
+        "faults.lc_offset.magnitude": "-10 N",
+        "programme[0].line_speed": "1 m/s",
+    }
     faults = {f["run_id"]: f for f in pq.read_table(out / "faults.parquet").to_pylist()}
     for rid, offset in zip(runs["run_id"], runs["axis.offset"], strict=True):
         assert faults[rid]["magnitude"] == offset and faults[rid]["magnitude_unit"] == "N"
         t = pq.read_table(out / "samples" / f"run_id={rid}" / "part-0.parquet")
         ts = t["t_s"].to_numpy()
-        err = (t["meas.lc_rewind.tension_N"].to_numpy().astype(float)
-               - t["true.lc_rewind.tension_N"].to_numpy().astype(float))
+        err = t["meas.lc_rewind.tension_N"].to_numpy().astype(float) - t[
+            "true.lc_rewind.tension_N"
+        ].to_numpy().astype(float)
         # the offset shows in the measurement from its onset (1 s), not before
         assert abs(err[ts < 0.95].mean()) < 1.0
         assert err[ts > 1.1].mean() == pytest.approx(offset, abs=1.0)
     # the speed axis changes the line speed: faster rollers at 2 m/s
-    enc = {rid: pq.read_table(out / "samples" / f"run_id={rid}" / "part-0.parquet",
-                              columns=["true.enc_pull.speed_rad_s"])[0].to_numpy().mean()
-           for rid in runs["run_id"]}
+    enc = {
+        rid: pq.read_table(
+            out / "samples" / f"run_id={rid}" / "part-0.parquet",
+            columns=["true.enc_pull.speed_rad_s"],
+        )[0]
+        .to_numpy()
+        .mean()
+        for rid in runs["run_id"]
+    }
     slow = [enc[r] for r, v in zip(runs["run_id"], runs["axis.speed"], strict=True) if v == 1]
     fast = [enc[r] for r, v in zip(runs["run_id"], runs["axis.speed"], strict=True) if v == 2]
     assert min(fast) / max(slow) == pytest.approx(2.0, rel=0.02)
     # seeds: the measurement noise differs between seeds of one combination
-    a, b = (pq.read_table(out / "samples" / f"run_id={r}" / "part-0.parquet",
-                          columns=["meas.lc_unwind.tension_N"])[0].to_numpy()
-            for r in runs["run_id"][:2])
+    a, b = (
+        pq.read_table(
+            out / "samples" / f"run_id={r}" / "part-0.parquet", columns=["meas.lc_unwind.tension_N"]
+        )[0].to_numpy()
+        for r in runs["run_id"][:2]
+    )
     assert not np.array_equal(a, b)
 
 
 def test_line_paths_change_the_line(tmp_path):
-    sw = sweep_file(tmp_path, """\
+    sw = sweep_file(
+        tmp_path,
+        """\
         set: {duration: 2 s, 'line.sensors.lc_rewind.noise': 0.1 N}
         axes:
           - {name: noise, path: line.sensors.lc_unwind.noise, values: [0.1 N, 4 N]}
-        """)
+        """,
+    )
     plan = plan_sweep(sw)
     assert [r.columns["axis.noise"] for r in plan.runs] == [0.1, 4.0]
-    assert [next(s for s in r.line_data["sensors"] if s["id"] == "lc_unwind")["noise"]
-            for r in plan.runs] == ["0.1 N", "4 N"]
-    assert all(next(s for s in r.line_data["sensors"] if s["id"] == "lc_rewind")["noise"]
-               == "0.1 N" for r in plan.runs)
+    assert [
+        next(s for s in r.line_data["sensors"] if s["id"] == "lc_unwind")["noise"]
+        for r in plan.runs
+    ] == ["0.1 N", "4 N"]
+    assert all(
+        next(s for s in r.line_data["sensors"] if s["id"] == "lc_rewind")["noise"] == "0.1 N"
+        for r in plan.runs
+    )
     s = run_sweep(sw, output=tmp_path / "out", workers=0)
     assert s.ok
     runs = runs_table(tmp_path / "out")
     spread = []
     for rid in runs["run_id"]:
         t = pq.read_table(tmp_path / "out" / "samples" / f"run_id={rid}" / "part-0.parquet")
-        spread.append(np.std(t["meas.lc_unwind.tension_N"].to_numpy().astype(float)
-                             - t["true.lc_unwind.tension_N"].to_numpy().astype(float)))
+        spread.append(
+            np.std(
+                t["meas.lc_unwind.tension_N"].to_numpy().astype(float)
+                - t["true.lc_unwind.tension_N"].to_numpy().astype(float)
+            )
+        )
     assert spread[1] > 10 * spread[0] > 0
     # the dataset keeps the base line file, not 2 versions of it
-    assert (tmp_path / "out" / "scenario" / "pet_film_line.yaml").read_text() == \
-        LINE.read_text()
+    assert (tmp_path / "out" / "scenario" / "pet_film_line.yaml").read_text() == LINE.read_text()
 
 
 # 2. bad sweep files -------------------------------------------------------------------------
@@ -460,112 +531,162 @@ SPEED = "'programme[0].line_speed'"
 BAD = {
     "unknown key": (
         f"axes:\n  - {{path: {SPEED}, values: [1 m/s], colour: red}}\n",
-        ["axes[0].colour: unknown key 'colour'"]),
+        ["axes[0].colour: unknown key 'colour'"],
+    ),
     "unknown top-level key": ("sweeps: 3\n", ["sweeps: unknown key 'sweeps'"]),
     "a path that is not a path": (
         "axes:\n  - {path: '../x', values: [1]}\n",
-        ["axes[0].path: '../x' is not a YAML path"]),
+        ["axes[0].path: '../x' is not a YAML path"],
+    ),
     "a column name that is not one": (
         f"axes:\n  - {{path: {SPEED}, name: 'a b', values: [1 m/s]}}\n",
-        ["axes[0].name: 'a b' is not a column name"]),
+        ["axes[0].name: 'a b' is not a column name"],
+    ),
     "missing scenario": (
-        "__scenario__: nope.yaml\n", ["scenario: scenario file 'nope.yaml' not found"]),
+        "__scenario__: nope.yaml\n",
+        ["scenario: scenario file 'nope.yaml' not found"],
+    ),
     "fault id that is not there": (
         "set:\n  faults: [{id: f, type: sensor.offset, target: lc_rewind, onset: 1 s, "
         "magnitude: 5 N}]\naxes:\n  - {path: faults.nope.magnitude, values: [1 N]}\n",
-        ["1 of 1 combination is invalid", "axes[0] (faults.nope.magnitude) = '1 N'",
-         "faults has no entry with id 'nope' (ids: f)"]),
+        [
+            "1 of 1 combination is invalid",
+            "axes[0] (faults.nope.magnitude) = '1 N'",
+            "faults has no entry with id 'nope' (ids: f)",
+        ],
+    ),
     "list without the fault key": (
         "axes:\n  - {path: faults.nope.magnitude, values: [1 N]}\n",
-        ["axes[0] (faults.nope.magnitude) = '1 N'", "leads nowhere in the base scenario",
-         "no key 'faults'"]),
+        [
+            "axes[0] (faults.nope.magnitude) = '1 N'",
+            "leads nowhere in the base scenario",
+            "no key 'faults'",
+        ],
+    ),
     "index past the end": (
         "axes:\n  - {path: 'programme[9].line_speed', values: [1 m/s]}\n",
-        ["axes[0] (programme[9].line_speed) = '1 m/s'",
-         "programme has 4 entries; [9] is past the end"]),
+        [
+            "axes[0] (programme[9].line_speed) = '1 m/s'",
+            "programme has 4 entries; [9] is past the end",
+        ],
+    ),
     "unknown scenario key": (
         "axes:\n  - {path: solvr.rtol, values: [1.0e-3]}\n",
-        ["axes[0] (solvr.rtol) = 0.001", "unknown key 'solvr'"]),
+        ["axes[0] (solvr.rtol) = 0.001", "unknown key 'solvr'"],
+    ),
     "zip of unequal lengths": (
         f"combine: zip\naxes:\n  - {{path: {SPEED}, values: [1 m/s, 2 m/s]}}\n"
         "  - {path: solver.rtol, values: [1.0e-6]}\n",
-        ["axes: combine: zip needs axes of equal length",
-         "programme[0].line_speed: 2, solver.rtol: 1"]),
+        [
+            "axes: combine: zip needs axes of equal length",
+            "programme[0].line_speed: 2, solver.rtol: 1",
+        ],
+    ),
     "distribution in a grid": (
         f"axes:\n  - {{path: {SPEED}, uniform: [1 m/s, 2 m/s]}}\n",
-        ["axes[0]: a distribution (uniform, loguniform) is drawn by combine: random"]),
+        ["axes[0]: a distribution (uniform, loguniform) is drawn by combine: random"],
+    ),
     "random without n": (
         f"combine: random\naxes:\n  - {{path: {SPEED}, uniform: [1 m/s, 2 m/s]}}\n",
-        ["n: combine: random needs n"]),
+        ["n: combine: random needs n"],
+    ),
     "n without random": (
         f"n: 3\naxes:\n  - {{path: {SPEED}, values: [1 m/s]}}\n",
-        ["n: n applies to combine: random (this sweep combines by grid)"]),
+        ["n: n applies to combine: random (this sweep combines by grid)"],
+    ),
     "reserved seed": (
         "axes:\n  - {path: seed, values: [1, 2]}\n",
-        ["axes[0].path: 'seed' is not swept: give the sweep's seeds: instead"]),
+        ["axes[0].path: 'seed' is not swept: give the sweep's seeds: instead"],
+    ),
     "reserved name": ("set: {name: other}\n", ["set.name: 'name' is not swept"]),
-    "reserved output": ("axes:\n  - {path: output, values: [a]}\n",
-                        ["axes[0].path: 'output' is not swept"]),
-    "reserved line": ("axes:\n  - {path: line, values: [other.yaml]}\n",
-                      ["axes[0].path: 'line' is not swept: one sweep runs one line file"]),
+    "reserved output": (
+        "axes:\n  - {path: output, values: [a]}\n",
+        ["axes[0].path: 'output' is not swept"],
+    ),
+    "reserved line": (
+        "axes:\n  - {path: line, values: [other.yaml]}\n",
+        ["axes[0].path: 'line' is not swept: one sweep runs one line file"],
+    ),
     "too many runs": (
         f"axes:\n  - {{path: {SPEED}, range: {{start: 1 m/s, stop: 2 m/s, num: 10000}}}}\n"
         "seeds: 11\n",
-        [f"axes: the sweep makes 110000 runs; at most {limits.MAX_SWEEP_RUNS}"]),
+        [f"axes: the sweep makes 110000 runs; at most {limits.MAX_SWEEP_RUNS}"],
+    ),
     "two axes on one path": (
         f"axes:\n  - {{path: {SPEED}, values: [1 m/s]}}\n"
         f"  - {{name: again, path: {SPEED}, values: [2 m/s]}}\n",
-        ["axes[1].path: the path 'programme[0].line_speed' is swept by two axes"]),
+        ["axes[1].path: the path 'programme[0].line_speed' is swept by two axes"],
+    ),
     "two axes on one column": (
         f"axes:\n  - {{name: a, path: {SPEED}, values: [1 m/s]}}\n"
         "  - {name: a, path: solver.rtol, values: [1.0e-6]}\n",
-        ["axes[1]: two axes have the column 'axis.a'; give one a different name"]),
+        ["axes[1]: two axes have the column 'axis.a'; give one a different name"],
+    ),
     "a value listed twice": (
         f"axes:\n  - {{path: {SPEED}, values: [1 m/s, 2 m/s, 1 m/s]}}\n",
-        ["1 of 3 combinations is invalid", "combinations 0 and 2 make the same run "
-         "(programme[0].line_speed = '1 m/s'): a value is listed twice"]),
+        [
+            "1 of 3 combinations is invalid",
+            "combinations 0 and 2 make the same run "
+            "(programme[0].line_speed = '1 m/s'): a value is listed twice",
+        ],
+    ),
     "random draws that repeat": (
         f"combine: random\nn: 5\naxes:\n  - {{path: {SPEED}, values: [1 m/s, 2 m/s]}}\n",
-        ["of 5 combinations are invalid", "of combine: random make the same run",
-         "draw from uniform or loguniform"]),
+        [
+            "of 5 combinations are invalid",
+            "of combine: random make the same run",
+            "draw from uniform or loguniform",
+        ],
+    ),
     "range step of the wrong sign": (
         f"axes:\n  - {{path: {SPEED}, range: {{start: 1 m/s, stop: 2 m/s, step: -0.5 m/s}}}}\n",
-        ["axes[0].range.step: step -0.5 does not lead from 1 to 2"]),
+        ["axes[0].range.step: step -0.5 does not lead from 1 to 2"],
+    ),
     "range in two dimensions": (
         f"axes:\n  - {{path: {SPEED}, range: {{start: 1 m/s, stop: 2 s, num: 3}}}}\n",
-        ["axes[0].range: the values have different dimensions"]),
+        ["axes[0].range: the values have different dimensions"],
+    ),
     "range with num and step": (
         f"axes:\n  - {{path: {SPEED}, range: {{start: 1, stop: 2, num: 3, step: 1}}}}\n",
-        ["axes[0].range", "give either num (how many values) or step (their spacing)"]),
+        ["axes[0].range", "give either num (how many values) or step (their spacing)"],
+    ),
     "loguniform from zero": (
         f"combine: random\nn: 2\naxes:\n  - {{path: {SPEED}, loguniform: [0 m/s, 2 m/s]}}\n",
-        ["axes[0].loguniform: loguniform needs low > 0"]),
+        ["axes[0].loguniform: loguniform needs low > 0"],
+    ),
     "a seed listed twice": ("seeds: [1, 2, 1]\n", ["seeds: a seed is listed twice"]),
     "the last seed too large": (
         f"seed: {limits.MAX_SEED}\nseeds: 2\n",
-        ["seeds: the last seed 18446744073709551616 is above 2**64 - 1"]),
+        ["seeds: the last seed 18446744073709551616 is above 2**64 - 1"],
+    ),
     "invalid YAML": ("axes: [\n", ["invalid YAML"]),
     # numbers at the ends of floating point (OverflowError tracebacks before)
     "a range step near 1e-320": (
         "axes:\n  - {path: solver.rtol, range: {start: 0, stop: 1, step: 1.0e-320}}\n",
-        ["axes[0].range: the range from 0 to 1 in steps of", "has more than 10000 values"]),
+        ["axes[0].range: the range from 0 to 1 in steps of", "has more than 10000 values"],
+    ),
     "a range wider than floating point": (
         "axes:\n  - {path: solver.rtol, range: {start: -1.0e+308, stop: 1.0e+308, "
-        "step: 1.0e+307}}\n", ["axes[0].range: the range from -1e+308 to 1e+308 is wider "
-                               "than floating point can hold"]),
+        "step: 1.0e+307}}\n",
+        ["axes[0].range: the range from -1e+308 to 1e+308 is wider than floating point can hold"],
+    ),
     "a uniform wider than floating point": (
-        "combine: random\nn: 2\naxes:\n  - {path: solver.rtol, "
-        "uniform: [-1.0e+308, 1.0e+308]}\n",
-        ["axes[0].uniform: the interval from -1e+308 to 1e+308 is wider than floating point"]),
+        "combine: random\nn: 2\naxes:\n  - {path: solver.rtol, uniform: [-1.0e+308, 1.0e+308]}\n",
+        ["axes[0].uniform: the interval from -1e+308 to 1e+308 is wider than floating point"],
+    ),
     # one value spelled two ways: the second axis overwrote the first (duplicate runs)
     "one value swept by two axes under two spellings": (
         "axes:\n  - {name: a, path: line.sensors.lc_rewind.noise, values: [1 N, 2 N]}\n"
         "  - {name: b, path: 'line.sensors[1].noise', values: [3 N, 4 N]}\n",
-        ["axes[1].path: 'line.sensors[1].noise' is the value axes[0] sweeps "
-         "('line.sensors.lc_rewind.noise'); sweep it once"]),
+        [
+            "axes[1].path: 'line.sensors[1].noise' is the value axes[0] sweeps "
+            "('line.sensors.lc_rewind.noise'); sweep it once"
+        ],
+    ),
     "a scenario that is not a regular file": (
-        "__scenario__: /dev/null\n", ["scenario: scenario file '/dev/null' is not a regular "
-                                       "file"]),
+        "__scenario__: /dev/null\n",
+        ["scenario: scenario file '/dev/null' is not a regular file"],
+    ),
 }
 
 
@@ -575,8 +696,9 @@ def test_bad_sweep_file(tmp_path, capsys, kind):
     scenario = QUICK
     if body.startswith("__scenario__: "):
         scenario, body = body.split("\n", 1)[0].split(": ", 1)[1], body.split("\n", 1)[1]
-    sw = sweep_file(tmp_path, "set: {duration: 2 s}\n" + body
-                    if "set:" not in body else body, scenario=scenario)
+    sw = sweep_file(
+        tmp_path, "set: {duration: 2 s}\n" + body if "set:" not in body else body, scenario=scenario
+    )
     before = sorted(p.name for p in tmp_path.iterdir())
     code, out, err = cli(capsys, sw, "-o", tmp_path / "out", "--workers", "0")
     assert code == 2 and out == ""
@@ -585,8 +707,9 @@ def test_bad_sweep_file(tmp_path, capsys, kind):
         assert text in err, (text, err)
     lines = err.rstrip("\n").split("\n")
     if " invalid (nothing was run)" in err:  # a line per invalid combination, each located
-        assert len(lines) >= 2 and all(line.startswith("  ") and f"{sw}" not in line
-                                       for line in lines[1:])
+        assert len(lines) >= 2 and all(
+            line.startswith("  ") and f"{sw}" not in line for line in lines[1:]
+        )
     elif "unknown key" in err:  # located by its line, and that line of the file quoted
         assert len(lines) == 2 and lines[1].startswith("    ") and " line " in lines[0]
     else:
@@ -599,12 +722,15 @@ def test_bad_sweep_file(tmp_path, capsys, kind):
 
 def test_every_invalid_combination_is_listed_at_once(tmp_path, capsys):
     # 3 x 2 combinations: a wrong unit in one axis, values out of range in the other
-    sw = sweep_file(tmp_path, f"""\
+    sw = sweep_file(
+        tmp_path,
+        f"""\
         set: {{duration: 2 s}}
         axes:
           - {{name: tol, path: solver.rtol, values: [1.0e-6, 2, 5]}}
           - {{name: v, path: {SPEED}, values: [3 kg, 2 m/s]}}
-        """)
+        """,
+    )
     code, _, err = cli(capsys, sw, "-o", tmp_path / "out")
     assert code == 2 and not (tmp_path / "out").exists()
     lines = err.rstrip("\n").split("\n")
@@ -616,33 +742,44 @@ def test_every_invalid_combination_is_listed_at_once(tmp_path, capsys):
         f"  axes[0] (solver.rtol) = 2: {scen}: solver.rtol: must be < 1.0, got 2 "
         "(in 2 combinations)",
         f"  axes[0] (solver.rtol) = 5: {scen}: solver.rtol: must be < 1.0, got 5 "
-        "(in 2 combinations)"]
+        "(in 2 combinations)",
+    ]
 
 
 def test_runs_with_other_sample_columns_are_refused(tmp_path, capsys):
     # the encoder enc_pull removed in one combination: its columns differ
-    sw = sweep_file(tmp_path, """\
+    sw = sweep_file(
+        tmp_path,
+        """\
         set: {duration: 2 s}
         axes:
           - {name: enc, path: line.sensors.enc_pull, values: [null, {id: enc_pull,
               type: encoder, element: pull, counts_per_rev: 1024}]}
-        """)
+        """,
+    )
     code, _, err = cli(capsys, sw, "-o", tmp_path / "out")
     assert code == 2 and not (tmp_path / "out").exists()
     assert "1 of 2 combinations is invalid" in err
-    assert "the runs of this combination have other sample columns than those of " \
-           "combination 0 (ctrl.enc_pull.speed_seen_rad_s, meas.enc_pull.speed_rad_s" in err
+    assert (
+        "the runs of this combination have other sample columns than those of "
+        "combination 0 (ctrl.enc_pull.speed_seen_rad_s, meas.enc_pull.speed_rad_s" in err
+    )
     assert "make two sweeps" in err
     # removing a sensor a controller reads is invalid, and says so
-    sw = sweep_file(tmp_path, """\
+    sw = sweep_file(
+        tmp_path,
+        """\
         set: {duration: 2 s}
         axes:
           - {path: line.sensors.lc_rewind, values: [null]}
-        """)
+        """,
+    )
     code, _, err = cli(capsys, sw, "-o", tmp_path / "out")
     assert code == 2 and not (tmp_path / "out").exists()
-    assert f"line.sensors.lc_rewind = null: {LINE}: controllers[4].sensor: no load_cell or " \
-           "pitch_length sensor with id 'lc_rewind'" in err
+    assert (
+        f"line.sensors.lc_rewind = null: {LINE}: controllers[4].sensor: no load_cell or "
+        "pitch_length sensor with id 'lc_rewind'" in err
+    )
 
 
 def test_output_key_outside_the_sweep_directory(tmp_path, capsys, monkeypatch):
@@ -662,6 +799,7 @@ def test_output_key_outside_the_sweep_directory(tmp_path, capsys, monkeypatch):
 
 # 3. resume and fault tolerance --------------------------------------------------------------
 
+
 @pytest.mark.parametrize("how", ["SIGINT to the process group", "SIGTERM to the sweep"])
 def test_interrupted_sweep_resumes_to_the_same_bytes(many, tmp_path, how, sweep_process):
     sw, reference = many
@@ -676,8 +814,9 @@ def test_interrupted_sweep_resumes_to_the_same_bytes(many, tmp_path, how, sweep_
     _, err = proc.communicate(timeout=60)
     if how.startswith("SIGINT"):
         assert proc.returncode == 130
-        assert err == ("interrupted; the finished runs are kept: run the same command again "
-                       "to continue\n")
+        assert err == (
+            "interrupted; the finished runs are kept: run the same command again to continue\n"
+        )
     else:
         assert proc.returncode == 143 and err.startswith("terminated (SIGTERM)")
     deadline = time.monotonic() + 10
@@ -687,8 +826,22 @@ def test_interrupted_sweep_resumes_to_the_same_bytes(many, tmp_path, how, sweep_
     done = finished_runs(out)
     assert 2 <= len(done) < 32, "the sweep was not interrupted half-way"
     assert (out / ".r2rsim-sweep.json").is_file() and not (out / "manifest.json").exists()
-    r = subprocess.run([sys.executable, "-m", "r2rsim.cli", "sweep", str(sw), "-o", str(out),
-                        "-q", "--workers", "0"], capture_output=True, text=True)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "r2rsim.cli",
+            "sweep",
+            str(sw),
+            "-o",
+            str(out),
+            "-q",
+            "--workers",
+            "0",
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0, r.stderr
     assert f"runs         32: {32 - len(done)} done, 0 failed, {len(done)} skipped" in r.stdout
     assert sorted(p.name for p in out.iterdir()) == sorted(p.name for p in reference.iterdir())
@@ -696,8 +849,7 @@ def test_interrupted_sweep_resumes_to_the_same_bytes(many, tmp_path, how, sweep_
     assert validate_dataset(out) == []
 
 
-def test_sweep_killed_with_sigkill_resumes_and_its_workers_exit(many, tmp_path,
-                                                               sweep_process):
+def test_sweep_killed_with_sigkill_resumes_and_its_workers_exit(many, tmp_path, sweep_process):
     sw, reference = many
     out = tmp_path / "out"
     proc = sweep_process(sw, out, "--workers", "1")
@@ -715,8 +867,22 @@ def test_sweep_killed_with_sigkill_resumes_and_its_workers_exit(many, tmp_path,
     assert all(gone(p) for p in workers)
     done = finished_runs(out)
     assert 2 <= len(done) < 32
-    r = subprocess.run([sys.executable, "-m", "r2rsim.cli", "sweep", str(sw), "-o", str(out),
-                        "-q", "--workers", "0"], capture_output=True, text=True)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "r2rsim.cli",
+            "sweep",
+            str(sw),
+            "-o",
+            str(out),
+            "-q",
+            "--workers",
+            "0",
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0, r.stderr
     assert f"{len(done)} skipped" in r.stdout
     assert_same_dataset(reference, out)
@@ -729,8 +895,11 @@ def test_a_killed_worker_is_replaced_and_its_run_run_again(many, tmp_path, sweep
     out = tmp_path / "out"
     proc = sweep_process(sw, out, "--workers", "1")
     wait_for_runs(proc, out, 2)
-    workers = [p for p in sweep_process.children(proc)
-               if b"spawn_main" in Path(f"/proc/{p}/cmdline").read_bytes()]
+    workers = [
+        p
+        for p in sweep_process.children(proc)
+        if b"spawn_main" in Path(f"/proc/{p}/cmdline").read_bytes()
+    ]
     assert len(workers) == 1
     os.kill(workers[0], signal.SIGKILL)  # the OOM killer, say
     stdout, err = proc.communicate(timeout=120)
@@ -743,12 +912,15 @@ def test_a_killed_worker_is_replaced_and_its_run_run_again(many, tmp_path, sweep
 def test_failed_runs_are_recorded_kept_and_retried(tmp_path, capsys, monkeypatch):
     # a step budget of 2 steps per simulated second makes a solver failure (with data up to
     # there); a run that raises in the worker fails without data
-    sw = sweep_file(tmp_path, """\
+    sw = sweep_file(
+        tmp_path,
+        """\
         set: {duration: 3 s}
         axes:
           - {name: budget, path: solver.max_steps_per_s, values: [50000, 2]}
           - {name: speed, path: 'programme[0].line_speed', values: [1 m/s, 1.5 m/s]}
-        """)
+        """,
+    )
     out = tmp_path / "out"
     plan = plan_sweep(sw)
     ok, ok2, budget, budget2 = (r.run_id for r in plan.runs)
@@ -775,8 +947,9 @@ def test_failed_runs_are_recorded_kept_and_retried(tmp_path, capsys, monkeypatch
     assert all(r.startswith("solver_failure: step budget") for r in runs["termination_reason"][1:])
     assert runs["axis.budget"] == [50000.0, 2.0, 2.0]
     failures = pq.read_table(out / "failures.parquet").to_pylist()
-    assert [(f["run_id"], f["error"], f["axis.speed"]) for f in failures] == \
-        [(ok2, "RuntimeError: boom", 1.5)]
+    assert [(f["run_id"], f["error"], f["axis.speed"]) for f in failures] == [
+        (ok2, "RuntimeError: boom", 1.5)
+    ]
     assert not (out / "samples" / f"run_id={ok2}").exists()
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["sweep"]["failed_without_data"] == [ok2]
@@ -807,19 +980,25 @@ def test_failed_runs_are_recorded_kept_and_retried(tmp_path, capsys, monkeypatch
     assert pq.read_table(out / "failures.parquet").num_rows == 0
     assert json.loads((out / "manifest.json").read_text())["sweep"]["failed_without_data"] == []
     # the run that succeeded first was not run again
-    assert snapshot(out)[f"samples/run_id={ok}/part-0.parquet"] == \
-        before[f"samples/run_id={ok}/part-0.parquet"]
+    assert (
+        snapshot(out)[f"samples/run_id={ok}/part-0.parquet"]
+        == before[f"samples/run_id={ok}/part-0.parquet"]
+    )
     assert validate_dataset(out) == []
 
 
 def test_finished_sweep_is_left_alone_reopened_for_new_seeds_and_guarded(tmp_path, capsys):
     base = scenario_copy(tmp_path / "proj")
-    sw = sweep_file(tmp_path / "proj", """\
+    sw = sweep_file(
+        tmp_path / "proj",
+        """\
         set: {duration: 2 s}
         axes:
           - {name: speed, path: 'programme[0].line_speed', values: [1 m/s, 2 m/s]}
         seeds: 2
-        """, scenario="base.yaml")
+        """,
+        scenario="base.yaml",
+    )
     out = tmp_path / "out"
     assert cli(capsys, sw, "-o", out, "--workers", "0")[0] == 0
     before = snapshot(out)
@@ -837,7 +1016,8 @@ def test_finished_sweep_is_left_alone_reopened_for_new_seeds_and_guarded(tmp_pat
     old_samples = [k for k in before if k.endswith("part-0.parquet")]
     assert len(old_samples) == 4 and all(after[k] == before[k] for k in old_samples)
     assert sorted(k for k in after if k.endswith("part-0.parquet")) == sorted(
-        old_samples + [k.replace("__s1/", "__s2/") for k in old_samples if "__s1/" in k])
+        old_samples + [k.replace("__s1/", "__s2/") for k in old_samples if "__s1/" in k]
+    )
     runs = runs_table(out)
     assert runs["seed"] == [0, 1, 2, 0, 1, 2]
     assert validate_dataset(out) == []
@@ -855,8 +1035,10 @@ def test_finished_sweep_is_left_alone_reopened_for_new_seeds_and_guarded(tmp_pat
     sw.write_text(sw.read_text().replace("seeds: 2", "seeds: 3"))
     # the base scenario changed: its runs would not be those in the dataset
     base.write_text(base.read_text().replace("warmup: 2 s", "warmup: 1 s"))
-    refused(match=f"6 run(s) in '{out}' were made from another base scenario, line, sweep "
-                  f"file `set:` or r2rsim version")
+    refused(
+        match=f"6 run(s) in '{out}' were made from another base scenario, line, sweep "
+        f"file `set:` or r2rsim version"
+    )
     # --overwrite starts it again
     code, stdout, _ = cli(capsys, sw, "-o", out, "--workers", "0", "--overwrite")
     assert code == 0 and "6 done" in stdout
@@ -871,9 +1053,11 @@ def test_output_holding_other_data(tmp_path, capsys, qs):
     capsys.readouterr()
     before = snapshot(ds)
     code, _, err = cli(capsys, sw, "-o", ds, "--workers", "0")
-    assert code == 2 and err == (f"error: output directory '{ds}' holds a run's dataset; pass "
-                                 f"--overwrite to replace it, or choose another directory "
-                                 f"with -o\n")
+    assert code == 2 and err == (
+        f"error: output directory '{ds}' holds a run's dataset; pass "
+        f"--overwrite to replace it, or choose another directory "
+        f"with -o\n"
+    )
     assert snapshot(ds) == before
     code, _, _ = cli(capsys, sw, "-o", ds, "--workers", "0", "--overwrite")
     assert code == 0 and len(runs_table(ds)["run_id"]) == 8 and validate_dataset(ds) == []
@@ -893,8 +1077,7 @@ def test_output_holding_other_data(tmp_path, capsys, qs):
         assert snapshot(mine) == before
 
 
-def test_files_put_into_an_unfinished_sweep_are_not_adopted(many, tmp_path, capsys,
-                                                            sweep_process):
+def test_files_put_into_an_unfinished_sweep_are_not_adopted(many, tmp_path, capsys, sweep_process):
     sw, reference = many
     out = tmp_path / "out"
     proc = sweep_process(sw, out, "--workers", "1")
@@ -912,15 +1095,29 @@ def test_files_put_into_an_unfinished_sweep_are_not_adopted(many, tmp_path, caps
     (out / "samples" / "README").write_text("mine too")
 
     def resume():
-        return subprocess.run([sys.executable, "-m", "r2rsim.cli", "sweep", str(sw), "-o",
-                               str(out), "-q", "--workers", "0"], capture_output=True,
-                              text=True)
+        return subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "r2rsim.cli",
+                "sweep",
+                str(sw),
+                "-o",
+                str(out),
+                "-q",
+                "--workers",
+                "0",
+            ],
+            capture_output=True,
+            text=True,
+        )
 
     r = resume()
     assert r.returncode == 2 and r.stderr == (
         f"error: output directory '{out}' holds an unfinished sweep and 2 file(s) r2rsim did "
         f"not write (notes.txt, samples/README): move them out of it, then run the sweep "
-        f"again to finish it\n")
+        f"again to finish it\n"
+    )
     assert (out / "notes.txt").read_text() == "mine"
     (out / "notes.txt").unlink()
     (out / "samples" / "README").unlink()
@@ -931,7 +1128,8 @@ def test_files_put_into_an_unfinished_sweep_are_not_adopted(many, tmp_path, caps
         assert main(["sweep", str(other), "-o", str(out), "-q", *extra]) == 2
         assert capsys.readouterr().err == (
             f"error: output directory '{out}' holds an unfinished sweep 'many', not 'other': "
-            f"choose another directory with -o\n")
+            f"choose another directory with -o\n"
+        )
     assert snapshot(out) == state
     r = resume()
     assert r.returncode == 0, r.stderr
@@ -977,29 +1175,37 @@ def test_interrupted_finalisation_is_finished_by_running_again(qs, tmp_path, mon
 
 def test_channels_of_runs_with_other_rates(tmp_path):
     # the record rate and a sensor's range swept: channels.parquet says what differs
-    sw = sweep_file(tmp_path, """\
+    sw = sweep_file(
+        tmp_path,
+        """\
         set: {duration: 1 s}
         axes:
           - {name: rate, path: record_rate, values: [100 Hz, 200 Hz]}
           - {name: range, path: line.sensors.lc_unwind.range, values: [[0, 1000], [0, 2000]]}
-        """)
+        """,
+    )
     s = run_sweep(sw, output=tmp_path / "out", workers=0)
     assert s.ok and s.done == 4
     assert runs_table(tmp_path / "out")["sample_period_s"] == [0.01, 0.01, 0.005, 0.005]
-    ch = {r["channel"]: r for r in pq.read_table(tmp_path / "out" / "channels.parquet")
-          .to_pylist()}
+    ch = {r["channel"]: r for r in pq.read_table(tmp_path / "out" / "channels.parquet").to_pylist()}
     assert ch["t_s"]["rate_hz"] is None and ch["meas.lc_unwind.tension_N"]["rate_hz"] is None
     assert ch["meas.dia_unwind.diameter_m"]["rate_hz"] == 10.0  # its own rate, in every run
     assert ch["flag.lc_unwind.clipped"]["description"].endswith(
-        "(differs between the runs of this sweep; see each run's configuration)")
+        "(differs between the runs of this sweep; see each run's configuration)"
+    )
     assert ch["t_s"]["description"] == "simulation time"
     assert validate_dataset(tmp_path / "out") == []
     # a sweep where nothing of it differs keeps every run's rates
-    one = run_sweep(sweep_file(tmp_path / "one", "set: {duration: 1 s}\nseeds: 2\n"),
-                    output=tmp_path / "one" / "out", workers=0)
+    one = run_sweep(
+        sweep_file(tmp_path / "one", "set: {duration: 1 s}\nseeds: 2\n"),
+        output=tmp_path / "one" / "out",
+        workers=0,
+    )
     assert one.ok
-    ch = {r["channel"]: r for r in pq.read_table(tmp_path / "one" / "out" / "channels.parquet")
-          .to_pylist()}
+    ch = {
+        r["channel"]: r
+        for r in pq.read_table(tmp_path / "one" / "out" / "channels.parquet").to_pylist()
+    }
     assert ch["t_s"]["rate_hz"] == 200.0 and ch["meas.dia_unwind.diameter_m"]["rate_hz"] == 10.0
 
 
@@ -1007,18 +1213,20 @@ def test_bad_worker_counts(tmp_path, capsys, qs):
     sw, _ = qs
     code, _, err = cli(capsys, sw, "-o", tmp_path / "out", "--workers", "-1")
     assert code == 2 and err == "error: --workers must be >= 0, got -1\n"
-    code, _, err = cli(capsys, sw, "-o", tmp_path / "out", "--workers", "0", "--scheduler",
-                       "local")
+    code, _, err = cli(capsys, sw, "-o", tmp_path / "out", "--workers", "0", "--scheduler", "local")
     assert code == 2 and err == "error: --workers must be >= 1, got 0\n"
     # one machine: a bounded number of processes (each loads the kernels, ~300 MB)
     for extra in ([], ["--scheduler", "local"]):
         code, _, err = cli(capsys, sw, "-o", tmp_path / "out", "--workers", "100000", *extra)
-        assert code == 2 and err == ("error: --workers 100000: at most 1024 worker processes "
-                                     "on one machine (docs/security.md)\n")
+        assert code == 2 and err == (
+            "error: --workers 100000: at most 1024 worker processes "
+            "on one machine (docs/security.md)\n"
+        )
     assert not (tmp_path / "out").exists()
 
 
 # 4. executors -------------------------------------------------------------------------------
+
 
 def test_process_pool_writes_the_serial_bytes(qs, tmp_path):
     sw, serial = qs
@@ -1040,6 +1248,7 @@ def test_dask_local_cluster_writes_the_serial_bytes(qs, tmp_path):
 
 
 # 5. readers ---------------------------------------------------------------------------------
+
 
 def test_readers_without_r2rsim(qs, capsys):
     import duckdb
@@ -1077,11 +1286,14 @@ def test_readers_without_r2rsim(qs, capsys):
 
 def finished_speed_sweep(tmp_path: Path, capsys) -> tuple[Path, Path]:
     """A finished serial sweep of two 1 s runs on axis ``v`` (1 and 3 m/s): (file, output)."""
-    sw = sweep_file(tmp_path, f"""\
+    sw = sweep_file(
+        tmp_path,
+        f"""\
         set: {{duration: 1 s}}
         axes:
           - {{name: v, path: {SPEED}, values: [1 m/s, 3 m/s]}}
-        """)
+        """,
+    )
     out = tmp_path / "out"
     assert cli(capsys, sw, "-o", out, "--workers", "0")[0] == 0
     return sw, out
@@ -1131,12 +1343,13 @@ def test_a_pool_worker_skips_the_collector_at_exit():
     """Each worker freezes the collector at exit (its shutdown otherwise took ~0.3 s of
     passes over numba's objects, which the sweep waited for); its runs are committed by then
     (the process sweeps above compare their datasets with serial ones)."""
-    probe = ("import atexit, gc, os\n"
-             "atexit.register(lambda: print('frozen at exit:', gc.get_freeze_count() > 0))\n"
-             "from r2rsim.sweep._execute import _worker_init\n"
-             "_worker_init(os.getppid())\n")
-    p = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
-                       timeout=120)
+    probe = (
+        "import atexit, gc, os\n"
+        "atexit.register(lambda: print('frozen at exit:', gc.get_freeze_count() > 0))\n"
+        "from r2rsim.sweep._execute import _worker_init\n"
+        "_worker_init(os.getppid())\n"
+    )
+    p = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr
     assert p.stdout.strip() == "frozen at exit: True"
 
@@ -1150,11 +1363,13 @@ def test_a_run_that_kills_its_worker_fails_alone(tmp_path):
 
     from r2rsim.sweep._execute import MAX_ATTEMPTS, run_processes
 
-    specs = [Spec(f"ok{i}") for i in range(3)] + [Spec("oom")] + [Spec(f"ok{i}")
-                                                                    for i in range(3, 6)]
+    specs = (
+        [Spec(f"ok{i}") for i in range(3)] + [Spec("oom")] + [Spec(f"ok{i}") for i in range(3, 6)]
+    )
     got: dict = {}
-    run_processes(specs, str(tmp_path), lambda spec, rec: got.setdefault(spec.run_id, rec),
-                  2, task=die_on_oom)
+    run_processes(
+        specs, str(tmp_path), lambda spec, rec: got.setdefault(spec.run_id, rec), 2, task=die_on_oom
+    )
     assert set(got) == {s.run_id for s in specs}
     assert all(got[f"ok{i}"]["status"] == "done" for i in range(6))
     assert got["oom"]["status"] == "failed" and not got["oom"]["has_data"]
@@ -1199,14 +1414,18 @@ def _fake_as_completed():
         def next_batch(self, block=True):
             out, self.ready = self.ready, []
             return out
+
     return AsCompleted
 
 
-@pytest.mark.parametrize("outcome, status", [
-    (None, "closed"),  # the client gave up reconnecting: the loop waited for ever
-    # the runs in flight were recorded as failed
-    (concurrent.futures.CancelledError("scheduler-connection-lost"), "running"),
-])
+@pytest.mark.parametrize(
+    "outcome, status",
+    [
+        (None, "closed"),  # the client gave up reconnecting: the loop waited for ever
+        # the runs in flight were recorded as failed
+        (concurrent.futures.CancelledError("scheduler-connection-lost"), "running"),
+    ],
+)
 def test_a_lost_dask_scheduler_stops_the_sweep(outcome, status):
     from _sweep_tasks import Spec
 
@@ -1215,10 +1434,15 @@ def test_a_lost_dask_scheduler_stops_the_sweep(outcome, status):
 
     got = {}
     client = _FakeClient({"a": {"run_id": "a", "status": "done"}, "b": outcome}, status)
-    with pytest.raises(R2RError, match="the Dask scheduler went away; the finished runs are "
-                                       "kept"):
-        _dask_loop(client, _fake_as_completed(), [Spec("a"), Spec("b")], "w",
-                   lambda spec, rec: got.setdefault(spec.run_id, rec), 2)
+    with pytest.raises(R2RError, match="the Dask scheduler went away; the finished runs are kept"):
+        _dask_loop(
+            client,
+            _fake_as_completed(),
+            [Spec("a"), Spec("b")],
+            "w",
+            lambda spec, rec: got.setdefault(spec.run_id, rec),
+            2,
+        )
     assert set(got) == {"a"}  # b is not recorded as failed: it runs again next time
 
 
@@ -1228,10 +1452,17 @@ def test_a_run_lost_with_its_dask_worker_is_recorded_failed():
     from r2rsim.sweep._execute import _dask_loop
 
     got = {}
-    client = _FakeClient({"a": {"run_id": "a", "status": "done"},
-                          "b": RuntimeError("KilledWorker: b")})
-    _dask_loop(client, _fake_as_completed(), [Spec("a"), Spec("b")], "w",
-               lambda spec, rec: got.setdefault(spec.run_id, rec), 2)
+    client = _FakeClient(
+        {"a": {"run_id": "a", "status": "done"}, "b": RuntimeError("KilledWorker: b")}
+    )
+    _dask_loop(
+        client,
+        _fake_as_completed(),
+        [Spec("a"), Spec("b")],
+        "w",
+        lambda spec, rec: got.setdefault(spec.run_id, rec),
+        2,
+    )
     assert got["a"]["status"] == "done" and got["b"]["status"] == "failed"
     assert got["b"]["reason"] == "RuntimeError: KilledWorker: b"
 
@@ -1251,19 +1482,31 @@ def test_a_sweep_finished_by_another_while_this_one_starts_is_left_finished(qs, 
     store.inspect()
     assert store.mode == "resume"
     (out / MARKER).unlink()  # A finished in between
-    with pytest.raises(InputError, match="another r2rsim sweep finished writing .* while "
-                                         "this one was starting; run the command again"):
+    with pytest.raises(
+        InputError,
+        match="another r2rsim sweep finished writing .* while "
+        "this one was starting; run the command again",
+    ):
         store.begin()
     assert not (out / MARKER).exists() and not (out / ".work").exists()
 
 
-@pytest.mark.parametrize("raised, code, words", [
-    (OSError(28, "No space left on device", "out/.work/x.parquet"), 1,
-     "error: cannot write the sweep's files: No space left on device (out/.work/x.parquet). "
-     "The finished runs are kept"),
-    (KeyboardInterrupt(), 130, "interrupted before this sweep ran a run; runs it finished "
-                               "before, if any, are kept"),
-])
+@pytest.mark.parametrize(
+    "raised, code, words",
+    [
+        (
+            OSError(28, "No space left on device", "out/.work/x.parquet"),
+            1,
+            "error: cannot write the sweep's files: No space left on device (out/.work/x.parquet). "
+            "The finished runs are kept",
+        ),
+        (
+            KeyboardInterrupt(),
+            130,
+            "interrupted before this sweep ran a run; runs it finished before, if any, are kept",
+        ),
+    ],
+)
 def test_sweep_exits_that_say_what_was_kept(qs, monkeypatch, capsys, raised, code, words):
     import r2rsim.sweep
 

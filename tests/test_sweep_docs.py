@@ -59,8 +59,9 @@ def _doc() -> str:
 
 def _blocks(text: str, lang: str) -> list[tuple[str, int]]:
     """The ```lang blocks of ``text``: (body, position just after the block)."""
-    return [(m.group(1), m.end())
-            for m in re.finditer(rf"^```{lang}\n(.*?)^```\n", text, re.M | re.S)]
+    return [
+        (m.group(1), m.end()) for m in re.finditer(rf"^```{lang}\n(.*?)^```\n", text, re.M | re.S)
+    ]
 
 
 def _table_rows(lines: list[str]) -> list[list[str]]:
@@ -89,7 +90,7 @@ def _table_after(text: str, pos: int) -> list[list[str]] | None:
 def _table_under(text: str, marker: str) -> list[list[str]]:
     """The first table after the line that starts with ``marker`` (a heading, a sentence),
     before the next heading."""
-    lines = text[text.index(f"\n{marker}") + 1:].split("\n")
+    lines = text[text.index(f"\n{marker}") + 1 :].split("\n")
     table = []
     for line in lines[1:]:
         if line.startswith("|"):
@@ -156,8 +157,10 @@ def test_sensor_error_is_its_noise_then_the_offset(queries):
     df = _query(queries, "offset_N", "faulty", "n", "mean_error_N", "rms_error_N")
     assert sorted(set(df["offset_N"])) == [-10.0, 10.0]
     assert len(df) == 4
-    per_run = {False: round((ONSET_S - WARMUP_S) * RATE_HZ),         # 2 s .. 5.995 s
-               True: round((DURATION_S - ONSET_S) * RATE_HZ) + 1}   # 6 s .. 10 s
+    per_run = {
+        False: round((ONSET_S - WARMUP_S) * RATE_HZ),  # 2 s .. 5.995 s
+        True: round((DURATION_S - ONSET_S) * RATE_HZ) + 1,
+    }  # 6 s .. 10 s
     for _, r in df.iterrows():
         faulty, offset = bool(r["faulty"]), r["offset_N"]
         assert r["n"] == RUNS_PER_OFFSET * per_run[faulty]
@@ -247,11 +250,14 @@ def _norm(s: str) -> str:
     return " ".join(s.replace("`", "").replace("'", "").split())
 
 
-@pytest.mark.parametrize("model,heading", [
-    (Sweep, "### 1.1 Keys of the sweep file"),
-    (Axis, "### 1.2 Keys of an axis"),
-    (Range, "### 1.3 Keys of a range"),
-])
+@pytest.mark.parametrize(
+    "model,heading",
+    [
+        (Sweep, "### 1.1 Keys of the sweep file"),
+        (Axis, "### 1.2 Keys of an axis"),
+        (Range, "### 1.3 Keys of a range"),
+    ],
+)
 def test_key_table_lists_every_key_of_the_model(model, heading):
     table = _table_under(_doc(), heading)
     assert table[0] == ["key", "type", "default", "meaning"]
@@ -263,8 +269,11 @@ def test_key_table_lists_every_key_of_the_model(model, heading):
             assert default == "required", key
         else:
             value = field.get_default(call_default_factory=True)
-            shown = "none" if value is None else \
-                f"`{value if isinstance(value, str) else json.dumps(value)}`"
+            shown = (
+                "none"
+                if value is None
+                else f"`{value if isinstance(value, str) else json.dumps(value)}`"
+            )
             assert default == shown, key
         if field.description:
             assert _norm(field.description) in _norm(meaning), key

@@ -32,9 +32,11 @@ seeds: [1, 2, 3, 4, 5, 6]
 def dataset(tmp_path_factory):
     d = tmp_path_factory.mktemp("select")
     # the base scenario has no fault 'f': the healthy case removes nothing, the others add it
-    text = SWEEP.replace("set: {duration: 24 s}",
-                         "set: {duration: 24 s, faults: [{id: f, type: sensor.offset, "
-                         "target: sensor_A, onset: 20 s, magnitude: 1 N}]}")
+    text = SWEEP.replace(
+        "set: {duration: 24 s}",
+        "set: {duration: 24 s, faults: [{id: f, type: sensor.offset, "
+        "target: sensor_A, onset: 20 s, magnitude: 1 N}]}",
+    )
     (d / "sweep.yaml").write_text(text, encoding="utf-8")
     summary = run_sweep(d / "sweep.yaml", output=d / "ds", workers=0)
     assert summary.ok and summary.done == 18
@@ -55,17 +57,32 @@ def test_where_selects_by_axis_value_in_si_and_by_null(dataset):
 def test_where_unknown_column_names_the_axes(dataset):
     from r2rsim.errors import InputError
 
-    with pytest.raises(InputError, match=r"no column 'size'.*axes: fault_entry, magnitude, "
-                                         r"sensor, type"):
+    with pytest.raises(
+        InputError,
+        match=r"no column 'size'.*axes: fault_entry, magnitude, "
+        r"sensor, type",
+    ):
         read_runs(dataset, where={"size": 1})
 
 
 def test_diagnose_where_on_a_sweep(dataset, tmp_path, capsys):
     """The pool is the healthy runs and the 19.5 N offset: split by seed, every faulty run
     tests, and the 6.5 N runs are not read at all."""
-    code = main(["diagnose", "--method", "residual", "--data", str(dataset),
-                 "--where", "magnitude=null,19.5 N", "--n-boot", "0",
-                 "-o", str(tmp_path / "res")])
+    code = main(
+        [
+            "diagnose",
+            "--method",
+            "residual",
+            "--data",
+            str(dataset),
+            "--where",
+            "magnitude=null,19.5 N",
+            "--n-boot",
+            "0",
+            "-o",
+            str(tmp_path / "res"),
+        ]
+    )
     out = capsys.readouterr()
     assert code == 0, out.err
     import pandas as pd
@@ -79,31 +96,71 @@ def test_diagnose_where_on_a_sweep(dataset, tmp_path, capsys):
     assert len(dr) == 1 and dr.iloc[0] > 0.5  # a 15 % offset on the monitored load cell
 
 
-@pytest.mark.parametrize("arg,msg", [
-    ("magnitude", "--where expects KEY=VALUE"),
-    ("=3", "--where expects KEY=VALUE"),
-    ("speed=1", "no column 'speed'"),
-    ("magnitude=123", "no run of"),
-])
+@pytest.mark.parametrize(
+    "arg,msg",
+    [
+        ("magnitude", "--where expects KEY=VALUE"),
+        ("=3", "--where expects KEY=VALUE"),
+        ("speed=1", "no column 'speed'"),
+        ("magnitude=123", "no run of"),
+    ],
+)
 def test_diagnose_bad_where(dataset, tmp_path, capsys, arg, msg):
-    code = main(["diagnose", "--method", "residual", "--data", str(dataset), "--where", arg,
-                 "-o", str(tmp_path / "res")])
+    code = main(
+        [
+            "diagnose",
+            "--method",
+            "residual",
+            "--data",
+            str(dataset),
+            "--where",
+            arg,
+            "-o",
+            str(tmp_path / "res"),
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 2 and msg in err and len(err.strip().splitlines()) == 1
 
 
-def test_a_seed_split_of_few_runs_serves_train_first_and_says_why_it_cannot(dataset, tmp_path,
-                                                                            capsys):
+def test_a_seed_split_of_few_runs_serves_train_first_and_says_why_it_cannot(
+    dataset, tmp_path, capsys
+):
     # two fault-free runs (seeds 4 and 5): one trains, one calibrates (docs/diagnostics.md §4)
-    code = main(["diagnose", "--method", "residual", "--data", str(dataset), "--where",
-                 "seed=4,5", "--where", "magnitude=null,19.5 N", "--n-boot", "0",
-                 "-o", str(tmp_path / "two")])
+    code = main(
+        [
+            "diagnose",
+            "--method",
+            "residual",
+            "--data",
+            str(dataset),
+            "--where",
+            "seed=4,5",
+            "--where",
+            "magnitude=null,19.5 N",
+            "--n-boot",
+            "0",
+            "-o",
+            str(tmp_path / "two"),
+        ]
+    )
     out = capsys.readouterr()
     assert code == 0, out.err
     assert "split 'seed': 1 train, 1 val, 2 test (2 faulty)" in out.out
     # only faulty runs: nothing to learn from
-    code = main(["diagnose", "--method", "residual", "--data", str(dataset), "--where",
-                 "magnitude=19.5 N", "-o", str(tmp_path / "res")])
+    code = main(
+        [
+            "diagnose",
+            "--method",
+            "residual",
+            "--data",
+            str(dataset),
+            "--where",
+            "magnitude=19.5 N",
+            "-o",
+            str(tmp_path / "res"),
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 2 and "all 6 runs have faults" in err, err
     assert "--train/--val/--test" in err and not (tmp_path / "res").exists()
@@ -131,8 +188,14 @@ def test_json_schema_of_the_sweep_file(capsys):
     assert schema["additionalProperties"] is False
     keys = set(schema["properties"])
     assert {"name", "scenario", "set", "axes", "combine", "n", "seed", "seeds"} <= keys
-    assert set(schema["$defs"]["Axis"]["properties"]) == {"path", "name", "values", "range",
-                                                          "uniform", "loguniform"}
+    assert set(schema["$defs"]["Axis"]["properties"]) == {
+        "path",
+        "name",
+        "values",
+        "range",
+        "uniform",
+        "loguniform",
+    }
     for path in sorted((REPO / "sweeps").glob("*.yaml")):
         data = yaml.safe_load(path.read_text(encoding="utf-8"))
         assert set(data) <= keys, path
@@ -151,14 +214,20 @@ def test_workers_that_cannot_start_fail_fast(tmp_path):
 
     (tmp_path / "s.yaml").write_text(
         f"name: nm\nscenario: {REPO / 'scenarios/quickstart.yaml'}\n"
-        "set: {duration: 1 s}\nseeds: 40\n", encoding="utf-8")
+        "set: {duration: 1 s}\nseeds: 40\n",
+        encoding="utf-8",
+    )
     script = tmp_path / "script.py"
-    script.write_text("from r2rsim.sweep import run_sweep\n"
-                      f"run_sweep({str(tmp_path / 's.yaml')!r}, "
-                      f"output={str(tmp_path / 'out')!r}, workers=2)\n", encoding="utf-8")
+    script.write_text(
+        "from r2rsim.sweep import run_sweep\n"
+        f"run_sweep({str(tmp_path / 's.yaml')!r}, "
+        f"output={str(tmp_path / 'out')!r}, workers=2)\n",
+        encoding="utf-8",
+    )
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
-                          timeout=300, cwd=tmp_path)
+    proc = subprocess.run(
+        [sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=tmp_path
+    )
     assert proc.returncode != 0
     assert "the worker processes die as they start" in proc.stderr
     assert 'if __name__ == "__main__":' in proc.stderr

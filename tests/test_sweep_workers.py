@@ -15,19 +15,22 @@ from conftest import REPO
 QUICK = REPO / "scenarios" / "quickstart.yaml"
 
 
-@pytest.mark.parametrize("planned_s,n_runs,cores,want", [
-    (0.0, 0, 2, 1),                          # nothing to do: still a valid count
-    (24.0, 12, 2, 1),                        # the quick-start sweep at 2 s per run
-    (120.0, 12, 2, 1),                       # ... at 10 s (the shipped sweep)
-    (SIM_S_PER_WORKER, 12, 2, 1),            # exactly one worker's share
-    (SIM_S_PER_WORKER + 1, 12, 2, 2),        # just over: a second worker
-    (720.0, 12, 2, 1),                       # ... at 60 s: 2 workers were slower
-    (7200.0, 40, 2, 2),                      # 40 runs of 180 s: both cores
-    (7200.0, 40, 1, 1),                      # never more than the cores
-    (1e6, 3, 64, 3),                         # never more than the runs
-    (1e6, 200, 64, 64),
-    (5 * SIM_S_PER_WORKER, 200, 64, 5),      # in proportion to the work
-])
+@pytest.mark.parametrize(
+    "planned_s,n_runs,cores,want",
+    [
+        (0.0, 0, 2, 1),  # nothing to do: still a valid count
+        (24.0, 12, 2, 1),  # the quick-start sweep at 2 s per run
+        (120.0, 12, 2, 1),  # ... at 10 s (the shipped sweep)
+        (SIM_S_PER_WORKER, 12, 2, 1),  # exactly one worker's share
+        (SIM_S_PER_WORKER + 1, 12, 2, 2),  # just over: a second worker
+        (720.0, 12, 2, 1),  # ... at 60 s: 2 workers were slower
+        (7200.0, 40, 2, 2),  # 40 runs of 180 s: both cores
+        (7200.0, 40, 1, 1),  # never more than the cores
+        (1e6, 3, 64, 3),  # never more than the runs
+        (1e6, 200, 64, 64),
+        (5 * SIM_S_PER_WORKER, 200, 64, 5),  # in proportion to the work
+    ],
+)
 def test_choose_workers(planned_s, n_runs, cores, want):
     assert choose_workers(planned_s, n_runs, cores) == want
 
@@ -47,11 +50,16 @@ def _sweep(tmp_path, body):
 
 def test_planned_seconds_reads_each_runs_duration(tmp_path):
     # a swept duration (with units, and a bare number of seconds) times the seeds
-    plan = plan_sweep(_sweep(tmp_path, """\
+    plan = plan_sweep(
+        _sweep(
+            tmp_path,
+            """\
         axes:
           - {name: d, path: duration, values: [2 s, 500 ms, 3]}
         seeds: 2
-        """))
+        """,
+        )
+    )
     assert len(plan.runs) == 6
     assert planned_seconds(plan.runs) == pytest.approx(2 * (2 + 0.5 + 3))
     # the shipped quick-start sweep: 12 runs of 10 s
@@ -61,11 +69,14 @@ def test_planned_seconds_reads_each_runs_duration(tmp_path):
 
 
 def test_default_and_override_on_a_sweep(tmp_path):
-    sw = _sweep(tmp_path, """\
+    sw = _sweep(
+        tmp_path,
+        """\
         set: {duration: 0.5 s}
         axes:
           - {name: speed, path: 'programme[0].line_speed', values: [1 m/s, 2 m/s]}
-        """)
+        """,
+    )
     s = run_sweep(sw, output=tmp_path / "auto")
     assert s.ok and s.executor == "1 local worker process (the default for 1 s of runs)"
     s = run_sweep(sw, output=tmp_path / "two", workers=2)

@@ -20,25 +20,35 @@ SET = REPO / "scenarios" / "thesis_realistic"
 
 def _calibration():
     spec = importlib.util.spec_from_file_location(
-        "calibrate_thesis_realistic", REPO / "benchmarks" / "calibrate_thesis_realistic.py")
+        "calibrate_thesis_realistic", REPO / "benchmarks" / "calibrate_thesis_realistic.py"
+    )
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
 
 
-@pytest.mark.parametrize("sweep, n_runs", [("healthy.yaml", 80), ("faults.yaml", 220),
-                                           ("switching.yaml", 10), ("testbed_cycles.yaml", 6),
-                                           ("faults_p2.yaml", 110),
-                                           ("testbed_dancer_failure_sweep.yaml", 6)])
+@pytest.mark.parametrize(
+    "sweep, n_runs",
+    [
+        ("healthy.yaml", 80),
+        ("faults.yaml", 220),
+        ("switching.yaml", 10),
+        ("testbed_cycles.yaml", 6),
+        ("faults_p2.yaml", 110),
+        ("testbed_dancer_failure_sweep.yaml", 6),
+    ],
+)
 def test_the_sweeps_plan(sweep, n_runs):
     plan = plan_sweep(SET / sweep)
     assert len(plan.runs) == n_runs
 
 
 #: every sweep file shipped (a sweep names its base scenario with a top-level scenario: key)
-SWEEPS = sorted(p for p in [*SET.glob("*.yaml"), *(REPO / "sweeps").glob("*.yaml")]
-                if any(line.startswith("scenario:")
-                       for line in p.read_text(encoding="utf-8").splitlines()))
+SWEEPS = sorted(
+    p
+    for p in [*SET.glob("*.yaml"), *(REPO / "sweeps").glob("*.yaml")]
+    if any(line.startswith("scenario:") for line in p.read_text(encoding="utf-8").splitlines())
+)
 
 
 @pytest.mark.parametrize("sweep", SWEEPS, ids=lambda p: f"{p.parent.name}/{p.name}")
@@ -60,8 +70,13 @@ def test_local_residual_noise_is_calibrated_reduced():
     wider than the target's (1-1.5σ), but a sensor or disturbance change that halves or
     doubles σ fails it."""
     cal = _calibration()
-    m = cal.calibrate(fit_seeds=[2001, 2002, 2003], test_seeds=[2004, 2005, 2006],
-                      duration="120 s", workers=0, modes=["OC1"])["OC1"]
+    m = cal.calibrate(
+        fit_seeds=[2001, 2002, 2003],
+        test_seeds=[2004, 2005, 2006],
+        duration="120 s",
+        workers=0,
+        modes=["OC1"],
+    )["OC1"]
     assert 0.9 < m["P05_sigmas"] < 2.5, m
     assert 3.6 < m["P20_sigmas"] < 10.0, m
 
@@ -71,8 +86,9 @@ def test_local_residual_noise_is_calibrated_full():
     """The calibration target on fresh seeds (not those of the calibration): a 5 % fault
     1-1.5σ (to 1.8σ in OC2, the noisier regime only by little) and a 20 % fault 4-7σ."""
     cal = _calibration()
-    for mode, m in cal.calibrate(fit_seeds=range(3001, 3006), test_seeds=range(3006, 3011),
-                                 workers=2).items():
+    for mode, m in cal.calibrate(
+        fit_seeds=range(3001, 3006), test_seeds=range(3006, 3011), workers=2
+    ).items():
         assert 1.0 < m["P05_sigmas"] < 1.8, (mode, m)
         assert 4.0 < m["P20_sigmas"] < 7.2, (mode, m)
 
@@ -85,9 +101,10 @@ def test_testbed_changes_rolls_that_differ(tmp_path):
     v = pq.read_table(out / "variability.parquet").to_pandas()
     strain = v[v.parameter == "wound_in_strain"].set_index("roll").value
     assert len(strain) == len(swaps) + 1 and strain.nunique() == len(strain)
-    s = pq.read_table(next((out / "samples").glob("*/part-0.parquet")),
-                      columns=["meas.speed_unwind.speed_rad_s",
-                               "meas.speed_drive4.speed_rad_s"]).to_pandas()
+    s = pq.read_table(
+        next((out / "samples").glob("*/part-0.parquet")),
+        columns=["meas.speed_unwind.speed_rad_s", "meas.speed_drive4.speed_rad_s"],
+    ).to_pandas()
     # the inputs of the Ch. 2 model are measured: the driven roller at 0.5 m/s / 0.1 m
     assert abs(np.nanmedian(s["meas.speed_drive4.speed_rad_s"]) - 5.0) < 0.05
     assert np.nanmax(s["meas.speed_unwind.speed_rad_s"]) > 5.0
@@ -98,11 +115,19 @@ def test_testbed_startup_gives_censored_load_cell_readings(tmp_path):
     ranged at 0 N, reads exactly 0 N with its clipped flag while the slack is taken up, and
     never once production runs."""
     from r2rsim.dataset.validate import validate_dataset
+
     out = run_scenario(SET / "testbed_startup.yaml", tmp_path / "su").output
     assert validate_dataset(out) == []
-    s = pq.read_table(next((out / "samples").glob("*/part-0.parquet")),
-                      columns=["t_s", "meas.lc_stage2.tension_N", "flag.lc_stage2.clipped",
-                               "state.span3.tension_N", "label.mode"]).to_pandas()
+    s = pq.read_table(
+        next((out / "samples").glob("*/part-0.parquet")),
+        columns=[
+            "t_s",
+            "meas.lc_stage2.tension_N",
+            "flag.lc_stage2.clipped",
+            "state.span3.tension_N",
+            "label.mode",
+        ],
+    ).to_pandas()
     clipped = s["flag.lc_stage2.clipped"].to_numpy()
     assert clipped.sum() >= 20  # measured 46-50 over seeds 1-4
     assert np.all(s["meas.lc_stage2.tension_N"][clipped] == 0.0)

@@ -30,15 +30,15 @@ from conftest import REPO
 
 THESIS = REPO / "scenarios" / "thesis"
 FILES = sorted(THESIS.glob("*.yaml"))
-DURATION = 30.0          # s, the short run
-ONSET = 20.0             # s, every fault of the set
-RAMP = 10.0              # s, the degradation ramp
-NOISE_A = 0.3            # N, sensor_A noise std (lines/registration.yaml)
-T_SET = 130.0            # N, registration loop set-point
-EA = 4.5e9 * 50e-6 * 0.5            # PET 4.5 GPa x 50 um x 0.5 m = 112.5 kN
-T_BREAK = 210e6 * 50e-6 * 0.5       # 5.25 kN
-REWIND_TORQUE_MAX = 100.0           # N m
-TRIM_LIMIT = 0.05                   # m/s, registration_loop output_limit
+DURATION = 30.0  # s, the short run
+ONSET = 20.0  # s, every fault of the set
+RAMP = 10.0  # s, the degradation ramp
+NOISE_A = 0.3  # N, sensor_A noise std (lines/registration.yaml)
+T_SET = 130.0  # N, registration loop set-point
+EA = 4.5e9 * 50e-6 * 0.5  # PET 4.5 GPa x 50 um x 0.5 m = 112.5 kN
+T_BREAK = 210e6 * 50e-6 * 0.5  # 5.25 kN
+REWIND_TORQUE_MAX = 100.0  # N m
+TRIM_LIMIT = 0.05  # m/s, registration_loop output_limit
 
 # file stem -> (fault type, target, magnitude in SI, operating mode): the thesis levels mapped
 # to numbers as the files' headers say
@@ -47,12 +47,20 @@ EXPECTED: dict[str, tuple[str, str, float, str]] = {}
 for _tag, _r in LEVELS.items():
     EXPECTED[f"sensor_a_offset_{_tag}"] = ("sensor.offset", "sensor_A", _r * T_SET, "OC1")
     # sensor B: a gain equal to an _r error of the tension the loop sees (the files' headers)
-    EXPECTED[f"sensor_b_gain_{_tag}"] = ("sensor.gain", "sensor_B",
-                                         float(f"{_r * T_SET / (EA + T_SET):.4e}"), "OC1")
+    EXPECTED[f"sensor_b_gain_{_tag}"] = (
+        "sensor.gain",
+        "sensor_B",
+        float(f"{_r * T_SET / (EA + T_SET):.4e}"),
+        "OC1",
+    )
 for _oc in ("OC1", "OC2"):
     for _p in (5, 10, 15, 20):
         EXPECTED[f"sensor_a_degradation_P{_p:02d}_{_oc}"] = (
-            "sensor.gain", "sensor_A", _p / 100, _oc)
+            "sensor.gain",
+            "sensor_A",
+            _p / 100,
+            _oc,
+        )
 NOMINAL = {"oc1_nominal": ("OC1", 0.5), "oc2_nominal": ("OC2", 1.0)}
 NOMINAL_OF = {"OC1": "oc1_nominal", "OC2": "oc2_nominal"}
 
@@ -75,14 +83,14 @@ def run(tmp_path_factory):
             # the loop to settle (about 25 s after the onset): those run in full
             full = stem == "dancer_failure" or stem.startswith("sensor_b_gain")
             duration = None if full else DURATION
-            summary = r2rsim.run_scenario(THESIS / f"{stem}.yaml", output=out,
-                                          duration=duration)
-            cache[stem] = {"summary": summary,
-                           **{k: pd.read_parquet(out / f"{k}.parquet")
-                              for k in ("faults", "runs", "events")},
-                           "samples": pd.read_parquet(out / "samples").sort_values("k")
-                           .reset_index(drop=True)}
+            summary = r2rsim.run_scenario(THESIS / f"{stem}.yaml", output=out, duration=duration)
+            cache[stem] = {
+                "summary": summary,
+                **{k: pd.read_parquet(out / f"{k}.parquet") for k in ("faults", "runs", "events")},
+                "samples": pd.read_parquet(out / "samples").sort_values("k").reset_index(drop=True),
+            }
         return cache[stem]
+
     return get
 
 
@@ -144,7 +152,9 @@ def check_dancer_failure(r):
     assert 63.0 < runs["termination_t_s"] < 90.0
     f, s = r["faults"], r["samples"]
     assert len(f) == 1 and (f.fault_type.iloc[0], f.target_id.iloc[0]) == (
-        "dancer.arm_stuck", "dancer")
+        "dancer.arm_stuck",
+        "dancer",
+    )
     assert (s["label.is_faulty"].to_numpy() == (s.t_s.to_numpy() >= 60.0)).all()
     assert (s["label.primary_type"][s.t_s >= 60.0] == "dancer.arm_stuck").all()
     seize = ev[ev.kind == "dancer_seized"]
@@ -176,7 +186,7 @@ def check_fault_row(r, ftype, target, magnitude, mode):
     assert (s["label.mode"].astype(str) == mode).all()
     assert r["runs"].iloc[0]["operating_mode"] == mode
     # (at the onset sample itself a ramp has p = 0 and label.ch is still False)
-    assert s["label.ch." + row.expected_channels[0][len("meas."):]][s.t_s > ONSET].all()
+    assert s["label.ch." + row.expected_channels[0][len("meas.") :]][s.t_s > ONSET].all()
 
 
 def _mean_within(x, expected, sigma):
@@ -192,8 +202,9 @@ def check_sensor_a_offset(r, nominal, b):
     _mean_within(d[~after], 0.0, NOISE_A)
     assert r["faults"].iloc[0].profile == "step"
     # monitoring only: the process is the fault-free run's, sample for sample
-    np.testing.assert_array_equal(s["state.registration.tension_N"].to_numpy(),
-                                  n["state.registration.tension_N"].to_numpy())
+    np.testing.assert_array_equal(
+        s["state.registration.tension_N"].to_numpy(), n["state.registration.tension_N"].to_numpy()
+    )
     state = [c for c in n.columns if c.startswith("state.")]
     pd.testing.assert_frame_equal(s[state], n[state])
 
@@ -204,8 +215,7 @@ def check_sensor_a_degradation(r, nominal, g):
     assert row.profile == "ramp" and row.ramp_s == pytest.approx(RAMP)
     t = s.t_s.to_numpy()
     p = np.clip((t - ONSET) / RAMP, 0.0, 1.0)
-    np.testing.assert_allclose(s["label.severity"].to_numpy()[t >= ONSET], p[t >= ONSET],
-                               atol=1e-9)
+    np.testing.assert_allclose(s["label.severity"].to_numpy()[t >= ONSET], p[t >= ONSET], atol=1e-9)
     meas, true = s["meas.sensor_A.tension_N"].to_numpy(), s["true.sensor_A.tension_N"].to_numpy()
     after = t >= ONSET
     _mean_within((meas - (1 + g * p) * true)[after], 0.0, NOISE_A)
@@ -226,8 +236,11 @@ def check_sensor_b_gain(r, nominal, g):
     assert np.median(ratio) == pytest.approx(1 + g, abs=1e-5)
     # before the onset nothing differs from the fault-free run (to the solver's tolerance)
     before = np.nonzero(t < ONSET)[0]  # the nominal run is the short one
-    np.testing.assert_allclose(s["state.registration.tension_N"].to_numpy()[before],
-                               n["state.registration.tension_N"].to_numpy()[before], rtol=1e-5)
+    np.testing.assert_allclose(
+        s["state.registration.tension_N"].to_numpy()[before],
+        n["state.registration.tension_N"].to_numpy()[before],
+        rtol=1e-5,
+    )
     # V21 in the pitch model: the loop holds the tension it sees, so the true tension settles
     # at EA·((1 + 130/EA)/(1 + g) - 1) (+-5 % / +-15 % of 130 N), to 0.1 %
     T = s["state.registration.tension_N"].to_numpy()

@@ -12,12 +12,19 @@ from r2rsim.units import parse_any
 
 from conftest import REPO
 
-CASES = ["oc1_nominal", "oc2_nominal",
-         "sensor_a_offset_N15", "sensor_a_offset_N05", "sensor_a_offset_P05",
-         "sensor_a_offset_P15",
-         "sensor_b_gain_N15", "sensor_b_gain_N05", "sensor_b_gain_P05", "sensor_b_gain_P15",
-         *(f"sensor_a_degradation_P{m}_{oc}" for oc in ("OC1", "OC2")
-           for m in ("05", "10", "15", "20"))]
+CASES = [
+    "oc1_nominal",
+    "oc2_nominal",
+    "sensor_a_offset_N15",
+    "sensor_a_offset_N05",
+    "sensor_a_offset_P05",
+    "sensor_a_offset_P15",
+    "sensor_b_gain_N15",
+    "sensor_b_gain_N05",
+    "sensor_b_gain_P05",
+    "sensor_b_gain_P15",
+    *(f"sensor_a_degradation_P{m}_{oc}" for oc in ("OC1", "OC2") for m in ("05", "10", "15", "20")),
+]
 
 pytestmark = pytest.mark.filterwarnings("ignore::r2rsim.errors.PlausibilityWarning")
 
@@ -54,15 +61,16 @@ def test_case_equals_its_scenario_file(plan, k, case):
     assert swept_line.model_dump() == single_line.model_dump()
     healthy = case.endswith("nominal")
     assert (spec.columns["axis.type"] is None) == healthy
-    assert spec.columns["axis.mode"] == ("OC2" if "OC2" in case or case == "oc2_nominal"
-                                         else "OC1")
+    assert spec.columns["axis.mode"] == ("OC2" if "OC2" in case or case == "oc2_nominal" else "OC1")
 
 
 def _small_thesis_sweep(d, seeds="[5]", duration="22 s"):
     """The thesis sweep with a shorter duration and other seeds, written into ``d``."""
     text = (REPO / "sweeps" / "thesis_sensor_faults.yaml").read_text(encoding="utf-8")
-    text = text.replace("scenario: ../scenarios/thesis/oc1_nominal.yaml",
-                        f"scenario: {REPO / 'scenarios/thesis/oc1_nominal.yaml'}")
+    text = text.replace(
+        "scenario: ../scenarios/thesis/oc1_nominal.yaml",
+        f"scenario: {REPO / 'scenarios/thesis/oc1_nominal.yaml'}",
+    )
     text = text.replace("set:\n", f"set:\n  duration: {duration}\n")
     text = text.replace("seeds: 5\nseed: 1\n", f"seeds: {seeds}\n")
     (d / "thesis.yaml").write_text(text, encoding="utf-8")
@@ -86,8 +94,12 @@ def test_sweep_run_has_the_data_of_its_scenario_file(tmp_path):
     assert len(row) == 1 and row["seed"].iloc[0] == 5
     rid = row["run_id"].iloc[0]
     swept = pd.read_parquet(tmp_path / "sweep" / "samples" / f"run_id={rid}")
-    single = run_scenario(REPO / "scenarios/thesis/sensor_a_offset_P15.yaml",
-                          output=tmp_path / "single", seed=5, duration=22.0)
+    single = run_scenario(
+        REPO / "scenarios/thesis/sensor_a_offset_P15.yaml",
+        output=tmp_path / "single",
+        seed=5,
+        duration=22.0,
+    )
     ref = pd.read_parquet(single.output / "samples").drop(columns="run_id")
     cols = [c for c in ref.columns if c.split(".")[0] in ("meas", "true", "state", "act")]
     assert len(cols) > 10 and list(swept.columns) == list(ref.columns)
@@ -112,15 +124,20 @@ def test_bench_study_names_a_sweep(tmp_path, capsys):
         "    test:\n"
         "      - {sweep: thesis.yaml, where: {seed: 4, mode: OC1}}\n"
         "methods: [{method: residual}]\n"
-        "evaluation: {n_boot: 20, persistence: 2}\n", encoding="utf-8")
-    assert main(["bench", str(spec), "--workdir", str(tmp_path / "work"),
-                 "-o", str(tmp_path / "res")]) == 0
+        "evaluation: {n_boot: 20, persistence: 2}\n",
+        encoding="utf-8",
+    )
+    assert (
+        main(["bench", str(spec), "--workdir", str(tmp_path / "work"), "-o", str(tmp_path / "res")])
+        == 0
+    )
     out = capsys.readouterr().out
     # 2 healthy OC1 train runs, 1 val, and the 14 OC1 cases at seed 4 (healthy + 12 faults
     # at OC1: 4 offsets, 4 gains on B, 4 ramps on A; plus the healthy one)
     assert "study reg: 2 train, 1 val, 13 test runs" in out
     res = pd.read_csv(tmp_path / "res" / "results.csv")
-    offsets = res[(res.metric == "dr") & res.fault.str.startswith("sensor.offset")
-                  & res.magnitude.notna()]
+    offsets = res[
+        (res.metric == "dr") & res.fault.str.startswith("sensor.offset") & res.magnitude.notna()
+    ]
     assert sorted(offsets.magnitude) == [-19.5, -6.5, 6.5, 19.5]
     assert offsets["value"].notna().all() and (offsets["value"] > 0.5).all()

@@ -30,17 +30,23 @@ def site(tmp_path_factory):
     package and a minimal dist-info with the entry points of its shipped pyproject.toml (as
     `pip install` would write, without pip, the network or touching this environment)."""
     d = tmp_path_factory.mktemp("site")
-    shutil.copytree(EXAMPLE / "r2rsim_example_plugin", d / "r2rsim_example_plugin",
-                    ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(
+        EXAMPLE / "r2rsim_example_plugin",
+        d / "r2rsim_example_plugin",
+        ignore=shutil.ignore_patterns("__pycache__"),
+    )
     project = tomllib.loads((EXAMPLE / "pyproject.toml").read_text(encoding="utf-8"))["project"]
     eps = project["entry-points"][GROUP]
     assert NAME in eps
     info = d / f"{project['name'].replace('-', '_')}-{project['version']}.dist-info"
     info.mkdir()
-    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {project['name']}\n"
-                                   f"Version: {project['version']}\n", encoding="utf-8")
+    (info / "METADATA").write_text(
+        f"Metadata-Version: 2.1\nName: {project['name']}\nVersion: {project['version']}\n",
+        encoding="utf-8",
+    )
     (info / "entry_points.txt").write_text(
-        f"[{GROUP}]\n" + "".join(f"{k} = {v}\n" for k, v in eps.items()), encoding="utf-8")
+        f"[{GROUP}]\n" + "".join(f"{k} = {v}\n" for k, v in eps.items()), encoding="utf-8"
+    )
     return d
 
 
@@ -49,26 +55,57 @@ def cli(*args, site=None, cwd):
     env = dict(os.environ)
     if site is not None:
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(site), env.get("PYTHONPATH")]))
-    return subprocess.run([sys.executable, "-m", "r2rsim.cli", *map(str, args)], env=env,
-                          cwd=cwd, capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "r2rsim.cli", *map(str, args)],
+        env=env,
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
 
 
 @pytest.fixture(scope="module")
 def data(tmp_path_factory):
     """Healthy OC1 runs (seeds 1, 2 train; 3 val; 4 test) and sensor A +15 % at 20 s (seed 5)."""
     d = tmp_path_factory.mktemp("third_party_data")
-    for name, scen, seed in (("h1", "oc1_nominal", 1), ("h2", "oc1_nominal", 2),
-                             ("h3", "oc1_nominal", 3), ("h4", "oc1_nominal", 4),
-                             ("f5", "sensor_a_offset_P15", 5)):
-        r2rsim.run_scenario(REPO / "scenarios" / "thesis" / f"{scen}.yaml", output=d / name,
-                            seed=seed, duration=30.0)
+    for name, scen, seed in (
+        ("h1", "oc1_nominal", 1),
+        ("h2", "oc1_nominal", 2),
+        ("h3", "oc1_nominal", 3),
+        ("h4", "oc1_nominal", 4),
+        ("f5", "sensor_a_offset_P15", 5),
+    ):
+        r2rsim.run_scenario(
+            REPO / "scenarios" / "thesis" / f"{scen}.yaml",
+            output=d / name,
+            seed=seed,
+            duration=30.0,
+        )
     return d
 
 
 def diagnose(site, data, out, *params):
-    return cli("diagnose", "--method", NAME, "--train", data / "h1", data / "h2", "--val",
-               data / "h3", "--test", data / "h4", data / "f5", *params, "-o", data / out,
-               "--n-boot", 50, site=site, cwd=data)
+    return cli(
+        "diagnose",
+        "--method",
+        NAME,
+        "--train",
+        data / "h1",
+        data / "h2",
+        "--val",
+        data / "h3",
+        "--test",
+        data / "h4",
+        data / "f5",
+        *params,
+        "-o",
+        data / out,
+        "--n-boot",
+        50,
+        site=site,
+        cwd=data,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -89,8 +126,9 @@ def test_plugin_is_listed_only_when_registered(site, tmp_path):
 def test_diagnose_scores_the_plugin(diagnosed, data):
     assert diagnosed.returncode == 0, diagnosed.stderr
     out = data / "out_lam02"
-    assert all((out / f).is_file() for f in ("predictions.parquet", "metrics.parquet",
-                                             "metrics.csv"))
+    assert all(
+        (out / f).is_file() for f in ("predictions.parquet", "metrics.parquet", "metrics.csv")
+    )
     m = pd.read_parquet(out / "metrics.parquet")
     assert set(m["method"]) == {NAME}
     assert set(pd.read_csv(out / "metrics.csv")["method"]) == {NAME}
@@ -127,12 +165,22 @@ def test_params_reach_the_plugin(site, data, diagnosed):
 def test_the_installed_plugin_passes_the_shipped_checks(site, tmp_path):
     # what docs/diagnostics.md §2.1 tells a plug-in's author to run: r2rsim's own checks,
     # on the built-in data, from an installed r2rsim (no checkout of r2rsim's tests needed)
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        filter(None, [str(site), os.environ.get("PYTHONPATH")])))
-    code = ("from r2rsim.evaluate import check_plugin\n"
-            f"for check in check_plugin({NAME!r}):\n    print('ok:', check)\n")
-    res = subprocess.run([sys.executable, "-c", code], env=env, cwd=tmp_path,
-                         capture_output=True, text=True, timeout=300)
+    env = dict(
+        os.environ,
+        PYTHONPATH=os.pathsep.join(filter(None, [str(site), os.environ.get("PYTHONPATH")])),
+    )
+    code = (
+        "from r2rsim.evaluate import check_plugin\n"
+        f"for check in check_plugin({NAME!r}):\n    print('ok:', check)\n"
+    )
+    res = subprocess.run(
+        [sys.executable, "-c", code],
+        env=env,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert res.returncode == 0, res.stderr
     assert res.stdout.count("ok: ") == 9 and "deterministic" in res.stdout, res.stdout
     assert "causal as declared" in res.stdout and "calibrate(runs, alpha, masks)" in res.stdout

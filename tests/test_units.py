@@ -50,15 +50,16 @@ def _norm(dims: dict) -> dict:
 
 
 def _same(ours: tuple[float, dict], ref: tuple[float, dict]) -> bool:
-    return (math.isclose(ours[0], ref[0], rel_tol=REL, abs_tol=0.0)
-            and _norm(ours[1]) == ref[1])
+    return math.isclose(ours[0], ref[0], rel_tol=REL, abs_tol=0.0) and _norm(ours[1]) == ref[1]
 
 
 # --- every quantity string in the repository --------------------------------------------------
 _STARTS_NUMERIC = re.compile(r"^\s*[+-]?(?:[0-9]|\.[0-9])")
 # A string literal that starts with a number and goes on with a unit: "50 um", '300 m/min'.
-_LITERAL = re.compile(r"""(?<![\w.])["']([+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)"""
-                      r"""(?:[eE][+-]?[0-9]+)?[ ]?[A-Za-z%µμ°][^"'\n]{0,40})["']""")
+_LITERAL = re.compile(
+    r"""(?<![\w.])["']([+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)"""
+    r"""(?:[eE][+-]?[0-9]+)?[ ]?[A-Za-z%µμ°][^"'\n]{0,40})["']"""
+)
 
 
 def _strings(node):
@@ -89,9 +90,15 @@ def _repository_quantities() -> dict[str, str]:
         # files of hostile strings (this one's below, the fuzzers') are not quantities of use,
         # nor are the expected messages of the sweep, worker, set-point and tutorial tests
         # ("1 of 3 combinations is invalid", "2 local worker processes", "20 s simulated")
-        if path.name in (Path(__file__).name, "test_fuzz.py", "test_input_robustness.py",
-                         "test_sweep.py", "test_sweep_workers.py", "test_break_setpoint.py",
-                         "test_tutorial.py"):
+        if path.name in (
+            Path(__file__).name,
+            "test_fuzz.py",
+            "test_input_robustness.py",
+            "test_sweep.py",
+            "test_sweep_workers.py",
+            "test_break_setpoint.py",
+            "test_tutorial.py",
+        ):
             continue
         for m in _LITERAL.finditer(path.read_text()):
             found.setdefault(m.group(1), str(path.relative_to(REPO)))
@@ -114,8 +121,7 @@ def test_repository_quantity_reads_as_pint_reads_it(ureg, text):
     try:
         ours = units._parse_text(text.strip())
     except units._Unreadable as exc:
-        assert text in KNOWN_REJECTED, (
-            f"{text!r} ({REPO_QUANTITIES[text]}) is refused: {exc}")
+        assert text in KNOWN_REJECTED, f"{text!r} ({REPO_QUANTITIES[text]}) is refused: {exc}"
         return
     assert text not in KNOWN_REJECTED
     assert _same(ours, _pint_si(ureg, text)), text
@@ -137,31 +143,123 @@ def test_table_spellings_and_powers_match_pint(ureg):
 
 
 def test_table_has_the_promised_units():
-    for name in ("m", "mm", "um", "µm", "μm", "km", "g", "kg", "mg", "s", "ms", "us", "min",
-                 "h", "Hz", "kHz", "N", "kN", "mN", "Pa", "kPa", "MPa", "GPa", "bar", "mbar",
-                 "J", "W", "kW", "rad", "mrad", "deg", "°", "rpm", "rev", "%", "meter",
-                 "metres", "second", "sec", "newton", "pascal", "gram", "kilogram", "hour",
-                 "minute", "hertz", "degree", "degrees", "radian", "revolution"):
+    for name in (
+        "m",
+        "mm",
+        "um",
+        "µm",
+        "μm",
+        "km",
+        "g",
+        "kg",
+        "mg",
+        "s",
+        "ms",
+        "us",
+        "min",
+        "h",
+        "Hz",
+        "kHz",
+        "N",
+        "kN",
+        "mN",
+        "Pa",
+        "kPa",
+        "MPa",
+        "GPa",
+        "bar",
+        "mbar",
+        "J",
+        "W",
+        "kW",
+        "rad",
+        "mrad",
+        "deg",
+        "°",
+        "rpm",
+        "rev",
+        "%",
+        "meter",
+        "metres",
+        "second",
+        "sec",
+        "newton",
+        "pascal",
+        "gram",
+        "kilogram",
+        "hour",
+        "minute",
+        "hertz",
+        "degree",
+        "degrees",
+        "radian",
+        "revolution",
+    ):
         assert name in units._UNITS, name
 
 
 COMPOUNDS = [
     # (ours, the same in pint's syntax)
-    ("2000 N*s/m", None), ("1 m/s/s", None), ("0.5 kg*m^2", None), ("5 N m", None),
-    ("5 N·m", None), ("5 N⋅m", "5 N*m"), ("1 kg/(m*s)", None), ("1 kg/(m s)", None),
-    ("1 kg/m s", None), ("3 m/s*kg", None), ("1390 kg/m^3", None), ("1390 kg/m**3", None),
-    ("1 kg·m²", None), ("2 s⁻¹", None), ("2 s^-1", None), ("2 s^(-1)", None),
-    ("2 s^(−1)", "2 s**-1"), ("1 1/min", None), ("5 /s", None), ("5 1/s", None),
-    ("3 m per min", None), ("50um", None), ("1e3 mm", None), ("1e+3m", None), ("-2.5e-3 N", None),
-    (".5 m", None), ("5. m", None), ("+5 m", None), ("1_000 m", None), ("90°", None),
-    ("50 %", None), ("50%", None), ("5 ‰", None), ("100 rpm", None), ("3 rev/min", "3 rpm"),
-    ("1 (m/s)^2", None), ("1 N*m*s", None), ("1 mN*m", None), ("1 daN/m", None),
-    ("1 kW*h", None), ("100 Pa*s", None), ("1 m/(s)", None), ("1 (N)", None),
-    ("5\u00a0um", "5 um"), ("1 GPa", None), ("1 degrees/s", None),
+    ("2000 N*s/m", None),
+    ("1 m/s/s", None),
+    ("0.5 kg*m^2", None),
+    ("5 N m", None),
+    ("5 N·m", None),
+    ("5 N⋅m", "5 N*m"),
+    ("1 kg/(m*s)", None),
+    ("1 kg/(m s)", None),
+    ("1 kg/m s", None),
+    ("3 m/s*kg", None),
+    ("1390 kg/m^3", None),
+    ("1390 kg/m**3", None),
+    ("1 kg·m²", None),
+    ("2 s⁻¹", None),
+    ("2 s^-1", None),
+    ("2 s^(-1)", None),
+    ("2 s^(−1)", "2 s**-1"),
+    ("1 1/min", None),
+    ("5 /s", None),
+    ("5 1/s", None),
+    ("3 m per min", None),
+    ("50um", None),
+    ("1e3 mm", None),
+    ("1e+3m", None),
+    ("-2.5e-3 N", None),
+    (".5 m", None),
+    ("5. m", None),
+    ("+5 m", None),
+    ("1_000 m", None),
+    ("90°", None),
+    ("50 %", None),
+    ("50%", None),
+    ("5 ‰", None),
+    ("100 rpm", None),
+    ("3 rev/min", "3 rpm"),
+    ("1 (m/s)^2", None),
+    ("1 N*m*s", None),
+    ("1 mN*m", None),
+    ("1 daN/m", None),
+    ("1 kW*h", None),
+    ("100 Pa*s", None),
+    ("1 m/(s)", None),
+    ("1 (N)", None),
+    ("5\u00a0um", "5 um"),
+    ("1 GPa", None),
+    ("1 degrees/s", None),
     # names outside the table go to pint one at a time
-    ("3 ft", None), ("2 inch", None), ("1 lbf", None), ("1 psi", None), ("5 ft*lbf", None),
-    ("1 lbf/inch", None), ("1 ft/min", None), ("1 micron", None), ("1 t", None),
-    ("1 kgf", None), ("1 ppm", None), ("1 dimensionless", None), ("1 mil", None),
+    ("3 ft", None),
+    ("2 inch", None),
+    ("1 lbf", None),
+    ("1 psi", None),
+    ("5 ft*lbf", None),
+    ("1 lbf/inch", None),
+    ("1 ft/min", None),
+    ("1 micron", None),
+    ("1 t", None),
+    ("1 kgf", None),
+    ("1 ppm", None),
+    ("1 dimensionless", None),
+    ("1 mil", None),
 ]
 
 
@@ -196,16 +294,30 @@ def test_offset_and_logarithmic_units_are_refused():
 
 
 # --- public behaviour kept from the pint-based version ----------------------------------------
-@pytest.mark.parametrize("value, dimension, expected", [
-    ("50 um", "length", 50e-6), ("300 m/min", "speed", 5.0), ("4.5 GPa", "pressure", 4.5e9),
-    ("0.5 kg*m^2", "inertia", 0.5), ("90 deg", "angle", math.pi / 2),
-    ("100 rpm", "angular_speed", 100 * 2 * math.pi / 60), ("1 kHz", "frequency", 1000.0),
-    ("2000 N*s/m", "damping", 2000.0), ("1 Hz", "angular_speed", 1.0),
-    ("3 rad/s", "angular_speed", 3.0), ("50 %", "dimensionless", 0.5),
-    ("0.5 %", "angle", 0.005), ("1e3", "length", 1000.0), ("  7  ", "time", 7.0),
-    (2, "force", 2.0), (0.25, "time", 0.25), ("1 rev", "angle", 2 * math.pi),
-    ("-9.81 m/s^2", "acceleration", -9.81), ("1.0e-4 N*m*s", "viscous_torque", 1e-4),
-])
+@pytest.mark.parametrize(
+    "value, dimension, expected",
+    [
+        ("50 um", "length", 50e-6),
+        ("300 m/min", "speed", 5.0),
+        ("4.5 GPa", "pressure", 4.5e9),
+        ("0.5 kg*m^2", "inertia", 0.5),
+        ("90 deg", "angle", math.pi / 2),
+        ("100 rpm", "angular_speed", 100 * 2 * math.pi / 60),
+        ("1 kHz", "frequency", 1000.0),
+        ("2000 N*s/m", "damping", 2000.0),
+        ("1 Hz", "angular_speed", 1.0),
+        ("3 rad/s", "angular_speed", 3.0),
+        ("50 %", "dimensionless", 0.5),
+        ("0.5 %", "angle", 0.005),
+        ("1e3", "length", 1000.0),
+        ("  7  ", "time", 7.0),
+        (2, "force", 2.0),
+        (0.25, "time", 0.25),
+        ("1 rev", "angle", 2 * math.pi),
+        ("-9.81 m/s^2", "acceleration", -9.81),
+        ("1.0e-4 N*m*s", "viscous_torque", 1e-4),
+    ],
+)
 def test_values(value, dimension, expected):
     assert parse_quantity(value, dimension) == pytest.approx(expected, rel=REL)
 
@@ -223,8 +335,9 @@ def test_booleans_types_and_non_finite_numbers_are_refused():
 def test_wrong_dimension_message():
     with pytest.raises(QuantityError) as info:
         parse_quantity("3 N", "length")
-    assert str(info.value) == ("'3 N' has dimension [length] * [mass] / [time] ** 2, "
-                               "expected a length (e.g. '1.5 m')")
+    assert str(info.value) == (
+        "'3 N' has dimension [length] * [mass] / [time] ** 2, expected a length (e.g. '1.5 m')"
+    )
     with pytest.raises(QuantityError, match=r"has dimension dimensionless, expected a speed"):
         parse_quantity("5 %", "speed")
     with pytest.raises(QuantityError, match=r"has dimension 1 / \[time\], expected an? angle"):
@@ -234,8 +347,9 @@ def test_wrong_dimension_message():
 def test_unreadable_message_style():
     with pytest.raises(QuantityError) as info:
         parse_quantity("1.5 meterz", "length")
-    assert str(info.value) == ("cannot read '1.5 meterz' as a quantity (unknown unit "
-                               "'meterz'); write e.g. '1.5 m'")
+    assert str(info.value) == (
+        "cannot read '1.5 meterz' as a quantity (unknown unit 'meterz'); write e.g. '1.5 m'"
+    )
 
 
 @pytest.mark.parametrize("dimension", sorted(DIMENSIONS))
@@ -244,22 +358,78 @@ def test_dimension_table_agrees_with_the_parser(ureg, dimension):
     # same as the pint dimensionality kept in DIMENSIONS, and each example must read as in pint
     pint_dims, _, example = DIMENSIONS[dimension]
     assert units._format_dims(units._expected_dims(dimension)) == (pint_dims or "dimensionless")
-    assert parse_quantity(example, dimension) == pytest.approx(
-        _pint_si(ureg, example)[0], rel=REL)
+    assert parse_quantity(example, dimension) == pytest.approx(_pint_si(ureg, example)[0], rel=REL)
 
 
 # --- hostile strings: a QuantityError, quickly ------------------------------------------------
 HOSTILE = [
-    "10**10**10 m", "1/0 m", "5 m/0", "(5 m", "2**1000000 m", "9" * 400 + " m",
-    "1 " + "m " * 5000, "x" * 10_000, "5 " + "m" * 9_998, "5\x00 m", "\x00", "",
-    "5 m\u202e", "\U0001f4a5 m", "5 \u2603", "5 m\ud800", "5 \u00e9", "5 m\u0301",
-    "1 kg/((m*s))", "1 " + "(" * 40 + "m" + ")" * 40, "1 ((m)", "1 m)", "1 ()", "1 (m))",
-    "1 m^99999999999999999999", "1 m^5", "1 m^2^2", "1 m^2.5", "1 m^", "1 m**", "1 m^x",
-    "1 m^(2", "1e99999 m", "1" * 31 + " m", "1 m/", "1 /", "1 */m", "1 m**/s", "5^2 m",
-    "5 2 m", "5 m 2", "m", "m/s", "- 5 m", "5 m,", "1,5 m", "1 000 m", "5 m = 3",
-    "__import__('os') m", "5 m; import os", "5 m\n6 s", "5 ${HOME}", "5 m[0]", "5 m.s",
-    "5 1.0/s", "5 0/s", "5 m/1", "5 per", "5 m per", "5 m^-", "1 m" + "*m" * 40,
-    "1 " + "/".join(["m"] * 40), "0x10 m", "1e m", "5 m @ 3", "5 m#", "1 " + "m^4 " * 20,
+    "10**10**10 m",
+    "1/0 m",
+    "5 m/0",
+    "(5 m",
+    "2**1000000 m",
+    "9" * 400 + " m",
+    "1 " + "m " * 5000,
+    "x" * 10_000,
+    "5 " + "m" * 9_998,
+    "5\x00 m",
+    "\x00",
+    "",
+    "5 m\u202e",
+    "\U0001f4a5 m",
+    "5 \u2603",
+    "5 m\ud800",
+    "5 \u00e9",
+    "5 m\u0301",
+    "1 kg/((m*s))",
+    "1 " + "(" * 40 + "m" + ")" * 40,
+    "1 ((m)",
+    "1 m)",
+    "1 ()",
+    "1 (m))",
+    "1 m^99999999999999999999",
+    "1 m^5",
+    "1 m^2^2",
+    "1 m^2.5",
+    "1 m^",
+    "1 m**",
+    "1 m^x",
+    "1 m^(2",
+    "1e99999 m",
+    "1" * 31 + " m",
+    "1 m/",
+    "1 /",
+    "1 */m",
+    "1 m**/s",
+    "5^2 m",
+    "5 2 m",
+    "5 m 2",
+    "m",
+    "m/s",
+    "- 5 m",
+    "5 m,",
+    "1,5 m",
+    "1 000 m",
+    "5 m = 3",
+    "__import__('os') m",
+    "5 m; import os",
+    "5 m\n6 s",
+    "5 ${HOME}",
+    "5 m[0]",
+    "5 m.s",
+    "5 1.0/s",
+    "5 0/s",
+    "5 m/1",
+    "5 per",
+    "5 m per",
+    "5 m^-",
+    "1 m" + "*m" * 40,
+    "1 " + "/".join(["m"] * 40),
+    "0x10 m",
+    "1e m",
+    "5 m @ 3",
+    "5 m#",
+    "1 " + "m^4 " * 20,
 ]
 
 
@@ -274,8 +444,11 @@ def test_hostile_strings_fail_fast_with_a_quantity_error():
 
 def test_extreme_units_give_a_quantity_error_not_an_arithmetic_exception():
     # factors that overflow to inf or underflow to 0 (pint fallback: yocto/yotta parsecs)
-    for text in ("1 Ypc^4 Ypc^4 Ypc^-4 Ypc^-3", "1 /(ym^4 ym^4 ym^4 ym^4) ym^4 ym^4 ym^4 ym^4 ym",
-                 "1 (Ypc^4 Ypc^4)^4 Ypc^-4 Ypc^-4 Ypc^-4 Ypc^-4 Ypc^-4 Ypc^-4 Ypc^-4 Ypc^-3"):
+    for text in (
+        "1 Ypc^4 Ypc^4 Ypc^-4 Ypc^-3",
+        "1 /(ym^4 ym^4 ym^4 ym^4) ym^4 ym^4 ym^4 ym^4 ym",
+        "1 (Ypc^4 Ypc^4)^4 Ypc^-4 Ypc^-4 Ypc^-4 Ypc^-4 Ypc^-4 Ypc^-4 Ypc^-4 Ypc^-3",
+    ):
         with pytest.raises(QuantityError, match="finite|out of range"):
             parse_quantity(text, "length")
 
@@ -298,10 +471,13 @@ def test_commas_are_refused_not_dropped():
 
 
 def test_the_common_path_does_not_import_pint():
-    code = ("import sys; from r2rsim.units import parse_quantity; "
-            "parse_quantity('50 um','length'); parse_quantity('300 m/min','speed'); "
-            "parse_quantity('0.5 kg*m^2','inertia'); parse_quantity('100 rpm','angular_speed'); "
-            "print('pint' in sys.modules, 'numpy' in sys.modules)")
-    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                       cwd=REPO, check=True)
+    code = (
+        "import sys; from r2rsim.units import parse_quantity; "
+        "parse_quantity('50 um','length'); parse_quantity('300 m/min','speed'); "
+        "parse_quantity('0.5 kg*m^2','inertia'); parse_quantity('100 rpm','angular_speed'); "
+        "print('pint' in sys.modules, 'numpy' in sys.modules)"
+    )
+    p = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, check=True
+    )
     assert p.stdout.split() == ["False", "False"]

@@ -26,20 +26,40 @@ programme:
 # path the error names; words of the message)
 CASES = {
     "a ramp still running at the next step": (
-        None, ("rate: 0.3 m/s^2}\n", "rate: 0.3 m/s^2}\n  - {at: 8 s, line_speed: 2 m/s}\n"),
-        "scen.yaml", "programme[2].at", "before the ramp of programme[1] ends at 8.66667 s"),
+        None,
+        ("rate: 0.3 m/s^2}\n", "rate: 0.3 m/s^2}\n  - {at: 8 s, line_speed: 2 m/s}\n"),
+        "scen.yaml",
+        "programme[2].at",
+        "before the ramp of programme[1] ends at 8.66667 s",
+    ),
     "a dancer roller that overlaps its neighbour": (
-        ("position: [0.15 m, -0.75 m]", "position: [0.05 m, -0.05 m]"), None,
-        "line.yaml", "elements[2]", "the dancer roller overlaps its upstream neighbour"),
+        ("position: [0.15 m, -0.75 m]", "position: [0.05 m, -0.05 m]"),
+        None,
+        "line.yaml",
+        "elements[2]",
+        "the dancer roller overlaps its upstream neighbour",
+    ),
     "a load cell whose axis sees no tension": (
-        ("element: idler1, wrap_angle: 90 deg", "element: idler1, wrap_angle: 180 deg, "
-         "axis_angle: 90 deg"), None,
-        "line.yaml", "sensors[0].axis_angle", "its measuring axis sees no tension"),
+        (
+            "element: idler1, wrap_angle: 90 deg",
+            "element: idler1, wrap_angle: 180 deg, axis_angle: 90 deg",
+        ),
+        None,
+        "line.yaml",
+        "sensors[0].axis_angle",
+        "its measuring axis sees no tension",
+    ),
     "a fault end before the onset it may draw": (
-        None, ("programme:", "faults:\n  - {id: f, type: sensor.offset, target: lc_rewind, "
-               "onset: {uniform: [30 s, 40 s]}, end: 31 s, magnitude: 5 N}\nprogramme:"),
-        "scen.yaml", "faults[0].end", "end 31 s can come before the onset, which is drawn "
-        "up to 40 s"),
+        None,
+        (
+            "programme:",
+            "faults:\n  - {id: f, type: sensor.offset, target: lc_rewind, "
+            "onset: {uniform: [30 s, 40 s]}, end: 31 s, magnitude: 5 N}\nprogramme:",
+        ),
+        "scen.yaml",
+        "faults[0].end",
+        "end 31 s can come before the onset, which is drawn up to 40 s",
+    ),
 }
 
 

@@ -39,11 +39,22 @@ def test_v1_single_span_step(tmp_path, model, backend):
     path = kinematic_line(tmp_path, model=model, EA=1.0e5, spans=[2.0], draws=[0.0, 0.001])
     tau = 2.0 / 1.001
     # record rate chosen so that t = tau, 1 s and 10 s fall on the sample grid
-    cl, res = run_line(path, backend=backend,
-                       duration=10.0, rate=1000.0, steps=[{"at": 0, "line_speed": 1.0}],
-                       tension=0.0)
-    _, res_tau = run_line(path, backend=backend, duration=tau, rate=1000.0 / tau,
-                          steps=[{"at": 0, "line_speed": 1.0}], tension=0.0)
+    cl, res = run_line(
+        path,
+        backend=backend,
+        duration=10.0,
+        rate=1000.0,
+        steps=[{"at": 0, "line_speed": 1.0}],
+        tension=0.0,
+    )
+    _, res_tau = run_line(
+        path,
+        backend=backend,
+        duration=tau,
+        rate=1000.0 / tau,
+        steps=[{"at": 0, "line_speed": 1.0}],
+        tension=0.0,
+    )
     T_tau = res_tau["span1.tension_N"][-1]
     assert res_tau.t[-1] == pytest.approx(tau, rel=1e-12)
     if model == "linear":
@@ -63,17 +74,31 @@ def test_v1_single_span_step(tmp_path, model, backend):
 
 
 # ---------------------------------------------------------------- V3 steady tension chain
-@pytest.mark.parametrize("model,expected", [
-    ("linear", [299.7003, 499.0020, 399.4009]),
-    ("exact", [300.1000, 500.2000, 400.1500]),
-])
+@pytest.mark.parametrize(
+    "model,expected",
+    [
+        ("linear", [299.7003, 499.0020, 399.4009]),
+        ("exact", [300.1000, 500.2000, 400.1500]),
+    ],
+)
 def test_v3_draw_chain(tmp_path, model, expected, backend):
     EA = 2.0e5
-    path = kinematic_line(tmp_path, model=model, EA=EA, spans=[1.0, 1.0, 1.0],
-                          draws=[0.0, 0.001, 0.002, 0.0015], wound_strain=100.0 / EA)
-    _, res = run_line(path, backend=backend,
-                      duration=8.0, rate=100.0, steps=[{"at": 0, "line_speed": 5.0}],
-                      tension=100.0)
+    path = kinematic_line(
+        tmp_path,
+        model=model,
+        EA=EA,
+        spans=[1.0, 1.0, 1.0],
+        draws=[0.0, 0.001, 0.002, 0.0015],
+        wound_strain=100.0 / EA,
+    )
+    _, res = run_line(
+        path,
+        backend=backend,
+        duration=8.0,
+        rate=100.0,
+        steps=[{"at": 0, "line_speed": 5.0}],
+        tension=100.0,
+    )
     got = [res[f"span{i}.tension_N"][-1] for i in (1, 2, 3)]
     np.testing.assert_allclose(got, expected, atol=1e-3)
     # and it started far from there (the test integrates, it does not start at the answer)
@@ -82,30 +107,54 @@ def test_v3_draw_chain(tmp_path, model, expected, backend):
 
 # ---------------------------------------------------------------- V5 tension transfer over idler
 def _idler_line(tmp_path, model, *, J=0.01, coulomb=0.0, viscous=0.0, EA=1.0e5):
-    idler = (f"type: idler, radius: 0.05, inertia: {J!r}, "
-             f"friction: {{coulomb: {coulomb!r}, viscous: {viscous!r}}}")
-    return kinematic_line(tmp_path, model=model, EA=EA, spans=[1.0, 1.0], draws=[0, 0, 0],
-                          wound_strain=100.0 / EA, middle=[idler])
+    idler = (
+        f"type: idler, radius: 0.05, inertia: {J!r}, "
+        f"friction: {{coulomb: {coulomb!r}, viscous: {viscous!r}}}"
+    )
+    return kinematic_line(
+        tmp_path,
+        model=model,
+        EA=EA,
+        spans=[1.0, 1.0],
+        draws=[0, 0, 0],
+        wound_strain=100.0 / EA,
+        middle=[idler],
+    )
 
 
 @pytest.mark.parametrize("model", MODELS)
 def test_v5_idler_transfer(tmp_path, model, backend):
     EA = 1.0e5
     path = _idler_line(tmp_path, model)
-    _, res = run_line(path, backend=backend,
-                      duration=5.0, rate=100.0, steps=[{"at": 0, "line_speed": 5.0}],
-                      tension=100.0)
+    _, res = run_line(
+        path,
+        backend=backend,
+        duration=5.0,
+        rate=100.0,
+        steps=[{"at": 0, "line_speed": 5.0}],
+        tension=100.0,
+    )
     assert abs(res["span2.tension_N"][-1] - res["span1.tension_N"][-1]) < 1e-9 * EA
     path = _idler_line(tmp_path, model, coulomb=0.02)
-    _, res = run_line(path, backend=backend,
-                      duration=5.0, rate=100.0, steps=[{"at": 0, "line_speed": 5.0}],
-                      tension=100.0)
+    _, res = run_line(
+        path,
+        backend=backend,
+        duration=5.0,
+        rate=100.0,
+        steps=[{"at": 0, "line_speed": 5.0}],
+        tension=100.0,
+    )
     dT = res["span2.tension_N"][-1] - res["span1.tension_N"][-1]
     assert dT == pytest.approx(0.400, abs=1e-6)  # tau_c / R, downstream higher
     path = _idler_line(tmp_path, model, coulomb=0.02, viscous=1e-4)
-    _, res = run_line(path, backend=backend,
-                      duration=5.0, rate=100.0, steps=[{"at": 0, "line_speed": 5.0}],
-                      tension=100.0)
+    _, res = run_line(
+        path,
+        backend=backend,
+        duration=5.0,
+        rate=100.0,
+        steps=[{"at": 0, "line_speed": 5.0}],
+        tension=100.0,
+    )
     dT = res["span2.tension_N"][-1] - res["span1.tension_N"][-1]
     om = res["n1.speed_rad_s"][-1]  # v/R to O(strain): the idler runs at the web speed
     assert om == pytest.approx(100.0, rel=2e-3)
@@ -116,30 +165,38 @@ def test_v5_idler_transfer(tmp_path, model, backend):
 @pytest.mark.parametrize("model", MODELS)
 def test_v6_idler_inertia_under_acceleration(tmp_path, model, backend):
     path = _idler_line(tmp_path, model, J=0.0109)
-    _, res = run_line(path, backend=backend, duration=8.0, rate=100.0,
-                      steps=[{"at": 0, "line_speed": 1.0},
-                             {"at": 1.0, "line_speed": 6.0, "rate": 0.5}], tension=100.0)
+    _, res = run_line(
+        path,
+        backend=backend,
+        duration=8.0,
+        rate=100.0,
+        steps=[{"at": 0, "line_speed": 1.0}, {"at": 1.0, "line_speed": 6.0, "rate": 0.5}],
+        tension=100.0,
+    )
     dT = at(res, "span2.tension_N", 8.0) - at(res, "span1.tension_N", 8.0)
     assert dT == pytest.approx(0.0109 * 0.5 / 0.05**2, rel=0.01)  # 2.18 N
     assert abs(at(res, "span2.tension_N", 0.9) - at(res, "span1.tension_N", 0.9)) < 1e-3
 
 
 # ---------------------------------------------------------------- V7 idler/span elastic mode
-@pytest.mark.parametrize("v,expected", [
-    (0.0, [223.495j, -223.495j]),
-    (5.0, [-3.7502 + 223.4775j, -3.7502 - 223.4775j, -2.4997]),
-])
+@pytest.mark.parametrize(
+    "v,expected",
+    [
+        (0.0, [223.495j, -223.495j]),
+        (5.0, [-3.7502 + 223.4775j, -3.7502 - 223.4775j, -2.4997]),
+    ],
+)
 def test_v7_idler_span_mode(tmp_path, v, expected):
     path = _idler_line(tmp_path, "linear", J=0.01)
     line = r2rsim.load_line(path)
     from r2rsim.schema.scenario import ProgrammeStep
 
-    cl = r2rsim.compile_line(line, r2rsim.Programme.from_steps(
-        line, [ProgrammeStep(at=0, line_speed=v)]))
+    cl = r2rsim.compile_line(
+        line, r2rsim.Programme.from_steps(line, [ProgrammeStep(at=0, line_speed=v)])
+    )
     y0 = r2rsim.nominal_state(cl, tension=100.0)
     # the linearisation point is a steady state
-    assert np.max(np.abs(cl.rhs(0.0, y0)[[cl.index("span1.strain"),
-                                          cl.index("n1.speed")]])) < 1e-9
+    assert np.max(np.abs(cl.rhs(0.0, y0)[[cl.index("span1.strain"), cl.index("n1.speed")]])) < 1e-9
     _, eig = cl.linearise(0.0, y0)
     eig = eig[np.abs(eig) > 1e-6]
     assert len(eig) == len(expected)
@@ -157,12 +214,19 @@ def test_v9_radius_law_and_roll_empty(tmp_path, model, backend):
     path = kinematic_line(tmp_path, model=model, EA=1e5, spans=[1.0], draws=[0.0, 0.0])
     text = path.read_text().replace("thickness: 0.0001", "thickness: 5.0e-05")
     write(path, text)  # c_w = thickness = 50 um
-    _, res = run_line(path, backend=backend,
-                      duration=3200.0, rate=1.0, steps=[{"at": 0, "line_speed": 5.0}],
-                      tension=0.0, rtol=1e-10)
+    _, res = run_line(
+        path,
+        backend=backend,
+        duration=3200.0,
+        rate=1.0,
+        steps=[{"at": 0, "line_speed": 5.0}],
+        tension=0.0,
+        rtol=1e-10,
+    )
     assert at(res, "src.radius_m", 600.0) == pytest.approx(0.449726, abs=1e-6)
     assert at(res, "src.radius_m", 600.0) == pytest.approx(
-        math.sqrt(0.25 - 50e-6 * 5.0 * 600.0 / math.pi), abs=1e-9)
+        math.sqrt(0.25 - 50e-6 * 5.0 * 600.0 / math.pi), abs=1e-9
+    )
     assert at(res, "src.length", 600.0) == pytest.approx(3000.000, abs=1e-6)
     # the roll empties at R = R_core = 0.045 m: a terminal event at t = 3116.1 s
     assert res.terminated and res.termination_reason == "roll_empty"
@@ -193,9 +257,11 @@ def test_v10_roll_inertia_and_mass(tmp_path, R, J, m, backend):
     _, res = run_line(path, backend=backend, duration=0.01, rate=100.0)
     rho, w, Rc = 1390.0, 1.0, 0.045
     assert res["unwind.inertia_kg_m2"][0] == pytest.approx(
-        0.5 * math.pi * rho * w * (R**4 - Rc**4), rel=1e-12)
+        0.5 * math.pi * rho * w * (R**4 - Rc**4), rel=1e-12
+    )
     assert res["unwind.web_mass_kg"][0] == pytest.approx(
-        math.pi * rho * w * (R**2 - Rc**2), rel=1e-12)
+        math.pi * rho * w * (R**2 - Rc**2), rel=1e-12
+    )
     # physics.md quotes J to 6 and m to 5-6 significant digits: half a unit of the last one
     assert res["unwind.inertia_kg_m2"][0] == pytest.approx(J, abs=5e-4 if R == 0.5 else 5e-5)
     assert res["unwind.web_mass_kg"][0] == pytest.approx(m, abs=5e-3)
@@ -205,11 +271,17 @@ def test_v10_roll_inertia_and_mass(tmp_path, R, J, m, backend):
 @pytest.mark.parametrize("model", MODELS)
 def test_v18_break_time(tmp_path, model, backend):
     # EA = 1e5 N with A = 1e-4 m^2; break stress 5 MPa -> T_break = 500 N
-    path = kinematic_line(tmp_path, model=model, EA=1e5, spans=[2.0], draws=[0.0, 0.01],
-                          break_stress="5 MPa")
-    _, res = run_line(path, backend=backend,
-                      duration=3.0, rate=1000.0, steps=[{"at": 0, "line_speed": 1.0}],
-                      tension=0.0)
+    path = kinematic_line(
+        tmp_path, model=model, EA=1e5, spans=[2.0], draws=[0.0, 0.01], break_stress="5 MPa"
+    )
+    _, res = run_line(
+        path,
+        backend=backend,
+        duration=3.0,
+        rate=1000.0,
+        steps=[{"at": 0, "line_speed": 1.0}],
+        tension=0.0,
+    )
     if model == "linear":
         t_b = 1.392470  # physics.md V18
     else:  # logistic solution of (1.2): t = (L/v1) ln((r - 1)/(r/w_b - 1)), w_b = 1 + Tb/EA
@@ -224,25 +296,46 @@ def test_v18_break_time(tmp_path, model, backend):
 
 
 # ---------------------------------------------------------------- V19 capstan threshold
-@pytest.mark.parametrize("mu,beta,ratio", [(0.3, "3.141592653589793", 2.5663),
-                                           (0.2, "90 deg", 1.3691)])
+@pytest.mark.parametrize(
+    "mu,beta,ratio", [(0.3, "3.141592653589793", 2.5663), (0.2, "90 deg", 1.3691)]
+)
 def test_v19_capstan_threshold(tmp_path, mu, beta, ratio, backend):
     EA = 1e5
-    node = (f"type: driven, radius: 0.1, inertia: 0.1, wrap_angle: {beta}, "
-            f"friction_coefficient: {mu}, drive: {{type: ideal_speed}}")
-    path = kinematic_line(tmp_path, model="linear", EA=EA, spans=[1.0, 1.0],
-                          draws=[0.0, 0.0, 0.003], wound_strain=100.0 / EA, middle=[node])
-    _, res = run_line(path, backend=backend,
-                      duration=3.0, rate=1000.0, steps=[{"at": 0, "line_speed": 1.0}],
-                      tension=100.0)
+    node = (
+        f"type: driven, radius: 0.1, inertia: 0.1, wrap_angle: {beta}, "
+        f"friction_coefficient: {mu}, drive: {{type: ideal_speed}}"
+    )
+    path = kinematic_line(
+        tmp_path,
+        model="linear",
+        EA=EA,
+        spans=[1.0, 1.0],
+        draws=[0.0, 0.0, 0.003],
+        wound_strain=100.0 / EA,
+        middle=[node],
+    )
+    _, res = run_line(
+        path,
+        backend=backend,
+        duration=3.0,
+        rate=1000.0,
+        steps=[{"at": 0, "line_speed": 1.0}],
+        tension=100.0,
+    )
     risk = [e for e in res.events if e.kind == "slip_risk"]
     assert len(risk) == 1 and risk[0].state == "start" and risk[0].component == "n1"
     assert risk[0].values["tension_ratio"] == pytest.approx(ratio, rel=1e-4)
     # closed form of the crossing time: T2(t) = T2inf + (100 - T2inf) e^(-v2 t / L)
     v1, v2 = 1.0, 1.003
     T2inf = (EA * (v2 - v1) + v1 * 100.0) / v2
-    t_cross = -1.0 / v2 * math.log((math.exp(mu * (math.pi if mu == 0.3 else math.pi / 2))
-                                    * 100.0 - T2inf) / (100.0 - T2inf))
+    t_cross = (
+        -1.0
+        / v2
+        * math.log(
+            (math.exp(mu * (math.pi if mu == 0.3 else math.pi / 2)) * 100.0 - T2inf)
+            / (100.0 - T2inf)
+        )
+    )
     assert risk[0].t == pytest.approx(t_cross, abs=1e-3)
     assert not res.terminated
 
@@ -271,11 +364,22 @@ def test_v24_speed_trim_first_order(tmp_path, backend):
         """
     path = write(tmp_path / "v24.yaml", text)
     assert kp == pytest.approx(8.3776e-5, rel=1e-4) and ki == pytest.approx(2.7925e-4, rel=1e-4)
-    _, res = run_line(path, backend=backend, duration=3.0 / wc, rate=1000.0 * wc,
-                      steps=[{"at": 0, "line_speed": v}], tension=0.0)
+    _, res = run_line(
+        path,
+        backend=backend,
+        duration=3.0 / wc,
+        rate=1000.0 * wc,
+        steps=[{"at": 0, "line_speed": v}],
+        tension=0.0,
+    )
     assert at(res, "span1.tension_N", 1 / wc) == pytest.approx(164.31, rel=1e-3)
     assert res["span1.tension_N"][-1] == pytest.approx(247.01, rel=1e-3)
-    _, res = run_line(path, backend=backend,
-                      duration=1.0, rate=1000.0, steps=[{"at": 0, "line_speed": v}],
-                      tension=0.0)
+    _, res = run_line(
+        path,
+        backend=backend,
+        duration=1.0,
+        rate=1000.0,
+        steps=[{"at": 0, "line_speed": v}],
+        tension=0.0,
+    )
     assert at(res, "span1.tension_N", 1.0) == pytest.approx(260.00, rel=1e-3)

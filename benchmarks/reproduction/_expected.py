@@ -46,26 +46,35 @@ def summary(names, results, expected: dict[str, str]) -> str:
         if r == XFAIL:
             lines.append(f"{XFAIL}: {name}: {expected[name]}")
         elif r == XPASS:
-            lines.append(f"{XPASS}: {name}: passes, but is listed as a documented "
-                         "non-reproduction (EXPECTED_FAILURES): take it off the list and "
-                         "regenerate the report")
+            lines.append(
+                f"{XPASS}: {name}: passes, but is listed as a documented "
+                "non-reproduction (EXPECTED_FAILURES): take it off the list and "
+                "regenerate the report"
+            )
     counts = {k: sum(r == k for r in results) for k in ("PASS", "FAIL", XFAIL, XPASS)}
     reported = sum(r.startswith("(") for r in results)
     status = exit_status(results)
-    lines.append(f"{counts['PASS']} PASS, {counts[XFAIL]} XFAIL (documented), "
-                 f"{counts['FAIL']} FAIL, {counts[XPASS]} XPASS"
-                 + (f", {reported} reported only (--quick)" if reported else "")
-                 + f"; exit status {status}"
-                 + (" (every asserted check reproduces the committed report)" if status == 0
-                    else " (a regression from the committed report, or an unexpected pass)"))
+    lines.append(
+        f"{counts['PASS']} PASS, {counts[XFAIL]} XFAIL (documented), "
+        f"{counts['FAIL']} FAIL, {counts[XPASS]} XPASS"
+        + (f", {reported} reported only (--quick)" if reported else "")
+        + f"; exit status {status}"
+        + (
+            " (every asserted check reproduces the committed report)"
+            if status == 0
+            else " (a regression from the committed report, or an unexpected pass)"
+        )
+    )
     return "\n".join(lines)
 
 
 def report_note(results, expected: dict[str, str]) -> str:
     """The sentence under a report's assertion table: what the exit status was and why."""
     status = exit_status(results)
-    return (f"Exit status {status}. `XFAIL (documented)`: the study's documented "
-            f"non-reproductions ({len(expected)} listed in the script's `EXPECTED_FAILURES`, "
-            "each with its reason); they do not fail the run. The run exits 3 when a check "
-            "the committed report passes fails, or a listed one passes (`XPASS`); results in "
-            "parentheses are reported, not asserted.")
+    return (
+        f"Exit status {status}. `XFAIL (documented)`: the study's documented "
+        f"non-reproductions ({len(expected)} listed in the script's `EXPECTED_FAILURES`, "
+        "each with its reason); they do not fail the run. The run exits 3 when a check "
+        "the committed report passes fails, or a listed one passes (`XPASS`); results in "
+        "parentheses are reported, not asserted."
+    )

@@ -31,11 +31,18 @@ from .layout import *  # noqa: F403 - the record field names
 MAXD = 16  # gradient slots per intermediate quantity
 
 #: event kind -> name used in the event log
-EVENT_NAMES = {EV_SLACK: "slack", EV_BREAK: "web_break", EV_CAPSTAN: "slip_risk",
-               EV_EMPTY: "roll_empty", EV_STOP_LO: "dancer_stop_low",
-               EV_STOP_HI: "dancer_stop_high", EV_JOINT_PASS: "splice_joint",
-               EV_JOINT_BREAK: "splice_break", EV_SPLICE_RADIUS: "splice_trigger",
-               EV_REFILL: "splice_refilled"}
+EVENT_NAMES = {
+    EV_SLACK: "slack",
+    EV_BREAK: "web_break",
+    EV_CAPSTAN: "slip_risk",
+    EV_EMPTY: "roll_empty",
+    EV_STOP_LO: "dancer_stop_low",
+    EV_STOP_HI: "dancer_stop_high",
+    EV_JOINT_PASS: "splice_joint",
+    EV_JOINT_BREAK: "splice_break",
+    EV_SPLICE_RADIUS: "splice_trigger",
+    EV_REFILL: "splice_refilled",
+}
 N_JOINT_SLOTS = 2  # splice joints on the line at once (a joint leaves at the rewind)
 
 
@@ -84,15 +91,21 @@ class Programme:
             for cid in st.tension or {}:
                 if cid not in tension_ids:
                     known = ", ".join(sorted(tension_ids)) or "none defined"
-                    raise InputError(f"no tension controller '{cid}' in the line (known: "
-                                     f"{known})", file=file, path=f"programme[{i}].tension.{cid}")
+                    raise InputError(
+                        f"no tension controller '{cid}' in the line (known: {known})",
+                        file=file,
+                        path=f"programme[{i}].tension.{cid}",
+                    )
             for key, check in (("draw", draw_problem), ("torque", torque_problem)):
                 for eid in getattr(st, key) or {}:
                     problem = check(line, eid)
                     if problem:
                         raise InputError(problem, file=file, path=f"programme[{i}].{key}.{eid}")
-        prog = cls.constant(line, torque={e for st in steps for e in st.torque or {}},
-                            draw={e for st in steps for e in st.draw or {}})
+        prog = cls.constant(
+            line,
+            torque={e for st in steps for e in st.torque or {}},
+            draw={e for st in steps for e in st.draw or {}},
+        )
         chan = {n: i for i, n in enumerate(prog.names)}
         busy_until = [0.0] * len(prog.names)
         busy_by = [""] * len(prog.names)
@@ -110,9 +123,12 @@ class Programme:
                 ts, vs = prog.times[ch], prog.values[ch]
                 old = vs[-1]
                 if st.at < busy_until[ch] - 1e-12:
-                    raise InputError(f"starts at {st.at:g} s, before the ramp of {busy_by[ch]} "
-                                     f"ends at {busy_until[ch]:g} s", file=file,
-                                     path=f"programme[{i}].at")
+                    raise InputError(
+                        f"starts at {st.at:g} s, before the ramp of {busy_by[ch]} "
+                        f"ends at {busy_until[ch]:g} s",
+                        file=file,
+                        path=f"programme[{i}].at",
+                    )
                 if st.rate is not None and ch == 0:
                     dur = abs(new - old) / st.rate
                 else:
@@ -149,8 +165,9 @@ def _line_draw(line: Line, e) -> float:
     drive = getattr(e, "drive", None)
     if drive is not None and drive.type == "ideal_speed":
         return drive.draw
-    return next((c.draw for c in line.controllers
-                 if c.type == "speed_pi" and c.element == e.id), 0.0)
+    return next(
+        (c.draw for c in line.controllers if c.type == "speed_pi" and c.element == e.id), 0.0
+    )
 
 
 @dataclass
@@ -205,9 +222,15 @@ class CompiledLine:
     def __post_init__(self):
         nq = int(self.I[H_NQ])
         drag_cache, end = kernels.scratch_layout(self.I)
-        self._W = np.zeros(max(end, 4 * self.n_states + 16 * (len(self.node_ids)
-                                                              + len(self.span_ids))
-                               + 8 * (len(self.sensors) + len(self.controllers)) + 16))
+        self._W = np.zeros(
+            max(
+                end,
+                4 * self.n_states
+                + 16 * (len(self.node_ids) + len(self.span_ids))
+                + 8 * (len(self.sensors) + len(self.controllers))
+                + 16,
+            )
+        )
         self._W[drag_cache:end] = np.nan  # no time matches an empty slot
         self._GI = np.zeros(nq * MAXD, np.int64)
         self._GC = np.zeros(nq, np.int64)
@@ -219,8 +242,17 @@ class CompiledLine:
     # ---- the callbacks ------------------------------------------------------------------
     def make_rhs(self):
         """Return ``rhs(t, y, yp)`` filling yp in place (the form scikit-sundae calls)."""
-        ev, I, P, W, GI, GC, GV, J1, a0 = (kernels.evaluate, self.I, self.P, self._W, self._GI,
-                                            self._GC, self._GV, self._J1, self._aux0)
+        ev, I, P, W, GI, GC, GV, J1, a0 = (
+            kernels.evaluate,
+            self.I,
+            self.P,
+            self._W,
+            self._GI,
+            self._GC,
+            self._GV,
+            self._J1,
+            self._aux0,
+        )
 
         def rhs(t, y, yp):
             ev(t, y, yp, J1, MODE_RHS, I, P, W, GI, GC, GV, a0)
@@ -229,8 +261,16 @@ class CompiledLine:
 
     def make_jac(self):
         """Return ``jac(t, y, yp, JJ)`` writing the pattern entries of the (n, n) array JJ."""
-        ev, I, P, W, GI, GC, GV, a0 = (kernels.evaluate, self.I, self.P, self._W, self._GI,
-                                        self._GC, self._GV, self._aux0)
+        ev, I, P, W, GI, GC, GV, a0 = (
+            kernels.evaluate,
+            self.I,
+            self.P,
+            self._W,
+            self._GI,
+            self._GC,
+            self._GV,
+            self._aux0,
+        )
         ydw = np.zeros(self.n_states)
 
         def jac(t, y, yp, JJ):
@@ -241,16 +281,40 @@ class CompiledLine:
     def rhs(self, t: float, y: np.ndarray) -> np.ndarray:
         """dy/dt at (t, y) (allocates; for analysis, not the solver path)."""
         yd = np.zeros(self.n_states)
-        kernels.evaluate(float(t), np.ascontiguousarray(y, float), yd, self._J1, MODE_RHS,
-                         self.I, self.P, self._W, self._GI, self._GC, self._GV, self._aux0)
+        kernels.evaluate(
+            float(t),
+            np.ascontiguousarray(y, float),
+            yd,
+            self._J1,
+            MODE_RHS,
+            self.I,
+            self.P,
+            self._W,
+            self._GI,
+            self._GC,
+            self._GV,
+            self._aux0,
+        )
         return yd
 
     def jacobian(self, t: float, y: np.ndarray) -> np.ndarray:
         """Analytic Jacobian d(dy/dt)/dy at (t, y) as a dense array."""
         n = self.n_states
         JJ = np.zeros((n, n))
-        kernels.evaluate(float(t), np.ascontiguousarray(y, float), np.zeros(n), JJ, MODE_JAC,
-                         self.I, self.P, self._W, self._GI, self._GC, self._GV, self._aux0)
+        kernels.evaluate(
+            float(t),
+            np.ascontiguousarray(y, float),
+            np.zeros(n),
+            JJ,
+            MODE_JAC,
+            self.I,
+            self.P,
+            self._W,
+            self._GI,
+            self._GC,
+            self._GV,
+            self._aux0,
+        )
         return JJ
 
     def linearise(self, t: float, y: np.ndarray):
@@ -263,8 +327,19 @@ class CompiledLine:
         Y = np.ascontiguousarray(Y, float)
         t = np.ascontiguousarray(np.broadcast_to(t, (Y.shape[0],)), float)
         AUX = np.empty((Y.shape[0], len(self.aux_names)))
-        kernels.outputs_rows(t, Y, AUX, self.I, self.P, self._W, self._GI, self._GC, self._GV,
-                             np.zeros(self.n_states), self._J1)
+        kernels.outputs_rows(
+            t,
+            Y,
+            AUX,
+            self.I,
+            self.P,
+            self._W,
+            self._GI,
+            self._GC,
+            self._GV,
+            np.zeros(self.n_states),
+            self._J1,
+        )
         return AUX
 
     def events(self, t, Y: np.ndarray) -> np.ndarray:
@@ -273,8 +348,19 @@ class CompiledLine:
         Y = np.atleast_2d(np.ascontiguousarray(Y, float))
         t = np.ascontiguousarray(np.broadcast_to(t, (Y.shape[0],)), float)
         G = np.empty((Y.shape[0], len(self.event_kinds)))
-        kernels.event_values_rows(t, Y, G, self.I, self.P, self._W, self._GI, self._GC,
-                                  self._GV, np.zeros(self.n_states), self._J1)
+        kernels.event_values_rows(
+            t,
+            Y,
+            G,
+            self.I,
+            self.P,
+            self._W,
+            self._GI,
+            self._GC,
+            self._GV,
+            np.zeros(self.n_states),
+            self._J1,
+        )
         return G
 
     def set_segment_start(self, t0: float) -> None:
@@ -291,17 +377,27 @@ class CompiledLine:
 
     def describe(self) -> str:
         """Human-readable summary of the state layout."""
-        lines = [f"{self.n_states} states, Jacobian nnz {len(self.pattern[0])}, "
-                 f"band (lower {self.lband}, upper {self.uband})"]
-        lines += [f"  {i:4d}  {n} [{u}]" for i, (n, u) in
-                  enumerate(zip(self.state_names, self.state_units, strict=True))]
+        lines = [
+            f"{self.n_states} states, Jacobian nnz {len(self.pattern[0])}, "
+            f"band (lower {self.lband}, upper {self.uband})"
+        ]
+        lines += [
+            f"  {i:4d}  {n} [{u}]"
+            for i, (n, u) in enumerate(zip(self.state_names, self.state_units, strict=True))
+        ]
         return "\n".join(lines)
 
 
-def compile_line(line: Line, programme: Programme | None = None, faults=(),
-                 disturbances=(), pitch_variations=None,
-                 extra_joint_slots: int = 0, nominal_web=None,
-                 pitch_offsets=None) -> CompiledLine:
+def compile_line(
+    line: Line,
+    programme: Programme | None = None,
+    faults=(),
+    disturbances=(),
+    pitch_variations=None,
+    extra_joint_slots: int = 0,
+    nominal_web=None,
+    pitch_offsets=None,
+) -> CompiledLine:
     """Compile a validated line.
 
     Parameters
@@ -336,8 +432,7 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
     CompiledLine
     """
     prog = programme or Programme.constant(line)
-    pk = _Packer(line, prog, faults, disturbances, extra_joint_slots, nominal_web,
-                 pitch_offsets)
+    pk = _Packer(line, prog, faults, disturbances, extra_joint_slots, nominal_web, pitch_offsets)
     for k, e in enumerate(line.elements):  # states in web order: element, then its span
         pk.element(k, e)
         pk.element_controllers(k, e)
@@ -348,16 +443,39 @@ def compile_line(line: Line, programme: Programme | None = None, faults=(),
     aux_names, aux_units = pk.outputs()
     I, P = pk.pack(ev_I, len(aux_names), pitch_variations)
     cl = CompiledLine(
-        line=line, programme=prog, I=I, P=P, n_states=len(pk.names), state_names=pk.names,
-        state_units=pk.units, state_kinds=pk.kinds, atol=np.array(pk.atol),
-        aux_names=aux_names, aux_units=aux_units, event_kinds=ev_kinds,
-        event_components=ev_comp, node_ids=[e.id for e in line.elements],
-        span_ids=pk.span_ids, sensors=pk.sensors, controllers=pk.ctrls,
-        mover_ids=pk.mover_ids, mover_q0=pk.mover_q0, splice_nodes=pk.splice_nodes,
+        line=line,
+        programme=prog,
+        I=I,
+        P=P,
+        n_states=len(pk.names),
+        state_names=pk.names,
+        state_units=pk.units,
+        state_kinds=pk.kinds,
+        atol=np.array(pk.atol),
+        aux_names=aux_names,
+        aux_units=aux_units,
+        event_kinds=ev_kinds,
+        event_components=ev_comp,
+        node_ids=[e.id for e in line.elements],
+        span_ids=pk.span_ids,
+        sensors=pk.sensors,
+        controllers=pk.ctrls,
+        mover_ids=pk.mover_ids,
+        mover_q0=pk.mover_q0,
+        splice_nodes=pk.splice_nodes,
         n_joint_slots=pk.nJ,
     )
-    assert len(aux_names) == AUX_SPAN * pk.nS + AUX_NODE * pk.nN + AUX_SENS * pk.nSe \
-        + AUX_CTRL * pk.nC + AUX_MOVER * pk.nM + AUX_JOINT * pk.nJ + 2 + (len(prog.names) - 1)
+    assert (
+        len(aux_names)
+        == AUX_SPAN * pk.nS
+        + AUX_NODE * pk.nN
+        + AUX_SENS * pk.nSe
+        + AUX_CTRL * pk.nC
+        + AUX_MOVER * pk.nM
+        + AUX_JOINT * pk.nJ
+        + 2
+        + (len(prog.names) - 1)
+    )
     _attach_pattern(cl)
     return cl
 
@@ -367,8 +485,16 @@ class _Packer:
     controllers and movers, and its states in web order, filled element by element by
     :func:`compile_line`; :meth:`pack` lays them out for the kernels (layout.py)."""
 
-    def __init__(self, line: Line, prog: Programme, faults, disturbances,
-                 extra_joint_slots: int, nominal_web, pitch_offsets):
+    def __init__(
+        self,
+        line: Line,
+        prog: Programme,
+        faults,
+        disturbances,
+        extra_joint_slots: int,
+        nominal_web,
+        pitch_offsets,
+    ):
         self.line, self.prog = line, prog
         self.faults, self.disturbances = faults, disturbances
         self.web = line.web
@@ -399,25 +525,27 @@ class _Packer:
         self.ctrl_P[:, CP_GATE] = 1.0  # loops are on (a splice gates the dancer loop off)
 
         self.speed_of = {c.element: j for j, c in enumerate(self.ctrls) if c.type == "speed_pi"}
-        self.tens_of = {c.element: j for j, c in enumerate(self.ctrls)
-                        if c.type == "tension_pi"}
+        self.tens_of = {c.element: j for j, c in enumerate(self.ctrls) if c.type == "tension_pi"}
 
         # movers: dancers (on a node) and festoon carriages (on a span)
         self.span_ids = [sp.id for sp in line.spans]
         self.mover_ids = [e.id for e in els if e.type in DANCERS] + [
-            sp.id for sp in line.spans if sp.festoon is not None]
+            sp.id for sp in line.spans if sp.festoon is not None
+        ]
         self.nM = len(self.mover_ids)
         self.mover_idx = {m: i for i, m in enumerate(self.mover_ids)}
         self.mov_I = np.full((self.nM, NMI), -1, np.int64)
         self.mov_P = np.zeros((self.nM, NMP))
         self.mover_q0 = [0.0] * self.nM
-        self.splice_nodes = [k for k, e in enumerate(els)
-                             if getattr(e, "splicer", None) is not None]
+        self.splice_nodes = [
+            k for k, e in enumerate(els) if getattr(e, "splicer", None) is not None
+        ]
         n_modulus = sum(f.type == "process.modulus_change" for f in faults)
         self.nJ = (N_JOINT_SLOTS if self.splice_nodes else 0) + n_modulus + extra_joint_slots
         self.nFS = len(faults)
         self.eccentric = {f.target for f in faults if f.type == "process.eccentricity"} | {
-            d.element for d in disturbances if d.type == "out_of_round"}
+            d.element for d in disturbances if d.type == "out_of_round"
+        }
         self.pitch_filters: list = []
         self.pitch_var_terms: list = []  # (sensor index, sensor) with a relaxed-pitch variation
 
@@ -452,10 +580,14 @@ class _Packer:
                 self.sens_I[j, SEI_TYPE] = SE_DANCER
                 self.sens_I[j, SEI_NODE] = m
                 self.sens_P[j, SEP_GAIN], self.sens_P[j, SEP_OFF], self.sens_P[j, SEP_TAU] = (
-                    sn.gain, sn.offset, sn.filter)
+                    sn.gain,
+                    sn.offset,
+                    sn.filter,
+                )
                 if sn.filter > 0:
-                    self.sens_I[j, SEI_F] = self.add(f"{sn.id}.filtered", unit,
-                                                     "sensor_filter", tol)
+                    self.sens_I[j, SEI_F] = self.add(
+                        f"{sn.id}.filtered", unit, "sensor_filter", tol
+                    )
 
     def _dancer_loop(self, j, c, m, k_node, span_u, q0):
         ci, cp = self.ctrl_I[j], self.ctrl_P[j]
@@ -464,8 +596,11 @@ class _Packer:
         ci[CI_MOVER] = m
         ci[CI_SENSOR] = self.sens_idx[c.sensor] if c.sensor else -1
         cp[CP_KP], cp[CP_KI] = c.kp, c.ki
-        cp[CP_KAW] = c.anti_windup_gain if c.anti_windup_gain is not None else (
-            c.ki / c.kp if c.kp > 0 else 1.0)
+        cp[CP_KAW] = (
+            c.anti_windup_gain
+            if c.anti_windup_gain is not None
+            else (c.ki / c.kp if c.kp > 0 else 1.0)
+        )
         cp[CP_LIM] = c.output_limit if c.output_limit is not None else math.inf
         cp[CP_SETP] = c.setpoint if c.setpoint is not None else q0
         cp[CP_GATE] = 1.0
@@ -491,8 +626,11 @@ class _Packer:
                 npr[NP_ECC] = d.eccentricity
         ni[NI_KIND] = {"unwind": NK_UNWIND, "rewind": NK_REWIND}.get(e.type, NK_ROLLER)
         drive = getattr(e, "drive", None)
-        ni[NI_DRIVE] = DRV_NONE if drive is None else (
-            DRV_IDEAL if drive.type == "ideal_speed" else DRV_TORQUE)
+        ni[NI_DRIVE] = (
+            DRV_NONE
+            if drive is None
+            else (DRV_IDEAL if drive.type == "ideal_speed" else DRV_TORQUE)
+        )
         ni[NI_SPAN_UP] = k - 1 if k > 0 else -1
         ni[NI_SPAN_DN] = k if k < self.nN - 1 else -1
         ni[NI_SPEEDC] = self.speed_of.get(e.id, -1)
@@ -536,8 +674,12 @@ class _Packer:
         """An unwind's or rewind's roll: geometry, wound density and strain, its states."""
         web, npr, ni, r = self.web, self.node_P[k], self.node_I[k], e.roll
         cw = r.build_per_wrap if r.build_per_wrap is not None else web.thickness
-        npr[NP_R0], npr[NP_RC], npr[NP_JC], npr[NP_CW] = (r.outer_radius, r.core_radius,
-                                                          r.core_inertia, cw)
+        npr[NP_R0], npr[NP_RC], npr[NP_JC], npr[NP_CW] = (
+            r.outer_radius,
+            r.core_radius,
+            r.core_inertia,
+            cw,
+        )
         # wound density from mass conservation: rho_r·c_w = rho·t_w (physics.md 1.4)
         npr[NP_RHOW] = web.density * web.thickness / cw * web.width
         npr[NP_EPSW], npr[NP_EPSW1], npr[NP_EPSW2] = r.wound_in_coefficients()
@@ -557,8 +699,11 @@ class _Packer:
             ci, cp = self.ctrl_I[j], self.ctrl_P[j]
             ci[CI_NODE] = k
             cp[CP_KP], cp[CP_KI] = c.kp, c.ki
-            cp[CP_KAW] = c.anti_windup_gain if c.anti_windup_gain is not None else (
-                c.ki / c.kp if c.kp > 0 else 1.0)
+            cp[CP_KAW] = (
+                c.anti_windup_gain
+                if c.anti_windup_gain is not None
+                else (c.ki / c.kp if c.kp > 0 else 1.0)
+            )
             cp[CP_LIM] = math.inf
             if c.type == "speed_pi":
                 ci[CI_TYPE] = C_SPEED
@@ -574,8 +719,7 @@ class _Packer:
     def _tension_loop(self, k, e, c, ci, cp) -> float:
         """A tension loop's record; returns the tolerance of its output."""
         roll = e.type in ("unwind", "rewind")
-        ci[CI_TYPE] = C_TENSION_TORQUE if (roll and e.drive.type == "torque") \
-            else C_TENSION_TRIM
+        ci[CI_TYPE] = C_TENSION_TORQUE if (roll and e.drive.type == "torque") else C_TENSION_TRIM
         ci[CI_SENSOR] = self.sens_idx[c.sensor]
         ci[CI_RSENSOR] = self.sens_idx[c.radius_sensor] if c.radius_sensor else -1
         ci[CI_CH] = self.channel[c.id]
@@ -590,8 +734,11 @@ class _Packer:
         cp[CP_FRF] = 1.0 if ff.friction else 0.0
         # a trim raises the tension of a span upstream of the node, lowers one downstream
         sm = self.sensors[self.sens_idx[c.sensor]]
-        meas = (self.span_ids.index(sm.span) + 1 if sm.type == "pitch_length"
-                else self.node_idx[sm.element])
+        meas = (
+            self.span_ids.index(sm.span) + 1
+            if sm.type == "pitch_length"
+            else self.node_idx[sm.element]
+        )
         cp[CP_SIGN] = 1.0 if meas <= k else -1.0
         return 1e-4 if ci[CI_TYPE] == C_TENSION_TORQUE else 1e-8
 
@@ -645,8 +792,7 @@ class _Packer:
         si_[SI_E] = self.add(f"{sp_k.id}.strain", "", "strain", 1e-4 / self.EA)
         for j, sn in self.pitch_filters:
             if sn.filter > 0:
-                self.sens_I[j, SEI_F] = self.add(f"{sn.id}.filtered", "m", "sensor_filter",
-                                                 1e-9)
+                self.sens_I[j, SEI_F] = self.add(f"{sn.id}.filtered", "m", "sensor_filter", 1e-9)
         self.pitch_filters.clear()
 
     def _pitch_sensor(self, j, sn, k):
@@ -710,18 +856,33 @@ class _Packer:
             names += [f"{sp.id}.tension_N", f"{sp.id}.geometric_strain", f"{sp.id}.length_m"]
             units += ["N", "1", "m"]
         for e in self.els:
-            names += [f"{e.id}.surface_speed_m_s", f"{e.id}.speed_rad_s", f"{e.id}.radius_m",
-                      f"{e.id}.inertia_kg_m2", f"{e.id}.web_mass_kg", f"{e.id}.torque_N_m",
-                      f"{e.id}.torque_command_N_m", f"{e.id}.tension_ratio"]
+            names += [
+                f"{e.id}.surface_speed_m_s",
+                f"{e.id}.speed_rad_s",
+                f"{e.id}.radius_m",
+                f"{e.id}.inertia_kg_m2",
+                f"{e.id}.web_mass_kg",
+                f"{e.id}.torque_N_m",
+                f"{e.id}.torque_command_N_m",
+                f"{e.id}.tension_ratio",
+            ]
             units += ["m/s", "rad/s", "m", "kg*m^2", "kg", "N*m", "N*m", "1"]
-        mover_unit = {mid: self.units[self.mov_I[m, MI_Q]]
-                      for m, mid in enumerate(self.mover_ids)}
+        mover_unit = {mid: self.units[self.mov_I[m, MI_Q]] for m, mid in enumerate(self.mover_ids)}
         for s in self.sensors:
-            u = {"load_cell": "N", "encoder": "rad_s", "roll_diameter": "m",
-                 "pitch_length": "m",
-                 "dancer_position": mover_unit.get(getattr(s, "element", ""), "m")}[s.type]
-            q = {"load_cell": "tension", "encoder": "speed", "roll_diameter": "diameter",
-                 "dancer_position": "position", "pitch_length": "pitch"}[s.type]
+            u = {
+                "load_cell": "N",
+                "encoder": "rad_s",
+                "roll_diameter": "m",
+                "pitch_length": "m",
+                "dancer_position": mover_unit.get(getattr(s, "element", ""), "m"),
+            }[s.type]
+            q = {
+                "load_cell": "tension",
+                "encoder": "speed",
+                "roll_diameter": "diameter",
+                "dancer_position": "position",
+                "pitch_length": "pitch",
+            }[s.type]
             names += [f"{s.id}.{q}_{u}", f"{s.id}.{q}_seen_{u}", f"{s.id}.force_N"]
             units += [u.replace("_", "/"), u.replace("_", "/"), "N"]
         for j, c in enumerate(self.ctrls):
@@ -739,8 +900,13 @@ class _Packer:
         for mid in self.mover_ids:
             u = mover_unit[mid]
             f_u = "N" if u == "m" else "N_m"
-            names += [f"{mid}.position_{u}", f"{mid}.velocity_{u}_s", f"{mid}.web_force_{f_u}",
-                      f"{mid}.static_force_{f_u}", f"{mid}.stop_state"]
+            names += [
+                f"{mid}.position_{u}",
+                f"{mid}.velocity_{u}_s",
+                f"{mid}.web_force_{f_u}",
+                f"{mid}.static_force_{f_u}",
+                f"{mid}.stop_state",
+            ]
             units += [u, f"{u}/s", f_u.replace("_", "*"), f_u.replace("_", "*"), "1"]
         for js in range(self.nJ):
             names += [f"splice_joint{js + 1}.lead_m", f"splice_joint{js + 1}.span_index"]
@@ -771,7 +937,7 @@ class _Packer:
         for ch in range(nch):
             sch_t[ch, : sch_n[ch]] = prog.times[ch]
             sch_v[ch, : sch_n[ch]] = prog.values[ch]
-            sch_t[ch, sch_n[ch]:] = math.inf
+            sch_t[ch, sch_n[ch] :] = math.inf
         return nch, maxpts, sch_n, sch_t, sch_v
 
     def _disturbance_tables(self):
@@ -805,20 +971,37 @@ class _Packer:
         """The header and the record blocks as the kernels' I (int64) and P (float64)."""
         nch, maxpts, sch_n, sch_t, sch_v = self._programme_tables()
         tab_I, tab_P = self._disturbance_tables()
-        blocks_I = [self.node_I.ravel(), self.span_I.ravel(), self.sens_I.ravel(),
-                    self.ctrl_I.ravel(), sch_n,
-                    np.array(ev_I, np.int64).reshape(-1, NEVI).ravel(), self.mov_I.ravel(),
-                    tab_I.ravel()]
+        blocks_I = [
+            self.node_I.ravel(),
+            self.span_I.ravel(),
+            self.sens_I.ravel(),
+            self.ctrl_I.ravel(),
+            sch_n,
+            np.array(ev_I, np.int64).reshape(-1, NEVI).ravel(),
+            self.mov_I.ravel(),
+            tab_I.ravel(),
+        ]
         offs_I, pos = [], HEADER
         for b in blocks_I:
             offs_I.append(pos)
             pos += b.size
         var_P = self._pitch_variation_terms(pitch_variations)
         nJ, nFS = self.nJ, self.nFS
-        blocks_P = [self.node_P.ravel(), self.span_P.ravel(), self.sens_P.ravel(),
-                    self.ctrl_P.ravel(), sch_t.ravel(), sch_v.ravel(), np.zeros(4),
-                    self.mov_P.ravel(), np.zeros(nJ * NJP), np.array([self.EA]),
-                    np.zeros(nFS * NFS), *tab_P, *var_P]
+        blocks_P = [
+            self.node_P.ravel(),
+            self.span_P.ravel(),
+            self.sens_P.ravel(),
+            self.ctrl_P.ravel(),
+            sch_t.ravel(),
+            sch_v.ravel(),
+            np.zeros(4),
+            self.mov_P.ravel(),
+            np.zeros(nJ * NJP),
+            np.array([self.EA]),
+            np.zeros(nFS * NFS),
+            *tab_P,
+            *var_P,
+        ]
         offs_P, ppos = [], 0
         for b in blocks_P:
             offs_P.append(ppos)
@@ -826,7 +1009,12 @@ class _Packer:
         P = np.concatenate(blocks_P)
         header = np.zeros(HEADER, np.int64)
         header[H_NN], header[H_NS], header[H_NSE], header[H_NC], header[H_NY] = (
-            self.nN, self.nS, self.nSe, self.nC, len(self.names))
+            self.nN,
+            self.nS,
+            self.nSe,
+            self.nC,
+            len(self.names),
+        )
         header[H_OFF_NI], header[H_OFF_SI], header[H_OFF_SEI], header[H_OFF_CI] = offs_I[:4]
         header[H_OFF_SCHN], header[H_OFF_EV] = offs_I[4], offs_I[5]
         header[H_OFF_NP], header[H_OFF_SP], header[H_OFF_SEP], header[H_OFF_CP] = offs_P[:4]
@@ -854,8 +1042,9 @@ def _attach_pattern(cl: CompiledLine) -> None:
     n = cl.n_states
     touch = np.zeros((n, n))
     y = np.zeros(n)
-    kernels.evaluate(0.0, y, np.zeros(n), touch, MODE_TOUCH, cl.I, cl.P, cl._W, cl._GI, cl._GC,
-                     cl._GV, cl._aux0)
+    kernels.evaluate(
+        0.0, y, np.zeros(n), touch, MODE_TOUCH, cl.I, cl.P, cl._W, cl._GI, cl._GC, cl._GV, cl._aux0
+    )
     rows, cols = np.nonzero(touch)
     cl.pattern = (rows.astype(np.int64), cols.astype(np.int64))
     cl.lband = int(max(0, (rows - cols).max(initial=0)))
@@ -863,7 +1052,6 @@ def _attach_pattern(cl: CompiledLine) -> None:
     cl.I[H_NPAT] = len(rows)
     cl.I[H_OFF_PAT] = len(cl.I)
     cl.I = np.concatenate([cl.I, cl.pattern[0], cl.pattern[1]])
-
 
 
 def _dancer_record(line: Line, k: int):
@@ -893,11 +1081,12 @@ def _dancer_record(line: Line, k: int):
         arm = e.arm_length
         mp[MP_CX], mp[MP_CY] = e.pivot
         mp[MP_NX] = arm
-        mp[MP_MASS] = e.arm_inertia + e.roller_mass * arm ** 2
+        mp[MP_MASS] = e.arm_inertia + e.roller_mass * arm**2
         mp[MP_QMIN], mp[MP_QMAX] = e.angle_range
         mp[MP_F0] = e.torque
-        lever = e.roller_mass * arm + e.arm_mass * (e.arm_com if e.arm_com is not None
-                                                    else 0.5 * arm)
+        lever = e.roller_mass * arm + e.arm_mass * (
+            e.arm_com if e.arm_com is not None else 0.5 * arm
+        )
         mp[MP_G1], mp[MP_G2] = lever * gy, -lever * gx
         if e.torsion_spring is not None:
             mp[MP_K], mp[MP_Q0] = e.torsion_spring.stiffness, e.torsion_spring.free_angle
@@ -920,8 +1109,10 @@ def _tangents(mp, centre):
     ``centre``."""
     cx, cy = centre
     out = []
-    for (ax, ay, bx, by, delta) in ((mp[MP_AX], mp[MP_AY], cx, cy, mp[MP_DU]),
-                                     (cx, cy, mp[MP_BX], mp[MP_BY], mp[MP_DD])):
+    for ax, ay, bx, by, delta in (
+        (mp[MP_AX], mp[MP_AY], cx, cy, mp[MP_DU]),
+        (cx, cy, mp[MP_BX], mp[MP_BY], mp[MP_DD]),
+    ):
         dx, dy = bx - ax, by - ay
         d2 = dx * dx + dy * dy
         lam = math.sqrt(d2 - delta * delta)

@@ -156,8 +156,11 @@ def autocorrelation(lag, f_c: float, std: float = 1.0) -> np.ndarray:
     top = math.atan(CUTOFF)
     theta = (np.arange(4000) + 0.5) * (top / 4000)  # midpoint rule in theta
     f = f_c * np.tan(theta)
-    return std * std * np.cos(2.0 * math.pi * np.multiply.outer(np.asarray(lag, float), f)
-                              ).mean(axis=-1)
+    return (
+        std
+        * std
+        * np.cos(2.0 * math.pi * np.multiply.outer(np.asarray(lag, float), f)).mean(axis=-1)
+    )
 
 
 def realise_disturbances(scenario, line, seed_sequence) -> list[DisturbanceInstance]:
@@ -182,33 +185,52 @@ def realise_disturbances(scenario, line, seed_sequence) -> list[DisturbanceInsta
     for d, child in zip(scenario.disturbances, children, strict=True):
         rng = np.random.default_rng(child)
         if d.type == "out_of_round":
-            out.append(DisturbanceInstance(d.type, d.element, eccentricity=d.eccentricity,
-                                           phase=float(rng.uniform(0.0, 2.0 * math.pi))))
+            out.append(
+                DisturbanceInstance(
+                    d.type,
+                    d.element,
+                    eccentricity=d.eccentricity,
+                    phase=float(rng.uniform(0.0, 2.0 * math.pi)),
+                )
+            )
             continue
         shape = d.shape or "sines"  # the table form: to reproduce data made before issue 16
         if shape == "sines":
-            f_c = d.bandwidth if d.type == "bearing_drag" else \
-                1.0 / (2.0 * math.pi * d.correlation_length)
+            f_c = (
+                d.bandwidth
+                if d.type == "bearing_drag"
+                else 1.0 / (2.0 * math.pi * d.correlation_length)
+            )
             a, w, ph = _sines(rng, d.std_si(), f_c)
-            out.append(DisturbanceInstance(d.type, d.element, shape, amplitudes=a, omegas=w,
-                                           phases=ph))
+            out.append(
+                DisturbanceInstance(d.type, d.element, shape, amplitudes=a, omegas=w, phases=ph)
+            )
         elif d.type == "bearing_drag":
             # on the sample grid; first-order filter of the given bandwidth
             n = int(math.ceil(scenario.duration * rate)) + 2
             a = math.exp(-2.0 * math.pi * d.bandwidth / rate)
-            out.append(DisturbanceInstance(d.type, d.element, shape, 0.0, 1.0 / rate,
-                                           _ar1(rng, n, a, d.std_si())))
+            out.append(
+                DisturbanceInstance(
+                    d.type, d.element, shape, 0.0, 1.0 / rate, _ar1(rng, n, a, d.std_si())
+                )
+            )
         else:  # wound_in_strain along the web, ten points per correlation length
             dx = d.correlation_length / 10.0
-            if wound_in_strain_points(v_max, scenario.duration, d.correlation_length) > \
-                    MAX_SAMPLES:  # checked at load; again for a --duration override
-                raise InputError(f"a correlation length of {d.correlation_length:g} m needs a "
-                                 f"table of more than {MAX_SAMPLES:.0e} points over this run",
-                                 path="disturbances[].correlation_length")
+            if (
+                wound_in_strain_points(v_max, scenario.duration, d.correlation_length) > MAX_SAMPLES
+            ):  # checked at load; again for a --duration override
+                raise InputError(
+                    f"a correlation length of {d.correlation_length:g} m needs a "
+                    f"table of more than {MAX_SAMPLES:.0e} points over this run",
+                    path="disturbances[].correlation_length",
+                )
             length = 1.5 * v_max * scenario.duration + 10.0 * d.correlation_length
             n = int(math.ceil(length / dx)) + 2
-            out.append(DisturbanceInstance(d.type, d.element, shape, 0.0, dx,
-                                           _ar1(rng, n, math.exp(-0.1), d.std_si())))
+            out.append(
+                DisturbanceInstance(
+                    d.type, d.element, shape, 0.0, dx, _ar1(rng, n, math.exp(-0.1), d.std_si())
+                )
+            )
     return out
 
 
@@ -244,19 +266,27 @@ def realise_pitch_variations(line, seed_sequence) -> dict[str, np.ndarray]:
     dict
         Sensor id -> array (M, 3) of (amplitude [m], wavenumber [rad/m], phase [rad]).
     """
-    sensors = [(j, s) for j, s in enumerate(line.sensors)
-               if s.type == "pitch_length" and s.pitch_variation is not None]
+    sensors = [
+        (j, s)
+        for j, s in enumerate(line.sensors)
+        if s.type == "pitch_length" and s.pitch_variation is not None
+    ]
     # a fixed spawn key per sensor (not the next spawn() after the disturbances'), so adding
     # a disturbance or another sensor does not change a sensor's variation
     ss = seed_sequence
-    children = [np.random.SeedSequence(ss.entropy, spawn_key=(*ss.spawn_key,
-                                                              PITCH_VARIATION_KEY, j))
-                for j, _ in sensors]
+    children = [
+        np.random.SeedSequence(ss.entropy, spawn_key=(*ss.spawn_key, PITCH_VARIATION_KEY, j))
+        for j, _ in sensors
+    ]
     out = {}
     for (_, s), child in zip(sensors, children, strict=True):
         pv = s.pitch_variation
-        amp, kappa, phase = _spectral_terms(np.random.default_rng(child),
-                                            PITCH_VARIATION_TERMS, pv.std, "gaussian",
-                                            pv.correlation_length)
+        amp, kappa, phase = _spectral_terms(
+            np.random.default_rng(child),
+            PITCH_VARIATION_TERMS,
+            pv.std,
+            "gaussian",
+            pv.correlation_length,
+        )
         out[s.id] = np.column_stack([amp, kappa, phase])
     return out

@@ -113,18 +113,36 @@ class FaultInstance:
     def record(self, run_id: str, onset_k: int) -> dict:
         """Row of faults.parquet."""
         return {
-            "run_id": run_id, "fault_id": self.id, "fault_type": self.type,
-            "fault_class": self.kind.fault_class, "target_id": self.target,
-            "component_path": self.target, "onset_t_s": self.onset, "onset_k": onset_k,
-            "profile": self.shape, "ramp_s": self.ramp, "end_t_s": self.end,
-            "magnitude": self.magnitude, "magnitude_unit": self.unit,
+            "run_id": run_id,
+            "fault_id": self.id,
+            "fault_type": self.type,
+            "fault_class": self.kind.fault_class,
+            "target_id": self.target,
+            "component_path": self.target,
+            "onset_t_s": self.onset,
+            "onset_k": onset_k,
+            "profile": self.shape,
+            "ramp_s": self.ramp,
+            "end_t_s": self.end,
+            "magnitude": self.magnitude,
+            "magnitude_unit": self.unit,
             "magnitude_rel": self.magnitude_rel,
-            "params_json": json.dumps({k: v for k, v in (
-                ("period_s", self.period), ("duty", self.duty), ("rate_hz", self.rate),
-                ("compose", self.compose), ("record_only", self.record_only or None))
-                if v is not None}),
+            "params_json": json.dumps(
+                {
+                    k: v
+                    for k, v in (
+                        ("period_s", self.period),
+                        ("duty", self.duty),
+                        ("rate_hz", self.rate),
+                        ("compose", self.compose),
+                        ("record_only", self.record_only or None),
+                    )
+                    if v is not None
+                }
+            ),
             "expected_channels": list(self.expected_channels),
-            "composed_with": list(self.composed_with), "sampled_from": self.sampled_from,
+            "composed_with": list(self.composed_with),
+            "sampled_from": self.sampled_from,
         }
 
 
@@ -148,16 +166,25 @@ def from_record(row: dict) -> FaultInstance:
         return None if v is None or (isinstance(v, float) and math.isnan(v)) else float(v)
 
     return FaultInstance(
-        id=row["fault_id"], type=row["fault_type"], target=row["target_id"],
-        onset=float(row["onset_t_s"]), end=num(row["end_t_s"]), shape=row["profile"],
-        ramp=num(row["ramp_s"]), period=params.get("period_s"), duty=params.get("duty"),
-        magnitude=float(row["magnitude"]), unit=row["magnitude_unit"],
-        rate=params.get("rate_hz"), compose=params.get("compose"),
+        id=row["fault_id"],
+        type=row["fault_type"],
+        target=row["target_id"],
+        onset=float(row["onset_t_s"]),
+        end=num(row["end_t_s"]),
+        shape=row["profile"],
+        ramp=num(row["ramp_s"]),
+        period=params.get("period_s"),
+        duty=params.get("duty"),
+        magnitude=float(row["magnitude"]),
+        unit=row["magnitude_unit"],
+        rate=params.get("rate_hz"),
+        compose=params.get("compose"),
         record_only=bool(params.get("record_only", False)),
-        composed_with=list(row["composed_with"] or []), sampled_from=row["sampled_from"],
+        composed_with=list(row["composed_with"] or []),
+        sampled_from=row["sampled_from"],
         expected_channels=list(row["expected_channels"] or []),
-        magnitude_rel=float(row["magnitude_rel"]) if row["magnitude_rel"] is not None
-        else math.nan)
+        magnitude_rel=float(row["magnitude_rel"]) if row["magnitude_rel"] is not None else math.nan,
+    )
 
 
 def _draw(value, dimension, rng, where, file):
@@ -166,8 +193,9 @@ def _draw(value, dimension, rng, where, file):
     def si(v):
         if dimension is None:
             if isinstance(v, str):
-                raise InputError("give this magnitude as a number in SI units", file=file,
-                                 path=where)
+                raise InputError(
+                    "give this magnitude as a number in SI units", file=file, path=where
+                )
             return float(v)
         try:
             return parse_quantity(v, dimension)
@@ -184,15 +212,17 @@ def _draw(value, dimension, rng, where, file):
         if not (0 < lo <= hi):
             raise InputError("loguniform needs 0 < low <= high", file=file, path=where)
         return float(math.exp(rng.uniform(math.log(lo), math.log(hi)))), json.dumps(
-            {"loguniform": [lo, hi]})
+            {"loguniform": [lo, hi]}
+        )
     if isinstance(value, Choice):
         vals = [si(v) for v in value.choice]
         return float(vals[int(rng.integers(len(vals)))]), json.dumps({"choice": vals})
     return si(value), None
 
 
-def realise_faults(scenario, line, seed_sequence, file: str = "<scenario>",
-                   channel_of=None) -> list[FaultInstance]:
+def realise_faults(
+    scenario, line, seed_sequence, file: str = "<scenario>", channel_of=None
+) -> list[FaultInstance]:
     """Draw the run's fault instances.
 
     Parameters
@@ -219,11 +249,15 @@ def realise_faults(scenario, line, seed_sequence, file: str = "<scenario>",
         if ft.magnitude == "none":
             mag, mag_spec = 1.0, None
         else:
-            mag, mag_spec = _draw(f.magnitude, magnitude_dimension(f.type, rdim), rng,
-                                  f"{where}.magnitude", file)
+            mag, mag_spec = _draw(
+                f.magnitude, magnitude_dimension(f.type, rdim), rng, f"{where}.magnitude", file
+            )
         if f.end is not None and f.end <= onset:
-            raise InputError(f"end {f.end:g} s comes before the drawn onset {onset:g} s",
-                             file=file, path=f"{where}.end")
+            raise InputError(
+                f"end {f.end:g} s comes before the drawn onset {onset:g} s",
+                file=file,
+                path=f"{where}.end",
+            )
         spec = {k: v for k, v in (("onset", onset_spec), ("magnitude", mag_spec)) if v}
         noise = (getattr(s, "noise", 0.0) or 0.0) if s is not None else 0.0
         rel = math.nan
@@ -232,18 +266,31 @@ def realise_faults(scenario, line, seed_sequence, file: str = "<scenario>",
         elif ft.magnitude == "reading" and noise > 0:
             rel = abs(mag) / noise
         inst = FaultInstance(
-            id=f.id, type=f.type, target=f.target, onset=onset, end=f.end,
-            shape=f.profile.shape, ramp=f.profile.ramp, period=f.profile.period,
-            duty=f.profile.duty, magnitude=mag, unit=unit, rate=f.rate, compose=f.compose,
+            id=f.id,
+            type=f.type,
+            target=f.target,
+            onset=onset,
+            end=f.end,
+            shape=f.profile.shape,
+            ramp=f.profile.ramp,
+            period=f.profile.period,
+            duty=f.profile.duty,
+            magnitude=mag,
+            unit=unit,
+            rate=f.rate,
+            compose=f.compose,
             record_only=f.record_only,
-            sampled_from=json.dumps({k: json.loads(v) for k, v in spec.items()}) if spec
-            else None,
+            sampled_from=json.dumps({k: json.loads(v) for k, v in spec.items()}) if spec else None,
             expected_channels=[channel_of(f.target)] if channel_of and s is not None else [],
-            magnitude_rel=rel)
+            magnitude_rel=rel,
+        )
         out.append(inst)
     for a in out:
-        a.composed_with = sorted(b.id for b in out if b is not a and b.target == a.target
-                                 and _overlap(a, b) and a.compose and b.compose)
+        a.composed_with = sorted(
+            b.id
+            for b in out
+            if b is not a and b.target == a.target and _overlap(a, b) and a.compose and b.compose
+        )
     return out
 
 

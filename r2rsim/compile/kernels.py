@@ -140,8 +140,32 @@ def _offsets(I):
     oRW0 = oXF + nN
     oEW = oRW0 + nSe
     oDC = oEW + 2 * nN
-    return (oT, oEM, oL, oLD, oLP, oLPP, oEAE, oV, oR, oOM, oJ, oTRIM, oTCMD, oTM, oRAW, oYS,
-            oU, oE, oMF, oMW, oXF, oRW0, oEW, oDC)
+    return (
+        oT,
+        oEM,
+        oL,
+        oLD,
+        oLP,
+        oLPP,
+        oEAE,
+        oV,
+        oR,
+        oOM,
+        oJ,
+        oTRIM,
+        oTCMD,
+        oTM,
+        oRAW,
+        oYS,
+        oU,
+        oE,
+        oMF,
+        oMW,
+        oXF,
+        oRW0,
+        oEW,
+        oDC,
+    )
 
 
 DRAG_CACHE = 7  # per node: three times, their drag torques, the next slot to fill
@@ -206,10 +230,30 @@ def mover_lengths(P, bm, kind, q):
         dcy = arm * math.cos(q)
         cx = P[bm + MP_CX] + arm * math.cos(q)
         cy = P[bm + MP_CY] + arm * math.sin(q)
-    lu, dlu = _span_geo(P[bm + MP_AX], P[bm + MP_AY], cx, cy, P[bm + MP_DU], P[bm + MP_TUX],
-                        P[bm + MP_TUY], 1.0, dcx, dcy)
-    ld, dld = _span_geo(cx, cy, P[bm + MP_BX], P[bm + MP_BY], P[bm + MP_DD], P[bm + MP_TDX],
-                        P[bm + MP_TDY], -1.0, dcx, dcy)
+    lu, dlu = _span_geo(
+        P[bm + MP_AX],
+        P[bm + MP_AY],
+        cx,
+        cy,
+        P[bm + MP_DU],
+        P[bm + MP_TUX],
+        P[bm + MP_TUY],
+        1.0,
+        dcx,
+        dcy,
+    )
+    ld, dld = _span_geo(
+        cx,
+        cy,
+        P[bm + MP_BX],
+        P[bm + MP_BY],
+        P[bm + MP_DD],
+        P[bm + MP_TDX],
+        P[bm + MP_TDY],
+        -1.0,
+        dcx,
+        dcy,
+    )
     return lu, dlu, ld, dld
 
 
@@ -269,8 +313,7 @@ def sines_slope(I, P, kind, node, x):
     out = 0.0
     for m in range(I[H_NTB]):
         bt = I[H_OFF_TB] + m * NTI
-        if I[bt + TI_KIND] != kind or I[bt + TI_NODE] != node or \
-                I[bt + TI_SHAPE] != SH_SINES:
+        if I[bt + TI_KIND] != kind or I[bt + TI_NODE] != node or I[bt + TI_SHAPE] != SH_SINES:
             continue
         o = I[bt + TI_OFFP]
         n = I[bt + TI_N]
@@ -286,8 +329,7 @@ def has_sines(I, kind, node):
     property: it decides the Jacobian pattern)."""
     for m in range(I[H_NTB]):
         bt = I[H_OFF_TB] + m * NTI
-        if I[bt + TI_KIND] == kind and I[bt + TI_NODE] == node and \
-                I[bt + TI_SHAPE] == SH_SINES:
+        if I[bt + TI_KIND] == kind and I[bt + TI_NODE] == node and I[bt + TI_SHAPE] == SH_SINES:
             return True
     return False
 
@@ -350,8 +392,32 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
     EAweb = P[I[H_EA]]
     ntb = I[H_NTB]
 
-    (oT, oEM, oL, oLD, oLP, oLPP, oEAE, oV, oR, oOM, oJ, oTRIM, oTCMD, oTM, oRAW, oYS, oU, oE,
-     oMF, oMW, oXF, oRW0, oEW, oDC) = _offsets(I)
+    (
+        oT,
+        oEM,
+        oL,
+        oLD,
+        oLP,
+        oLPP,
+        oEAE,
+        oV,
+        oR,
+        oOM,
+        oJ,
+        oTRIM,
+        oTCMD,
+        oTM,
+        oRAW,
+        oYS,
+        oU,
+        oE,
+        oMF,
+        oMW,
+        oXF,
+        oRW0,
+        oEW,
+        oDC,
+    ) = _offsets(I)
     # gradient quantity ids
     qT = 0
     qL = qT + nS
@@ -385,8 +451,12 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         bs = oFS + fs * NFS
         if P[bs + FS_ON] != 0.0:
             dt = t - P[bs + FS_T0]
-            P[int(P[bs + FS_IDX])] = (P[bs + FS_BASE] + P[bs + FS_A] + P[bs + FS_B] * dt
-                                      + P[bs + FS_C] * math.exp(-dt / P[bs + FS_TAU]))
+            P[int(P[bs + FS_IDX])] = (
+                P[bs + FS_BASE]
+                + P[bs + FS_A]
+                + P[bs + FS_B] * dt
+                + P[bs + FS_C] * math.exp(-dt / P[bs + FS_TAU])
+            )
 
     # 0. span lengths: fixed, or set by a dancer's or festoon carriage's coordinate q
     for i in range(nS):
@@ -517,7 +587,7 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             R = math.sqrt(R2) if R2 > 1e-12 else 1e-6
             W[oR + k] = R
             Rc = P[b + NP_RC]
-            W[oJ + k] = P[b + NP_JC] + 0.5 * PI * P[b + NP_RHOW] * (R ** 4 - Rc ** 4)
+            W[oJ + k] = P[b + NP_JC] + 0.5 * PI * P[b + NP_RHOW] * (R**4 - Rc**4)
             if jac:
                 _g_add(GI, GC, GV, maxd, qR + k, iS, sg * P[b + NP_CW] / (2.0 * PI * R))
         else:
@@ -606,8 +676,31 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
                     if I[oSEI + j * NSEI + SEI_VN] > 0:
                         _g_add(GI, GC, GV, maxd, qRAW + j, iU, h * dL0du)
         else:
-            _sensor_raw(j, typ, node, g, P[b + SEP_OFF], P[b + SEP_WIN], P[b + SEP_WOUT], I,
-                        oNI, W, oT, oR, oOM, oRAW, jac, GI, GC, GV, maxd, qT, qR, qOM, qRAW)
+            _sensor_raw(
+                j,
+                typ,
+                node,
+                g,
+                P[b + SEP_OFF],
+                P[b + SEP_WIN],
+                P[b + SEP_WOUT],
+                I,
+                oNI,
+                W,
+                oT,
+                oR,
+                oOM,
+                oRAW,
+                jac,
+                GI,
+                GC,
+                GV,
+                maxd,
+                qT,
+                qR,
+                qOM,
+                qRAW,
+            )
         _sensor_fault(t, P, b, W, oRAW + j, oRW0 + j, jac, GC, GV, maxd, qRAW + j)
         if iF >= 0:
             W[oYS + j] = y[iF]
@@ -651,8 +744,12 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
                     wy = P[bs + SEP_COUT] / L0c
                     e = Tref - (W[oYS + sens] / L0c - 1.0) * P[bs + SEP_COUT]
                     # de/dR through L0c
-                    wr = W[oYS + sens] * P[bs + SEP_COUT] / (L0c * L0c) * (
-                        3.0 * P[bs + SEP_Q1] * Rn * Rn)
+                    wr = (
+                        W[oYS + sens]
+                        * P[bs + SEP_COUT]
+                        / (L0c * L0c)
+                        * (3.0 * P[bs + SEP_Q1] * Rn * Rn)
+                    )
             else:
                 wy = 1.0
                 e = Tref - W[oYS + sens]
@@ -717,8 +814,12 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             else:
                 draw = P[b + CP_DRAW]
                 ddraw = 0.0
-            vref = (V * (1.0 + draw) * vg + P[bn + NP_VOFF]
-                    + P[bn + NP_VSLOPE] * (t - P[bn + NP_VT0]) + W[oTRIM + k])
+            vref = (
+                V * (1.0 + draw) * vg
+                + P[bn + NP_VOFF]
+                + P[bn + NP_VSLOPE] * (t - P[bn + NP_VT0])
+                + W[oTRIM + k]
+            )
             wref = vref / R
             sens = I[oCI + c * NCI + CI_SENSOR]
             wm = W[oYS + sens] if sens >= 0 else W[oOM + k]
@@ -743,9 +844,8 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
                 if ix >= 0:
                     _g_add(GI, GC, GV, maxd, qTCMD + k, ix, ki)
                 if kind != NK_ROLLER:
-                    dJdR = 2.0 * PI * P[bn + NP_RHOW] * R ** 3
-                    _g_axpy(GI, GC, GV, maxd, qTCMD + k,
-                            ff * (dJdR * aref - J * aref / R), qR + k)
+                    dJdR = 2.0 * PI * P[bn + NP_RHOW] * R**3
+                    _g_axpy(GI, GC, GV, maxd, qTCMD + k, ff * (dJdR * aref - J * aref / R), qR + k)
         else:  # torque-mode tension control of a roll
             sgn = -1.0 if kind == NK_UNWIND else 1.0
             rs = I[oCI + c * NCI + CI_RSENSOR]
@@ -766,12 +866,14 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             jfac = P[b + CP_JFAC]
             rr = P[b + CP_RR]
             fr = P[b + CP_FRF]
-            Jh = (jfac * (P[bn + NP_JC] + 0.5 * PI * P[bn + NP_RHOW] * (Rh ** 4 - Rc ** 4))
-                  + P[b + CP_JABS])
-            dJh = jfac * (2.0 * PI * P[bn + NP_RHOW] * Rh ** 3)
+            Jh = (
+                jfac * (P[bn + NP_JC] + 0.5 * PI * P[bn + NP_RHOW] * (Rh**4 - Rc**4))
+                + P[b + CP_JABS]
+            )
+            dJh = jfac * (2.0 * PI * P[bn + NP_RHOW] * Rh**3)
             cw = P[bn + NP_CW]
-            alpha = A / Rh - rr * sgn * cw * V * V / (2.0 * PI * Rh ** 3)
-            dalpha = -A / (Rh * Rh) + 3.0 * rr * sgn * cw * V * V / (2.0 * PI * Rh ** 4)
+            alpha = A / Rh - rr * sgn * cw * V * V / (2.0 * PI * Rh**3)
+            dalpha = -A / (Rh * Rh) + 3.0 * rr * sgn * cw * V * V / (2.0 * PI * Rh**4)
             om = W[oOM + k]
             weps = P[bn + NP_WEPS]
             th = math.tanh(om / weps)
@@ -854,8 +956,12 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
                 draw, _ = setpoint(I, P, dch, t)
             else:
                 draw = P[bn + NP_DRAW]
-            v = (V * (1.0 + draw) * P[bn + NP_VGAIN] + P[bn + NP_VOFF]
-                 + P[bn + NP_VSLOPE] * (t - P[bn + NP_VT0]) + W[oTRIM + k])
+            v = (
+                V * (1.0 + draw) * P[bn + NP_VGAIN]
+                + P[bn + NP_VOFF]
+                + P[bn + NP_VSLOPE] * (t - P[bn + NP_VT0])
+                + W[oTRIM + k]
+            )
             W[oV + k] = rf * v
             W[oOM + k] = v / R
             if jac:
@@ -870,8 +976,31 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         if typ != SE_ENCODER or I[oNI + node * NI + NI_W] >= 0:
             continue
         b = oSEP + j * NSEP
-        _sensor_raw(j, typ, node, P[b + SEP_GAIN], P[b + SEP_OFF], 0.0, 0.0, I, oNI, W, oT,
-                    oR, oOM, oRAW, jac, GI, GC, GV, maxd, qT, qR, qOM, qRAW)
+        _sensor_raw(
+            j,
+            typ,
+            node,
+            P[b + SEP_GAIN],
+            P[b + SEP_OFF],
+            0.0,
+            0.0,
+            I,
+            oNI,
+            W,
+            oT,
+            oR,
+            oOM,
+            oRAW,
+            jac,
+            GI,
+            GC,
+            GV,
+            maxd,
+            qT,
+            qR,
+            qOM,
+            qRAW,
+        )
         _sensor_fault(t, P, b, W, oRAW + j, oRW0 + j, jac, GC, GV, maxd, qRAW + j)
         iF = I[oSEI + j * NSEI + SEI_F]
         W[oYS + j] = y[iF] if iF >= 0 else W[oRAW + j]
@@ -916,14 +1045,22 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
             if up >= 0:
                 _j_axpy(JJ, mode, iw, (fu - Re) / J, GI, GC, GV, maxd, qT + up)
             if ith >= 0:
-                _j_add(JJ, mode, iw, ith, P[b + NP_ECC] * (
-                    math.cos(y[ith]) * Tup - math.cos(y[ith] - P[b + NP_WRAP]) * Tdn) / J)
+                _j_add(
+                    JJ,
+                    mode,
+                    iw,
+                    ith,
+                    P[b + NP_ECC]
+                    * (math.cos(y[ith]) * Tup - math.cos(y[ith] - P[b + NP_WRAP]) * Tdn)
+                    / J,
+                )
             _j_axpy(JJ, mode, iw, 1.0 / J, GI, GC, GV, maxd, qTM + k)
             _j_add(JJ, mode, iw, iw, -dtf / J)
             if I[oNI + k * NI + NI_KIND] != NK_ROLLER:
-                dJdR = 2.0 * PI * P[b + NP_RHOW] * R ** 3
-                _j_axpy(JJ, mode, iw, (Tdn - Tup) / J - num * dJdR / (J * J), GI, GC, GV,
-                        maxd, qR + k)
+                dJdR = 2.0 * PI * P[b + NP_RHOW] * R**3
+                _j_axpy(
+                    JJ, mode, iw, (Tdn - Tup) / J - num * dJdR / (J * J), GI, GC, GV, maxd, qR + k
+                )
 
     # 10. rolls: length through the tangent point (s) and unstretched length (u)
     for k in range(nN):
@@ -952,17 +1089,60 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         if jac:
             _j_axpy(JJ, mode, iS, 1.0, GI, GC, GV, maxd, qV + k)
             if kind == NK_UNWIND:
-                _j_flux(JJ, mode, iU, 1.0, v, esrc_fwd, W[oEM + sp], -1, sp, xk, linear, I,
-                        P, GI, GC, GV, maxd, qV + k, qT, oSP)
+                _j_flux(
+                    JJ,
+                    mode,
+                    iU,
+                    1.0,
+                    v,
+                    esrc_fwd,
+                    W[oEM + sp],
+                    -1,
+                    sp,
+                    xk,
+                    linear,
+                    I,
+                    P,
+                    GI,
+                    GC,
+                    GV,
+                    maxd,
+                    qV + k,
+                    qT,
+                    oSP,
+                )
                 dq = v * _df(xk * esrc_fwd, linear) * xk * desrc if v >= 0.0 else 0.0
                 _j_axpy(JJ, mode, iU, dq, GI, GC, GV, maxd, qR + k)
                 if ntb > 0 and has_sines(I, TB_WOUND, k):  # the strain along u = y[iU]
-                    dq = v * _df(xk * esrc_fwd, linear) * xk * sines_slope(
-                        I, P, TB_WOUND, k, y[iU]) if v >= 0.0 else 0.0
+                    dq = (
+                        v * _df(xk * esrc_fwd, linear) * xk * sines_slope(I, P, TB_WOUND, k, y[iU])
+                        if v >= 0.0
+                        else 0.0
+                    )
                     _j_add(JJ, mode, iU, iU, dq)
             else:
-                _j_flux(JJ, mode, iU, 1.0, v, W[oEM + sp], W[oEM + sp], sp, sp, xk, linear,
-                        I, P, GI, GC, GV, maxd, qV + k, qT, oSP)
+                _j_flux(
+                    JJ,
+                    mode,
+                    iU,
+                    1.0,
+                    v,
+                    W[oEM + sp],
+                    W[oEM + sp],
+                    sp,
+                    sp,
+                    xk,
+                    linear,
+                    I,
+                    P,
+                    GI,
+                    GC,
+                    GV,
+                    maxd,
+                    qV + k,
+                    qT,
+                    oSP,
+                )
 
     # 11. spans: mass conservation with the geometric strain as the state
     for i in range(nS):
@@ -1013,14 +1193,59 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
                 _j_axpy(JJ, mode, ie, -fac * dqa, GI, GC, GV, maxd, qR + a)
                 if ntb > 0 and has_sines(I, TB_WOUND, a):
                     iua = I[oNI + a * NI + NI_U]
-                    dqa = W[oV + a] * _df(xa * ef, linear) * xa * sines_slope(
-                        I, P, TB_WOUND, a, y[iua]) if W[oV + a] >= 0.0 else 0.0
+                    dqa = (
+                        W[oV + a]
+                        * _df(xa * ef, linear)
+                        * xa
+                        * sines_slope(I, P, TB_WOUND, a, y[iua])
+                        if W[oV + a] >= 0.0
+                        else 0.0
+                    )
                     _j_add(JJ, mode, ie, iua, -fac * dqa)
-            _j_flux(JJ, mode, ie, fac, W[oV + bnode], W[oEM + i], er, i,
-                    sp_after if sp_after >= 0 else i, xb, linear, I, P, GI, GC, GV, maxd,
-                    qV + bnode, qT, oSP)
-            _j_flux(JJ, mode, ie, -fac, W[oV + a], ef, W[oEM + i], sp_before, i, xa, linear,
-                    I, P, GI, GC, GV, maxd, qV + a, qT, oSP)
+            _j_flux(
+                JJ,
+                mode,
+                ie,
+                fac,
+                W[oV + bnode],
+                W[oEM + i],
+                er,
+                i,
+                sp_after if sp_after >= 0 else i,
+                xb,
+                linear,
+                I,
+                P,
+                GI,
+                GC,
+                GV,
+                maxd,
+                qV + bnode,
+                qT,
+                oSP,
+            )
+            _j_flux(
+                JJ,
+                mode,
+                ie,
+                -fac,
+                W[oV + a],
+                ef,
+                W[oEM + i],
+                sp_before,
+                i,
+                xa,
+                linear,
+                I,
+                P,
+                GI,
+                GC,
+                GV,
+                maxd,
+                qV + a,
+                qT,
+                oSP,
+            )
 
     # 12. first-order sensor filters
     for j in range(nSe):
@@ -1130,8 +1355,7 @@ def _pitch_material(span, rn, P, b, I):
         bj = oJP + js * NJP
         if P[bj + JP_ACTIVE] == 0.0 or P[bj + JP_MAT] == 0.0:
             continue
-        if int(P[bj + JP_SPAN]) > span and int(P[bj + JP_TSPAN]) <= span \
-                and P[bj + JP_U0] > u0:
+        if int(P[bj + JP_SPAN]) > span and int(P[bj + JP_TSPAN]) <= span and P[bj + JP_U0] > u0:
             u0 = P[bj + JP_U0]
             ratio = P[bj + JP_RATIO]
             dl0 = P[bj + JP_DL0] if int(P[bj + JP_NODE]) == rn else P[b + SEP_DL0]
@@ -1162,8 +1386,31 @@ def _pitch_l0(j, rn, P, b, I, oSEI, oNI, W, oR, y):
 
 
 @njit(cache=True)
-def _sensor_raw(j, typ, node, g, off, win, wout, I, oNI, W, oT, oR, oOM, oRAW, jac, GI, GC, GV,
-                maxd, qT, qR, qOM, qRAW):
+def _sensor_raw(
+    j,
+    typ,
+    node,
+    g,
+    off,
+    win,
+    wout,
+    I,
+    oNI,
+    W,
+    oT,
+    oR,
+    oOM,
+    oRAW,
+    jac,
+    GI,
+    GC,
+    GV,
+    maxd,
+    qT,
+    qR,
+    qOM,
+    qRAW,
+):
     if typ == SE_LOADCELL:
         up = I[oNI + node * NI + NI_SPAN_UP]
         dn = I[oNI + node * NI + NI_SPAN_DN]
@@ -1204,8 +1451,28 @@ def _flux(v, e_fwd, e_rev, linear):
 
 
 @njit(cache=True)
-def _j_flux(JJ, mode, row, a, v, e_fwd, e_rev, sp_fwd, sp_rev, xf, linear, I, P, GI, GC, GV,
-            maxd, qv, qT, oSP):
+def _j_flux(
+    JJ,
+    mode,
+    row,
+    a,
+    v,
+    e_fwd,
+    e_rev,
+    sp_fwd,
+    sp_rev,
+    xf,
+    linear,
+    I,
+    P,
+    GI,
+    GC,
+    GV,
+    maxd,
+    qv,
+    qT,
+    oSP,
+):
     """Add a·d(flux)/dy to a Jacobian row for the flux v·f(xf·e) (xf: splice-joint factor
     of the node). Both upwind sources are recorded (one with 0)."""
     fwd = v >= 0.0
@@ -1231,8 +1498,32 @@ def event_values(t, y, g, I, P, W, GI, GC, GV, yd, JJ):
     trigger: R - R_trigger; refill: storage short of its set-point.
     """
     evaluate(t, y, yd, JJ, RUNTIME_MODE[MODE_RHS], I, P, W, GI, GC, GV, yd[:0])
-    (oT, oEM, oL, oLD, oLP, oLPP, oEAE, oV, oR, oOM, oJ, oTRIM, oTCMD, oTM, oRAW, oYS, oU, oE,
-     oMF, oMW, oXF, oRW0, oEW, oDC) = _offsets(I)
+    (
+        oT,
+        oEM,
+        oL,
+        oLD,
+        oLP,
+        oLPP,
+        oEAE,
+        oV,
+        oR,
+        oOM,
+        oJ,
+        oTRIM,
+        oTCMD,
+        oTM,
+        oRAW,
+        oYS,
+        oU,
+        oE,
+        oMF,
+        oMW,
+        oXF,
+        oRW0,
+        oEW,
+        oDC,
+    ) = _offsets(I)
     oNI = I[H_OFF_NI]
     oSI = I[H_OFF_SI]
     oNP = I[H_OFF_NP]
@@ -1328,7 +1619,6 @@ def jac_values(t, y, JJ, I, P, W, GI, GC, GV, yd, vals):
         vals[m] = JJ[I[op + m], I[op + npat + m]]
 
 
-
 @njit(cache=True)
 def rhs_rows(T, Y, F, I, P, W, GI, GC, GV, JJ, aux0):
     """dy/dt for every row of a state matrix."""
@@ -1363,5 +1653,6 @@ def hermite(ts, ys, fs, tq, out):
         h01 = -2.0 * s3 + 3.0 * s2
         h11 = s3 - s2
         for i in range(n):
-            out[r, i] = (h00 * ys[j, i] + h10 * h * fs[j, i] + h01 * ys[j + 1, i]
-                         + h11 * h * fs[j + 1, i])
+            out[r, i] = (
+                h00 * ys[j, i] + h10 * h * fs[j, i] + h01 * ys[j + 1, i] + h11 * h * fs[j + 1, i]
+            )

@@ -10,23 +10,23 @@ cannot disagree.
 import numpy as np
 
 # ---- header of I (offsets of the record blocks and counts) ----
-H_NN, H_NS, H_NSE, H_NC, H_NY = 0, 1, 2, 3, 4          # nodes, spans, sensors, controllers, states
-H_OFF_NI, H_OFF_SI, H_OFF_SEI, H_OFF_CI = 5, 6, 7, 8    # record blocks in I
+H_NN, H_NS, H_NSE, H_NC, H_NY = 0, 1, 2, 3, 4  # nodes, spans, sensors, controllers, states
+H_OFF_NI, H_OFF_SI, H_OFF_SEI, H_OFF_CI = 5, 6, 7, 8  # record blocks in I
 H_OFF_NP, H_OFF_SP, H_OFF_SEP, H_OFF_CP = 9, 10, 11, 12  # record blocks in P
-H_MODEL = 13             # 0 exact span model, 1 linear
-H_NCH = 14               # number of set-point channels (0 = line speed)
-H_OFF_SCHN = 15          # I block: number of points per channel
+H_MODEL = 13  # 0 exact span model, 1 linear
+H_NCH = 14  # number of set-point channels (0 = line speed)
+H_OFF_SCHN = 15  # I block: number of points per channel
 H_OFF_SCHT, H_OFF_SCHV = 16, 17  # P blocks: times, values (H_MAXPTS per channel)
 H_MAXPTS = 18
-H_OFF_RT = 19            # P block: runtime values (segment start time)
+H_OFF_RT = 19  # P block: runtime values (segment start time)
 H_NPAT, H_OFF_PAT = 20, 21  # Jacobian pattern (rows then cols) in I
-H_NQ, H_MAXD = 22, 23    # gradient scratch: number of quantities, slots per quantity
-H_NAUX = 25              # length of one row of algebraic outputs
-H_NEV = 26               # number of event functions
-H_OFF_EV = 27            # I block: event records
-H_NM, H_OFF_MI, H_OFF_MP = 28, 29, 30   # movers (dancers, festoon carriages)
+H_NQ, H_MAXD = 22, 23  # gradient scratch: number of quantities, slots per quantity
+H_NAUX = 25  # length of one row of algebraic outputs
+H_NEV = 26  # number of event functions
+H_OFF_EV = 27  # I block: event records
+H_NM, H_OFF_MI, H_OFF_MP = 28, 29, 30  # movers (dancers, festoon carriages)
 H_NJ, H_OFF_JP = 31, 32  # splice-joint slots (P block)
-H_EA = 33                # index in P of the web's EA
+H_EA = 33  # index in P of the web's EA
 H_NFS, H_OFF_FS = 34, 35  # fault parameter slots (P block)
 H_NTB, H_OFF_TB = 36, 37  # process-disturbance tables (I records; values in P)
 HEADER = 40
@@ -41,10 +41,40 @@ NI_TH = 11  # roller angle state (only for an eccentric roller), else -1
 # or the ideal-speed drive's NP_DRAW) and an open-loop torque command (added to tau_cmd)
 NI_DRAWCH, NI_TQCH = 12, 13
 NI = 14
-(NP_R, NP_J, NP_B, NP_TC, NP_WEPS, NP_R0, NP_RC, NP_JC, NP_CW, NP_RHOW, NP_EPSW,
- NP_TLAG, NP_TMAX, NP_DRAW, NP_EMB, NP_RIPA, NP_RIPW, NP_EPSW1, NP_EPSW2,
- NP_VGAIN, NP_VOFF, NP_VSLOPE, NP_VT0, NP_RTRIG,
- NP_TEFF, NP_TBIAS, NP_TSTUCK, NP_TSV, NP_FRICF, NP_REFF, NP_ECC, NP_WRAP) = range(32)
+(
+    NP_R,
+    NP_J,
+    NP_B,
+    NP_TC,
+    NP_WEPS,
+    NP_R0,
+    NP_RC,
+    NP_JC,
+    NP_CW,
+    NP_RHOW,
+    NP_EPSW,
+    NP_TLAG,
+    NP_TMAX,
+    NP_DRAW,
+    NP_EMB,
+    NP_RIPA,
+    NP_RIPW,
+    NP_EPSW1,
+    NP_EPSW2,
+    NP_VGAIN,
+    NP_VOFF,
+    NP_VSLOPE,
+    NP_VT0,
+    NP_RTRIG,
+    NP_TEFF,
+    NP_TBIAS,
+    NP_TSTUCK,
+    NP_TSV,
+    NP_FRICF,
+    NP_REFF,
+    NP_ECC,
+    NP_WRAP,
+) = range(32)
 NP = 32
 # faults on a node (defaults: TEFF 1, FRICF 1, the rest 0):
 #   applied torque = TSV while TSTUCK, else clip(TEFF·command + TBIAS, ±TMAX)
@@ -72,9 +102,29 @@ NSEI = 6
 # or the held value SV while STUCK; FON = 0 skips all of it
 # SEP_DL0 (pitch): relaxed-pitch offset of the web at the sensor while no material joint
 # (below) covers it, i.e. that of the roll on the unwind at t = 0
-(SEP_WIN, SEP_WOUT, SEP_GAIN, SEP_OFF, SEP_TAU, SEP_CIN, SEP_COUT, SEP_FON, SEP_FT0, SEP_BA,
- SEP_BB, SEP_BC, SEP_BTAU, SEP_GA, SEP_GB, SEP_GC, SEP_GTAU, SEP_STUCK, SEP_SV, SEP_Q1,
- SEP_DL0) = range(21)
+(
+    SEP_WIN,
+    SEP_WOUT,
+    SEP_GAIN,
+    SEP_OFF,
+    SEP_TAU,
+    SEP_CIN,
+    SEP_COUT,
+    SEP_FON,
+    SEP_FT0,
+    SEP_BA,
+    SEP_BB,
+    SEP_BC,
+    SEP_BTAU,
+    SEP_GA,
+    SEP_GB,
+    SEP_GC,
+    SEP_GTAU,
+    SEP_STUCK,
+    SEP_SV,
+    SEP_Q1,
+    SEP_DL0,
+) = range(21)
 NSEP = 21
 
 # ---- controller records ----
@@ -91,10 +141,45 @@ NCP = 13
 MV_LINEAR, MV_PIVOT, MV_FESTOON = 1, 2, 3
 MI_KIND, MI_Q, MI_QD, MI_SPAN_U, MI_SPAN_D, MI_NODE = range(6)
 NMI = 6
-(MP_MASS, MP_QMIN, MP_QMAX, MP_C, MP_FC, MP_EPS, MP_F0, MP_K, MP_Q0, MP_G1, MP_G2, MP_MODE,
- MP_CX, MP_CY, MP_NX, MP_NY, MP_AX, MP_AY, MP_BX, MP_BY, MP_DU, MP_DD, MP_TUX, MP_TUY,
- MP_TDX, MP_TDY, MP_LU0, MP_LD0, MP_NSTR, MP_CYLF, MP_CYLX, MP_CYLY, MP_CYLA,
- MP_SEIZED_Q, MP_FAIR, MP_LOADF, MP_FRICF) = range(37)
+(
+    MP_MASS,
+    MP_QMIN,
+    MP_QMAX,
+    MP_C,
+    MP_FC,
+    MP_EPS,
+    MP_F0,
+    MP_K,
+    MP_Q0,
+    MP_G1,
+    MP_G2,
+    MP_MODE,
+    MP_CX,
+    MP_CY,
+    MP_NX,
+    MP_NY,
+    MP_AX,
+    MP_AY,
+    MP_BX,
+    MP_BY,
+    MP_DU,
+    MP_DD,
+    MP_TUX,
+    MP_TUY,
+    MP_TDX,
+    MP_TDY,
+    MP_LU0,
+    MP_LD0,
+    MP_NSTR,
+    MP_CYLF,
+    MP_CYLX,
+    MP_CYLY,
+    MP_CYLA,
+    MP_SEIZED_Q,
+    MP_FAIR,
+    MP_LOADF,
+    MP_FRICF,
+) = range(37)
 NMP = 37
 # MP_FAIR: actuator force of a linear dancer or festoon (MP_F0 then holds gravity only);
 # MP_LOADF scales the actuator (air cylinder, torque motor): loss of loading;
@@ -106,8 +191,9 @@ NMP = 37
 # the trail is still on the roll). JP_MAT: 1 for a material joint (the web of another roll,
 # or a modulus change: JP_RATIO is its E·A over the first roll's and JP_DL0 its relaxed-pitch
 # offset), 0 for a splice overlap
-(JP_ACTIVE, JP_U0, JP_LEN, JP_RATIO, JP_TBRK, JP_SPAN, JP_NODE, JP_TSPAN, JP_MAT,
- JP_DL0) = range(10)
+(JP_ACTIVE, JP_U0, JP_LEN, JP_RATIO, JP_TBRK, JP_SPAN, JP_NODE, JP_TSPAN, JP_MAT, JP_DL0) = range(
+    10
+)
 NJP = 10
 
 # ---- fault parameter slots (P only): while FS_ON, the kernel sets, at every evaluation,
@@ -120,7 +206,7 @@ NFS = 8
 # ---- process disturbances: I record (kind, node, n, offset in P, shape).
 # SH_TABLE: P holds [x0, dx, v0 .. v(n-1)], interpolated linearly (held outside the grid);
 # SH_SINES: P holds n amplitudes, n angular frequencies, n phases: sum a·sin(w·x + phase)
-TB_DRAG, TB_WOUND = 1, 2   # drag torque on node vs time; wound-in strain of an unwind vs u
+TB_DRAG, TB_WOUND = 1, 2  # drag torque on node vs time; wound-in strain of an unwind vs u
 TI_KIND, TI_NODE, TI_N, TI_OFFP, TI_SHAPE = range(5)
 NTI = 5
 SH_TABLE, SH_SINES = 0, 1
@@ -128,16 +214,22 @@ SH_TABLE, SH_SINES = 0, 1
 # ---- event records (I block, 3 ints each: kind, index, sign convention) ----
 EV_SLACK, EV_BREAK, EV_CAPSTAN, EV_EMPTY = 1, 2, 3, 4
 EV_STOP_LO, EV_STOP_HI, EV_JOINT_PASS, EV_JOINT_BREAK, EV_SPLICE_RADIUS, EV_REFILL = (
-    5, 6, 7, 8, 9, 10)
+    5,
+    6,
+    7,
+    8,
+    9,
+    10,
+)
 NEVI = 2
 
 # ---- algebraic outputs, per record ----
-AUX_SPAN = 3      # tension, geometric strain, length
-AUX_NODE = 8      # v, omega, R, J, m, tau_applied, tau_cmd, capstan margin ratio
-AUX_SENS = 3      # physical value, controller-visible value, bearing force (load cell)
-AUX_CTRL = 3      # error, output, integrator
-AUX_MOVER = 5     # position, velocity, web force, net force, mode
-AUX_JOINT = 2     # leading-edge position (unstretched, from the unwind), span index
+AUX_SPAN = 3  # tension, geometric strain, length
+AUX_NODE = 8  # v, omega, R, J, m, tau_applied, tau_cmd, capstan margin ratio
+AUX_SENS = 3  # physical value, controller-visible value, bearing force (load cell)
+AUX_CTRL = 3  # error, output, integrator
+AUX_MOVER = 5  # position, velocity, web force, net force, mode
+AUX_JOINT = 2  # leading-edge position (unstretched, from the unwind), span index
 # set-points after the records: line speed, line acceleration, one per channel >= 1
 
 # ---- evaluation modes ----

@@ -33,13 +33,25 @@ VARIABILITY_KEY = 1 << 20
 
 #: drawn in this order, one draw each if varied (append only: an insertion would shift the
 #: draws of every run with the later parameters)
-_ROLL_PARAMETERS = (("modulus", "pressure", "Pa"), ("thickness", "length", "m"),
-                    ("outer_radius", "length", "m"), ("wound_in_strain", "dimensionless", ""),
-                    ("relaxed_pitch", "length", "m"))
+_ROLL_PARAMETERS = (
+    ("modulus", "pressure", "Pa"),
+    ("thickness", "length", "m"),
+    ("outer_radius", "length", "m"),
+    ("wound_in_strain", "dimensionless", ""),
+    ("relaxed_pitch", "length", "m"),
+)
 
 #: the columns of variability.parquet, in order (run_id, then these)
-VARIABILITY_COLUMNS = ("source", "component", "roll", "parameter", "unit", "nominal", "value",
-                       "loaded_t_s")
+VARIABILITY_COLUMNS = (
+    "source",
+    "component",
+    "roll",
+    "parameter",
+    "unit",
+    "nominal",
+    "value",
+    "loaded_t_s",
+)
 
 
 def draw(spread: Spread, nominal: float, dimension: str, rng: np.random.Generator) -> float:
@@ -52,8 +64,9 @@ def draw(spread: Spread, nominal: float, dimension: str, rng: np.random.Generato
 
 
 def _child(ss: np.random.SeedSequence, *key: int) -> np.random.Generator:
-    return np.random.default_rng(np.random.SeedSequence(ss.entropy,
-                                                        spawn_key=(*ss.spawn_key, *key)))
+    return np.random.default_rng(
+        np.random.SeedSequence(ss.entropy, spawn_key=(*ss.spawn_key, *key))
+    )
 
 
 @dataclass
@@ -65,12 +78,12 @@ class RollDraws:
     """
 
     stream: np.random.SeedSequence
-    spec: dict            # unwind id -> RollVariability
-    node_of: dict         # unwind id -> node index
-    web_EA: float         # E·A of the web at t = 0 (the first roll's) [N]
-    web_modulus: float    # nominal E [Pa]
+    spec: dict  # unwind id -> RollVariability
+    node_of: dict  # unwind id -> node index
+    web_EA: float  # E·A of the web at t = 0 (the first roll's) [N]
+    web_modulus: float  # nominal E [Pa]
     web_thickness: float  # nominal thickness [m]
-    web_width: float      # [m]
+    web_width: float  # [m]
     rows: list = field(default_factory=list)
     #: unwind id -> relaxed-pitch offset [m] of its roll at t = 0 (varied unwinds only)
     pitch_offset0: dict = field(default_factory=dict)
@@ -86,18 +99,31 @@ class RollDraws:
         rng = _child(self.stream, 2, self.node_of[unwind], n)
         spec = self.spec[unwind]
         e0 = roll.wound_in_coefficients()[0]
-        nominal = {"modulus": self.web_modulus, "thickness": self.web_thickness,
-                   "outer_radius": roll.outer_radius, "wound_in_strain": e0,
-                   "relaxed_pitch": 0.0}
+        nominal = {
+            "modulus": self.web_modulus,
+            "thickness": self.web_thickness,
+            "outer_radius": roll.outer_radius,
+            "wound_in_strain": e0,
+            "relaxed_pitch": 0.0,
+        }
         out = {}
         for name, dim, unit in _ROLL_PARAMETERS:  # fixed order: one draw each, if varied
             spread = getattr(spec, name)
             if spread is None:
                 continue
             out[name] = draw(spread, nominal[name], dim, rng)
-            self.rows.append({"source": "roll", "component": unwind, "roll": n,
-                              "parameter": name, "unit": unit, "nominal": nominal[name],
-                              "value": out[name], "loaded_t_s": t})
+            self.rows.append(
+                {
+                    "source": "roll",
+                    "component": unwind,
+                    "roll": n,
+                    "parameter": name,
+                    "unit": unit,
+                    "nominal": nominal[name],
+                    "value": out[name],
+                    "loaded_t_s": t,
+                }
+            )
         return out
 
     def next_roll(self, unwind: str, roll, t: float):
@@ -110,8 +136,11 @@ class RollDraws:
         v = self.roll_values(unwind, roll, t)
         if not {"modulus", "thickness", "relaxed_pitch"} & v.keys():
             return apply_roll(roll, v), None, None
-        ea = (v.get("modulus", self.web_modulus) * v.get("thickness", self.web_thickness)
-              * self.web_width)
+        ea = (
+            v.get("modulus", self.web_modulus)
+            * v.get("thickness", self.web_thickness)
+            * self.web_width
+        )
         return apply_roll(roll, v), ea / self.web_EA, v.get("relaxed_pitch")
 
 
@@ -152,8 +181,9 @@ def realise_variability(scenario, line, seed_sequence):
     var = scenario.variability
     if var is None:
         return line, None, []
-    stream = np.random.SeedSequence(seed_sequence.entropy, spawn_key=(
-        *seed_sequence.spawn_key, VARIABILITY_KEY))
+    stream = np.random.SeedSequence(
+        seed_sequence.entropy, spawn_key=(*seed_sequence.spawn_key, VARIABILITY_KEY)
+    )
     rows: list[dict] = []
     elements = list(line.elements)
     if var.friction is not None:
@@ -161,15 +191,31 @@ def realise_variability(scenario, line, seed_sequence):
         for k, e in enumerate(elements):  # one draw per element, in line order
             f = draw(var.friction, 1.0, "dimensionless", rng)
             fr = e.friction
-            elements[k] = e.model_copy(update={"friction": fr.model_copy(update={
-                "viscous": fr.viscous * f, "coulomb": fr.coulomb * f})})
-            for name, unit, value in (("friction.viscous", "N m s/rad", fr.viscous),
-                                      ("friction.coulomb", "N m", fr.coulomb)):
+            elements[k] = e.model_copy(
+                update={
+                    "friction": fr.model_copy(
+                        update={"viscous": fr.viscous * f, "coulomb": fr.coulomb * f}
+                    )
+                }
+            )
+            for name, unit, value in (
+                ("friction.viscous", "N m s/rad", fr.viscous),
+                ("friction.coulomb", "N m", fr.coulomb),
+            ):
                 if value == 0.0:
                     continue  # nothing varies
-                rows.append({"source": "run", "component": e.id, "roll": None,
-                             "parameter": name, "unit": unit, "nominal": value,
-                             "value": value * f, "loaded_t_s": 0.0})
+                rows.append(
+                    {
+                        "source": "run",
+                        "component": e.id,
+                        "roll": None,
+                        "parameter": name,
+                        "unit": unit,
+                        "nominal": value,
+                        "value": value * f,
+                        "loaded_t_s": 0.0,
+                    }
+                )
     sensors = list(line.sensors)
     for j, s in enumerate(sensors):
         cal = var.sensors.get(s.id)
@@ -178,26 +224,42 @@ def realise_variability(scenario, line, seed_sequence):
         rng = _child(stream, 1, j)
         dim, unit = sensor_dimension(line, s)
         update = {}
-        for name, spread, nominal, d, u in (("gain", cal.gain, s.gain, "dimensionless", ""),
-                                            ("offset", cal.offset, s.offset, dim, unit)):
+        for name, spread, nominal, d, u in (
+            ("gain", cal.gain, s.gain, "dimensionless", ""),
+            ("offset", cal.offset, s.offset, dim, unit),
+        ):
             if spread is None:
                 continue
             update[name] = draw(spread, nominal, d, rng)
-            rows.append({"source": "run", "component": s.id, "roll": None,
-                         "parameter": f"calibration.{name}", "unit": u, "nominal": nominal,
-                         "value": update[name], "loaded_t_s": 0.0})
+            rows.append(
+                {
+                    "source": "run",
+                    "component": s.id,
+                    "roll": None,
+                    "parameter": f"calibration.{name}",
+                    "unit": u,
+                    "nominal": nominal,
+                    "value": update[name],
+                    "loaded_t_s": 0.0,
+                }
+            )
         sensors[j] = s.model_copy(update=update)
     web = line.web
     node_of = {e.id: k for k, e in enumerate(elements)}
-    rolls = RollDraws(stream, dict(var.rolls), node_of, web.EA, web.modulus, web.thickness,
-                      web.width)
+    rolls = RollDraws(
+        stream, dict(var.rolls), node_of, web.EA, web.modulus, web.thickness, web.width
+    )
     for uid in var.rolls:
         k = node_of[uid]
         v = rolls.roll_values(uid, elements[k].roll, 0.0)
         elements[k] = elements[k].model_copy(update={"roll": apply_roll(elements[k].roll, v)})
         if "modulus" in v or "thickness" in v:  # the first roll's web is the line's
-            web = web.model_copy(update={"modulus": v.get("modulus", web.modulus),
-                                         "thickness": v.get("thickness", web.thickness)})
+            web = web.model_copy(
+                update={
+                    "modulus": v.get("modulus", web.modulus),
+                    "thickness": v.get("thickness", web.thickness),
+                }
+            )
         if "relaxed_pitch" in v:
             rolls.pitch_offset0[uid] = v["relaxed_pitch"]
             for s in sensors:
@@ -218,7 +280,8 @@ def joint_slots_needed(scenario, line) -> int:
     n = 0
     for uid, r in var.rolls.items():
         e = line.element(uid)
-        if getattr(e, "splicer", None) is not None and (r.modulus or r.thickness
-                                                         or r.relaxed_pitch):
+        if getattr(e, "splicer", None) is not None and (
+            r.modulus or r.thickness or r.relaxed_pitch
+        ):
             n += 2
     return n

@@ -14,8 +14,7 @@ if TYPE_CHECKING:
     from .columns import true_state_columns
     from .writer import SCHEMA_VERSION, DatasetWriter
 
-_LAZY = {"SCHEMA_VERSION": ".writer", "DatasetWriter": ".writer",
-         "true_state_columns": ".columns"}
+_LAZY = {"SCHEMA_VERSION": ".writer", "DatasetWriter": ".writer", "true_state_columns": ".columns"}
 
 __all__ = ["SCHEMA_VERSION", "DatasetWriter", "true_state_columns"]
 

@@ -40,21 +40,27 @@ def true_state_columns(cl: CompiledLine) -> list[dict]:
     for j, name in enumerate(cl.aux_names):
         comp, _, q = name.partition(".")
         unit = cl.aux_units[j]
-        mq = q.split("_")[0] if not q.startswith(("web_", "static_", "stop_")) else \
-            "_".join(q.split("_")[:2])
+        mq = (
+            q.split("_")[0]
+            if not q.startswith(("web_", "static_", "stop_"))
+            else "_".join(q.split("_")[:2])
+        )
         if comp in cl.mover_ids and mq in _MOVER_DESC:
             kind, desc = "state", _MOVER_DESC[mq]
         elif comp.startswith("splice_joint"):
             kind = "state"
-            desc = {"lead_m": "unstretched web length from the unwind to the joint's leading "
-                              "edge (NaN: no joint on the line)",
-                    "span_index": "index of the span holding the joint's leading edge (-1: "
-                                  "none)"}[q]
+            desc = {
+                "lead_m": "unstretched web length from the unwind to the joint's leading "
+                "edge (NaN: no joint on the line)",
+                "span_index": "index of the span holding the joint's leading edge (-1: none)",
+            }[q]
         elif comp in cl.span_ids:
             kind = "state"
-            desc = {"tension_N": "span tension (true)",
-                    "geometric_strain": "geometric strain L/l - 1 (< 0: slack)",
-                    "length_m": "span path length (changes with a dancer or festoon)"}[q]
+            desc = {
+                "tension_N": "span tension (true)",
+                "geometric_strain": "geometric strain L/l - 1 (< 0: slack)",
+                "length_m": "span path length (changes with a dancer or festoon)",
+            }[q]
         elif comp in cl.node_ids:
             if q == "tension_ratio" and comp in (cl.node_ids[0], cl.node_ids[-1]):
                 continue  # an end roll has one span: no capstan ratio
@@ -77,9 +83,21 @@ def true_state_columns(cl: CompiledLine) -> list[dict]:
                 continue  # the true shadow is written by the measurement stage
         else:
             kind = "ctrl"
-            desc = {"error": "controller error", "output": "controller output",
-                    "integral": "integrator state"}[q.split("_")[0]]
+            desc = {
+                "error": "controller error",
+                "output": "controller output",
+                "integral": "integrator state",
+            }[q.split("_")[0]]
         col = f"{kind}.{comp}.{q}" if comp != "line" else f"{kind}.{q}"
-        out.append({"aux": j, "column": col, "kind": kind, "component": comp, "quantity": q,
-                    "unit": unit, "description": desc})
+        out.append(
+            {
+                "aux": j,
+                "column": col,
+                "kind": kind,
+                "component": comp,
+                "quantity": q,
+                "unit": unit,
+                "description": desc,
+            }
+        )
     return out

@@ -53,18 +53,19 @@ class _FaultsAt:
     def __init__(self, fault_rows: list[dict], t: np.ndarray):
         n = len(t)
         self.faults = faults = [from_record(r) for r in fault_rows]
-        self.present = np.array([f.present(t) for f in faults], dtype=bool).reshape(
-            len(faults), n)
+        self.present = np.array([f.present(t) for f in faults], dtype=bool).reshape(len(faults), n)
         self.prof = np.array([f.p(t) for f in faults], dtype=float).reshape(len(faults), n)
         self.n_active = self.present.sum(axis=0)
         self.any_on = self.n_active > 0
-        rel = np.array([f.magnitude_rel if not math.isnan(f.magnitude_rel) else -1.0
-                        for f in faults])
+        rel = np.array(
+            [f.magnitude_rel if not math.isnan(f.magnitude_rel) else -1.0 for f in faults]
+        )
         score = np.where(self.present, rel[:, None], -np.inf)
         first = np.argmax(score, axis=0) if faults else np.zeros(n, int)
         self.primary = np.where(self.any_on, first, len(faults))
-        self.severity = np.where(self.any_on, self.prof[first, np.arange(n)] if faults
-                                 else 0.0, 0.0)
+        self.severity = np.where(
+            self.any_on, self.prof[first, np.arange(n)] if faults else 0.0, 0.0
+        )
 
     def sensor_mask(self, sensor_id: str) -> np.ndarray:
         """Where a sensor fault of ``sensor_id`` corrupts its channel (p > 0)."""
@@ -75,9 +76,16 @@ class _FaultsAt:
         return mask
 
 
-def derive_labels(fault_rows: list[dict], k: np.ndarray, t: np.ndarray, *, warmup: float,
-                  modes: list, terminated_k: int | None, sensor_channels: dict[str, str]
-                  ) -> dict[str, np.ndarray | pa.Array]:
+def derive_labels(
+    fault_rows: list[dict],
+    k: np.ndarray,
+    t: np.ndarray,
+    *,
+    warmup: float,
+    modes: list,
+    terminated_k: int | None,
+    sensor_channels: dict[str, str],
+) -> dict[str, np.ndarray | pa.Array]:
     """The ``label.*`` columns of a chunk of samples (``label.fault_ids`` as an Arrow list
     array, the others as numpy arrays).
 
@@ -154,8 +162,11 @@ def label_column(batch, name: str) -> np.ndarray | pa.Array:
     column stays an Arrow array."""
     col = batch.column(name)
     if isinstance(col, pa.ChunkedArray):
-        col = col.unify_dictionaries().combine_chunks() if pa.types.is_dictionary(
-            col.type) else col.combine_chunks()
+        col = (
+            col.unify_dictionaries().combine_chunks()
+            if pa.types.is_dictionary(col.type)
+            else col.combine_chunks()
+        )
     if pa.types.is_dictionary(col.type):
         if col.null_count == 0:
             values = col.dictionary.to_numpy(zero_copy_only=False)
@@ -212,8 +223,9 @@ def first_difference(name: str, got, expected) -> int | None:
     return int(np.argmax(diff)) if diff.any() else None
 
 
-def check_labels(batch, k: np.ndarray, want: dict, names: list[str],
-                 reported: set[str]) -> list[str]:
+def check_labels(
+    batch, k: np.ndarray, want: dict, names: list[str], reported: set[str]
+) -> list[str]:
     """The batch's label columns against those derived from faults.parquet (``want``, from
     :func:`derive_labels`): one message per column, at its first difference (``reported``
     holds the columns already told)."""
@@ -228,16 +240,23 @@ def check_labels(batch, k: np.ndarray, want: dict, names: list[str],
         got = label_column(batch, name)
         bad = first_difference(name, got, expected)
         if bad is not None:
-            problems.append(f"{name} at k = {k[bad]} is {_item(got[bad])!r}; "
-                            f"faults.parquet gives {_item(expected[bad])!r}")
+            problems.append(
+                f"{name} at k = {k[bad]} is {_item(got[bad])!r}; "
+                f"faults.parquet gives {_item(expected[bad])!r}"
+            )
             reported.add(name)
     return problems
 
 
 #: the label columns :func:`quick_label_problem` compares (the others follow from them, the
 #: run's warm-up and its programme, not from faults.parquet alone)
-QUICK_LABELS = ("label.is_faulty", "label.n_active", "label.primary_type", "label.severity",
-                "label.score_mask")
+QUICK_LABELS = (
+    "label.is_faulty",
+    "label.n_active",
+    "label.primary_type",
+    "label.severity",
+    "label.score_mask",
+)
 
 
 def quick_label_problem(table: pa.Table, run: dict, fault_rows: list[dict]) -> str | None:
@@ -259,20 +278,25 @@ def quick_label_problem(table: pa.Table, run: dict, fault_rows: list[dict]) -> s
     t = table.column("t_s").to_numpy()
     k = table.column("k").to_numpy()
     fa = _FaultsAt(fault_rows, t)
-    want = {"label.is_faulty": fa.any_on, "label.n_active": fa.n_active,
-            "label.severity": fa.severity.astype(np.float32),
-            "label.score_mask": t >= run["warmup_s"]}
+    want = {
+        "label.is_faulty": fa.any_on,
+        "label.n_active": fa.n_active,
+        "label.severity": fa.severity.astype(np.float32),
+        "label.score_mask": t >= run["warmup_s"],
+    }
     for name in table.column_names:
         if name.startswith("label.ch."):
-            want[name] = fa.sensor_mask(name[len("label.ch."):].split(".")[0])
+            want[name] = fa.sensor_mask(name[len("label.ch.") :].split(".")[0])
     for name, expected in want.items():
         if name not in table.column_names:
             return f"label column {name} missing"
         got = table.column(name).to_numpy()
         bad = first_difference(name, got, expected)
         if bad is not None:
-            return (f"{name} at k = {k[bad]} is {_item(got[bad])!r}; faults.parquet gives "
-                    f"{_item(expected[bad])!r}")
+            return (
+                f"{name} at k = {k[bad]} is {_item(got[bad])!r}; faults.parquet gives "
+                f"{_item(expected[bad])!r}"
+            )
     return _primary_problem(table, k, fa.primary, [f.type for f in fa.faults])
 
 
@@ -284,8 +308,7 @@ def _primary_problem(table: pa.Table, k, primary: np.ndarray, types: list[str]) 
     col = table.column("label.primary_type")
     names = [*types, "normal"]
     if pa.types.is_dictionary(col.type):
-        col = col.unify_dictionaries().combine_chunks() if isinstance(
-            col, pa.ChunkedArray) else col
+        col = col.unify_dictionaries().combine_chunks() if isinstance(col, pa.ChunkedArray) else col
         words = col.dictionary.to_pylist()
         got = col.indices.to_numpy(zero_copy_only=False)
         # each stored word's meaning as a fault index; several faults may share a type
@@ -300,5 +323,7 @@ def _primary_problem(table: pa.Table, k, primary: np.ndarray, types: list[str]) 
         return None
     i = int(np.argmax(bad))
     stored = col[i].as_py() if not isinstance(col, pa.DictionaryArray) else col[i].as_py()
-    return (f"label.primary_type at k = {k[i]} is {stored!r}; faults.parquet gives "
-            f"{names[primary[i]]!r}")
+    return (
+        f"label.primary_type at k = {k[i]} is {stored!r}; faults.parquet gives "
+        f"{names[primary[i]]!r}"
+    )

@@ -65,11 +65,18 @@ def layout_problem(rel: str, *, sweep: bool) -> str | None:
     if len(parts) == 1:
         ok = rel in TOP_FILES and (sweep or rel[: -len(".parquet")] not in SWEEP_TABLES)
     elif parts[0] == SAMPLES:
-        ok = (len(parts) == 3 and parts[1].startswith("run_id=")
-              and safe_component(parts[1][len("run_id="):]) and parts[2] == "part-0.parquet")
+        ok = (
+            len(parts) == 3
+            and parts[1].startswith("run_id=")
+            and safe_component(parts[1][len("run_id=") :])
+            and parts[2] == "part-0.parquet"
+        )
     else:
-        ok = len(parts) == 2 and parts[0] in (SWEEP_COPIES if sweep else RUN_COPIES) \
+        ok = (
+            len(parts) == 2
+            and parts[0] in (SWEEP_COPIES if sweep else RUN_COPIES)
             and safe_component(parts[1])
+        )
     return None if ok else "not a file of the r2rsim dataset layout"
 
 
@@ -98,8 +105,11 @@ def sha256_file(path: Path) -> str:
 def safe_component(name: str) -> bool:
     """Whether ``name`` can be used as one directory or file name: not empty, not ``.`` or
     ``..``, no path separator and no NUL."""
-    return (isinstance(name, str) and name not in ("", ".", "..")
-            and not any(c in name for c in "/\\\0"))
+    return (
+        isinstance(name, str)
+        and name not in ("", ".", "..")
+        and not any(c in name for c in "/\\\0")
+    )
 
 
 def inside(base: Path, rel: str | Path) -> Path:
@@ -126,8 +136,10 @@ def inside(base: Path, rel: str | Path) -> Path:
     root = Path(base).resolve()
     path = (root / rel).resolve()
     if path == root or not path.is_relative_to(root):
-        raise R2RError(f"refusing to write '{rel}': it resolves to {path}, outside the "
-                       f"dataset directory {base}")
+        raise R2RError(
+            f"refusing to write '{rel}': it resolves to {path}, outside the "
+            f"dataset directory {base}"
+        )
     return path
 
 
@@ -156,13 +168,14 @@ def occupied_output(out: Path) -> bool:
         For a symbolic link or something that is not a directory (never replaced).
     """
     if out.is_symlink():
-        raise InputError(f"output directory '{out}' is a symbolic link; give the directory "
-                         f"it points to, or another one, with -o")
+        raise InputError(
+            f"output directory '{out}' is a symbolic link; give the directory "
+            f"it points to, or another one, with -o"
+        )
     if not out.exists():
         return False
     if not out.is_dir():
-        raise InputError(f"output '{out}' exists and is not a directory; choose another "
-                         f"with -o")
+        raise InputError(f"output '{out}' exists and is not a directory; choose another with -o")
     return any(out.iterdir())
 
 
@@ -191,17 +204,20 @@ def check_writable(out: str | Path, *, inside_out: bool) -> None:
     while not os.path.lexists(anc) and anc != anc.parent:
         anc = anc.parent
     if not anc.is_dir():
-        raise InputError(f"output '{out}': '{anc}' is a file, not a directory, so nothing "
-                         f"can be written under it; choose another directory with -o")
+        raise InputError(
+            f"output '{out}': '{anc}' is a file, not a directory, so nothing "
+            f"can be written under it; choose another directory with -o"
+        )
     if not inside_out and out.is_dir() and not out.is_symlink() and os.path.ismount(out):
-        raise InputError(f"output '{out}' is a mount point: a run writes its dataset next to "
-                         f"the output and moves it into place, which cannot replace a mount "
-                         f"point; give a directory inside it (-o {out / 'NAME'})")
+        raise InputError(
+            f"output '{out}' is a mount point: a run writes its dataset next to "
+            f"the output and moves it into place, which cannot replace a mount "
+            f"point; give a directory inside it (-o {out / 'NAME'})"
+        )
     if os.access(anc, os.W_OK | os.X_OK):
         return
     read_only = hasattr(os, "statvfs") and bool(os.statvfs(anc).f_flag & os.ST_RDONLY)
-    why = "is on a read-only file system" if read_only else \
-        "is not writable (no permission)"
+    why = "is on a read-only file system" if read_only else "is not writable (no permission)"
     raise InputError(f"output '{out}': '{anc}' {why}; choose another directory with -o")
 
 
@@ -244,8 +260,11 @@ def read_manifest(root: Path) -> tuple[dict | None, str | None]:
         manifest = read_json(mpath)
     except (OSError, ValueError) as exc:
         return None, f"manifest.json is not readable JSON ({exc})"
-    if not isinstance(manifest, dict) or not isinstance(manifest.get("files"), dict) \
-            or "schema_version" not in manifest:
+    if (
+        not isinstance(manifest, dict)
+        or not isinstance(manifest.get("files"), dict)
+        or "schema_version" not in manifest
+    ):
         return None, "manifest.json is not an r2rsim manifest (no schema_version and files)"
     return manifest, None
 
@@ -315,8 +334,10 @@ def dataset_problems(root: str | Path, *, hashes: bool = True) -> list[str]:
             continue
         size = p.stat().st_size
         if size != info.get("bytes"):
-            problems.append(f"{rel}: checksum differs from manifest.json (so does its size: "
-                            f"{size} bytes, not {info.get('bytes')})")
+            problems.append(
+                f"{rel}: checksum differs from manifest.json (so does its size: "
+                f"{size} bytes, not {info.get('bytes')})"
+            )
         elif hashes and sha256_file(p) != info.get("sha256"):
             problems.append(f"{rel}: checksum differs from manifest.json")
     return problems
@@ -392,8 +413,11 @@ def _looks_like_tmp(path: Path) -> bool:
                 return False
         for name in filenames:
             p = here / name
-            if p.is_symlink() or not p.is_file() or layout_problem(
-                    p.relative_to(path).as_posix(), sweep=False) is not None:
+            if (
+                p.is_symlink()
+                or not p.is_file()
+                or layout_problem(p.relative_to(path).as_posix(), sweep=False) is not None
+            ):
                 return False
     return True
 

@@ -55,8 +55,12 @@ class Run:
         """The columns an algorithm may use: :data:`VISIBLE`, and with ``drive_data`` also
         :data:`DRIVE_DATA` (without the ``*_seen_*`` channels)."""
         pats = VISIBLE + (DRIVE_DATA if drive_data else ())
-        cols = [c for c in self.samples.columns if any(fnmatch.fnmatch(c, p) for p in pats)
-                and not any(fnmatch.fnmatch(c, p) for p in _LEAKS)]
+        cols = [
+            c
+            for c in self.samples.columns
+            if any(fnmatch.fnmatch(c, p) for p in pats)
+            and not any(fnmatch.fnmatch(c, p) for p in _LEAKS)
+        ]
         return self.samples[cols]
 
     @property
@@ -67,9 +71,11 @@ class Run:
 
 
 #: columns the harness needs in each table
-_NEEDED = {"runs.parquet": ("run_id",), "faults.parquet": ("run_id",),
-           "samples": ("k", "t_s", "label.is_faulty", "label.score_mask",
-                       "label.primary_type")}
+_NEEDED = {
+    "runs.parquet": ("run_id",),
+    "faults.parquet": ("run_id",),
+    "samples": ("k", "t_s", "label.is_faulty", "label.score_mask", "label.primary_type"),
+}
 
 
 def is_dataset_dir(path: Path) -> bool:
@@ -79,8 +85,10 @@ def is_dataset_dir(path: Path) -> bool:
 
 
 def _unreadable(rel: str, exc: Exception) -> str:
-    return (f"{rel} is not a readable Parquet file ({type(exc).__name__}: "
-            f"{(str(exc).strip().splitlines() or [''])[0]})")
+    return (
+        f"{rel} is not a readable Parquet file ({type(exc).__name__}: "
+        f"{(str(exc).strip().splitlines() or [''])[0]})"
+    )
 
 
 class _Reader:
@@ -97,15 +105,15 @@ class _Reader:
     def fail(self, msg: str, run: str | None = None) -> InputError:
         return self.v.fail(msg, run)
 
-    def arrow(self, rel: str, needed: tuple[str, ...] = (), run: str | None = None
-              ) -> pa.Table:
+    def arrow(self, rel: str, needed: tuple[str, ...] = (), run: str | None = None) -> pa.Table:
         """A Parquet file of the dataset as an Arrow table (``run``: named in errors); the
         checksum of a samples file (``run`` given) is begun, not waited for: call
         ``self.v.check(rel)`` before using what it holds."""
         f = self.root / rel
         if not f.is_file():
-            raise self.fail(f"{rel} is missing: the directory is not a complete r2rsim "
-                            f"dataset", run)
+            raise self.fail(
+                f"{rel} is missing: the directory is not a complete r2rsim dataset", run
+            )
         if run is None:
             data = self.v.read(rel)
         else:
@@ -120,12 +128,12 @@ class _Reader:
         missing = [c for c in needed if c not in table.column_names]
         if missing:
             self.v.check(rel)
-            raise self.fail(f"{rel} has no column {', '.join(missing)}: not a complete "
-                            f"r2rsim dataset", run)
+            raise self.fail(
+                f"{rel} has no column {', '.join(missing)}: not a complete r2rsim dataset", run
+            )
         return table
 
-    def table(self, rel: str, needed: tuple[str, ...] = (), run: str | None = None
-              ) -> pd.DataFrame:
+    def table(self, rel: str, needed: tuple[str, ...] = (), run: str | None = None) -> pd.DataFrame:
         """A Parquet file of the dataset as a DataFrame, checked."""
         table = self.arrow(rel, needed, run)
         self.v.check(rel)
@@ -141,8 +149,12 @@ def _matches(value, wanted) -> bool:
                 return True
         elif missing:
             continue
-        elif isinstance(w, (int, float)) and not isinstance(w, bool) and isinstance(
-                value, (int, float)) and not isinstance(value, bool):
+        elif (
+            isinstance(w, (int, float))
+            and not isinstance(w, bool)
+            and isinstance(value, (int, float))
+            and not isinstance(value, bool)
+        ):
             if math.isclose(float(value), float(w), rel_tol=1e-9, abs_tol=1e-12):
                 return True
         elif value == w:
@@ -166,15 +178,20 @@ def select_rows(rows: list[dict], where: dict, dataset: Path) -> list[dict]:
     columns = set(rows[0]) if rows else set()
     out = rows
     for key, wanted in where.items():
-        col = key if key in columns or not rows else (
-            f"axis.{key}" if f"axis.{key}" in columns else key)
+        col = (
+            key
+            if key in columns or not rows
+            else (f"axis.{key}" if f"axis.{key}" in columns else key)
+        )
         if rows and col not in columns:
-            axes = sorted(c[len("axis."):] for c in columns if c.startswith("axis."))
+            axes = sorted(c[len("axis.") :] for c in columns if c.startswith("axis."))
             kind = "none" if "sweep" in columns else "none, not a sweep"
-            raise InputError(f"dataset {dataset}: runs.parquet has no column '{key}' to select "
-                             f"runs by (axes: {', '.join(axes) or kind}); a selection "
-                             f"applies to every dataset named (a bench spec selects per "
-                             f"run set)")
+            raise InputError(
+                f"dataset {dataset}: runs.parquet has no column '{key}' to select "
+                f"runs by (axes: {', '.join(axes) or kind}); a selection "
+                f"applies to every dataset named (a bench spec selects per "
+                f"run set)"
+            )
         values = wanted if isinstance(wanted, (list, tuple)) else [wanted]
         si = []
         for v in values:
@@ -188,8 +205,13 @@ def select_rows(rows: list[dict], where: dict, dataset: Path) -> list[dict]:
     return out
 
 
-def read_runs(path: str | Path, verify: bool = True, where: dict | None = None, *,
-              check_labels: bool | None = None) -> list[Run]:
+def read_runs(
+    path: str | Path,
+    verify: bool = True,
+    where: dict | None = None,
+    *,
+    check_labels: bool | None = None,
+) -> list[Run]:
     """Read every run of a dataset directory written by ``r2rsim run`` or ``r2rsim sweep``.
 
     Parameters
@@ -224,8 +246,9 @@ def read_runs(path: str | Path, verify: bool = True, where: dict | None = None, 
     refuse_unfinished(path)
     if not is_dataset_dir(path) or not (path / "samples").is_dir():
         what = "runs.parquet" if not (path / "runs.parquet").exists() else "samples/"
-        raise InputError(f"dataset {path}: {what} is missing: the directory is not a "
-                         f"complete r2rsim dataset")
+        raise InputError(
+            f"dataset {path}: {what} is missing: the directory is not a complete r2rsim dataset"
+        )
     labels = verify if check_labels is None else check_labels
     rd = _Reader(path, verify)
     try:
@@ -234,21 +257,24 @@ def read_runs(path: str | Path, verify: bool = True, where: dict | None = None, 
         rd.v.close()
 
 
-def _label_problem(t: pa.Table, run_row: dict, fault_rows: list[dict], path: Path
-                   ) -> str | None:
+def _label_problem(t: pa.Table, run_row: dict, fault_rows: list[dict], path: Path) -> str | None:
     """Why a run's labels are refused (:func:`r2rsim.dataset.labels.quick_label_problem`:
     every label faults.parquet determines), or None."""
     try:
         problem = quick_label_problem(t, run_row, fault_rows)
     except Exception as exc:  # noqa: BLE001 - a table lacking a column, of another type
-        return (f"its labels cannot be checked ({type(exc).__name__}: "
-                f"{(str(exc).strip().splitlines() or [''])[0]}): not a complete r2rsim "
-                f"dataset ({NO_VERIFY})")
+        return (
+            f"its labels cannot be checked ({type(exc).__name__}: "
+            f"{(str(exc).strip().splitlines() or [''])[0]}): not a complete r2rsim "
+            f"dataset ({NO_VERIFY})"
+        )
     if problem is None:
         return None
-    return (f"{problem}: the labels in the samples differ from what faults.parquet and "
-            f"runs.parquet give (edited after the writing?); refusing to use it (`r2rsim "
-            f"validate {path}` lists every problem; {NO_VERIFY})")
+    return (
+        f"{problem}: the labels in the samples differ from what faults.parquet and "
+        f"runs.parquet give (edited after the writing?); refusing to use it (`r2rsim "
+        f"validate {path}` lists every problem; {NO_VERIFY})"
+    )
 
 
 def _read_runs(rd: _Reader, path: Path, where: dict | None, labels: bool) -> list[Run]:
@@ -267,31 +293,37 @@ def _read_runs(rd: _Reader, path: Path, where: dict | None, labels: bool) -> lis
     for row in rows:
         run, table = _read_run(rd, path, row, faults)
         if labels:
-            problem = _label_problem(table, run_rows[run.run_id],
-                                     fault_rows.get(run.run_id, []), path)
+            problem = _label_problem(
+                table, run_rows[run.run_id], fault_rows.get(run.run_id, []), path
+            )
             if problem:
                 raise rd.fail(problem, run.run_id)
         out.append(run)
     return out
 
 
-def _read_run(rd: _Reader, path: Path, row: dict, faults: pd.DataFrame
-              ) -> tuple[Run, pa.Table]:
+def _read_run(rd: _Reader, path: Path, row: dict, faults: pd.DataFrame) -> tuple[Run, pa.Table]:
     """One run, its samples read (checked against manifest.json when verifying), and the
     samples as Arrow (for the label check)."""
     rid = str(row["run_id"])
     if rid in ("", ".", "..") or any(c in rid for c in "/\\\0"):
-        raise rd.fail(f"run id {rid!r} in runs.parquet is not a plain name (its samples "
-                      f"would lie outside samples/)")
+        raise rd.fail(
+            f"run id {rid!r} in runs.parquet is not a plain name (its samples "
+            f"would lie outside samples/)"
+        )
     part = path / "samples" / f"run_id={rid}"
     if part.is_dir():
         files = sorted(p for p in part.iterdir() if p.is_file() and p.suffix == ".parquet")
     else:  # a samples/ directory without hive partitions (filtered on run_id below)
-        files = sorted(p for p in (path / "samples").iterdir()
-                       if p.is_file() and p.suffix == ".parquet")
+        files = sorted(
+            p for p in (path / "samples").iterdir() if p.is_file() and p.suffix == ".parquet"
+        )
     if not files:
-        raise rd.fail(f"no samples file (samples/run_id={rid}/part-0.parquet is "
-                      f"missing): the directory is not a complete r2rsim dataset", rid)
+        raise rd.fail(
+            f"no samples file (samples/run_id={rid}/part-0.parquet is "
+            f"missing): the directory is not a complete r2rsim dataset",
+            rid,
+        )
     rels = [f.relative_to(path).as_posix() for f in files]
     tables = [rd.arrow(rel, run=rid) for rel in rels]
     t = tables[0] if len(tables) == 1 else pa.concat_tables(tables, promote_options="default")
@@ -301,8 +333,10 @@ def _read_run(rd: _Reader, path: Path, row: dict, faults: pd.DataFrame
         rd.v.check(rel)
     missing = [c for c in _NEEDED["samples"] if c not in t.column_names]
     if missing:
-        raise rd.fail(f"the samples have no column {', '.join(missing)}: not a "
-                      f"complete r2rsim dataset", rid)
+        raise rd.fail(
+            f"the samples have no column {', '.join(missing)}: not a complete r2rsim dataset", rid
+        )
     s = t.to_pandas().set_index("k", drop=False).sort_index()
-    return Run(rid, s, faults[faults.run_id.astype(str) == rid].reset_index(drop=True), row,
-               path), t
+    return Run(
+        rid, s, faults[faults.run_id.astype(str) == rid].reset_index(drop=True), row, path
+    ), t

@@ -69,8 +69,10 @@ def validate_dataset(path: str | Path, labels: bool = True) -> list[str]:
     """
     root = Path(path)
     if (root / SWEEP_MARKER).is_file():
-        return [f"{root}: an unfinished sweep (interrupted, or still running): run the same "
-                f"`r2rsim sweep` command again to finish it"]
+        return [
+            f"{root}: an unfinished sweep (interrupted, or still running): run the same "
+            f"`r2rsim sweep` command again to finish it"
+        ]
     if not (root / "manifest.json").is_file():
         return [f"{root}: no manifest.json (not an r2rsim dataset?)"]
     # the light check follows the writer's own hashing: sizes are enough to find a file
@@ -107,8 +109,10 @@ def validate_dataset(path: str | Path, labels: bool = True) -> list[str]:
         rid = run["run_id"]
         # the run id names a directory: one that is not a plain name leads elsewhere
         if not safe_component(rid):
-            problems.append(f"run {rid!r}: the run id is not a plain directory name, so its "
-                            f"samples path leaves samples/")
+            problems.append(
+                f"run {rid!r}: the run id is not a plain directory name, so its "
+                f"samples path leaves samples/"
+            )
             continue
         try:
             part = inside(root, f"samples/run_id={rid}/part-0.parquet")
@@ -120,11 +124,11 @@ def validate_dataset(path: str | Path, labels: bool = True) -> list[str]:
             continue
         rows = [f for f in faults if f["run_id"] == rid]
         try:
-            problems += [f"run {rid}: {p}"
-                         for p in _check_samples(part, run, rows, channels, labels)]
+            problems += [
+                f"run {rid}: {p}" for p in _check_samples(part, run, rows, channels, labels)
+            ]
         except Exception as exc:  # noqa: BLE001 - pyarrow raises several types on bad files
-            problems.append(f"run {rid}: samples/run_id={rid}/part-0.parquet: "
-                            f"{_unreadable(exc)}")
+            problems.append(f"run {rid}: samples/run_id={rid}/part-0.parquet: {_unreadable(exc)}")
     return problems + _variability_problems(root, {r["run_id"] for r in runs})
 
 
@@ -142,8 +146,11 @@ def _variability_problems(root: Path, run_ids: set[str]) -> list[str]:
     if missing:
         return [f"variability.parquet: no column {', '.join(missing)}"]
     strays = sorted(set(table.column("run_id").to_pylist()) - run_ids, key=str)
-    return [f"variability.parquet: rows of run {strays[0]!r}, which is not in runs.parquet"
-            ] if strays else []
+    return (
+        [f"variability.parquet: rows of run {strays[0]!r}, which is not in runs.parquet"]
+        if strays
+        else []
+    )
 
 
 def _unreadable(exc: Exception) -> str:
@@ -152,8 +159,9 @@ def _unreadable(exc: Exception) -> str:
     return f"not a readable Parquet file ({type(exc).__name__}: {first})"
 
 
-def _check_samples(part: Path, run: dict, rows: list[dict], channels: list[str],
-                   labels: bool = True) -> list[str]:
+def _check_samples(
+    part: Path, run: dict, rows: list[dict], channels: list[str], labels: bool = True
+) -> list[str]:
     """The problems of one run's samples file, read batch by batch."""
     pf = pq.ParquetFile(part)
     names = pf.schema_arrow.names
@@ -170,8 +178,11 @@ def _check_samples(part: Path, run: dict, rows: list[dict], channels: list[str],
         if not run["termination_reason"]:
             problems.append("terminated without a termination_reason")
         terminated_k = _last_k(pf)
-    sensor_channels = {c[len("label.ch."):].split(".")[0]: c[len("label.ch."):]
-                       for c in names if c.startswith("label.ch.")}
+    sensor_channels = {
+        c[len("label.ch.") :].split(".")[0]: c[len("label.ch.") :]
+        for c in names
+        if c.startswith("label.ch.")
+    }
     modes = json.loads(run.get("modes_json") or "[]")
     first_onset = min((f["onset_t_s"] for f in rows), default=None)
     onset_seen = {f["fault_id"]: False for f in rows}
@@ -191,16 +202,27 @@ def _check_samples(part: Path, run: dict, rows: list[dict], channels: list[str],
         k_next += m
         t_last = float(t[-1])
         problems += _check_onsets(rows, k, t, onset_seen)
-        want = derive_labels(rows, k, t, warmup=run["warmup_s"], modes=modes,
-                             terminated_k=terminated_k, sensor_channels=sensor_channels)
+        want = derive_labels(
+            rows,
+            k,
+            t,
+            warmup=run["warmup_s"],
+            modes=modes,
+            terminated_k=terminated_k,
+            sensor_channels=sensor_channels,
+        )
         problems += _check_labels(batch, k, want, names, reported)
         if first_onset is not None and "early" not in reported and "label.is_faulty" in names:
             early = _column(batch, "label.is_faulty").astype(bool) & (t < first_onset - 1e-12)
             if early.any():
                 problems.append("fault labels before the first onset")
                 reported.add("early")
-    if run["terminated"] and t_last is not None and run["termination_t_s"] is not None \
-            and t_last > run["termination_t_s"] + 1e-9:
+    if (
+        run["terminated"]
+        and t_last is not None
+        and run["termination_t_s"] is not None
+        and t_last > run["termination_t_s"] + 1e-9
+    ):
         problems.append("samples after termination_t_s")
     return problems
 
@@ -212,8 +234,10 @@ def _check_layout(pf: pq.ParquetFile, run: dict, channels: list[str]) -> list[st
     if ["run_id", *names] != channels:
         extra = sorted(set(names) - set(channels) - {"run_id"})
         missing = sorted(set(channels) - set(names) - {"run_id"})
-        problems.append(f"sample columns differ from channels.parquet "
-                        f"(not listed: {extra[:5]}, absent: {missing[:5]})")
+        problems.append(
+            f"sample columns differ from channels.parquet "
+            f"(not listed: {extra[:5]}, absent: {missing[:5]})"
+        )
     n = pf.metadata.num_rows
     if n != run["n_samples"]:
         problems.append(f"{n} rows but runs.n_samples = {run['n_samples']}")
@@ -240,6 +264,8 @@ def _check_onsets(rows: list[dict], k: np.ndarray, t: np.ndarray, seen: dict) ->
         if first < len(k):
             seen[f["fault_id"]] = True
             if f["onset_k"] != int(k[first]):
-                problems.append(f"fault {f['fault_id']} onset_k = {f['onset_k']}, but "
-                                f"the first sample at or after its onset is {k[first]}")
+                problems.append(
+                    f"fault {f['fault_id']} onset_k = {f['onset_k']}, but "
+                    f"the first sample at or after its onset is {k[first]}"
+                )
     return problems

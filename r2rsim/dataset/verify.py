@@ -39,15 +39,17 @@ _BLOCK = 1 << 20
 def refuse_unfinished(path: Path) -> None:
     """An unfinished sweep's directory (interrupted, or still running) is not a dataset."""
     if (Path(path) / SWEEP_MARKER).is_file():
-        raise InputError(f"dataset {path}: an unfinished sweep (interrupted, or still "
-                         f"running): run the same `r2rsim sweep` command again to finish it")
+        raise InputError(
+            f"dataset {path}: an unfinished sweep (interrupted, or still "
+            f"running): run the same `r2rsim sweep` command again to finish it"
+        )
 
 
 def run_of(rel: str) -> str | None:
     """The run a dataset file belongs to (``samples/run_id=<id>/...``), else None."""
     part = rel.split("/")
     if len(part) > 2 and part[0] == "samples" and part[1].startswith("run_id="):
-        return part[1][len("run_id="):]
+        return part[1][len("run_id=") :]
     return None
 
 
@@ -103,42 +105,56 @@ class Verifier:
     def _check_manifest(self) -> None:
         mf = self.root / "manifest.json"
         if not mf.is_file():
-            raise self.fail("no manifest.json, so its files cannot be checked: not a "
-                            f"complete r2rsim dataset ({NO_VERIFY})")
+            raise self.fail(
+                "no manifest.json, so its files cannot be checked: not a "
+                f"complete r2rsim dataset ({NO_VERIFY})"
+            )
         try:
             files = read_json(mf)["files"]
-            items = [(str(rel), str(info["sha256"]), info.get("bytes")) for rel, info in
-                     files.items()]
+            items = [
+                (str(rel), str(info["sha256"]), info.get("bytes")) for rel, info in files.items()
+            ]
         except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
-            raise self.fail(f"manifest.json is not readable ({type(exc).__name__}: "
-                            f"{str(exc).splitlines()[0] if str(exc) else ''}); "
-                            f"{NO_VERIFY}") from None
+            raise self.fail(
+                f"manifest.json is not readable ({type(exc).__name__}: "
+                f"{str(exc).splitlines()[0] if str(exc) else ''}); "
+                f"{NO_VERIFY}"
+            ) from None
         self.files = {rel: (sha, size) for rel, sha, size in items}
         for rel, (_, size) in self.files.items():
             f = self.root / rel
             if not f.is_file():
-                raise self.fail(f"{rel} is missing (listed in manifest.json): the directory "
-                                f"is not a complete r2rsim dataset ({NO_VERIFY})", run_of(rel))
+                raise self.fail(
+                    f"{rel} is missing (listed in manifest.json): the directory "
+                    f"is not a complete r2rsim dataset ({NO_VERIFY})",
+                    run_of(rel),
+                )
             if size is not None and f.stat().st_size != size:
-                raise self.fail(f"{rel} has {f.stat().st_size} bytes, manifest.json says "
-                                f"{size}: the file was changed or truncated after it was "
-                                f"written; refusing to use it (`r2rsim validate "
-                                f"{self.root}` lists every problem; {NO_VERIFY})",
-                                run_of(rel))
+                raise self.fail(
+                    f"{rel} has {f.stat().st_size} bytes, manifest.json says "
+                    f"{size}: the file was changed or truncated after it was "
+                    f"written; refusing to use it (`r2rsim validate "
+                    f"{self.root}` lists every problem; {NO_VERIFY})",
+                    run_of(rel),
+                )
 
     def listed(self, rel: str, run: str | None = None) -> None:
         """Refuse a file manifest.json does not list (it was added after the writing)."""
         if self.verify and rel not in self.files:
-            raise self.fail(f"{rel} is not listed in manifest.json: it was added after the "
-                            f"dataset was written; refusing to use it ({NO_VERIFY})",
-                            run or run_of(rel))
+            raise self.fail(
+                f"{rel} is not listed in manifest.json: it was added after the "
+                f"dataset was written; refusing to use it ({NO_VERIFY})",
+                run or run_of(rel),
+            )
 
     def _compare(self, rel: str, digest: str, run: str | None) -> None:
         if digest != self.files[rel][0]:
-            raise self.fail(f"{rel}: checksum differs from manifest.json: the file was "
-                            f"changed after it was written; refusing to use it (`r2rsim "
-                            f"validate {self.root}` lists every problem; {NO_VERIFY})",
-                            run or run_of(rel))
+            raise self.fail(
+                f"{rel}: checksum differs from manifest.json: the file was "
+                f"changed after it was written; refusing to use it (`r2rsim "
+                f"validate {self.root}` lists every problem; {NO_VERIFY})",
+                run or run_of(rel),
+            )
         self._hashed.add(rel)
 
     def read(self, rel: str, run: str | None = None) -> bytes:
@@ -157,14 +173,20 @@ class Verifier:
         if not self.verify or rel in self._hashed or rel in self._pending:
             return
         if not HASH_IN_THREAD:
-            digest = (hashlib.sha256(data).hexdigest() if data is not None
-                      else _sha256_file(self.root / rel))
+            digest = (
+                hashlib.sha256(data).hexdigest()
+                if data is not None
+                else _sha256_file(self.root / rel)
+            )
             self._compare(rel, digest, run)
             return
         if self._pool is None:
             self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="r2rsim-hash")
-        job = ((lambda: hashlib.sha256(data).hexdigest()) if data is not None
-               else (lambda: _sha256_file(self.root / rel)))
+        job = (
+            (lambda: hashlib.sha256(data).hexdigest())
+            if data is not None
+            else (lambda: _sha256_file(self.root / rel))
+        )
         self._pending[rel] = (self._pool.submit(job), run)
 
     def check(self, rel: str | None = None) -> None:
@@ -178,6 +200,7 @@ class Verifier:
             try:
                 digest = fut.result()
             except OSError as exc:
-                raise self.fail(f"{name} cannot be read ({exc.strerror or exc})",
-                                run or run_of(name)) from None
+                raise self.fail(
+                    f"{name} cannot be read ({exc.strerror or exc})", run or run_of(name)
+                ) from None
             self._compare(name, digest, run)

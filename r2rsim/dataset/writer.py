@@ -50,30 +50,57 @@ from .paths import (
 
 SCHEMA_VERSION = "0.1"
 
-FAULTS_SCHEMA = pa.schema([
-    ("run_id", pa.string()), ("fault_id", pa.string()), ("fault_type", pa.string()),
-    ("fault_class", pa.string()), ("target_id", pa.string()), ("component_path", pa.string()),
-    ("onset_t_s", pa.float64()), ("onset_k", pa.int64()), ("profile", pa.string()),
-    ("ramp_s", pa.float64()), ("end_t_s", pa.float64()), ("magnitude", pa.float64()),
-    ("magnitude_unit", pa.string()), ("magnitude_rel", pa.float64()),
-    ("params_json", pa.string()), ("expected_channels", pa.list_(pa.string())),
-    ("composed_with", pa.list_(pa.string())), ("sampled_from", pa.string()),
-])
+FAULTS_SCHEMA = pa.schema(
+    [
+        ("run_id", pa.string()),
+        ("fault_id", pa.string()),
+        ("fault_type", pa.string()),
+        ("fault_class", pa.string()),
+        ("target_id", pa.string()),
+        ("component_path", pa.string()),
+        ("onset_t_s", pa.float64()),
+        ("onset_k", pa.int64()),
+        ("profile", pa.string()),
+        ("ramp_s", pa.float64()),
+        ("end_t_s", pa.float64()),
+        ("magnitude", pa.float64()),
+        ("magnitude_unit", pa.string()),
+        ("magnitude_rel", pa.float64()),
+        ("params_json", pa.string()),
+        ("expected_channels", pa.list_(pa.string())),
+        ("composed_with", pa.list_(pa.string())),
+        ("sampled_from", pa.string()),
+    ]
+)
 
-EVENTS_SCHEMA = pa.schema([
-    ("run_id", pa.string()), ("t_s", pa.float64()), ("kind", pa.string()),
-    ("component", pa.string()), ("state", pa.string()), ("message", pa.string()),
-    ("values_json", pa.string()),
-])
+EVENTS_SCHEMA = pa.schema(
+    [
+        ("run_id", pa.string()),
+        ("t_s", pa.float64()),
+        ("kind", pa.string()),
+        ("component", pa.string()),
+        ("state", pa.string()),
+        ("message", pa.string()),
+        ("values_json", pa.string()),
+    ]
+)
 
 #: variability.parquet: the values a run's ``variability:`` drew (ground truth; plug-ins
 #: never see it). ``source`` is ``run`` (friction, sensor calibration) or ``roll``; ``roll``
 #: counts an unwind's rolls from 0 (the one at t = 0); ``loaded_t_s`` is when it was loaded.
-VARIABILITY_SCHEMA = pa.schema([
-    ("run_id", pa.string()), ("source", pa.string()), ("component", pa.string()),
-    ("roll", pa.int32()), ("parameter", pa.string()), ("unit", pa.string()),
-    ("nominal", pa.float64()), ("value", pa.float64()), ("loaded_t_s", pa.float64()),
-])
+VARIABILITY_SCHEMA = pa.schema(
+    [
+        ("run_id", pa.string()),
+        ("source", pa.string()),
+        ("component", pa.string()),
+        ("roll", pa.int32()),
+        ("parameter", pa.string()),
+        ("unit", pa.string()),
+        ("nominal", pa.float64()),
+        ("value", pa.float64()),
+        ("loaded_t_s", pa.float64()),
+    ]
+)
 
 
 #: raw column data collected before it is written as one row group. The solver's chunks
@@ -81,8 +108,15 @@ VARIABILITY_SCHEMA = pa.schema([
 #: Parquet footer, which the writer keeps in memory until it closes, grow with run length.
 ROW_GROUP_BYTES = 16 << 20
 
-__all__ = ["DatasetWriter", "EVENTS_SCHEMA", "FAULTS_SCHEMA", "SCHEMA_VERSION",
-           "VARIABILITY_SCHEMA", "check_output", "sha256_file"]
+__all__ = [
+    "DatasetWriter",
+    "EVENTS_SCHEMA",
+    "FAULTS_SCHEMA",
+    "SCHEMA_VERSION",
+    "VARIABILITY_SCHEMA",
+    "check_output",
+    "sha256_file",
+]
 
 
 def check_output(output: str | Path, overwrite: bool = False, *, hashes: bool = True) -> None:
@@ -116,12 +150,15 @@ def check_output(output: str | Path, overwrite: bool = False, *, hashes: bool = 
     problems = dataset_problems(out, hashes=hashes)
     if problems:
         more = f" and {len(problems) - 1} more" if len(problems) > 1 else ""
-        raise InputError(f"output directory '{out}' exists and is not an r2rsim dataset "
-                         f"({problems[0]}{more}); r2rsim replaces only a directory holding "
-                         f"exactly a dataset it wrote: choose another directory with -o")
+        raise InputError(
+            f"output directory '{out}' exists and is not an r2rsim dataset "
+            f"({problems[0]}{more}); r2rsim replaces only a directory holding "
+            f"exactly a dataset it wrote: choose another directory with -o"
+        )
     if not overwrite:
-        raise InputError(f"output directory '{out}' exists (an r2rsim dataset); pass "
-                         f"--overwrite to replace it")
+        raise InputError(
+            f"output directory '{out}' exists (an r2rsim dataset); pass --overwrite to replace it"
+        )
 
 
 @contextlib.contextmanager
@@ -148,7 +185,8 @@ def undefined_as_null(name: str) -> bool:
     non-finite value in a run that ended well (:func:`_nonfinite_finder`)."""
     return name.startswith("state.") and (
         name.endswith(".tension_ratio")
-        or (name.startswith("state.splice_joint") and name.endswith(".lead_m")))
+        or (name.startswith("state.splice_joint") and name.endswith(".lead_m"))
+    )
 
 
 def _converter(arrow_type: pa.DataType, example, name: str = ""):
@@ -159,10 +197,12 @@ def _converter(arrow_type: pa.DataType, example, name: str = ""):
     if isinstance(example, pa.Array):
         return lambda a: a
     if arrow_type == pa.float32() and undefined_as_null(name):
+
         def to_float32_or_null(a):
             x = np.asarray(a).astype(np.float32, copy=False)
             undefined = ~np.isfinite(x)
             return pa.array(x, mask=undefined) if undefined.any() else pa.array(x)
+
         return to_float32_or_null
     if arrow_type == pa.float32():
         # numpy's cast is several times faster than Arrow's checked one
@@ -182,8 +222,11 @@ def _nonfinite_finder(fields):
     does not. A finite chunk costs one concatenation and one ``isfinite`` over all the
     checked columns."""
     names = [f.name for f in fields]
-    checked = [i for i, f in enumerate(fields) if f.type == pa.float32()
-               and f.name.startswith(("true.", "state.", "act.", "cmd."))]
+    checked = [
+        i
+        for i, f in enumerate(fields)
+        if f.type == pa.float32() and f.name.startswith(("true.", "state.", "act.", "cmd."))
+    ]
     if not checked:
         return None
 
@@ -201,6 +244,7 @@ def _nonfinite_finder(fields):
             return None
         r = int(np.argmax(rows))
         return float(np.asarray(t)[r]), names[checked[int(np.argmax(bad[:, r]))]]
+
     return find
 
 
@@ -230,13 +274,22 @@ class DatasetWriter:
         For a run id that is not a single directory name.
     """
 
-    def __init__(self, output: Path, run_id: str, metadata: dict[str, str], *,
-                 overwrite: bool = False, clean: bool = True):
+    def __init__(
+        self,
+        output: Path,
+        run_id: str,
+        metadata: dict[str, str],
+        *,
+        overwrite: bool = False,
+        clean: bool = True,
+    ):
         self.output = Path(output)
         self.overwrite = overwrite
         if not safe_component(run_id) or not safe_component(self.output.name):
-            raise R2RError(f"run id '{run_id}' or dataset name '{self.output.name}' is not a "
-                           f"single directory name")
+            raise R2RError(
+                f"run id '{run_id}' or dataset name '{self.output.name}' is not a "
+                f"single directory name"
+            )
         check_output(self.output, overwrite, hashes=False)  # commit() hashes what it replaces
         self.run_id = run_id
         self.metadata = {k: str(v) for k, v in metadata.items()}
@@ -263,8 +316,9 @@ class DatasetWriter:
         if self.tmp.resolve() in ACTIVE:
             raise R2RError(f"another writer of this process is writing {self.output}")
         if self.tmp.exists():  # left by a dead process that had this pid (clean_stale kept it)
-            raise R2RError(f"'{self.tmp}' exists and is not r2rsim's own temporary directory; "
-                           f"move it away")
+            raise R2RError(
+                f"'{self.tmp}' exists and is not r2rsim's own temporary directory; move it away"
+            )
         self.tmp.mkdir(parents=True)
         ACTIVE.add(self.tmp.resolve())
         self._samples = inside(self.tmp, samples_file(run_id))
@@ -295,13 +349,18 @@ class DatasetWriter:
             meta = {k.encode(): v.encode() for k, v in self.metadata.items()}
             self._schema = pa.schema(fields, metadata=meta)
             float_cols = [f.name for f in fields if f.type in (pa.float32(), pa.float64())]
-            self._converters = [(f.name, _converter(f.type, columns[f.name], f.name))
-                                for f in fields]
+            self._converters = [
+                (f.name, _converter(f.type, columns[f.name], f.name)) for f in fields
+            ]
             self._find_nonfinite = _nonfinite_finder(fields)
             self._writer = pq.ParquetWriter(
-                self._samples, self._schema, compression="zstd", compression_level=3,
+                self._samples,
+                self._schema,
+                compression="zstd",
+                compression_level=3,
                 use_dictionary=[f.name for f in fields if pa.types.is_dictionary(f.type)],
-                use_byte_stream_split=float_cols, write_statistics=True,
+                use_byte_stream_split=float_cols,
+                write_statistics=True,
             )
         with np.errstate(over="ignore"):  # beyond float32's range is inf, as Arrow casts
             arrays = [convert(columns[name]) for name, convert in self._converters]
@@ -326,19 +385,25 @@ class DatasetWriter:
         """Write ``<name>.parquet``, one of the layout's tables
         (:data:`r2rsim.dataset.paths.RUN_TABLES`), with the metadata."""
         if name not in RUN_TABLES:  # the cleanup and validate know only the layout's files
-            raise R2RError(f"'{name}.parquet' is not a table of the dataset layout "
-                           f"({', '.join(RUN_TABLES)})")
+            raise R2RError(
+                f"'{name}.parquet' is not a table of the dataset layout ({', '.join(RUN_TABLES)})"
+            )
         meta = dict(table.schema.metadata or {})
         meta.update({k.encode(): v.encode() for k, v in self.metadata.items()})
-        pq.write_table(table.replace_schema_metadata(meta),
-                       inside(self.tmp, f"{name}.parquet"), compression="zstd")
+        pq.write_table(
+            table.replace_schema_metadata(meta),
+            inside(self.tmp, f"{name}.parquet"),
+            compression="zstd",
+        )
 
     def write_text(self, relpath: str, text: str) -> None:
         """Write a text file at ``relpath`` inside the dataset: a copy of an input file,
         ``scenario/<file>`` (:func:`r2rsim.dataset.paths.layout_problem`)."""
         if relpath.split("/")[0] not in RUN_COPIES or layout_problem(relpath, sweep=False):
-            raise R2RError(f"'{relpath}' is not where the dataset layout keeps a copy of an "
-                           f"input file ({', '.join(d + '/' for d in RUN_COPIES)})")
+            raise R2RError(
+                f"'{relpath}' is not where the dataset layout keeps a copy of an "
+                f"input file ({', '.join(d + '/' for d in RUN_COPIES)})"
+            )
         path = inside(self.tmp, relpath)
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(text, encoding="utf-8")
@@ -362,16 +427,21 @@ class DatasetWriter:
             "numpy_version": np.__version__,
             "pyarrow_version": pa.__version__,
             **manifest_extra,
-            "files": {p.relative_to(self.tmp).as_posix(): {"sha256": sha256_file(p),
-                                                            "bytes": p.stat().st_size}
-                      for p in files},
+            "files": {
+                p.relative_to(self.tmp).as_posix(): {
+                    "sha256": sha256_file(p),
+                    "bytes": p.stat().st_size,
+                }
+                for p in files
+            },
         }
-        inside(self.tmp, "manifest.json").write_text(json.dumps(manifest, indent=2,
-                                                                sort_keys=True))
+        inside(self.tmp, "manifest.json").write_text(json.dumps(manifest, indent=2, sort_keys=True))
         problems = check(self.tmp) if check is not None else []
         if problems:
-            raise R2RError("the dataset failed its own validation (a bug in r2rsim; please "
-                           "report it): " + "; ".join(problems[:5]))
+            raise R2RError(
+                "the dataset failed its own validation (a bug in r2rsim; please "
+                "report it): " + "; ".join(problems[:5])
+            )
         out = self.output
         if out.is_symlink() or (out.exists() and (not out.is_dir() or any(out.iterdir()))):
             # raises unless an r2rsim dataset to replace; hashed below, once it is moved
@@ -384,15 +454,19 @@ class DatasetWriter:
             problems = dataset_problems(trash)
             if problems:
                 self._restore()
-                raise InputError(f"output directory '{out}' changed during the run and is "
-                                 f"no longer an r2rsim dataset ({problems[0]}); it is left "
-                                 f"as it was")
+                raise InputError(
+                    f"output directory '{out}' changed during the run and is "
+                    f"no longer an r2rsim dataset ({problems[0]}); it is left "
+                    f"as it was"
+                )
         with _signals_deferred():
             try:
                 os.rename(self.tmp, out)  # onto nothing, or an empty directory
             except OSError as exc:
-                raise R2RError(f"cannot move the dataset into '{out}' ({exc.strerror}): was "
-                               f"it filled during the run?") from None
+                raise R2RError(
+                    f"cannot move the dataset into '{out}' ({exc.strerror}): was "
+                    f"it filled during the run?"
+                ) from None
             self._committed = True
             ACTIVE.discard(self.tmp.resolve())
         if self._trash is not None:

@@ -141,8 +141,10 @@ class Diagnostic(BaseEstimator):
         frames = self._frames(runs)
         if masks is None:
             masks = [np.ones(len(f), dtype=bool) for f in frames]
-        pool = [np.asarray(self.score(f)["statistic"], dtype=float)[np.asarray(m, dtype=bool)]
-                for f, m in zip(frames, masks, strict=True)]
+        pool = [
+            np.asarray(self.score(f)["statistic"], dtype=float)[np.asarray(m, dtype=bool)]
+            for f, m in zip(frames, masks, strict=True)
+        ]
         self.threshold_ = exceedance_threshold(np.concatenate(pool), alpha, self.name)
         return self
 
@@ -173,19 +175,28 @@ class Diagnostic(BaseEstimator):
     def required_columns(self, frame: pd.DataFrame) -> list[str]:
         """The columns matching ``requires``, in the frame's order; raises InputError naming
         the patterns nothing matches."""
-        cols = [c for c in frame.columns if any(fnmatch.fnmatch(c, p) for p in self.requires)
-                and c != "t_s"]
-        missing = [p for p in self.requires if not any(fnmatch.fnmatch(c, p)
-                                                        for c in frame.columns)]
+        cols = [
+            c
+            for c in frame.columns
+            if any(fnmatch.fnmatch(c, p) for p in self.requires) and c != "t_s"
+        ]
+        missing = [
+            p for p in self.requires if not any(fnmatch.fnmatch(c, p) for c in frame.columns)
+        ]
         if missing:
             drive = any(p.startswith(tuple(d.rstrip("*") for d in DRIVE_DATA)) for p in missing)
-            raise InputError(f"{self.name}: the data has no column matching "
-                             f"{', '.join(missing)}" + (
-                                 " (act.*, cmd.* and ctrl.* are drive data, shown to "
-                                 "plug-ins only under the drive-data protocol: --drive-data, "
-                                 "evaluate(..., drive_data=True) or evaluation: "
-                                 "{drive_data: true})"
-                                 if drive else ""))
+            raise InputError(
+                f"{self.name}: the data has no column matching "
+                f"{', '.join(missing)}"
+                + (
+                    " (act.*, cmd.* and ctrl.* are drive data, shown to "
+                    "plug-ins only under the drive-data protocol: --drive-data, "
+                    "evaluate(..., drive_data=True) or evaluation: "
+                    "{drive_data: true})"
+                    if drive
+                    else ""
+                )
+            )
         return cols
 
     def _check_alpha(self):
@@ -205,20 +216,22 @@ class Diagnostic(BaseEstimator):
         """Parameter ``key`` must be an integer from ``low`` to ``high`` (bounds that keep a
         fit's memory and time finite)."""
         v = getattr(self, key)
-        if not (isinstance(v, (int, np.integer)) and not isinstance(v, bool)
-                and low <= v <= high):
-            raise InputError(f"{self.name}: {key} must be an integer from {low} to {high}, "
-                             f"got {v!r}")
+        if not (isinstance(v, (int, np.integer)) and not isinstance(v, bool) and low <= v <= high):
+            raise InputError(
+                f"{self.name}: {key} must be an integer from {low} to {high}, got {v!r}"
+            )
 
     def _check_seed(self, key: str = "random_state", high: int = MAX_SEED):
         """Parameter ``key``, a seed, must be null or an integer from 0 to ``high`` (numpy
         refuses a negative seed and scikit-learn one above 2**32 - 1, each in the middle of
         a fit)."""
         v = getattr(self, key)
-        if v is not None and not (isinstance(v, (int, np.integer)) and not isinstance(v, bool)
-                                  and 0 <= v <= high):
-            raise InputError(f"{self.name}: {key} must be null or an integer from 0 to "
-                             f"{high}, got {v!r}")
+        if v is not None and not (
+            isinstance(v, (int, np.integer)) and not isinstance(v, bool) and 0 <= v <= high
+        ):
+            raise InputError(
+                f"{self.name}: {key} must be null or an integer from 0 to {high}, got {v!r}"
+            )
 
     def _check_fitted(self):
         if not any(k.endswith("_") and not k.startswith("_") for k in vars(self)):

@@ -73,8 +73,9 @@ class PCAMonitor(Diagnostic):
     name = "pca"
     lags = 0
 
-    def __init__(self, n_components: float | int = 0.95, alpha: float = 0.01,
-                 limits: str = "analytic"):
+    def __init__(
+        self, n_components: float | int = 0.95, alpha: float = 0.01, limits: str = "analytic"
+    ):
         self.n_components = n_components
         self.alpha = alpha
         self.limits = limits
@@ -83,20 +84,30 @@ class PCAMonitor(Diagnostic):
         X = f[self.columns_].to_numpy(float)
         if self.lags:  # dynamic PCA: each row carries the previous `lags` rows
             n = len(X)
-            X = np.hstack([np.vstack([np.full((j, X.shape[1]), np.nan), X[: n - j]])
-                           for j in range(self.lags + 1)])
+            X = np.hstack(
+                [
+                    np.vstack([np.full((j, X.shape[1]), np.nan), X[: n - j]])
+                    for j in range(self.lags + 1)
+                ]
+            )
         return X
 
     def fit(self, runs):
         if self.limits not in ("analytic", "empirical"):
-            raise InputError(f"{self.name}: limits must be 'analytic' or 'empirical', "
-                             f"got {self.limits!r}")
+            raise InputError(
+                f"{self.name}: limits must be 'analytic' or 'empirical', got {self.limits!r}"
+            )
         self._check_alpha()
         nc = self.n_components
-        if not (isinstance(nc, (int, float)) and not isinstance(nc, bool)
-                and (0 < nc < 1 or (nc >= 1 and nc == int(nc) and nc <= MAX_COMPONENTS))):
-            raise InputError(f"{self.name}: n_components must be a fraction of variance in "
-                             f"(0, 1) or a whole number from 1 to {MAX_COMPONENTS}, got {nc!r}")
+        if not (
+            isinstance(nc, (int, float))
+            and not isinstance(nc, bool)
+            and (0 < nc < 1 or (nc >= 1 and nc == int(nc) and nc <= MAX_COMPONENTS))
+        ):
+            raise InputError(
+                f"{self.name}: n_components must be a fraction of variance in "
+                f"(0, 1) or a whole number from 1 to {MAX_COMPONENTS}, got {nc!r}"
+            )
         self._check_int("lags", 0, MAX_LAGS)
         frames = self._frames(runs)
         self.columns_ = self.required_columns(frames[0])
@@ -114,14 +125,18 @@ class PCAMonitor(Diagnostic):
         self.P_ = Vt[:a].T
         self.lam_ = lam[:a]
         if self.limits == "analytic":
-            self.t2_limit_ = float(a * (n - 1) * (n + 1) / (n * (n - a))
-                                   * stats.f.ppf(1 - self.alpha, a, n - a))
+            self.t2_limit_ = float(
+                a * (n - 1) * (n + 1) / (n * (n - a)) * stats.f.ppf(1 - self.alpha, a, n - a)
+            )
             rest = lam[a:]
             th1, th2, th3 = (np.sum(rest**i) for i in (1, 2, 3))
             h0 = 1 - 2 * th1 * th3 / (3 * th2**2)
             c = stats.norm.ppf(1 - self.alpha)
-            self.spe_limit_ = float(th1 * (c * np.sqrt(2 * th2 * h0**2) / th1 + 1
-                                           + th2 * h0 * (h0 - 1) / th1**2) ** (1 / h0))
+            self.spe_limit_ = float(
+                th1
+                * (c * np.sqrt(2 * th2 * h0**2) / th1 + 1 + th2 * h0 * (h0 - 1) / th1**2)
+                ** (1 / h0)
+            )
         else:
             t2, spe = self._stats(Z)
             self.t2_limit_ = float(np.quantile(t2, 1 - self.alpha))
@@ -151,8 +166,13 @@ class DynamicPCAMonitor(PCAMonitor):
 
     name = "dpca"
 
-    def __init__(self, lags: int = 2, n_components: float | int = 0.95, alpha: float = 0.01,
-                 limits: str = "analytic"):
+    def __init__(
+        self,
+        lags: int = 2,
+        n_components: float | int = 0.95,
+        alpha: float = 0.01,
+        limits: str = "analytic",
+    ):
         super().__init__(n_components=n_components, alpha=alpha, limits=limits)
         self.lags = lags
 
@@ -170,8 +190,13 @@ class IsolationForestDetector(Diagnostic):
 
     name = "iforest"
 
-    def __init__(self, n_estimators: int = 100, max_samples: int = 256, alpha: float = 0.001,
-                 random_state: int | None = None):
+    def __init__(
+        self,
+        n_estimators: int = 100,
+        max_samples: int = 256,
+        alpha: float = 0.001,
+        random_state: int | None = None,
+    ):
         self.n_estimators = n_estimators
         self.max_samples = max_samples
         self.alpha = alpha
@@ -188,9 +213,11 @@ class IsolationForestDetector(Diagnostic):
         frames = self._frames(runs)
         self.columns_ = self.required_columns(frames[0])
         Z = self._fit_scaling(self._matrix(frames, self.columns_))
-        self.forest_ = IsolationForest(n_estimators=self.n_estimators,
-                                       max_samples=min(self.max_samples, len(Z)),
-                                       random_state=self.random_state).fit(Z)
+        self.forest_ = IsolationForest(
+            n_estimators=self.n_estimators,
+            max_samples=min(self.max_samples, len(Z)),
+            random_state=self.random_state,
+        ).fit(Z)
         self.threshold_ = float(np.quantile(-self.forest_.score_samples(Z), 1 - self.alpha))
         return self
 

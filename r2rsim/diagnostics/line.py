@@ -50,8 +50,11 @@ def _sweep_set(sweep_dir: str) -> tuple[tuple[str, str], ...]:
         return ()
     data = read_yaml(files[0])
     items = (data.get("set") or {}).items() if isinstance(data, dict) else ()
-    return tuple((k, json.dumps(v, default=str)) for k, v in items
-                 if isinstance(k, str) and k.startswith("line."))
+    return tuple(
+        (k, json.dumps(v, default=str))
+        for k, v in items
+        if isinstance(k, str) and k.startswith("line.")
+    )
 
 
 @lru_cache(maxsize=256)
@@ -62,8 +65,7 @@ def _built(scenario_dir: str, sweep_dir: str, name: str | None, overrides: str) 
         return None
     line = json.loads(chosen[0])
     changes = [(k, json.loads(v)) for k, v in _sweep_set(sweep_dir)]
-    changes += [(k, v) for k, v in json.loads(overrides or "{}").items()
-                if k.startswith("line.")]
+    changes += [(k, v) for k, v in json.loads(overrides or "{}").items() if k.startswith("line.")]
     for path, value in changes:  # in the order the sweep applied them: set:, then the axes
         _, parts = _paths.split_root(path)
         if value is None and not isinstance(parts[-1], int):
@@ -100,8 +102,12 @@ def _run_line_text(run) -> str | None:
         return None
     info = run.info or {}
     overrides = info.get("overrides_json")
-    return _built(str(scen), str(root / "sweep"), info.get("line_config"),
-                  overrides if isinstance(overrides, str) else "")
+    return _built(
+        str(scen),
+        str(root / "sweep"),
+        info.get("line_config"),
+        overrides if isinstance(overrides, str) else "",
+    )
 
 
 def attach_line(frame: pd.DataFrame, run) -> pd.DataFrame:
@@ -144,5 +150,7 @@ def named(items, given: str, plugin: str, role: str, kind: str, plural: str):
     for x in items:
         if x.id == given:
             return x
-    raise InputError(f"{plugin}: {role} '{given}' is not {kind} of the line ({plural}: "
-                     f"{', '.join(str(x.id) for x in items) or 'none'})")
+    raise InputError(
+        f"{plugin}: {role} '{given}' is not {kind} of the line ({plural}: "
+        f"{', '.join(str(x.id) for x in items) or 'none'})"
+    )

@@ -49,8 +49,10 @@ def _load(ep) -> type:
     except Exception as exc:  # noqa: BLE001 - any import failure of third-party code
         raise PluginError(f"{where} cannot be loaded: {one_line(exc)}") from exc
     if not isinstance(obj, type):
-        raise PluginError(f"{where} is not a class (it is a {type(obj).__name__}); an entry "
-                          f"point must name a subclass of r2rsim.diagnostics.Diagnostic")
+        raise PluginError(
+            f"{where} is not a class (it is a {type(obj).__name__}); an entry "
+            f"point must name a subclass of r2rsim.diagnostics.Diagnostic"
+        )
     if not issubclass(obj, Diagnostic):
         raise PluginError(f"{where} is not a subclass of r2rsim.diagnostics.Diagnostic")
     return obj
@@ -104,7 +106,8 @@ def _find_spec_without_importing(module: str):
         if spec is None or spec.submodule_search_locations is None:
             return None
         spec = importlib.machinery.PathFinder.find_spec(
-            f"{spec.name}.{part}", list(spec.submodule_search_locations))
+            f"{spec.name}.{part}", list(spec.submodule_search_locations)
+        )
     return spec
 
 
@@ -131,14 +134,24 @@ def _class_doc(module: str, attr: str, depth: int = 0) -> tuple[str, str | None]
         if isinstance(node, ast.ImportFrom):
             for alias in node.names:
                 if (alias.asname or alias.name) == attr:
-                    base = importlib.util.resolve_name("." * node.level + (node.module or ""),
-                                                       spec.parent if spec.parent is not None
-                                                       else module) if node.level else \
-                        node.module
+                    base = (
+                        importlib.util.resolve_name(
+                            "." * node.level + (node.module or ""),
+                            spec.parent if spec.parent is not None else module,
+                        )
+                        if node.level
+                        else node.module
+                    )
                     return _class_doc(base or "", alias.name, depth + 1)
-        targets = (node.targets if isinstance(node, ast.Assign) else
-                   [node.target] if isinstance(node, ast.AnnAssign) else
-                   [ast.Name(node.name)] if isinstance(node, ast.FunctionDef) else [])
+        targets = (
+            node.targets
+            if isinstance(node, ast.Assign)
+            else [node.target]
+            if isinstance(node, ast.AnnAssign)
+            else [ast.Name(node.name)]
+            if isinstance(node, ast.FunctionDef)
+            else []
+        )
         if any(isinstance(t, ast.Name) and t.id == attr for t in targets):
             return "", None  # assigned or a function: only loading tells what it is
     return "", f"is not defined in module '{module}'"
@@ -174,8 +187,10 @@ def require_registered(name: str):
     """
     found = {ep.name: ep for ep in entry_points(group=GROUP)}
     if name not in found:
-        raise InputError(f"no diagnostic plug-in '{name}' (registered: "
-                         f"{', '.join(sorted(found)) or 'none'}; `r2rsim list plugins`)")
+        raise InputError(
+            f"no diagnostic plug-in '{name}' (registered: "
+            f"{', '.join(sorted(found)) or 'none'}; `r2rsim list plugins`)"
+        )
     return found[name]
 
 
@@ -188,8 +203,11 @@ def call(cls_or_est, method: str, fn, *args, **kwargs):
     except (InputError, MemoryError):
         raise
     except Exception as exc:  # noqa: BLE001 - third-party code may raise anything
-        name = getattr(cls_or_est, "name", None) or getattr(cls_or_est, "__name__", None) \
+        name = (
+            getattr(cls_or_est, "name", None)
+            or getattr(cls_or_est, "__name__", None)
             or type(cls_or_est).__name__
+        )
         raise PluginError(f"plug-in '{name}': {method} raised {one_line(exc)}") from exc
 
 
@@ -209,8 +227,16 @@ def unknown_parameter(cls: type, key: str) -> str | None:
 
 # --------------------------------------------------------------------------- parameter types
 
-_NAMES = {int: "an integer", float: "a number", str: "a string", bool: "true or false",
-          type(None): "null", list: "a list", dict: "a mapping", tuple: "a list"}
+_NAMES = {
+    int: "an integer",
+    float: "a number",
+    str: "a string",
+    bool: "true or false",
+    type(None): "null",
+    list: "a list",
+    dict: "a mapping",
+    tuple: "a list",
+}
 
 
 def _expected(cls: type, key: str) -> tuple[tuple[type, ...], str] | None:
@@ -230,8 +256,11 @@ def _expected(cls: type, key: str) -> tuple[tuple[type, ...], str] | None:
     ann = p.annotation
     types_: tuple[type, ...] | None = None
     if ann is not inspect.Parameter.empty and not isinstance(ann, str):
-        args = (typing.get_args(ann) if typing.get_origin(ann) in (typing.Union, types.UnionType)
-                else (ann,))
+        args = (
+            typing.get_args(ann)
+            if typing.get_origin(ann) in (typing.Union, types.UnionType)
+            else (ann,)
+        )
         args = tuple(typing.get_origin(a) or a for a in args)
         if all(a in _NAMES for a in args):
             types_ = args
@@ -271,6 +300,8 @@ def check_param(cls: type, key: str, value):
     if isinstance(value, int) and not isinstance(value, bool) and float in types_:
         ok = True
     if not ok:
-        raise InputError(f"{cls.name} expects {words} for {key}, got {value!r} "
-                         f"({_NAMES.get(type(value), type(value).__name__)})")
+        raise InputError(
+            f"{cls.name} expects {words} for {key}, got {value!r} "
+            f"({_NAMES.get(type(value), type(value).__name__)})"
+        )
     return value

@@ -43,27 +43,52 @@ _LINE = {
     "name": "check_plugin_line",
     "web": {"material": "PET", "thickness": "50 um", "width": "1 m"},
     "elements": [
-        {"id": "unwind", "type": "unwind",
-         "roll": {"core_radius": "76 mm", "outer_radius": "0.3 m", "core_inertia": 0.5}},
+        {
+            "id": "unwind",
+            "type": "unwind",
+            "roll": {"core_radius": "76 mm", "outer_radius": "0.3 m", "core_inertia": 0.5},
+        },
         {"id": "idler1", "type": "idler", "radius": 0.05, "inertia": 0.011},
         {"id": "pull", "type": "driven", "radius": 0.1, "inertia": 0.2},
-        {"id": "rewind", "type": "rewind",
-         "roll": {"core_radius": "76 mm", "outer_radius": "0.1 m", "core_inertia": 0.5}},
+        {
+            "id": "rewind",
+            "type": "rewind",
+            "roll": {"core_radius": "76 mm", "outer_radius": "0.1 m", "core_inertia": 0.5},
+        },
     ],
     "spans": [{"length": "1.5 m"}, {"length": 1.0}, {"length": 1.0}],
-    "sensors": [{"id": "lc", "type": "load_cell", "element": "idler1", "noise": "2 N"},
-                {"id": "enc", "type": "encoder", "element": "pull", "noise": "0.05 rad/s"}],
+    "sensors": [
+        {"id": "lc", "type": "load_cell", "element": "idler1", "noise": "2 N"},
+        {"id": "enc", "type": "encoder", "element": "pull", "noise": "0.05 rad/s"},
+    ],
     "controllers": [
-        {"id": "speed", "type": "speed_pi", "element": "pull", "master": True, "kp": 25,
-         "ki": 790},
-        {"id": "tens", "type": "tension_pi", "element": "unwind", "sensor": "lc",
-         "setpoint": "200 N", "kp": 0.1, "ki": 0.5},
+        {"id": "speed", "type": "speed_pi", "element": "pull", "master": True, "kp": 25, "ki": 790},
+        {
+            "id": "tens",
+            "type": "tension_pi",
+            "element": "unwind",
+            "sensor": "lc",
+            "setpoint": "200 N",
+            "kp": 0.1,
+            "ki": 0.5,
+        },
     ],
 }
-_SCENARIO = {"line": "line.yaml", "duration": "20 s", "record_rate": "50 Hz", "warmup": "1 s",
-             "initial": {"state": "steady"}, "programme": [{"at": 0, "line_speed": "2 m/s"}]}
-_FAULT = {"id": "lc_offset", "type": "sensor.offset", "target": "lc", "onset": "10 s",
-          "magnitude": "20 N"}
+_SCENARIO = {
+    "line": "line.yaml",
+    "duration": "20 s",
+    "record_rate": "50 Hz",
+    "warmup": "1 s",
+    "initial": {"state": "steady"},
+    "programme": [{"at": 0, "line_speed": "2 m/s"}],
+}
+_FAULT = {
+    "id": "lc_offset",
+    "type": "sensor.offset",
+    "target": "lc",
+    "onset": "10 s",
+    "magnitude": "20 N",
+}
 
 
 def example_runs() -> tuple[list[Run], Run]:
@@ -86,21 +111,28 @@ def example_runs() -> tuple[list[Run], Run]:
         (d / "line.yaml").write_text(yaml.safe_dump(_LINE), encoding="utf-8")
         for seed, faults in ((1, []), (2, []), (3, [_FAULT])):
             scen = d / f"s{seed}.yaml"
-            scen.write_text(yaml.safe_dump({**_SCENARIO, "seed": seed, "faults": faults}),
-                            encoding="utf-8")
+            scen.write_text(
+                yaml.safe_dump({**_SCENARIO, "seed": seed, "faults": faults}), encoding="utf-8"
+            )
             run_scenario(scen, output=d / f"run{seed}")
             runs += read_runs(d / f"run{seed}", verify=False)  # samples are read in memory
     return runs[:2], runs[2]
 
 
 def _fail(name: str, rule: str) -> AssertionError:
-    return AssertionError(f"plug-in '{name}' breaks the contract (docs/diagnostics.md §2.1): "
-                          f"{rule}")
+    return AssertionError(
+        f"plug-in '{name}' breaks the contract (docs/diagnostics.md §2.1): {rule}"
+    )
 
 
-def check_plugin(plugin: str | type[Diagnostic], train: Sequence[Run] | None = None,
-                 test: Run | None = None, *, params: dict | None = None,
-                 drive_data: bool = False) -> list[str]:
+def check_plugin(
+    plugin: str | type[Diagnostic],
+    train: Sequence[Run] | None = None,
+    test: Run | None = None,
+    *,
+    params: dict | None = None,
+    drive_data: bool = False,
+) -> list[str]:
     """Check a diagnostic plug-in against the contract the harness relies on.
 
     Parameters
@@ -133,8 +165,10 @@ def check_plugin(plugin: str | type[Diagnostic], train: Sequence[Run] | None = N
     """
     cls = get(plugin) if isinstance(plugin, str) else plugin
     if not (isinstance(cls, type) and issubclass(cls, Diagnostic)):
-        raise InputError(f"check_plugin: {plugin!r} is neither a registered plug-in name "
-                         f"nor a subclass of r2rsim.diagnostics.Diagnostic")
+        raise InputError(
+            f"check_plugin: {plugin!r} is neither a registered plug-in name "
+            f"nor a subclass of r2rsim.diagnostics.Diagnostic"
+        )
     if train is None or test is None:
         default_train, default_test = example_runs()
         train = default_train if train is None else train
@@ -174,8 +208,10 @@ class _CheckRun:
         self.done.append(check)
 
     def stores_parameters_only(self, est) -> None:
-        rule = ("__init__ must store each parameter under its own name and do nothing else "
-                "(clone(est) must round-trip get_params())")
+        rule = (
+            "__init__ must store each parameter under its own name and do nothing else "
+            "(clone(est) must round-trip get_params())"
+        )
         try:
             same = clone(est).get_params() == est.get_params()
         except RuntimeError as exc:  # scikit-learn's clone checks this too
@@ -184,8 +220,10 @@ class _CheckRun:
             raise _fail(self.name, rule)
         fitted = [k for k in vars(est) if k.endswith("_") and not k.startswith("_")]
         if fitted:
-            raise _fail(self.name, f"__init__ set fitted attributes {fitted}; only fit sets "
-                        f"attributes ending in '_'")
+            raise _fail(
+                self.name,
+                f"__init__ set fitted attributes {fitted}; only fit sets attributes ending in '_'",
+            )
         self._ok("__init__ stores its parameters only (clone round-trips them)")
 
     def refuses_to_score_unfitted(self, est) -> None:
@@ -195,13 +233,22 @@ class _CheckRun:
             if "not fitted" in str(exc):
                 self._ok("score before fit raises RuntimeError('... not fitted ...')")
                 return
-            raise _fail(self.name, f"score before fit raised RuntimeError({exc}) without "
-                        f"'not fitted' (self._check_fitted() says so)") from None
+            raise _fail(
+                self.name,
+                f"score before fit raised RuntimeError({exc}) without "
+                f"'not fitted' (self._check_fitted() says so)",
+            ) from None
         except Exception as exc:  # noqa: BLE001 - any other exception breaks the rule
-            raise _fail(self.name, f"score before fit raised {type(exc).__name__}, not "
-                        f"RuntimeError('... not fitted ...')") from None
-        raise _fail(self.name, "score before fit returned; it must raise "
-                    "RuntimeError('... not fitted ...') (self._check_fitted())")
+            raise _fail(
+                self.name,
+                f"score before fit raised {type(exc).__name__}, not "
+                f"RuntimeError('... not fitted ...')",
+            ) from None
+        raise _fail(
+            self.name,
+            "score before fit returned; it must raise "
+            "RuntimeError('... not fitted ...') (self._check_fitted())",
+        )
 
     def fits_and_scores(self, est) -> pd.DataFrame:
         before = [f.copy() for f in self.frames] + [self.frame.copy()]
@@ -210,20 +257,29 @@ class _CheckRun:
         scores = est.score(self.frame)
         for f, b in zip([*self.frames, self.frame], before, strict=True):
             if not f.equals(b):
-                raise _fail(self.name, "fit and score must leave the frames they are given "
-                            "unchanged (copy before changing them)")
+                raise _fail(
+                    self.name,
+                    "fit and score must leave the frames they are given "
+                    "unchanged (copy before changing them)",
+                )
         if not isinstance(scores, pd.DataFrame) or "statistic" not in scores.columns:
             raise _fail(self.name, "score must return a DataFrame with a 'statistic' column")
         if not scores.index.equals(self.frame.index):
-            raise _fail(self.name, "score must return one row per sample, indexed like the "
-                        "run's samples (index k)")
+            raise _fail(
+                self.name,
+                "score must return one row per sample, indexed like the run's samples (index k)",
+            )
         alarms = est.decide(scores)
-        if not (isinstance(alarms, pd.Series) and alarms.dtype == bool
-                and alarms.index.equals(scores.index)):
-            raise _fail(self.name, "decide must return a boolean Series indexed like the "
-                        "scores")
-        self._ok("fit returns self; score and decide are aligned to the samples; the "
-                 "inputs are left unchanged")
+        if not (
+            isinstance(alarms, pd.Series)
+            and alarms.dtype == bool
+            and alarms.index.equals(scores.index)
+        ):
+            raise _fail(self.name, "decide must return a boolean Series indexed like the scores")
+        self._ok(
+            "fit returns self; score and decide are aligned to the samples; the "
+            "inputs are left unchanged"
+        )
         return scores
 
     def outputs_as_the_harness_checks(self, est) -> None:
@@ -235,27 +291,31 @@ class _CheckRun:
             meas = {c for c in self.frame.columns if c.startswith("meas.")}
             bad = [n for n in names if isinstance(n, str) and n not in meas]
             if not ranking.index.equals(self.frame.index) or bad:
-                raise _fail(self.name, "rank_channels must return a frame indexed like the "
-                            "scores whose entries are meas. channels of the run or None"
-                            + (f" (got {bad[:3]})" if bad else ""))
-        self._ok("the harness accepts its outputs (statistic, decide, diagnose, "
-                 "rank_channels)")
+                raise _fail(
+                    self.name,
+                    "rank_channels must return a frame indexed like the "
+                    "scores whose entries are meas. channels of the run or None"
+                    + (f" (got {bad[:3]})" if bad else ""),
+                )
+        self._ok("the harness accepts its outputs (statistic, decide, diagnose, rank_channels)")
 
     def is_deterministic(self, scores: pd.DataFrame) -> None:
         again = self.cls(**copy.deepcopy(self.params)).fit(self.frames).score(self.frame)
         try:
             pd.testing.assert_frame_equal(scores, again)
         except AssertionError:
-            raise _fail(self.name, "two fits with the same parameters must give the same "
-                        "scores (take randomness from a random_state parameter)") from None
+            raise _fail(
+                self.name,
+                "two fits with the same parameters must give the same "
+                "scores (take randomness from a random_state parameter)",
+            ) from None
         self._ok("deterministic (random_state=0 where it has one)")
 
     def learns_only_visible_columns(self, est) -> None:
         hidden = HIDDEN + (() if self.drive_data else DRIVE)
         seen = [c for c in getattr(est, "columns_", []) if str(c).startswith(hidden)]
         if seen:
-            raise _fail(self.name, f"columns_ holds columns an algorithm may not see: "
-                        f"{seen[:3]}")
+            raise _fail(self.name, f"columns_ holds columns an algorithm may not see: {seen[:3]}")
         self._ok("learns only visible columns")
 
     def is_causal_as_declared(self, est, scores: pd.DataFrame) -> None:
@@ -268,18 +328,30 @@ class _CheckRun:
         n = len(self.frame)
         for k in sorted({n // 4, n // 2, (3 * n) // 4} - {0}):
             cut = est.score(self.frame.iloc[:k])["statistic"].to_numpy(float)
-            if cut.shape != (k,) or not np.allclose(cut, full[:k], rtol=CAUSAL_RTOL,
-                                                     atol=CAUSAL_ATOL, equal_nan=True):
-                bad = (int(np.flatnonzero(~np.isclose(cut, full[:k], rtol=CAUSAL_RTOL,
-                                                      atol=CAUSAL_ATOL,
-                                                      equal_nan=True))[0])
-                       if cut.shape == (k,) else 0)
-                raise _fail(self.name, f"it declares itself causal (its statistic at t uses "
-                            f"samples up to t only), but scoring the run cut after sample "
-                            f"{k} changes the statistic at sample {bad}: read no later "
-                            f"samples, or declare causal = False (an offline method)")
-        self._ok("causal as declared: the statistic up to t does not change when later "
-                 "samples are cut")
+            if cut.shape != (k,) or not np.allclose(
+                cut, full[:k], rtol=CAUSAL_RTOL, atol=CAUSAL_ATOL, equal_nan=True
+            ):
+                bad = (
+                    int(
+                        np.flatnonzero(
+                            ~np.isclose(
+                                cut, full[:k], rtol=CAUSAL_RTOL, atol=CAUSAL_ATOL, equal_nan=True
+                            )
+                        )[0]
+                    )
+                    if cut.shape == (k,)
+                    else 0
+                )
+                raise _fail(
+                    self.name,
+                    f"it declares itself causal (its statistic at t uses "
+                    f"samples up to t only), but scoring the run cut after sample "
+                    f"{k} changes the statistic at sample {bad}: read no later "
+                    f"samples, or declare causal = False (an offline method)",
+                )
+        self._ok(
+            "causal as declared: the statistic up to t does not change when later samples are cut"
+        )
 
     def calibrates_its_own_threshold(self) -> None:
         """After ``calibrate(runs, alpha, masks)`` on healthy runs, its own alarms on those
@@ -290,12 +362,19 @@ class _CheckRun:
         for alpha in CALIBRATION_ALPHAS:
             if est.calibrate(runs, alpha, masks) is not est:
                 raise _fail(self.name, "calibrate must return self")
-            alarms = np.concatenate([np.asarray(est.decide(est.score(f)), dtype=bool)[m]
-                                     for f, m in zip(runs, masks, strict=True)])
+            alarms = np.concatenate(
+                [
+                    np.asarray(est.decide(est.score(f)), dtype=bool)[m]
+                    for f, m in zip(runs, masks, strict=True)
+                ]
+            )
             if alarms.mean() > alpha + 1e-12:
-                raise _fail(self.name, f"after calibrate(runs, alpha={alpha}) its own alarms "
-                            f"flag {alarms.mean():.4f} of those runs' masked samples, more "
-                            f"than alpha: calibrate must move the threshold its decide uses")
+                raise _fail(
+                    self.name,
+                    f"after calibrate(runs, alpha={alpha}) its own alarms "
+                    f"flag {alarms.mean():.4f} of those runs' masked samples, more "
+                    f"than alpha: calibrate must move the threshold its decide uses",
+                )
         self._ok("calibrate(runs, alpha, masks) makes its own alarms hold alpha on those runs")
 
     def refuses_data_without_its_columns(self) -> None:
@@ -303,13 +382,23 @@ class _CheckRun:
             self.cls(**self.params).fit([self.frames[0][["t_s"]]])
         except InputError as exc:
             if "no column matching" in exc.message:
-                self._ok("fit on data without its columns raises InputError('no column "
-                         "matching ...')")
+                self._ok(
+                    "fit on data without its columns raises InputError('no column matching ...')"
+                )
                 return
-            raise _fail(self.name, f"fit without its columns raised InputError({exc.message})"
-                        f"; use self.required_columns(frame), which names the pattern") from None
+            raise _fail(
+                self.name,
+                f"fit without its columns raised InputError({exc.message})"
+                f"; use self.required_columns(frame), which names the pattern",
+            ) from None
         except Exception as exc:  # noqa: BLE001
-            raise _fail(self.name, f"fit without its columns raised {type(exc).__name__}; "
-                        f"call self.required_columns(frame) in fit") from None
-        raise _fail(self.name, "fit on a frame with only t_s must raise InputError('no "
-                    "column matching ...') (self.required_columns(frame))")
+            raise _fail(
+                self.name,
+                f"fit without its columns raised {type(exc).__name__}; "
+                f"call self.required_columns(frame) in fit",
+            ) from None
+        raise _fail(
+            self.name,
+            "fit on a frame with only t_s must raise InputError('no "
+            "column matching ...') (self.required_columns(frame))",
+        )

@@ -29,8 +29,15 @@ from ..dataset.read import Run, read_runs
 from ..errors import InputError
 from .splits import ROLES, seed_order_key, split_by_seed
 
-__all__ = ["DEFAULT_CHANNELS", "FORMATS", "PROTECTED", "SPLITS", "TIMEEVAL_INDEX_COLUMNS",
-           "ExportSummary", "export_dataset"]
+__all__ = [
+    "DEFAULT_CHANNELS",
+    "FORMATS",
+    "PROTECTED",
+    "SPLITS",
+    "TIMEEVAL_INDEX_COLUMNS",
+    "ExportSummary",
+    "export_dataset",
+]
 
 #: the layouts written
 FORMATS = ("timeeval", "tsb-ad")
@@ -51,11 +58,29 @@ _INDEX = ("k", "t_s")
 COLLECTION = "r2rsim"
 #: the columns of TimeEval's ``datasets.csv`` (its ``DatasetManager`` index), in order
 TIMEEVAL_INDEX_COLUMNS = (
-    "collection_name", "dataset_name", "train_path", "test_path", "dataset_type",
-    "datetime_index", "split_at", "train_type", "train_is_normal", "input_type", "length",
-    "dimensions", "contamination", "num_anomalies", "min_anomaly_length",
-    "median_anomaly_length", "max_anomaly_length", "mean", "stddev", "trend", "stationarity",
-    "period_size")
+    "collection_name",
+    "dataset_name",
+    "train_path",
+    "test_path",
+    "dataset_type",
+    "datetime_index",
+    "split_at",
+    "train_type",
+    "train_is_normal",
+    "input_type",
+    "length",
+    "dimensions",
+    "contamination",
+    "num_anomalies",
+    "min_anomaly_length",
+    "median_anomaly_length",
+    "max_anomaly_length",
+    "mean",
+    "stddev",
+    "trend",
+    "stationarity",
+    "period_size",
+)
 #: the file listing a TSB-AD export (TSB-AD's runners read its ``file_name`` column)
 TSB_AD_LIST = "file_list.csv"
 #: the collection and domain fields of a TSB-AD file name
@@ -100,9 +125,11 @@ class ExportSummary:
         train = f" and {extra} training series" if extra else ""  # (series: also plural)
         index = "datasets.csv" if self.format == "timeeval" else TSB_AD_LIST
         n = len(self.exported)
-        return (f"exported {n} run{'s' * (n != 1)}{train} ({len(self.channels)} channels, "
-                f"label {self.label}) to {self.out} ({self.format}: {index} and "
-                f"{len(self.files)} series files)")
+        return (
+            f"exported {n} run{'s' * (n != 1)}{train} ({len(self.channels)} channels, "
+            f"label {self.label}) to {self.out} ({self.format}: {index} and "
+            f"{len(self.files)} series files)"
+        )
 
 
 # --------------------------------------------------------------------------- checks
@@ -115,8 +142,10 @@ def _check_label(label: str) -> str:
     classes = sorted({f.fault_class for f in CATALOGUE.values()})
     if label == "any" or label in classes or label in CATALOGUE:
         return label
-    raise InputError(f"--label '{label}' is not 'any', a fault class ({', '.join(classes)}) "
-                     f"or a fault type (`r2rsim list faults`, e.g. sensor.offset)")
+    raise InputError(
+        f"--label '{label}' is not 'any', a fault class ({', '.join(classes)}) "
+        f"or a fault type (`r2rsim list faults`, e.g. sensor.offset)"
+    )
 
 
 def _patterns(channels: str | Sequence[str] | None) -> list[str]:
@@ -166,8 +195,12 @@ def select_channels(columns: Sequence[str], patterns: Sequence[str]) -> list[str
     for p in patterns:
         if not any(_admits(p, c) for c in cols):
             hidden = [c for c in cols if fnmatch.fnmatchcase(c, p)]
-            why = (f" (it matches {hidden[0]}, which is exported only when named by its "
-                   f"family, e.g. --channels '{hidden[0].split('.')[0]}.*')" if hidden else "")
+            why = (
+                f" (it matches {hidden[0]}, which is exported only when named by its "
+                f"family, e.g. --channels '{hidden[0].split('.')[0]}.*')"
+                if hidden
+                else ""
+            )
             raise InputError(f"--channels '{p}' selects no channel of the dataset{why}")
     return [c for c in cols if any(_admits(p, c) for p in patterns)]
 
@@ -175,13 +208,17 @@ def select_channels(columns: Sequence[str], patterns: Sequence[str]) -> list[str
 def _check_output(out: Path, source: Path) -> None:
     """The output: absent or empty, writable, not inside the dataset (InputError)."""
     if occupied_output(out):
-        raise InputError(f"output directory '{out}' exists and is not empty; r2rsim export "
-                         f"writes only into a new or empty directory: choose another with -o")
+        raise InputError(
+            f"output directory '{out}' exists and is not empty; r2rsim export "
+            f"writes only into a new or empty directory: choose another with -o"
+        )
     src = source.resolve()
     dst = Path(os.path.abspath(out)).resolve()
     if dst == src or src in dst.parents:
-        raise InputError(f"output directory '{out}' is inside the dataset {source} (a "
-                         f"dataset holds only its own files): choose another with -o")
+        raise InputError(
+            f"output directory '{out}' is inside the dataset {source} (a "
+            f"dataset holds only its own files): choose another with -o"
+        )
     check_writable(out, inside_out=False)
 
 
@@ -209,8 +246,10 @@ def _numeric(run: Run, name: str) -> np.ndarray:
     col = run.samples[name]
     kind = getattr(col.dtype, "kind", "O")
     if kind not in "biuf":
-        raise InputError(f"channel '{name}' holds {col.dtype} values, not numbers: it cannot "
-                         f"be a channel of a CSV series (choose others with --channels)")
+        raise InputError(
+            f"channel '{name}' holds {col.dtype} values, not numbers: it cannot "
+            f"be a channel of a CSV series (choose others with --channels)"
+        )
     return col.to_numpy()
 
 
@@ -232,8 +271,7 @@ def _label(run: Run, label: str) -> np.ndarray:
         return run.samples["label.is_faulty"].to_numpy(dtype=bool)
     t = run.samples["t_s"].to_numpy(dtype=float)
     faults, present = fault_presence(_fault_rows(run), t)
-    keep = [i for i, f in enumerate(faults)
-            if f.type == label or f.kind.fault_class == label]
+    keep = [i for i, f in enumerate(faults) if f.type == label or f.kind.fault_class == label]
     return present[keep].any(axis=0) if keep else np.zeros(len(t), dtype=bool)
 
 
@@ -251,8 +289,7 @@ def _anomalies(label: np.ndarray) -> list[int]:
     return (np.flatnonzero(d == -1) - np.flatnonzero(d == 1)).tolist()
 
 
-def _write_csv(path: Path, s: _Series, channels: list[str], first: str | None,
-               last: str) -> None:
+def _write_csv(path: Path, s: _Series, channels: list[str], first: str | None, last: str) -> None:
     """One series: [``first`` = the time in s], the channels, ``last`` = the 0/1 label."""
     cols = []
     if first is not None:
@@ -264,7 +301,7 @@ def _write_csv(path: Path, s: _Series, channels: list[str], first: str | None,
         f.write(",".join(header) + "\n")
         step = 65536
         for start in range(0, len(s.label), step):
-            part = [c[start:start + step] for c in cols]
+            part = [c[start : start + step] for c in cols]
             f.write("".join(",".join(r) + "\n" for r in zip(*part, strict=True)))
 
 
@@ -282,16 +319,23 @@ def _stats(s: _Series, channels: list[str]) -> tuple[str, str]:
         means.append(x.mean() if len(x) else np.nan)
         sds.append(x.std(ddof=1) if len(x) > 1 else np.nan)
     m, sd = np.array(means), np.array(sds)
-    return (_num(m[np.isfinite(m)].mean()) if np.isfinite(m).any() else "",
-            _num(sd[np.isfinite(sd)].mean()) if np.isfinite(sd).any() else "")
+    return (
+        _num(m[np.isfinite(m)].mean()) if np.isfinite(m).any() else "",
+        _num(sd[np.isfinite(sd)].mean()) if np.isfinite(sd).any() else "",
+    )
 
 
 # --------------------------------------------------------------------------- layouts
 
 
-def _timeeval(tmp: Path, series: dict[str, _Series], selected: list[str],
-              trainer: dict[str, str | None], channels: list[str],
-              summary: ExportSummary) -> None:
+def _timeeval(
+    tmp: Path,
+    series: dict[str, _Series],
+    selected: list[str],
+    trainer: dict[str, str | None],
+    channels: list[str],
+    summary: ExportSummary,
+) -> None:
     (tmp / COLLECTION).mkdir()
     for rid, s in series.items():
         rel = f"{COLLECTION}/{rid}.csv"
@@ -306,20 +350,29 @@ def _timeeval(tmp: Path, series: dict[str, _Series], selected: list[str],
         n = len(s.label)
         mean, sd = _stats(s, channels)
         row = {
-            "collection_name": COLLECTION, "dataset_name": rid,
+            "collection_name": COLLECTION,
+            "dataset_name": rid,
             "train_path": summary.files[train] if semi else "",
-            "test_path": summary.files[rid], "dataset_type": "synthetic",
-            "datetime_index": "False", "split_at": "",
+            "test_path": summary.files[rid],
+            "dataset_type": "synthetic",
+            "datetime_index": "False",
+            "split_at": "",
             "train_type": "semi-supervised" if semi else "unsupervised",
             "train_is_normal": "True" if semi else "False",
             "input_type": "univariate" if len(channels) == 1 else "multivariate",
-            "length": str(n), "dimensions": str(len(channels)),
+            "length": str(n),
+            "dimensions": str(len(channels)),
             "contamination": repr(float(s.label.sum()) / n) if n else "",
             "num_anomalies": str(len(lengths)),
             "min_anomaly_length": str(min(lengths, default=0)),
             "median_anomaly_length": str(int(np.median(lengths)) if lengths else 0),
             "max_anomaly_length": str(max(lengths, default=0)),
-            "mean": mean, "stddev": sd, "trend": "", "stationarity": "", "period_size": ""}
+            "mean": mean,
+            "stddev": sd,
+            "trend": "",
+            "stationarity": "",
+            "period_size": "",
+        }
         lines.append(",".join(row[c] for c in TIMEEVAL_INDEX_COLUMNS))
     (tmp / "datasets.csv").write_text("\n".join(lines) + "\n", encoding="utf-8")
 
@@ -330,12 +383,19 @@ def tsb_ad_name(number: int, width: int, train: int, first: int) -> str:
     TSB-AD's runners read the training-prefix length as the third field from the end
     (``name.split('.')[0].split('_')[-3]``) and drop nothing else from the name.
     """
-    return (f"{number:0{width}d}_{_TSB_COLLECTION}_id_{number}_{_TSB_DOMAIN}_tr_{train}"
-            f"_1st_{first}.csv")
+    return (
+        f"{number:0{width}d}_{_TSB_COLLECTION}_id_{number}_{_TSB_DOMAIN}_tr_{train}_1st_{first}.csv"
+    )
 
 
-def _tsb_ad(tmp: Path, series: dict[str, _Series], selected: list[str],
-            roles: dict[str, str], channels: list[str], summary: ExportSummary) -> None:
+def _tsb_ad(
+    tmp: Path,
+    series: dict[str, _Series],
+    selected: list[str],
+    roles: dict[str, str],
+    channels: list[str],
+    summary: ExportSummary,
+) -> None:
     width = max(3, len(str(len(selected))))
     lines = ["file_name,run_id,split,length,num_anomalies"]
     for i, rid in enumerate(selected, start=1):
@@ -352,10 +412,18 @@ def _tsb_ad(tmp: Path, series: dict[str, _Series], selected: list[str],
 # --------------------------------------------------------------------------- entry point
 
 
-def export_dataset(path: str | Path, out: str | Path, format: str, *,
-                   channels: str | Sequence[str] | None = None, label: str = "any",
-                   split: str = "all", where: dict | None = None, drop_warmup: bool = False,
-                   verify: bool = True) -> ExportSummary:
+def export_dataset(
+    path: str | Path,
+    out: str | Path,
+    format: str,
+    *,
+    channels: str | Sequence[str] | None = None,
+    label: str = "any",
+    split: str = "all",
+    where: dict | None = None,
+    drop_warmup: bool = False,
+    verify: bool = True,
+) -> ExportSummary:
     """Write a dataset's runs as TimeEval or TSB-AD CSV files.
 
     Parameters
@@ -417,16 +485,19 @@ def export_dataset(path: str | Path, out: str | Path, format: str, *,
 
     runs = read_runs(path, verify=verify, where=where or None)
     if where and not runs:
-        raise InputError(f"no run of {path} has "
-                         + ", ".join(f"{k} = {v}" for k, v in where.items()))
+        raise InputError(
+            f"no run of {path} has " + ", ".join(f"{k} = {v}" for k, v in where.items())
+        )
     if not runs:
         raise InputError(f"dataset {path} holds no run")
     sp = split_by_seed(runs)
     roles = {r.run_id: role for role in ROLES for r in getattr(sp, role)}
     selected = [r for r in runs if split == "all" or roles[r.run_id] == split]
     if not selected:
-        raise InputError(f"--split {split}: no run of {path} has that role ({sp.describe()}; "
-                         f"every faulty run is a test run)")
+        raise InputError(
+            f"--split {split}: no run of {path} has that role ({sp.describe()}; "
+            f"every faulty run is a test run)"
+        )
     chans = select_channels(list(runs[0].samples.columns), patterns)
     for r in selected:
         missing = [c for c in chans if c not in r.samples.columns]
@@ -448,19 +519,29 @@ def export_dataset(path: str | Path, out: str | Path, format: str, *,
     by_id = {r.run_id: r for r in runs}
     position = {r.run_id: i for i, r in enumerate(runs)}
     order = [r.run_id for r in selected]  # then the training series outside the selection
-    order += sorted({t for t in trainer.values() if t is not None} - set(order),
-                    key=position.__getitem__)
+    order += sorted(
+        {t for t in trainer.values() if t is not None} - set(order), key=position.__getitem__
+    )
 
     series = {}
     for rid in order:
         r = by_id[rid]
-        rows = (r.samples["label.score_mask"].to_numpy(dtype=bool) if drop_warmup
-                else np.ones(len(r.samples), dtype=bool))
+        rows = (
+            r.samples["label.score_mask"].to_numpy(dtype=bool)
+            if drop_warmup
+            else np.ones(len(r.samples), dtype=bool)
+        )
         series[rid] = _Series(r, rows, _label(r, label)[rows])
 
-    summary = ExportSummary(out, format, chans, label, sp.describe(),
-                            roles={rid: roles[rid] for rid in order},
-                            exported=[r.run_id for r in selected])
+    summary = ExportSummary(
+        out,
+        format,
+        chans,
+        label,
+        sp.describe(),
+        roles={rid: roles[rid] for rid in order},
+        exported=[r.run_id for r in selected],
+    )
     dest = Path(os.path.abspath(out))  # (``-o .``: its parent, not itself, holds the tmp)
     dest.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=dest.parent, prefix=f".{dest.name}.export-"))
@@ -486,8 +567,9 @@ def _move_into(tmp: Path, dest: Path, out: Path) -> None:
     ``tmp``; on a failure, take back what was moved (InputError if ``dest`` was filled
     meanwhile)."""
     if occupied_output(dest):
-        raise InputError(f"output directory '{out}' was filled while the export ran; "
-                         f"nothing was written")
+        raise InputError(
+            f"output directory '{out}' was filled while the export ran; nothing was written"
+        )
     moved = []
     try:
         for entry in sorted(tmp.iterdir()):

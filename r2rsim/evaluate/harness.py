@@ -70,9 +70,19 @@ from .splits import (
     split_by_seed,
 )
 
-__all__ = ["METRICS", "Evaluation", "Split", "acting_faults", "check_settings", "evaluate",
-           "no_training_run", "read_datasets", "run_data", "split_by_condition",
-           "split_by_seed"]
+__all__ = [
+    "METRICS",
+    "Evaluation",
+    "Split",
+    "acting_faults",
+    "check_settings",
+    "evaluate",
+    "no_training_run",
+    "read_datasets",
+    "run_data",
+    "split_by_condition",
+    "split_by_seed",
+]
 
 
 @dataclass(frozen=True)
@@ -93,28 +103,30 @@ METRICS: dict[str, Metric] = {
     "dr": Metric("M3 sample detection rate over the fault windows", True),
     "dr_steady": Metric("M3 over the steady-state samples (severity 1)", True),
     "pd": Metric("M4 run-level detection probability in the detection window", True),
-    "pd_null": Metric("M4 rule on fault-free test runs at pretend onsets: P_D by chance",
-                      None),
+    "pd_null": Metric("M4 rule on fault-free test runs at pretend onsets: P_D by chance", None),
     "dd_median_s": Metric("M5 median detection delay over detected runs", False, "s"),
     "dd_mean_s": Metric("M5 mean detection delay over detected runs", False, "s"),
     "dd_p90_s": Metric("M5 90th percentile of the detection delay", False, "s"),
     "dd_censored_mean_s": Metric("M5 mean delay, a miss counting its horizon", False, "s"),
     "n_missed": Metric("M5 faulty runs not detected", False),
     "pd_steady": Metric("M4 detection of the fully developed fault", True),
-    "pd_steady_null": Metric("pd_steady's rule at pretend onsets on fault-free test runs",
-                             None),
-    "dd_steady_median_s": Metric("M5 median delay from the first severity-1 sample", False,
-                                 "s"),
+    "pd_steady_null": Metric("pd_steady's rule at pretend onsets on fault-free test runs", None),
+    "dd_steady_median_s": Metric("M5 median delay from the first severity-1 sample", False, "s"),
     "roc_auc": Metric("M7 area under the ROC curve of the statistic", True),
     "pr_auc": Metric("M7 average precision of the statistic", True),
     "vus_pr": Metric("M7 volume under the range-based PR surface of the statistic", True),
     "ia": Metric("M9 isolation accuracy over alarmed fault samples", True),
     "hit1": Metric("M13 channel hit@1 at the first detection onset", True),
     "hit1_samples": Metric("M13 channel hit@1 over alarmed sensor-fault samples", True),
-    "mdm90": Metric("M15 smallest |magnitude| with P_D >= 0.9 and significantly above "
-                    "pd_null (plug-in alarms)", False),
-    "mdm90_cal": Metric("M15 smallest |magnitude| with P_D >= 0.9 and significantly above "
-                        "pd_null_cal, at theta (M6)", False),
+    "mdm90": Metric(
+        "M15 smallest |magnitude| with P_D >= 0.9 and significantly above pd_null (plug-in alarms)",
+        False,
+    ),
+    "mdm90_cal": Metric(
+        "M15 smallest |magnitude| with P_D >= 0.9 and significantly above "
+        "pd_null_cal, at theta (M6)",
+        False,
+    ),
     "theta": Metric("M6 threshold calibrated on the validation runs", None),
     "far_ff_cal": Metric("M1 FAR over fault-free test runs at theta (M6)", False),
     "far_pre_cal": Metric("M1 pre-onset FAR at theta (M6)", False),
@@ -132,13 +144,33 @@ METRICS: dict[str, Metric] = {
 _META = ("fit_s", "exec_s_per_sim_h", "theta")
 
 #: metrics computed per run (not per sample): left out of the per-regime strata
-_RUN_LEVEL = frozenset({"pd", "pd_null", "dd_median_s", "dd_mean_s", "dd_p90_s",
-                        "dd_censored_mean_s", "n_missed", "pd_steady", "dd_steady_median_s",
-                        "hit1", "mdm90", "pd_steady_null"})
+_RUN_LEVEL = frozenset(
+    {
+        "pd",
+        "pd_null",
+        "dd_median_s",
+        "dd_mean_s",
+        "dd_p90_s",
+        "dd_censored_mean_s",
+        "n_missed",
+        "pd_steady",
+        "dd_steady_median_s",
+        "hit1",
+        "mdm90",
+        "pd_steady_null",
+    }
+)
 #: the metrics reported at theta, by the name of the metric at the plug-in's alarms
-_CAL = {"far_ff": "far_ff_cal", "far_pre": "far_pre_cal", "dr": "dr_cal", "pd": "pd_cal",
-        "dd_median_s": "dd_median_cal_s", "dr_steady": "dr_steady_cal", "hit1": "hit1_cal",
-        "pd_null": "pd_null_cal"}
+_CAL = {
+    "far_ff": "far_ff_cal",
+    "far_pre": "far_pre_cal",
+    "dr": "dr_cal",
+    "pd": "pd_cal",
+    "dd_median_s": "dd_median_cal_s",
+    "dr_steady": "dr_steady_cal",
+    "hit1": "hit1_cal",
+    "pd_null": "pd_null_cal",
+}
 #: condition label of a per-regime stratum (``label.mode`` per sample)
 MODE_PREFIX = "mode:"
 #: values of the ``window`` option
@@ -152,8 +184,9 @@ ALL = "all"
 NONE = "none"
 
 
-def read_datasets(paths: Sequence[str | Path], verify: bool = True,
-                  where: dict | None = None) -> list[Run]:
+def read_datasets(
+    paths: Sequence[str | Path], verify: bool = True, where: dict | None = None
+) -> list[Run]:
     """Every run of the given dataset directories (runs or sweeps); a directory that is not
     a dataset but holds datasets (one level down) contributes all of them. ``verify``: check
     each dataset's files against its manifest.json (sizes, and the sha256 of each file read)
@@ -173,8 +206,10 @@ def read_datasets(paths: Sequence[str | Path], verify: bool = True,
         for d in subs:
             runs += read_runs(d, verify=verify, where=where)
     if where and paths and not runs:
-        raise InputError(f"no run of {', '.join(map(str, paths))} has "
-                         + ", ".join(f"{k} = {v}" for k, v in where.items()))
+        raise InputError(
+            f"no run of {', '.join(map(str, paths))} has "
+            + ", ".join(f"{k} = {v}" for k, v in where.items())
+        )
     return runs
 
 
@@ -185,8 +220,9 @@ def fault_key(run: Run) -> str:
     """The run's fault as ``type:target`` (several joined by ``+``; ``none`` when healthy):
     the fault stratum of the results table."""
     faults = acting_faults(run)
-    keys = sorted({f"{t}:{g}" for t, g in zip(faults["fault_type"], faults["target_id"],
-                                               strict=True)})
+    keys = sorted(
+        {f"{t}:{g}" for t, g in zip(faults["fault_type"], faults["target_id"], strict=True)}
+    )
     return "+".join(keys) if keys else NONE
 
 
@@ -195,9 +231,16 @@ def _magnitude(run: Run) -> float:
     return float(faults["magnitude"].iloc[0]) if len(faults) == 1 else math.nan
 
 
-def run_data(run: Run, statistic: np.ndarray, alarm: np.ndarray,
-             diagnosis: np.ndarray | None = None, *, ranking: pd.DataFrame | None = None,
-             modes: bool = False, steady: bool = False) -> RunData:
+def run_data(
+    run: Run,
+    statistic: np.ndarray,
+    alarm: np.ndarray,
+    diagnosis: np.ndarray | None = None,
+    *,
+    ranking: pd.DataFrame | None = None,
+    modes: bool = False,
+    steady: bool = False,
+) -> RunData:
     """The ground truth of a run (``label.*``) with a detector's output, as :class:`RunData`.
 
     Faulty samples are ``label.is_faulty``, scored samples ``label.score_mask`` (false in the
@@ -216,12 +259,17 @@ def run_data(run: Run, statistic: np.ndarray, alarm: np.ndarray,
         extra["severity"] = s["label.severity"].to_numpy(float)
     if ranking is not None:
         extra.update(_channel_data(run, ranking))
-    return RunData(t=s["t_s"].to_numpy(float), faulty=s["label.is_faulty"].to_numpy(bool),
-                   scored=s["label.score_mask"].to_numpy(bool), alarm=alarm, score=statistic,
-                   diagnosis=diagnosis,
-                   true_type=s["label.primary_type"].astype(str).to_numpy()
-                   if diagnosis is not None else None,
-                   magnitude=_magnitude(run), **extra)
+    return RunData(
+        t=s["t_s"].to_numpy(float),
+        faulty=s["label.is_faulty"].to_numpy(bool),
+        scored=s["label.score_mask"].to_numpy(bool),
+        alarm=alarm,
+        score=statistic,
+        diagnosis=diagnosis,
+        true_type=s["label.primary_type"].astype(str).to_numpy() if diagnosis is not None else None,
+        magnitude=_magnitude(run),
+        **extra,
+    )
 
 
 def _label(run: Run, column: str) -> pd.Series:
@@ -234,13 +282,17 @@ def _channel_data(run: Run, ranking: pd.DataFrame) -> dict:
     """``channel_truth`` from ``label.ch.*`` and the top-ranked channel as an index into it
     (-1 for a name that is not a labelled channel, or no name)."""
     cols = [c for c in run.samples.columns if c.startswith("label.ch.")]
-    names = tuple(c[len("label.ch."):] for c in cols)
+    names = tuple(c[len("label.ch.") :] for c in cols)
     lookup = {n: i for i, n in enumerate(names)}
     top = ranking.iloc[:, 0] if ranking.shape[1] else pd.Series(index=ranking.index)
-    code = top.map(lambda v: lookup.get(str(v).removeprefix("meas."), -1)
-                   if isinstance(v, str) else -1)
-    return {"channels": names, "channel_truth": run.samples[cols].to_numpy(bool),
-            "ranking": code.to_numpy(np.int64)[:, None]}
+    code = top.map(
+        lambda v: lookup.get(str(v).removeprefix("meas."), -1) if isinstance(v, str) else -1
+    )
+    return {
+        "channels": names,
+        "channel_truth": run.samples[cols].to_numpy(bool),
+        "ranking": code.to_numpy(np.int64)[:, None],
+    }
 
 
 # --------------------------------------------------------------------------- per-run counts
@@ -262,18 +314,37 @@ def _counts(r: RunData, rule: _Rule) -> dict[str, float]:
     runs (so a bootstrap replicate is a sum over resampled rows)."""
     f = far([r])
     ev = false_alarm_events([r])
-    out = {"ff_a": f.alarms_ff, "ff_n": f.n_ff, "pre_a": f.alarms_pre, "pre_n": f.n_pre,
-           "fa_ev": ev.n_events, "ok_h": ev.hours,
-           "dr_hit": 0, "dr_tot": 0, "elig": 0, "det": 0,
-           "delay": math.nan, "cens": math.nan, "ia_hit": 0, "ia_tot": 0,
-           "t_on": math.nan, "w_len": math.nan, **_extra_counts(r, rule)}
+    out = {
+        "ff_a": f.alarms_ff,
+        "ff_n": f.n_ff,
+        "pre_a": f.alarms_pre,
+        "pre_n": f.n_pre,
+        "fa_ev": ev.n_events,
+        "ok_h": ev.hours,
+        "dr_hit": 0,
+        "dr_tot": 0,
+        "elig": 0,
+        "det": 0,
+        "delay": math.nan,
+        "cens": math.nan,
+        "ia_hit": 0,
+        "ia_tot": 0,
+        "t_on": math.nan,
+        "w_len": math.nan,
+        **_extra_counts(r, rule),
+    }
     if r.is_faulty:
         out["dr_hit"], out["dr_tot"] = window_counts(r)
         d = detect_run(r, rule.m, rule.h, rule.w)
         if d.eligible:
-            out.update(elig=1, det=int(d.detected), delay=d.delay,
-                       cens=d.delay if d.detected else d.horizon, t_on=d.onset_s,
-                       w_len=d.horizon)
+            out.update(
+                elig=1,
+                det=int(d.detected),
+                delay=d.delay,
+                cens=d.delay if d.detected else d.horizon,
+                t_on=d.onset_s,
+                w_len=d.horizon,
+            )
         if r.diagnosis is not None:
             out["ia_hit"], out["ia_tot"] = isolation_counts(r)
     return out
@@ -282,15 +353,30 @@ def _counts(r: RunData, rule: _Rule) -> dict[str, float]:
 def _extra_counts(r: RunData, rule: _Rule) -> dict[str, float]:
     """The counts of the optional metrics: steady-state window (``rule.steady``) and
     channel isolation (with a ranking); zeros (nan delays) when the run has no such data."""
-    out = {"st_hit": 0, "st_tot": 0, "st_elig": 0, "st_det": 0, "st_delay": math.nan,
-           "st_t_on": math.nan, "st_w_len": math.nan,
-           "hit_r": 0, "hit_n": 0, "loc_hit": 0, "loc_tot": 0}
+    out = {
+        "st_hit": 0,
+        "st_tot": 0,
+        "st_elig": 0,
+        "st_det": 0,
+        "st_delay": math.nan,
+        "st_t_on": math.nan,
+        "st_w_len": math.nan,
+        "hit_r": 0,
+        "hit_n": 0,
+        "loc_hit": 0,
+        "loc_tot": 0,
+    }
     if rule.steady and r.severity is not None:
         out["st_hit"], out["st_tot"] = steady_counts(r)
         d = steady_detection(r, rule.m, rule.h, rule.w) if r.is_faulty else None
         if d is not None and d.eligible:
-            out.update(st_elig=1, st_det=int(d.detected), st_delay=d.delay,
-                       st_t_on=d.onset_s, st_w_len=d.horizon)
+            out.update(
+                st_elig=1,
+                st_det=int(d.detected),
+                st_delay=d.delay,
+                st_t_on=d.onset_s,
+                st_w_len=d.horizon,
+            )
     if r.ranking is not None:
         out["hit_r"], out["hit_n"] = run_hit(r, 1, rule.m, rule.h, rule.w)
         out["loc_hit"], out["loc_tot"] = localization_counts(r)
@@ -311,8 +397,7 @@ _FROM_COUNTS = {
     "pd": lambda c: _ratio(c["det"].sum(-1), c["elig"].sum(-1)),
     "dd_median_s": lambda c: _nanstat(np.nanmedian, c["delay"]),
     "dd_mean_s": lambda c: _nanstat(np.nanmean, c["delay"]),
-    "dd_p90_s": lambda c: _nanstat(lambda x, axis: np.nanpercentile(x, 90, axis=axis),
-                                   c["delay"]),
+    "dd_p90_s": lambda c: _nanstat(lambda x, axis: np.nanpercentile(x, 90, axis=axis), c["delay"]),
     "dd_censored_mean_s": lambda c: _nanstat(np.nanmean, c["cens"]),
     "ia": lambda c: _ratio(c["ia_hit"].sum(-1), c["ia_tot"].sum(-1)),
     "dr_steady": lambda c: _ratio(c["st_hit"].sum(-1), c["st_tot"].sum(-1)),
@@ -329,8 +414,9 @@ def _nanstat(fn, x: np.ndarray) -> np.ndarray:
         return fn(x, axis=-1)
 
 
-def _bootstrap(counts: pd.DataFrame, n_boot: int, seed: int, level: float = 0.95
-               ) -> dict[str, tuple[float, float, float]]:
+def _bootstrap(
+    counts: pd.DataFrame, n_boot: int, seed: int, level: float = 0.95
+) -> dict[str, tuple[float, float, float]]:
     """Point estimate and percentile CI of every count-based metric, resampling runs."""
     cols = {k: counts[k].to_numpy(float) for k in counts.columns}
     idx = np.random.default_rng(seed).integers(0, len(counts), size=(n_boot, len(counts)))
@@ -340,8 +426,11 @@ def _bootstrap(counts: pd.DataFrame, n_boot: int, seed: int, level: float = 0.95
         est = float(fn(cols))
         boot = fn(resampled) if n_boot else np.empty(0)
         boot = boot[np.isfinite(boot)]
-        lo, hi = (np.percentile(boot, [50 * (1 - level), 50 * (1 + level)]) if boot.size
-                  else (math.nan, math.nan))
+        lo, hi = (
+            np.percentile(boot, [50 * (1 - level), 50 * (1 + level)])
+            if boot.size
+            else (math.nan, math.nan)
+        )
         out[name] = (est, float(lo), float(hi))
     return out
 
@@ -385,8 +474,7 @@ class Evaluation:
     def table(self) -> pd.DataFrame:
         """The results as a wide table: one row per stratum (magnitude rows left out), one
         column per metric."""
-        m = self.metrics[self.metrics["magnitude"].isna()
-                         & ~self.metrics["metric"].isin(_META)]
+        m = self.metrics[self.metrics["magnitude"].isna() & ~self.metrics["metric"].isin(_META)]
         keys = ["condition", "fault"]
         order = pd.MultiIndex.from_frame(m[keys].drop_duplicates())
         wide = m.pivot_table(index=keys, columns="metric", values="value", aggfunc="first")
@@ -398,31 +486,70 @@ class Evaluation:
     def format(self) -> str:
         """The readable table printed by ``r2rsim diagnose``."""
         t = self.table()
-        show = [c for c in ("n_runs", "far_ff", "far_pre", "fa_per_h", "dr", "dr_steady",
-                            "pd", "pd_null", "dd_median_s", "dd_p90_s", "n_missed",
-                            "pd_steady", "pd_steady_null", "dd_steady_median_s", "roc_auc",
-                            "pr_auc", "vus_pr", "ia", "hit1", "mdm90", "far_ff_cal", "dr_cal",
-                            "dr_steady_cal", "pd_cal", "pd_null_cal", "dd_median_cal_s",
-                            "mdm90_cal")
-                if c in t.columns]
+        show = [
+            c
+            for c in (
+                "n_runs",
+                "far_ff",
+                "far_pre",
+                "fa_per_h",
+                "dr",
+                "dr_steady",
+                "pd",
+                "pd_null",
+                "dd_median_s",
+                "dd_p90_s",
+                "n_missed",
+                "pd_steady",
+                "pd_steady_null",
+                "dd_steady_median_s",
+                "roc_auc",
+                "pr_auc",
+                "vus_pr",
+                "ia",
+                "hit1",
+                "mdm90",
+                "far_ff_cal",
+                "dr_cal",
+                "dr_steady_cal",
+                "pd_cal",
+                "pd_null_cal",
+                "dd_median_cal_s",
+                "mdm90_cal",
+            )
+            if c in t.columns
+        ]
         st = self.settings
-        own = {"val": f"own threshold recalibrated on val at alpha={st.get('alpha')}",
-               "fit": "own threshold from fit"}.get(st.get("own_threshold"), "own threshold")
-        head = (f"{self.method} {json.dumps(self.params, sort_keys=True, default=str)}  "
-                f"[{st.get('split', '')}; m={st.get('m')}, h={st.get('h')} s, "
-                f"W={st.get('detection_window', DETECTION_WINDOW_S):g} s, "
-                f"alpha={st.get('alpha')}, theta={self.theta:.4g}, "
-                f"fit {st.get('fit_s', math.nan):.2g} s]\n"
-                f"columns without _cal: {own}; _cal: at theta")
+        own = {
+            "val": f"own threshold recalibrated on val at alpha={st.get('alpha')}",
+            "fit": "own threshold from fit",
+        }.get(st.get("own_threshold"), "own threshold")
+        head = (
+            f"{self.method} {json.dumps(self.params, sort_keys=True, default=str)}  "
+            f"[{st.get('split', '')}; m={st.get('m')}, h={st.get('h')} s, "
+            f"W={st.get('detection_window', DETECTION_WINDOW_S):g} s, "
+            f"alpha={st.get('alpha')}, theta={self.theta:.4g}, "
+            f"fit {st.get('fit_s', math.nan):.2g} s]\n"
+            f"columns without _cal: {own}; _cal: at theta"
+        )
         if st.get("causal") is False:
-            head += ("\nOFFLINE method: its statistic at t uses samples after t, so its "
-                     "delays (DD) and P_D are not those of an online detector")
-        short = {"fa_per_h": "FA/h", "dd_median_s": "DD med s", "dd_p90_s": "DD p90 s",
-                 "n_missed": "missed", "dd_median_cal_s": "DD_cal s",
-                 "dd_steady_median_s": "DD_st s", "pd_null": "pd_null",
-                 "pd_null_cal": "pd_null_cal"}
-        body = t[show].rename(columns=short).to_string(
-            float_format=lambda v: f"{v:.3g}", na_rep="-")
+            head += (
+                "\nOFFLINE method: its statistic at t uses samples after t, so its "
+                "delays (DD) and P_D are not those of an online detector"
+            )
+        short = {
+            "fa_per_h": "FA/h",
+            "dd_median_s": "DD med s",
+            "dd_p90_s": "DD p90 s",
+            "n_missed": "missed",
+            "dd_median_cal_s": "DD_cal s",
+            "dd_steady_median_s": "DD_st s",
+            "pd_null": "pd_null",
+            "pd_null_cal": "pd_null_cal",
+        }
+        body = (
+            t[show].rename(columns=short).to_string(float_format=lambda v: f"{v:.3g}", na_rep="-")
+        )
         return head + "\n" + body
 
     def write(self, outdir: str | Path, overwrite: bool = False) -> Path:
@@ -448,12 +575,17 @@ class Evaluation:
             When ``outdir`` holds anything else, or earlier results without ``overwrite``.
         """
         datasets = json.dumps({"test": self.test_datasets}, indent=1) + "\n"
-        return write_results(outdir, "diagnose", {
-            "predictions.parquet": lambda p: self.predictions.to_parquet(p, index=False),
-            "metrics.parquet": lambda p: self.metrics.to_parquet(p, index=False),
-            "metrics.csv": lambda p: self.metrics.to_csv(p, index=False),
-            DATASETS_FILE: lambda p: p.write_text(datasets, encoding="utf-8"),
-        }, overwrite)
+        return write_results(
+            outdir,
+            "diagnose",
+            {
+                "predictions.parquet": lambda p: self.predictions.to_parquet(p, index=False),
+                "metrics.parquet": lambda p: self.metrics.to_parquet(p, index=False),
+                "metrics.csv": lambda p: self.metrics.to_csv(p, index=False),
+                DATASETS_FILE: lambda p: p.write_text(datasets, encoding="utf-8"),
+            },
+            overwrite,
+        )
 
 
 def _sha(obj) -> str:
@@ -463,8 +595,10 @@ def _sha(obj) -> str:
 def _check_healthy(runs: Sequence[Run], role: str) -> None:
     for r in runs:
         if is_faulty(r):
-            raise InputError(f"{r.path}: run {r.run_id} has faults; {role} runs must be "
-                             f"fault-free (plug-ins learn from healthy data only)")
+            raise InputError(
+                f"{r.path}: run {r.run_id} has faults; {role} runs must be "
+                f"fault-free (plug-ins learn from healthy data only)"
+            )
 
 
 def _check_disjoint(roles: dict[str, list[Run]]) -> None:
@@ -473,8 +607,10 @@ def _check_disjoint(roles: dict[str, list[Run]]) -> None:
         for r in runs:
             key = (str(Path(r.path).resolve()), r.run_id)
             if key in seen and seen[key] != role:
-                raise InputError(f"run {r.run_id} ({r.path}) is both a {seen[key]} and a "
-                                 f"{role} run; the roles must not share runs")
+                raise InputError(
+                    f"run {r.run_id} ({r.path}) is both a {seen[key]} and a "
+                    f"{role} run; the roles must not share runs"
+                )
             seen.setdefault(key, role)
 
 
@@ -491,19 +627,21 @@ def _strata(test: list[Run]) -> list[tuple[str, str, list[int]]]:
     return out
 
 
-def _fault_strata(c: str, in_c: list[int], ftype: list[str]
-                  ) -> list[tuple[str, str, list[int]]]:
+def _fault_strata(c: str, in_c: list[int], ftype: list[str]) -> list[tuple[str, str, list[int]]]:
     """The fault strata of one condition holding the test runs ``in_c``."""
     healthy = [i for i in in_c if ftype[i] == NONE]
     present = sorted({ftype[i] for i in in_c} - {NONE})
     if not present:
         return [(c, NONE, healthy)]
-    return [(c, t, healthy + [i for i in in_c if ftype[i] != NONE and t in (ALL, ftype[i])])
-            for t in present + ([ALL] if len(present) > 1 else [])]
+    return [
+        (c, t, healthy + [i for i in in_c if ftype[i] != NONE and t in (ALL, ftype[i])])
+        for t in present + ([ALL] if len(present) > 1 else [])
+    ]
 
 
-def _mode_strata(test: list[Run], view: list[RunData], mode: str
-                 ) -> list[tuple[str, str, list[int]]]:
+def _mode_strata(
+    test: list[Run], view: list[RunData], mode: str
+) -> list[tuple[str, str, list[int]]]:
     """The strata of one regime: the test runs with a scored sample in it (``view``: the
     runs restricted to it, :func:`restrict_to_mode`), by fault as in :func:`_strata`."""
     in_m = [i for i, r in enumerate(view) if r.scored.any()]
@@ -530,12 +668,26 @@ def _pooled(runs: list[RunData]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.concatenate(s), np.concatenate(y), np.concatenate(g)
 
 
-def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence[Run] = (),
-             *, alpha: float = 0.01, m: int = 1, h: float = 0.0, n_boot: int = 1000,
-             seed: int = 0, split: str = "explicit", drive_data: bool = False,
-             mode_strata: bool = False, window: str = "fault", isolation: bool = False,
-             vus_buffer: float | None = None, detection_window: float = DETECTION_WINDOW_S,
-             own_threshold: str = "val") -> Evaluation:
+def evaluate(
+    estimator,
+    train: Sequence[Run],
+    test: Sequence[Run],
+    val: Sequence[Run] = (),
+    *,
+    alpha: float = 0.01,
+    m: int = 1,
+    h: float = 0.0,
+    n_boot: int = 1000,
+    seed: int = 0,
+    split: str = "explicit",
+    drive_data: bool = False,
+    mode_strata: bool = False,
+    window: str = "fault",
+    isolation: bool = False,
+    vus_buffer: float | None = None,
+    detection_window: float = DETECTION_WINDOW_S,
+    own_threshold: str = "val",
+) -> Evaluation:
     """Fit a plug-in on healthy runs, score the test runs and compute every metric.
 
     Parameters
@@ -592,9 +744,17 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
     -------
     Evaluation
     """
-    check_settings(alpha=alpha, m=m, h=h, n_boot=n_boot, window=window,
-                   vus_buffer=vus_buffer, seed=seed, detection_window=detection_window,
-                   own_threshold=own_threshold)
+    check_settings(
+        alpha=alpha,
+        m=m,
+        h=h,
+        n_boot=n_boot,
+        window=window,
+        vus_buffer=vus_buffer,
+        seed=seed,
+        detection_window=detection_window,
+        own_threshold=own_threshold,
+    )
     train, val, test = list(train), list(val), list(test)
     if not train:
         raise InputError("no training runs")
@@ -615,12 +775,21 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
     exec_s = time.perf_counter() - t0
     rd, rd_cal = _run_data(test, scored, theta if val else None, mode_strata, window)
 
-    dataset_sha = _sha(sorted((r.info.get("scenario_sha256"), int(r.info["seed"]),
-                               role) for role, rs in (("train", train), ("val", val),
-                                                      ("test", test)) for r in rs))
-    base = {"method": plugin.name, "params_sha256": _sha(plugin.params),
-            "dataset_sha256": dataset_sha, "split": split, "causal": plugin.causal,
-            "own_threshold": "val" if recalibrated else "fit"}
+    dataset_sha = _sha(
+        sorted(
+            (r.info.get("scenario_sha256"), int(r.info["seed"]), role)
+            for role, rs in (("train", train), ("val", val), ("test", test))
+            for r in rs
+        )
+    )
+    base = {
+        "method": plugin.name,
+        "params_sha256": _sha(plugin.params),
+        "dataset_sha256": dataset_sha,
+        "split": split,
+        "causal": plugin.causal,
+        "own_threshold": "val" if recalibrated else "fit",
+    }
     rule = _Rule(m, h, float(detection_window), steady=window == "steady")
     table = _MetricTable(base, rule, n_boot, seed, max_buffer)
     table.add_strata(test, rd, rd_cal)
@@ -632,22 +801,46 @@ def evaluate(estimator, train: Sequence[Run], test: Sequence[Run], val: Sequence
         table.add(ALL, ALL, math.nan, "exec_s_per_sim_h", exec_s / sim_h, n=len(test))
     if val:
         table.add(ALL, ALL, math.nan, "theta", theta, n=len(val))
-    return Evaluation(plugin.name, plugin.params,
-                      _predictions(test, scored, rd_cal, plugin.name, base["params_sha256"]),
-                      table.frame(), theta,
-                      {"alpha": alpha, "m": m, "h": h, "detection_window": detection_window,
-                       "own_threshold": "val" if recalibrated else "fit",
-                       "causal": plugin.causal, "n_boot": n_boot, "seed": seed,
-                       "split": split, "fit_s": fit_s, "drive_data": drive_data,
-                       "mode_strata": mode_strata, "window": window, "isolation": isolation,
-                       "vus_buffer": vus_buffer, "vus_max_buffer_samples": max_buffer},
-                      list(dict.fromkeys(str(Path(r.path).resolve()) for r in test)))
+    return Evaluation(
+        plugin.name,
+        plugin.params,
+        _predictions(test, scored, rd_cal, plugin.name, base["params_sha256"]),
+        table.frame(),
+        theta,
+        {
+            "alpha": alpha,
+            "m": m,
+            "h": h,
+            "detection_window": detection_window,
+            "own_threshold": "val" if recalibrated else "fit",
+            "causal": plugin.causal,
+            "n_boot": n_boot,
+            "seed": seed,
+            "split": split,
+            "fit_s": fit_s,
+            "drive_data": drive_data,
+            "mode_strata": mode_strata,
+            "window": window,
+            "isolation": isolation,
+            "vus_buffer": vus_buffer,
+            "vus_max_buffer_samples": max_buffer,
+        },
+        list(dict.fromkeys(str(Path(r.path).resolve()) for r in test)),
+    )
 
 
-def check_settings(*, alpha: float = 0.01, m: int = 1, h: float = 0.0, n_boot: int = 1000,
-                   window: str = "fault", vus_buffer: float | None = None,
-                   seed: int = 0, detection_window: float = DETECTION_WINDOW_S,
-                   own_threshold: str = "val") -> None:
+def check_settings(
+    *,
+    alpha: float = 0.01,
+    m: int = 1,
+    h: float = 0.0,
+    n_boot: int = 1000,
+    window: str = "fault",
+    vus_buffer: float | None = None,
+    seed: int = 0,
+    detection_window: float = DETECTION_WINDOW_S,
+    own_threshold: str = "val",
+) -> None:
     """Check the settings of :func:`evaluate` (same names and meaning) before any data is
     read: ``r2rsim diagnose`` calls it first, so a bad flag costs nothing.
 
@@ -662,25 +855,36 @@ def check_settings(*, alpha: float = 0.01, m: int = 1, h: float = 0.0, n_boot: i
         raise InputError(f"persistence m must be an integer >= 1, got {m!r}")
     if not h >= 0:
         raise InputError(f"grace period h must be >= 0 s, got {h!r}")
-    if isinstance(detection_window, bool) or not isinstance(
-            detection_window, (int, float, np.integer, np.floating)) \
-            or not detection_window > 0:
-        raise InputError(f"detection window must be a time > 0 s (inf: up to the fault's "
-                         f"end), got {detection_window!r}")
+    if (
+        isinstance(detection_window, bool)
+        or not isinstance(detection_window, (int, float, np.integer, np.floating))
+        or not detection_window > 0
+    ):
+        raise InputError(
+            f"detection window must be a time > 0 s (inf: up to the fault's "
+            f"end), got {detection_window!r}"
+        )
     if own_threshold not in OWN_THRESHOLDS:
-        raise InputError(f"own_threshold must be one of {', '.join(OWN_THRESHOLDS)}, got "
-                         f"{own_threshold!r}")
+        raise InputError(
+            f"own_threshold must be one of {', '.join(OWN_THRESHOLDS)}, got {own_threshold!r}"
+        )
     if not 0 <= n_boot <= MAX_BOOTSTRAP:
-        raise InputError(f"n_boot must be from 0 to {MAX_BOOTSTRAP} (docs/security.md), "
-                         f"got {n_boot!r}")
+        raise InputError(
+            f"n_boot must be from 0 to {MAX_BOOTSTRAP} (docs/security.md), got {n_boot!r}"
+        )
     if window not in WINDOWS:
         raise InputError(f"window must be one of {', '.join(WINDOWS)}, got {window!r}")
     if vus_buffer is not None and not 0 <= vus_buffer <= MAX_VUS_BUFFER_S:
-        raise InputError(f"vus_buffer must be from 0 to {MAX_VUS_BUFFER_S:g} s "
-                         f"(docs/security.md), got {vus_buffer!r}")
+        raise InputError(
+            f"vus_buffer must be from 0 to {MAX_VUS_BUFFER_S:g} s "
+            f"(docs/security.md), got {vus_buffer!r}"
+        )
     # the bounds of a run's seed; numpy refuses a negative one (with a traceback)
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) \
-            or not 0 <= seed <= MAX_SEED:
+    if (
+        isinstance(seed, bool)
+        or not isinstance(seed, (int, np.integer))
+        or not 0 <= seed <= MAX_SEED
+    ):
         raise InputError(f"seed must be an integer from 0 to 2**64 - 1, got {seed!r}")
 
 
@@ -689,15 +893,20 @@ def _vus_max_buffer(vus_buffer: float | None, test: list[Run]) -> int | None:
     refused above :data:`~r2rsim.limits.MAX_VUS_BUFFER_SAMPLES`."""
     if vus_buffer is None:
         return None
-    periods = [float(np.median(np.diff(t))) for r in test
-               if (t := r.samples["t_s"].to_numpy(float)).size > 1]
+    periods = [
+        float(np.median(np.diff(t)))
+        for r in test
+        if (t := r.samples["t_s"].to_numpy(float)).size > 1
+    ]
     period = float(np.median(periods)) if periods else 1.0
     n = vus_buffer / period
     if not n <= MAX_VUS_BUFFER_SAMPLES:
-        raise InputError(f"vus_buffer {vus_buffer:g} s is {n:.3g} samples of the test runs "
-                         f"(period {period:g} s), more than the limit of "
-                         f"{MAX_VUS_BUFFER_SAMPLES} buffer lengths (docs/security.md): "
-                         f"lower it")
+        raise InputError(
+            f"vus_buffer {vus_buffer:g} s is {n:.3g} samples of the test runs "
+            f"(period {period:g} s), more than the limit of "
+            f"{MAX_VUS_BUFFER_SAMPLES} buffer lengths (docs/security.md): "
+            f"lower it"
+        )
     return int(round(n))
 
 
@@ -711,8 +920,9 @@ class _Scored:
         self.params = call(self.est, "get_params", self.est.get_params)
         self.drive_data = drive_data
         is_causal = getattr(self.est, "is_causal", None)
-        self.causal = bool(is_causal() if callable(is_causal)
-                           else getattr(self.est, "causal", True))
+        self.causal = bool(
+            is_causal() if callable(is_causal) else getattr(self.est, "causal", True)
+        )
 
     def frame(self, run: Run) -> pd.DataFrame:
         """The plug-in's view of a run: no labels, faults or true states; the run's line in
@@ -738,13 +948,19 @@ class _Scored:
             frames = [self.frame(r) for r in val]
             masks = [r.samples["label.score_mask"].to_numpy(bool) for r in val]
             if not callable(getattr(self.est, "calibrate", None)):
-                raise PluginError(f"plug-in '{self.name}' has no calibrate(runs, alpha, "
-                                  f"masks) method: derive it from r2rsim.diagnostics."
-                                  f"Diagnostic, or evaluate with own_threshold='fit'")
+                raise PluginError(
+                    f"plug-in '{self.name}' has no calibrate(runs, alpha, "
+                    f"masks) method: derive it from r2rsim.diagnostics."
+                    f"Diagnostic, or evaluate with own_threshold='fit'"
+                )
             call(self.est, "calibrate", self.est.calibrate, frames, alpha, masks)
         cal = [self.outputs(r) for r in val]
-        pool = np.concatenate([s[r.samples["label.score_mask"].to_numpy(bool)]
-                               for r, (s, *_) in zip(val, cal, strict=True)])
+        pool = np.concatenate(
+            [
+                s[r.samples["label.score_mask"].to_numpy(bool)]
+                for r, (s, *_) in zip(val, cal, strict=True)
+            ]
+        )
         pool = pool[~np.isnan(pool)]  # +inf alarms at any theta: it counts as an exceedance
         if not np.isfinite(pool).any():
             raise InputError(f"{self.name}: no finite statistic on the validation runs")
@@ -758,27 +974,41 @@ class _Scored:
         where = f"run {run.run_id} of {run.path}"
         scores = call(est, f"score ({where})", est.score, f)
         if not isinstance(scores, pd.DataFrame) or "statistic" not in scores.columns:
-            got = ("a DataFrame without a 'statistic' column"
-                   if isinstance(scores, pd.DataFrame) else f"a {type(scores).__name__}")
-            raise PluginError(f"plug-in '{name}': score ({where}) returned {got}; it must "
-                              f"return a DataFrame with a 'statistic' column")
+            got = (
+                "a DataFrame without a 'statistic' column"
+                if isinstance(scores, pd.DataFrame)
+                else f"a {type(scores).__name__}"
+            )
+            raise PluginError(
+                f"plug-in '{name}': score ({where}) returned {got}; it must "
+                f"return a DataFrame with a 'statistic' column"
+            )
         if not scores.index.equals(f.index):
-            raise InputError(f"{name}: score() returned rows not aligned to the samples of "
-                             f"run {run.run_id}")
+            raise InputError(
+                f"{name}: score() returned rows not aligned to the samples of run {run.run_id}"
+            )
         stat = call(est, f"score ({where})", scores["statistic"].to_numpy, float)
         alarm = np.asarray(call(est, f"decide ({where})", est.decide, scores), dtype=bool)
-        diag = (np.asarray(call(est, f"diagnose ({where})", est.diagnose, scores)).astype(str)
-                if hasattr(est, "diagnose") else None)
+        diag = (
+            np.asarray(call(est, f"diagnose ({where})", est.diagnose, scores)).astype(str)
+            if hasattr(est, "diagnose")
+            else None
+        )
         if len(alarm) != len(f) or (diag is not None and len(diag) != len(f)):
-            raise PluginError(f"plug-in '{name}': decide/diagnose ({where}) returned "
-                              f"{len(alarm)} values for {len(f)} samples")
+            raise PluginError(
+                f"plug-in '{name}': decide/diagnose ({where}) returned "
+                f"{len(alarm)} values for {len(f)} samples"
+            )
         if not rank:
             return stat, alarm, diag, None
         ranking = call(est, f"rank_channels ({where})", est.rank_channels, scores)
-        if ranking is not None and (not isinstance(ranking, pd.DataFrame)
-                                    or len(ranking) != len(f)):
-            raise PluginError(f"plug-in '{name}': rank_channels ({where}) must return None "
-                              f"or a DataFrame with one row per sample")
+        if ranking is not None and (
+            not isinstance(ranking, pd.DataFrame) or len(ranking) != len(f)
+        ):
+            raise PluginError(
+                f"plug-in '{name}': rank_channels ({where}) must return None "
+                f"or a DataFrame with one row per sample"
+            )
         return stat, alarm, diag, ranking
 
 
@@ -792,16 +1022,22 @@ def ranking_scores(statistics: Sequence[np.ndarray]) -> list[np.ndarray]:
     return np.split(ranks, np.cumsum([len(s) for s in statistics])[:-1])
 
 
-def _run_data(test: list[Run], scored: list[tuple], theta: float | None, mode_strata: bool,
-              window: str) -> tuple[list[RunData], list[RunData] | None]:
+def _run_data(
+    test: list[Run], scored: list[tuple], theta: float | None, mode_strata: bool, window: str
+) -> tuple[list[RunData], list[RunData] | None]:
     """The test runs' RunData at the plug-in's own threshold, and (with ``theta``) the same
     runs with the alarms at theta."""
     ranks = ranking_scores([s for s, *_ in scored])
-    rd = [run_data(r, rank, a, d, ranking=rk, modes=mode_strata, steady=window == "steady")
-          for r, rank, (s, a, d, rk) in zip(test, ranks, scored, strict=True)]
+    rd = [
+        run_data(r, rank, a, d, ranking=rk, modes=mode_strata, steady=window == "steady")
+        for r, rank, (s, a, d, rk) in zip(test, ranks, scored, strict=True)
+    ]
     # the same runs at theta: only the alarm differs (a nan statistic never exceeds theta)
-    rd_cal = ([replace(x, alarm=o[0] > theta) for x, o in zip(rd, scored, strict=True)]
-              if theta is not None else None)
+    rd_cal = (
+        [replace(x, alarm=o[0] > theta) for x, o in zip(rd, scored, strict=True)]
+        if theta is not None
+        else None
+    )
     return rd, rd_cal
 
 
@@ -822,12 +1058,14 @@ class _NullRates:
             todo = [w for w in want if (i, *w) not in self._cache]
             for w, o in zip(todo, null_outcomes(self.runs[i], todo, self.m), strict=True):
                 self._cache[(i, *w)] = (int(o is True), int(o is not None))
-            out[row] = np.sum([np.multiply(self._cache[(i, *w)], k) for w, k in want.items()],
-                              axis=0)
+            out[row] = np.sum(
+                [np.multiply(self._cache[(i, *w)], k) for w, k in want.items()], axis=0
+            )
         return out
 
-    def rate(self, healthy: list[int], windows: list[tuple[float, float]]
-             ) -> tuple[float, float, float]:
+    def rate(
+        self, healthy: list[int], windows: list[tuple[float, float]]
+    ) -> tuple[float, float, float]:
         """pd_null with its percentile bootstrap CI over the fault-free runs."""
         if not healthy or not windows:
             return math.nan, math.nan, math.nan
@@ -855,8 +1093,7 @@ def _windows(counts: pd.DataFrame, steady: bool = False) -> list[tuple[float, fl
 class _MetricTable:
     """The rows of the long results table, stratum by stratum."""
 
-    def __init__(self, base: dict, rule: _Rule, n_boot: int, seed: int,
-                 max_buffer: int | None):
+    def __init__(self, base: dict, rule: _Rule, n_boot: int, seed: int, max_buffer: int | None):
         self.base, self.rule = base, rule
         self.n_boot, self.seed, self.max_buffer = n_boot, seed, max_buffer
         self.rows: list[dict] = []
@@ -864,9 +1101,19 @@ class _MetricTable:
     def add(self, cond, ftype, mag, metric, value, lo=math.nan, hi=math.nan, n=0):
         if value is None or (isinstance(value, float) and math.isnan(value)):
             return
-        self.rows.append({**self.base, "condition": cond, "fault": ftype, "magnitude": mag,
-                          "metric": metric, "value": float(value), "ci_low": lo,
-                          "ci_high": hi, "n_runs": n})
+        self.rows.append(
+            {
+                **self.base,
+                "condition": cond,
+                "fault": ftype,
+                "magnitude": mag,
+                "metric": metric,
+                "value": float(value),
+                "ci_low": lo,
+                "ci_high": hi,
+                "n_runs": n,
+            }
+        )
 
     def _counts(self, runs: list[RunData] | None) -> pd.DataFrame | None:
         """Per-run counts, once per run; a stratum takes its runs' rows."""
@@ -890,8 +1137,7 @@ class _MetricTable:
             mags = np.unique(mags[np.isfinite(mags)])
             if ftype in (NONE, ALL) or mags.size <= 1:
                 continue
-            by_mag = {float(mg): [i for i in faulty_idx if rd[i].magnitude == mg]
-                      for mg in mags}
+            by_mag = {float(mg): [i for i in faulty_idx if rd[i].magnitude == mg] for mg in mags}
             for mg, at in by_mag.items():
                 self.stratum(cond, ftype, mg, at, view, view_cal, healthy)
             for key, v in (("mdm90", view), ("mdm90_cal", view_cal)):
@@ -915,14 +1161,18 @@ class _MetricTable:
         """The per-sample metrics of each regime (``label.mode``) × fault."""
         for mode in _modes(rd):
             view = [restrict_to_mode(r, mode) for r in rd]
-            view_cal = ([replace(r, alarm=x.alarm) for r, x in zip(view, rd_cal, strict=True)]
-                        if rd_cal else None)
+            view_cal = (
+                [replace(r, alarm=x.alarm) for r, x in zip(view, rd_cal, strict=True)]
+                if rd_cal
+                else None
+            )
             v, v_cal = self._view(view), self._view(view_cal)
             for cond, ftype, idx in _mode_strata(test, view, mode):
                 self.stratum(cond, ftype, math.nan, idx, v, v_cal, regime=True)
 
-    def stratum(self, cond, ftype, mag, idx, view, view_cal, healthy=None,
-                regime: bool = False) -> None:
+    def stratum(
+        self, cond, ftype, mag, idx, view, view_cal, healthy=None, regime: bool = False
+    ) -> None:
         """Add the rows of one stratum. ``view``/``view_cal``: (runs, their counts, their
         null rates) at the plug-in's alarms and at theta; ``healthy``: the fault-free runs
         whose pretend onsets give pd_null (default: those of ``idx``); ``regime``: runs
@@ -941,11 +1191,18 @@ class _MetricTable:
         n_faulty = int(counts["elig"].sum())
         if n_faulty and not regime:
             self.add(cond, ftype, mag, "n_missed", float(n_faulty - counts["det"].sum()), n=n)
-            self.add(cond, ftype, mag, "pd_null", *nulls.rate(healthy, _windows(counts)),
-                     n=len(healthy))
+            self.add(
+                cond, ftype, mag, "pd_null", *nulls.rate(healthy, _windows(counts)), n=len(healthy)
+            )
         if counts["st_elig"].sum() and not regime:
-            self.add(cond, ftype, mag, "pd_steady_null",
-                     *nulls.rate(healthy, _windows(counts, steady=True)), n=len(healthy))
+            self.add(
+                cond,
+                ftype,
+                mag,
+                "pd_steady_null",
+                *nulls.rate(healthy, _windows(counts, steady=True)),
+                n=len(healthy),
+            )
         y = np.concatenate([r.faulty[r.scored] for r in runs])
         if y.any() and not y.all():
             s = np.concatenate([r.score[r.scored] for r in runs])
@@ -953,8 +1210,9 @@ class _MetricTable:
             self.add(cond, ftype, mag, "pr_auc", average_precision(s, y), n=n)
             if self.max_buffer is not None:
                 ps, py, pg = _pooled(runs)
-                self.add(cond, ftype, mag, "vus_pr", vus_pr(ps, py, self.max_buffer,
-                                                            groups=pg), n=n)
+                self.add(
+                    cond, ftype, mag, "vus_pr", vus_pr(ps, py, self.max_buffer, groups=pg), n=n
+                )
         if view_cal is None:
             return
         _, prc, nulls_cal = view_cal
@@ -963,26 +1221,57 @@ class _MetricTable:
             if metric in _CAL and metric not in skip:
                 self.add(cond, ftype, mag, _CAL[metric], est_, lo, hi, n)
         if n_faulty and not regime:
-            self.add(cond, ftype, mag, "pd_null_cal", *nulls_cal.rate(healthy, _windows(cc)),
-                     n=len(healthy))
+            self.add(
+                cond,
+                ftype,
+                mag,
+                "pd_null_cal",
+                *nulls_cal.rate(healthy, _windows(cc)),
+                n=len(healthy),
+            )
 
     def frame(self) -> pd.DataFrame:
         """The typed long table."""
-        metrics = pd.DataFrame(self.rows, columns=[*self.base, "condition", "fault",
-                                                   "magnitude", "metric", "value", "ci_low",
-                                                   "ci_high", "n_runs"])
-        return metrics.astype({"magnitude": float, "value": float, "ci_low": float,
-                               "ci_high": float, "n_runs": "int64"})
+        metrics = pd.DataFrame(
+            self.rows,
+            columns=[
+                *self.base,
+                "condition",
+                "fault",
+                "magnitude",
+                "metric",
+                "value",
+                "ci_low",
+                "ci_high",
+                "n_runs",
+            ],
+        )
+        return metrics.astype(
+            {
+                "magnitude": float,
+                "value": float,
+                "ci_low": float,
+                "ci_high": float,
+                "n_runs": "int64",
+            }
+        )
 
 
-def _predictions(test: list[Run], scored: list[tuple], rd_cal, name: str,
-                 params_sha: str) -> pd.DataFrame:
+def _predictions(
+    test: list[Run], scored: list[tuple], rd_cal, name: str, params_sha: str
+) -> pd.DataFrame:
     """One row per test sample: the plug-in's statistic, alarm (and at theta), diagnosis."""
     preds = []
     for r, (s, a, d, _), rc in zip(test, scored, rd_cal or [None] * len(test), strict=True):
-        p = pd.DataFrame({"run_id": r.run_id, "k": r.samples["k"].to_numpy(np.int64),
-                          "t_s": r.samples["t_s"].to_numpy(float), "statistic": s,
-                          "alarm": a})
+        p = pd.DataFrame(
+            {
+                "run_id": r.run_id,
+                "k": r.samples["k"].to_numpy(np.int64),
+                "t_s": r.samples["t_s"].to_numpy(float),
+                "statistic": s,
+                "alarm": a,
+            }
+        )
         if rc is not None:
             p["alarm_cal"] = rc.alarm
         if d is not None:

@@ -206,19 +206,27 @@ class RunData:
         object.__setattr__(self, "magnitude", float(self.magnitude))
         object.__setattr__(self, "channels", tuple(self.channels))
         if self.channel_truth is not None:
-            object.__setattr__(self, "channel_truth", self._aligned(
-                "channel_truth", bool, (self.n, len(self.channels))))
+            object.__setattr__(
+                self,
+                "channel_truth",
+                self._aligned("channel_truth", bool, (self.n, len(self.channels))),
+            )
         if self.ranking is not None:
             r = np.asarray(self.ranking, dtype=np.int64)
-            object.__setattr__(self, "ranking", self._aligned(
-                "ranking", np.int64, (self.n, r.shape[1] if r.ndim == 2 else -1)))
+            object.__setattr__(
+                self,
+                "ranking",
+                self._aligned("ranking", np.int64, (self.n, r.shape[1] if r.ndim == 2 else -1)),
+            )
 
     def _aligned(self, name: str, dtype: type, shape: tuple | None = None) -> NDArray:
         a = np.asarray(getattr(self, name), dtype=dtype)
         want = self.t.shape if shape is None else shape
         if a.shape != want:
-            raise ValueError(f"{name} has shape {a.shape}, expected {want}"
-                             + (" (like t)" if shape is None else ""))
+            raise ValueError(
+                f"{name} has shape {a.shape}, expected {want}"
+                + (" (like t)" if shape is None else "")
+            )
         return a
 
     @property
@@ -290,8 +298,9 @@ class RunData:
         if not w > 0:
             raise ValueError(f"detection window w must be > 0 s, got {w!r}")
         tol = _TIME_RTOL * (self.period if self.n > 1 else 1.0)
-        end = eps if h == 0 else int(np.searchsorted(self.t, self.t[eps] + h + tol,
-                                                     side="right") - 1)
+        end = (
+            eps if h == 0 else int(np.searchsorted(self.t, self.t[eps] + h + tol, side="right") - 1)
+        )
         if math.isfinite(w):
             limit = self.t[self.full_onset()] + w
             end = min(end, int(np.searchsorted(self.t, limit + tol, side="right") - 1))
@@ -402,9 +411,18 @@ def far(runs: Sequence[RunData]) -> FarResult:
             pre = r.scored[:tau]  # all samples before tau are fault-free by definition of tau
             a_pre += int(a[:tau].sum())
             n_pre += int(pre.sum())
-    return FarResult(far_ff=_ratio(a_ff, n_ff), far_pre=_ratio(a_pre, n_pre),
-                     far=_ratio(a_all, n_all), alarms_ff=a_ff, n_ff=n_ff, alarms_pre=a_pre,
-                     n_pre=n_pre, alarms_all=a_all, n_all=n_all, n_masked=n_masked)
+    return FarResult(
+        far_ff=_ratio(a_ff, n_ff),
+        far_pre=_ratio(a_pre, n_pre),
+        far=_ratio(a_all, n_all),
+        alarms_ff=a_ff,
+        n_ff=n_ff,
+        alarms_pre=a_pre,
+        n_pre=n_pre,
+        alarms_all=a_all,
+        n_all=n_all,
+        n_masked=n_masked,
+    )
 
 
 @dataclass(frozen=True)
@@ -494,6 +512,7 @@ def window_counts(run: RunData) -> tuple[int, int]:
 
 # --------------------------------------------------------------------------- M3/M5, steady state
 
+
 def _steady(run: RunData) -> NDArray[np.bool_]:
     if run.severity is None:
         raise ValueError("the steady-state window needs runs with a per-sample severity")
@@ -537,8 +556,9 @@ def steady_detection_rate(runs: Sequence[RunData]) -> float:
     return _pooled(steady_counts(r) for r in runs)
 
 
-def steady_detection(run: RunData, m: int = 1, h: float = 0.0,
-                     w: float = DETECTION_WINDOW_S) -> RunDetection | None:
+def steady_detection(
+    run: RunData, m: int = 1, h: float = 0.0, w: float = DETECTION_WINDOW_S
+) -> RunDetection | None:
     """M4/M5 from the start of the steady state: detection of a fully developed fault.
 
     The onset is tau_s, the first faulty sample with severity 1, and the window ends
@@ -618,12 +638,13 @@ class _Events:
         tau (whenever it began), else the first confirmed event starting in (tau, end]."""
         if self.a[tau] and self.conf[self.start[tau]]:
             return tau
-        ks = np.flatnonzero(self.conf_onset[tau: end + 1])
+        ks = np.flatnonzero(self.conf_onset[tau : end + 1])
         return tau + int(ks[0]) if ks.size else None
 
 
-def detect_run(run: RunData, m: int = 1, h: float = 0.0,
-               w: float = DETECTION_WINDOW_S) -> RunDetection:
+def detect_run(
+    run: RunData, m: int = 1, h: float = 0.0, w: float = DETECTION_WINDOW_S
+) -> RunDetection:
     """Find the detection of one faulty run (M4).
 
     The detection window is [tau, min(t_full + w, t_eps + h, last sample)]
@@ -660,12 +681,19 @@ def detect_run(run: RunData, m: int = 1, h: float = 0.0,
     if tau is None:
         raise ValueError("detect_run needs a faulty run (no faulty sample found)")
     horizon = float(run.t[end] - run.t[tau])
-    eligible = bool(run.scored[tau: end + 1].any())
+    eligible = bool(run.scored[tau : end + 1].any())
     k_star = _Events(run, m).first_detection(tau, end) if eligible else None
     detected = k_star is not None
     delay = float(run.t[k_star] - run.t[tau]) if detected else math.nan
-    return RunDetection(eligible=eligible, detected=detected, k_star=k_star, delay=delay,
-                        horizon=horizon, magnitude=run.magnitude, onset_s=float(run.t[tau]))
+    return RunDetection(
+        eligible=eligible,
+        detected=detected,
+        k_star=k_star,
+        delay=delay,
+        horizon=horizon,
+        magnitude=run.magnitude,
+        onset_s=float(run.t[tau]),
+    )
 
 
 def _detections(runs: Sequence[RunData], m: int, h: float, w: float) -> list[RunDetection]:
@@ -673,8 +701,9 @@ def _detections(runs: Sequence[RunData], m: int, h: float, w: float) -> list[Run
     return [d for d in dets if d.eligible]
 
 
-def detection_probability(runs: Sequence[RunData], m: int = 1, h: float = 0.0,
-                          w: float = DETECTION_WINDOW_S) -> float:
+def detection_probability(
+    runs: Sequence[RunData], m: int = 1, h: float = 0.0, w: float = DETECTION_WINDOW_S
+) -> float:
     """M4: run-level detection probability P_D.
 
     Parameters
@@ -693,20 +722,22 @@ def detection_probability(runs: Sequence[RunData], m: int = 1, h: float = 0.0,
     return _ratio(sum(d.detected for d in dets), len(dets))
 
 
-def detection_windows(runs: Sequence[RunData], h: float = 0.0,
-                      w: float = DETECTION_WINDOW_S) -> list[tuple[float, float]]:
+def detection_windows(
+    runs: Sequence[RunData], h: float = 0.0, w: float = DETECTION_WINDOW_S
+) -> list[tuple[float, float]]:
     """The detection windows of the eligible faulty runs as (onset time, length) in seconds:
     the pretend windows of :func:`null_detection`, drawn like the real ones."""
     out = []
     for r in _faulty_runs(runs):
         tau, end = r.onset, r.window_end(h, w)
-        if r.scored[tau: end + 1].any():
+        if r.scored[tau : end + 1].any():
             out.append((float(r.t[tau]), float(r.t[end] - r.t[tau])))
     return out
 
 
-def null_detection(run: RunData, windows: Sequence[tuple[float, float]],
-                   m: int = 1) -> tuple[int, int]:
+def null_detection(
+    run: RunData, windows: Sequence[tuple[float, float]], m: int = 1
+) -> tuple[int, int]:
     """The detection rule of :func:`detect_run` applied to a fault-free run at pretend onsets.
 
     Each window (onset time t0, length L) is placed on the run as [first sample with
@@ -732,8 +763,9 @@ def null_detection(run: RunData, windows: Sequence[tuple[float, float]],
     return (sum(o is True for o in outcomes), sum(o is not None for o in outcomes))
 
 
-def null_outcomes(run: RunData, windows: Sequence[tuple[float, float]],
-                  m: int = 1) -> list[bool | None]:
+def null_outcomes(
+    run: RunData, windows: Sequence[tuple[float, float]], m: int = 1
+) -> list[bool | None]:
     """Per pretend window of :func:`null_detection`: True ("detected"), False, or None when
     the window is not eligible (past the run's end, or without a scored sample)."""
     if run.is_faulty:
@@ -746,15 +778,16 @@ def null_outcomes(run: RunData, windows: Sequence[tuple[float, float]],
     for t0, length in windows:
         tau = int(np.searchsorted(run.t, t0 - tol, side="left"))
         end = int(np.searchsorted(run.t, t0 + length + tol, side="right") - 1)
-        if tau >= run.n or end < tau or not run.scored[tau: end + 1].any():
+        if tau >= run.n or end < tau or not run.scored[tau : end + 1].any():
             out.append(None)
         else:
             out.append(ev.first_detection(tau, end) is not None)
     return out
 
 
-def null_detection_rate(runs: Sequence[RunData], windows: Sequence[tuple[float, float]],
-                        m: int = 1) -> float:
+def null_detection_rate(
+    runs: Sequence[RunData], windows: Sequence[tuple[float, float]], m: int = 1
+) -> float:
     """``pd_null``: the share of pretend windows on the fault-free runs that are "detected"
     (:func:`null_detection`, pooled over runs; nan when none is eligible). A detector that
     alarms at random scores P_D close to this rate."""
@@ -784,8 +817,9 @@ class DelayStats:
     n_missed: int
 
 
-def detection_delay(runs: Sequence[RunData], m: int = 1, h: float = 0.0,
-                    w: float = DETECTION_WINDOW_S) -> DelayStats:
+def detection_delay(
+    runs: Sequence[RunData], m: int = 1, h: float = 0.0, w: float = DETECTION_WINDOW_S
+) -> DelayStats:
     """M5: detection delay DD = t[k*] - t[tau] over detected runs, with the miss count.
 
     The delay is measured per run from the onset, never averaged over alarmed samples.
@@ -810,9 +844,14 @@ def detection_delay(runs: Sequence[RunData], m: int = 1, h: float = 0.0,
         med, mean, p90 = float(np.median(dd)), float(dd.mean()), float(np.percentile(dd, 90))
     else:
         med = mean = p90 = math.nan
-    return DelayStats(median=med, mean=mean, p90=p90,
-                      censored_mean=float(censored.mean()) if censored.size else math.nan,
-                      n_detected=int(dd.size), n_missed=len(dets) - int(dd.size))
+    return DelayStats(
+        median=med,
+        mean=mean,
+        p90=p90,
+        censored_mean=float(censored.mean()) if censored.size else math.nan,
+        n_detected=int(dd.size),
+        n_missed=len(dets) - int(dd.size),
+    )
 
 
 # --------------------------------------------------------------------------- M6
@@ -919,8 +958,10 @@ def pooled_scores(runs: Sequence[RunData]) -> tuple[NDArray[np.float64], NDArray
         raise ValueError("pooled_scores needs runs with scores")
     if not runs:
         return np.empty(0), np.empty(0, dtype=bool)
-    return (np.concatenate([r.score[r.scored] for r in runs]),
-            np.concatenate([r.faulty[r.scored] for r in runs]))
+    return (
+        np.concatenate([r.score[r.scored] for r in runs]),
+        np.concatenate([r.faulty[r.scored] for r in runs]),
+    )
 
 
 def _check_score_y(score: ArrayLike, y: ArrayLike) -> tuple[NDArray, NDArray]:
@@ -1015,12 +1056,12 @@ def _group_bounds(n: int, groups: ArrayLike | None) -> tuple[NDArray, NDArray]:
 def _ranges(y: NDArray[np.bool_], first: NDArray) -> tuple[NDArray, NDArray]:
     """Start and end (inclusive) of every anomaly range: maximal runs of y within a group."""
     joined = y[1:] & y[:-1] & (first[1:] == first[:-1])  # k and k+1 in one range
-    return (np.flatnonzero(y & ~np.r_[False, joined]),
-            np.flatnonzero(y & ~np.r_[joined, False]))
+    return (np.flatnonzero(y & ~np.r_[False, joined]), np.flatnonzero(y & ~np.r_[joined, False]))
 
 
-def _buffer_weights(y: NDArray[np.bool_], first: NDArray, last: NDArray,
-                    buffer: int) -> NDArray[np.float64]:
+def _buffer_weights(
+    y: NDArray[np.bool_], first: NDArray, last: NDArray, buffer: int
+) -> NDArray[np.float64]:
     """Soft labels: 1 on anomalies; sqrt(1 - d/(buffer+1)) at distance d in 1..buffer samples
     from the nearest anomaly of the same group; 0 elsewhere."""
     w = y.astype(float)
@@ -1037,8 +1078,9 @@ def _buffer_weights(y: NDArray[np.bool_], first: NDArray, last: NDArray,
     return w
 
 
-def range_pr_auc(score: ArrayLike, y: ArrayLike, buffer: int = 0,
-                 groups: ArrayLike | None = None) -> float:
+def range_pr_auc(
+    score: ArrayLike, y: ArrayLike, buffer: int = 0, groups: ArrayLike | None = None
+) -> float:
     """Range-based PR-AUC with a soft buffer of ``buffer`` samples (one slice of VUS-PR).
 
     For the rule ``score >= theta`` at each distinct score (decreasing), with p(k) the alarm
@@ -1085,8 +1127,9 @@ def _range_inputs(score, y, buffer, groups, name: str):
     return s, yy, first, last, np.argsort(-s, kind="mergesort")
 
 
-def _range_auc(s: NDArray, y: NDArray, buffer: int, first: NDArray, last: NDArray,
-               order: NDArray) -> float:
+def _range_auc(
+    s: NDArray, y: NDArray, buffer: int, first: NDArray, last: NDArray, order: NDArray
+) -> float:
     w = _buffer_weights(y, first, last, buffer)
     blocks = np.flatnonzero(np.r_[s[order][1:] != s[order][:-1], True])  # distinct thresholds
     tp = np.cumsum(w[order])[blocks]
@@ -1095,15 +1138,16 @@ def _range_auc(s: NDArray, y: NDArray, buffer: int, first: NDArray, last: NDArra
     starts, ends = _ranges(y, first)
     lo = np.maximum(starts - buffer, first[starts])
     hi = np.minimum(ends + buffer, last[ends])
-    found = np.sort([pos[a:b + 1].min() for a, b in zip(lo, hi, strict=True)])
+    found = np.sort([pos[a : b + 1].min() for a, b in zip(lo, hi, strict=True)])
     existence = np.searchsorted(found, blocks, side="right") / starts.size
     recall = np.minimum(tp / y.sum(), 1.0) * existence
     precision = tp / (blocks + 1)
     return float(np.sum(np.diff(np.r_[0.0, recall]) * precision))
 
 
-def vus_pr(score: ArrayLike, y: ArrayLike, max_buffer: int = 0,
-           groups: ArrayLike | None = None) -> float:
+def vus_pr(
+    score: ArrayLike, y: ArrayLike, max_buffer: int = 0, groups: ArrayLike | None = None
+) -> float:
     """M7: volume under the range-based PR surface (VUS-PR, after Paparrizos et al. 2022).
 
     The mean of :func:`range_pr_auc` over the buffer lengths 0, 1, ..., ``max_buffer``
@@ -1139,13 +1183,14 @@ def vus_pr(score: ArrayLike, y: ArrayLike, max_buffer: int = 0,
     # on the time. Refused, not capped at the series length: the weights sqrt(1 - d/(l+1))
     # keep changing with l beyond it, so a cap would silently change the value.
     if not max_buffer <= MAX_VUS_BUFFER_SAMPLES:  # negative, fractional: _range_inputs
-        raise ValueError(f"max_buffer must be an integer from 0 to {MAX_VUS_BUFFER_SAMPLES} "
-                         f"(r2rsim.limits.MAX_VUS_BUFFER_SAMPLES), got {max_buffer!r}")
+        raise ValueError(
+            f"max_buffer must be an integer from 0 to {MAX_VUS_BUFFER_SAMPLES} "
+            f"(r2rsim.limits.MAX_VUS_BUFFER_SAMPLES), got {max_buffer!r}"
+        )
     prep = _range_inputs(score, y, max_buffer, groups, "max_buffer")
     if prep is None:
         return math.nan
-    return float(np.mean([_range_auc(*prep[:2], b, *prep[2:])
-                          for b in range(int(max_buffer) + 1)]))
+    return float(np.mean([_range_auc(*prep[:2], b, *prep[2:]) for b in range(int(max_buffer) + 1)]))
 
 
 # --------------------------------------------------------------------------- M9
@@ -1210,8 +1255,9 @@ def _has_channels(run: RunData) -> bool:
     return run.channel_truth is not None and run.ranking is not None
 
 
-def run_hit(run: RunData, n: int = 1, m: int = 1, h: float = 0.0,
-            w: float = DETECTION_WINDOW_S) -> tuple[int, int]:
+def run_hit(
+    run: RunData, n: int = 1, m: int = 1, h: float = 0.0, w: float = DETECTION_WINDOW_S
+) -> tuple[int, int]:
     """M13 for one run: is a true faulty channel in the top ``n`` of the ranking at k*?
 
     Parameters
@@ -1241,8 +1287,9 @@ def run_hit(run: RunData, n: int = 1, m: int = 1, h: float = 0.0,
     return int(hit[0]), 1
 
 
-def hit_at_n(runs: Sequence[RunData], n: int = 1, m: int = 1, h: float = 0.0,
-             w: float = DETECTION_WINDOW_S) -> float:
+def hit_at_n(
+    runs: Sequence[RunData], n: int = 1, m: int = 1, h: float = 0.0, w: float = DETECTION_WINDOW_S
+) -> float:
     """M13: localisation hit@n at the first detection onset, over detected sensor-fault runs.
 
     hit@n = (1/|R|) sum_r 1[c_r in top-n of the ranking at k*_r], where R holds the detected
@@ -1322,9 +1369,13 @@ class Detectability:
 MDM_SIGNIFICANCE = 0.05
 
 
-def detectability(magnitude: ArrayLike, detected: ArrayLike, level: float = 0.9,
-                  null: Mapping[float, float] | None = None,
-                  significance: float = MDM_SIGNIFICANCE) -> Detectability:
+def detectability(
+    magnitude: ArrayLike,
+    detected: ArrayLike,
+    level: float = 0.9,
+    null: Mapping[float, float] | None = None,
+    significance: float = MDM_SIGNIFICANCE,
+) -> Detectability:
     """M15: P_D per fault magnitude and the minimum detectable magnitude (MDM90 by default).
 
     Runs are grouped by their exact magnitude value (a sweep uses a grid of magnitudes); runs
@@ -1360,20 +1411,27 @@ def detectability(magnitude: ArrayLike, detected: ArrayLike, level: float = 0.9,
         raise ValueError("magnitude and detected differ in length")
     keep = ~np.isnan(mag)
     df = pd.DataFrame({"magnitude": mag[keep], "detected": det[keep]})
-    table = (df.groupby("magnitude", sort=False)["detected"]
-             .agg(n_runs="size", n_detected="sum").reset_index())
+    table = (
+        df.groupby("magnitude", sort=False)["detected"]
+        .agg(n_runs="size", n_detected="sum")
+        .reset_index()
+    )
     table["n_detected"] = table["n_detected"].astype(int)
     table["p_d"] = table["n_detected"] / table["n_runs"]
     # sort by |m|, then by m so that -x precedes +x deterministically
-    table = (table.assign(_abs=table["magnitude"].abs())
-             .sort_values(["_abs", "magnitude"], kind="mergesort")
-             .drop(columns="_abs").reset_index(drop=True))
+    table = (
+        table.assign(_abs=table["magnitude"].abs())
+        .sort_values(["_abs", "magnitude"], kind="mergesort")
+        .drop(columns="_abs")
+        .reset_index(drop=True)
+    )
     ok = table["p_d"] >= level
     if null is not None:
         table["p_null"] = [float(null.get(float(m), math.nan)) for m in table["magnitude"]]
-        table["p_value"] = [_binomial_p_greater(int(x), int(n), p0) for x, n, p0 in
-                            zip(table["n_detected"], table["n_runs"], table["p_null"],
-                                strict=True)]
+        table["p_value"] = [
+            _binomial_p_greater(int(x), int(n), p0)
+            for x, n, p0 in zip(table["n_detected"], table["n_runs"], table["p_null"], strict=True)
+        ]
         table["significant"] = table["p_value"] < significance
         ok &= table["significant"]
     hit = table.loc[ok, "magnitude"]
@@ -1418,9 +1476,14 @@ class ConfidenceInterval:
     n_valid: int
 
 
-def bootstrap_ci(stat: ArrayLike | Callable[[list[RunData]], float],
-                 runs: Sequence[RunData] | None = None, *, n_boot: int = 1000, seed: int = 0,
-                 level: float = 0.95) -> ConfidenceInterval:
+def bootstrap_ci(
+    stat: ArrayLike | Callable[[list[RunData]], float],
+    runs: Sequence[RunData] | None = None,
+    *,
+    n_boot: int = 1000,
+    seed: int = 0,
+    level: float = 0.95,
+) -> ConfidenceInterval:
     """Percentile bootstrap CI over runs (§5.5: resample runs, never samples).
 
     Parameters
@@ -1477,5 +1540,11 @@ def bootstrap_ci(stat: ArrayLike | Callable[[list[RunData]], float],
         low, high = np.percentile(finite, [50 * (1 - level), 50 * (1 + level)])
     else:
         low = high = math.nan
-    return ConfidenceInterval(estimate=estimate, low=float(low), high=float(high), level=level,
-                              n_boot=int(n_boot), n_valid=int(finite.size))
+    return ConfidenceInterval(
+        estimate=estimate,
+        low=float(low),
+        high=float(high),
+        level=level,
+        n_boot=int(n_boot),
+        n_valid=int(finite.size),
+    )

@@ -35,11 +35,16 @@ _TABLE = {"condition", "fault", "magnitude", "metric", "value"}
 #: the files each command writes into its results directory, with the columns that mark a
 #: table as its own (None: not a table)
 FILES: dict[str, dict[str, set[str] | None]] = {
-    "diagnose": {"predictions.parquet": {"run_id", "k", "t_s", "statistic", "alarm", "method"},
-                 "metrics.parquet": _TABLE | {"method"}, "metrics.csv": _TABLE | {"method"},
-                 DATASETS_FILE: None},
-    "bench": {"results.parquet": _TABLE | {"study", "label"},
-              "results.csv": _TABLE | {"study", "label"}},
+    "diagnose": {
+        "predictions.parquet": {"run_id", "k", "t_s", "statistic", "alarm", "method"},
+        "metrics.parquet": _TABLE | {"method"},
+        "metrics.csv": _TABLE | {"method"},
+        DATASETS_FILE: None,
+    },
+    "bench": {
+        "results.parquet": _TABLE | {"study", "label"},
+        "results.csv": _TABLE | {"study", "label"},
+    },
 }
 
 
@@ -105,16 +110,21 @@ def check_results_output(output: str | Path, kind: str, overwrite: bool = False)
     foreign = [p.name for p in sorted(out.iterdir()) if not _is_own(p, kind)]
     if foreign:
         more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
-        raise InputError(f"output directory '{out}' exists and holds files r2rsim {kind} did "
-                         f"not write ({foreign[0]}{more}); r2rsim replaces only a directory "
-                         f"holding its own {kind} results: choose another directory with -o")
+        raise InputError(
+            f"output directory '{out}' exists and holds files r2rsim {kind} did "
+            f"not write ({foreign[0]}{more}); r2rsim replaces only a directory "
+            f"holding its own {kind} results: choose another directory with -o"
+        )
     if not overwrite:
-        raise InputError(f"output directory '{out}' holds earlier r2rsim {kind} results; pass "
-                         f"--overwrite to replace them")
+        raise InputError(
+            f"output directory '{out}' holds earlier r2rsim {kind} results; pass "
+            f"--overwrite to replace them"
+        )
 
 
-def write_results(output: str | Path, kind: str, files: dict[str, Callable[[Path], None]],
-                  overwrite: bool = False) -> Path:
+def write_results(
+    output: str | Path, kind: str, files: dict[str, Callable[[Path], None]], overwrite: bool = False
+) -> Path:
     """Write a results directory: check it (:func:`check_results_output`), write every file
     into a temporary directory next to it, then move them in, replacing the earlier results
     (and their report, which described them).

@@ -27,8 +27,17 @@ import pandas as pd
 from ..dataset.read import Run
 from ..errors import InputError
 
-__all__ = ["ROLES", "Split", "acting_faults", "apportion", "is_faulty", "no_training_run",
-           "seed_order_key", "split_by_condition", "split_by_seed"]
+__all__ = [
+    "ROLES",
+    "Split",
+    "acting_faults",
+    "apportion",
+    "is_faulty",
+    "no_training_run",
+    "seed_order_key",
+    "split_by_condition",
+    "split_by_seed",
+]
 
 #: the roles of a split, in the order they are served (train first)
 ROLES = ("train", "val", "test")
@@ -63,8 +72,10 @@ class Split:
             For example ``split 'seed': 6 train, 2 val, 82 test (80 faulty)``.
         """
         n_faulty = sum(is_faulty(r) for r in self.test)
-        return (f"split '{self.name}': {len(self.train)} train, {len(self.val)} val, "
-                f"{len(self.test)} test ({n_faulty} faulty)")
+        return (
+            f"split '{self.name}': {len(self.train)} train, {len(self.val)} val, "
+            f"{len(self.test)} test ({n_faulty} faulty)"
+        )
 
 
 def acting_faults(run: Run) -> pd.DataFrame:
@@ -110,8 +121,10 @@ def _fractions(train: float, val: float, test: float) -> tuple[float, float, flo
     fr = {"train": train, "val": val, "test": test}
     bad = [f"{k}={v:g}" for k, v in fr.items() if not 0.0 <= v <= 1.0]
     if bad or abs(train + val + test - 1.0) > 1e-9:
-        raise InputError(f"split fractions must lie in [0, 1] and sum to 1, got "
-                         f"{', '.join(bad) or ', '.join(f'{k}={v:g}' for k, v in fr.items())}")
+        raise InputError(
+            f"split fractions must lie in [0, 1] and sum to 1, got "
+            f"{', '.join(bad) or ', '.join(f'{k}={v:g}' for k, v in fr.items())}"
+        )
     return float(train), float(val), float(test)
 
 
@@ -147,7 +160,7 @@ def apportion(n: int, fractions: Sequence[float]) -> list[int]:
     shares = [round(f * n, _SHARE_DECIMALS) for f in fractions]
     counts = [math.floor(s) for s in shares]
     by_remainder = sorted(range(len(shares)), key=lambda i: (-(shares[i] - counts[i]), i))
-    for i in by_remainder[:n - sum(counts)]:
+    for i in by_remainder[: n - sum(counts)]:
         counts[i] += 1
     positive = [i for i, f in enumerate(fractions) if f > 0]
     minimum = [0] * len(fractions)
@@ -182,8 +195,9 @@ def seed_order_key(run: Run) -> tuple[str, str, str]:
     return digest, str(run.run_id), str(run.info.get("scenario_sha256") or "")
 
 
-def _apportion_runs(runs: Sequence[Run], indices: Sequence[int],
-                    fractions: Sequence[float]) -> dict[str, list[int]]:
+def _apportion_runs(
+    runs: Sequence[Run], indices: Sequence[int], fractions: Sequence[float]
+) -> dict[str, list[int]]:
     """The runs ``runs[i]`` for i in ``indices``, all of one condition, by role (as indices):
     in :func:`seed_order_key` order, the first ``counts[0]`` are train, the next
     ``counts[1]`` val, the rest test."""
@@ -192,7 +206,7 @@ def _apportion_runs(runs: Sequence[Run], indices: Sequence[int],
     out: dict[str, list[int]] = {}
     start = 0
     for role, count in zip(ROLES, counts, strict=True):
-        out[role] = ordered[start:start + count]
+        out[role] = ordered[start : start + count]
         start += count
     return out
 
@@ -205,8 +219,9 @@ def _by_condition(runs: Sequence[Run], indices: Sequence[int]) -> dict[str, list
     return groups
 
 
-def split_by_seed(runs: Sequence[Run], train: float = 0.6, val: float = 0.2,
-                  test: float = 0.2) -> Split:
+def split_by_seed(
+    runs: Sequence[Run], train: float = 0.6, val: float = 0.2, test: float = 0.2
+) -> Split:
     """Assign runs to roles, deterministically, in the requested fractions per condition.
 
     * Every faulty run (:func:`is_faulty`) is a test run, whatever its seed or scenario.
@@ -275,22 +290,29 @@ def no_training_run(runs: Sequence[Run]) -> str:
     """
     healthy = [r for r in runs if not is_faulty(r)]
     if not healthy:
-        return (f"split 'seed': all {len(runs)} runs have faults, and plug-ins learn from "
-                f"fault-free runs only: add fault-free runs (--data), or name the roles with "
-                f"--train/--val/--test")
+        return (
+            f"split 'seed': all {len(runs)} runs have faults, and plug-ins learn from "
+            f"fault-free runs only: add fault-free runs (--data), or name the roles with "
+            f"--train/--val/--test"
+        )
     named = [str(r.info.get("split")) for r in healthy if r.info.get("split") in ROLES]
     if len(named) == len(healthy):
         counts = ", ".join(f"{named.count(role)} {role}" for role in ROLES if role in named)
-        return (f"split 'seed': each of the {len(healthy)} fault-free runs has a split of its "
-                f"own in its scenario (runs.split: {counts}), and none is train: add "
-                f"fault-free runs without a split: of their own, or name the roles with "
-                f"--train/--val/--test")
-    return (f"split 'seed': none of the {len(healthy)} fault-free runs is in train: name the "
-            f"roles with --train/--val/--test")
+        return (
+            f"split 'seed': each of the {len(healthy)} fault-free runs has a split of its "
+            f"own in its scenario (runs.split: {counts}), and none is train: add "
+            f"fault-free runs without a split: of their own, or name the roles with "
+            f"--train/--val/--test"
+        )
+    return (
+        f"split 'seed': none of the {len(healthy)} fault-free runs is in train: name the "
+        f"roles with --train/--val/--test"
+    )
 
 
-def split_by_condition(runs: Sequence[Run], train: str = "OC1", test: str = "OC2",
-                       val: float = 0.25) -> Split:
+def split_by_condition(
+    runs: Sequence[Run], train: str = "OC1", test: str = "OC2", val: float = 0.25
+) -> Split:
     """Train and calibrate on one operating condition, test on another.
 
     Every run of mode ``test`` is a test run, faulty or not. The fault-free runs of mode
@@ -323,12 +345,16 @@ def split_by_condition(runs: Sequence[Run], train: str = "OC1", test: str = "OC2
     modes = sorted({r.mode for r in runs})
     for role, mode in (("train", train), ("test", test)):
         if mode not in modes:
-            raise InputError(f"split by condition: no run has the {role} mode '{mode}' "
-                             f"(modes present: {', '.join(m or '(none)' for m in modes)})")
+            raise InputError(
+                f"split by condition: no run has the {role} mode '{mode}' "
+                f"(modes present: {', '.join(m or '(none)' for m in modes)})"
+            )
     tested = [r for r in runs if r.mode == test]
-    pool = [i for i, r in enumerate(runs)
-            if r.mode == train != test and not is_faulty(r)]
+    pool = [i for i, r in enumerate(runs) if r.mode == train != test and not is_faulty(r)]
     roles = _apportion_runs(runs, pool, fractions)
-    return Split([runs[i] for i in sorted(roles["train"])],
-                 [runs[i] for i in sorted(roles["val"])], tested,
-                 name=f"condition {train}->{test}")
+    return Split(
+        [runs[i] for i in sorted(roles["train"])],
+        [runs[i] for i in sorted(roles["val"])],
+        tested,
+        name=f"condition {train}->{test}",
+    )

@@ -27,11 +27,20 @@ import numpy as np
 from ..compile.compiler import CompiledLine
 from ..compile.faults import loop_sensor_ids
 
-_QUANTITY = {"load_cell": ("tension", "N"), "encoder": ("speed", "rad_s"),
-             "roll_diameter": ("diameter", "m"), "pitch_length": ("pitch", "m"),
-             "dancer_position": ("position", None)}
-_RECORD_FAULTS = ("sensor.noise", "sensor.spike", "sensor.quantization", "sensor.delay",
-                  "sensor.dropout")
+_QUANTITY = {
+    "load_cell": ("tension", "N"),
+    "encoder": ("speed", "rad_s"),
+    "roll_diameter": ("diameter", "m"),
+    "pitch_length": ("pitch", "m"),
+    "dancer_position": ("position", None),
+}
+_RECORD_FAULTS = (
+    "sensor.noise",
+    "sensor.spike",
+    "sensor.quantization",
+    "sensor.delay",
+    "sensor.dropout",
+)
 
 
 def _speed_node(cl: CompiledLine, sensor) -> str:
@@ -48,8 +57,9 @@ def channel_names(cl: CompiledLine, sensor) -> tuple[str, str, str]:
     unit as channels.parquet writes it is :func:`unit_of_suffix` of the suffix."""
     q, u = _QUANTITY[sensor.type]
     if u is None:  # dancer position: m (travel) or rad (arm angle)
-        u = next(n for n in cl.aux_names
-                 if n.startswith(f"{sensor.id}.{q}_") and "_seen_" not in n).rsplit("_", 1)[1]
+        u = next(
+            n for n in cl.aux_names if n.startswith(f"{sensor.id}.{q}_") and "_seen_" not in n
+        ).rsplit("_", 1)[1]
     return f"meas.{sensor.id}.{q}_{u}", f"true.{sensor.id}.{q}_{u}", u
 
 
@@ -88,29 +98,51 @@ class MeasurementModel:
             q, _ = _QUANTITY[s.type]
             name, true, u = channel_names(cl, s)
             rate = min(s.rate or record_rate, record_rate)
-            mine = [(f, np.random.default_rng(c)) for f, c in zip(faults, fault_children,
-                                                                  strict=True)
-                    if f.target == s.id]
-            self.channels.append({
-                "sensor": s, "name": name, "true": true,
-                "seen_col": cl.aux_index(f"{s.id}.{q}_seen_{u}"),
-                "true_col": cl.aux_index(f"{s.id}.{q}_{u}"),
-                "rate": rate, "last_tick": None, "held": math.nan, "clip_held": False,
-                "rng": np.random.default_rng(child), "faults": mine,
-                "hist_t": np.zeros(0), "hist_v": np.zeros(0),
-                "record_loop_faults": [f for f, _ in mine if f.kind.acts == "loop"
-                                       and (s.id not in in_loop or f.record_only)],
-                "stuck_at": {},
-                "speed_col": (cl.aux_index(f"{_speed_node(cl, s)}.surface_speed_m_s")
-                              if s.noise_per_speed > 0 else None),
-                "rng_extra": np.random.default_rng(extra),
-            })
+            mine = [
+                (f, np.random.default_rng(c))
+                for f, c in zip(faults, fault_children, strict=True)
+                if f.target == s.id
+            ]
+            self.channels.append(
+                {
+                    "sensor": s,
+                    "name": name,
+                    "true": true,
+                    "seen_col": cl.aux_index(f"{s.id}.{q}_seen_{u}"),
+                    "true_col": cl.aux_index(f"{s.id}.{q}_{u}"),
+                    "rate": rate,
+                    "last_tick": None,
+                    "held": math.nan,
+                    "clip_held": False,
+                    "rng": np.random.default_rng(child),
+                    "faults": mine,
+                    "hist_t": np.zeros(0),
+                    "hist_v": np.zeros(0),
+                    "record_loop_faults": [
+                        f
+                        for f, _ in mine
+                        if f.kind.acts == "loop" and (s.id not in in_loop or f.record_only)
+                    ],
+                    "stuck_at": {},
+                    "speed_col": (
+                        cl.aux_index(f"{_speed_node(cl, s)}.surface_speed_m_s")
+                        if s.noise_per_speed > 0
+                        else None
+                    ),
+                    "rng_extra": np.random.default_rng(extra),
+                }
+            )
             ch = self.channels[-1]
             if s.type == "encoder" and s.counts_per_rev:
                 # random initial roller angle: the quantisation phase of the count
-                ch["enc"] = {"theta0": float(ch["rng_extra"].uniform(0.0, 2.0 * math.pi)),
-                             "window": float(s.window or 1.0 / rate),
-                             "t0": None, "om0": 0.0, "ht": np.zeros(0), "hth": np.zeros(0)}
+                ch["enc"] = {
+                    "theta0": float(ch["rng_extra"].uniform(0.0, 2.0 * math.pi)),
+                    "window": float(s.window or 1.0 / rate),
+                    "t0": None,
+                    "om0": 0.0,
+                    "ht": np.zeros(0),
+                    "hth": np.zeros(0),
+                }
 
     def measure(self, t: np.ndarray, aux: np.ndarray) -> dict[str, np.ndarray]:
         """Measured and true channels (and clip flags) for one chunk of samples.
@@ -132,8 +164,9 @@ class MeasurementModel:
             s = ch["sensor"]
             seen = aux[:, ch["seen_col"]]
             ticks = np.floor(t * ch["rate"] + 1e-6).astype(np.int64)
-            prev = np.concatenate([[ch["last_tick"] if ch["last_tick"] is not None else -1],
-                                   ticks[:-1]])
+            prev = np.concatenate(
+                [[ch["last_tick"] if ch["last_tick"] is not None else -1], ticks[:-1]]
+            )
             fresh = ticks != prev
             nf = int(fresh.sum())
             tt = t[fresh]
@@ -163,8 +196,9 @@ class MeasurementModel:
                     quant = np.where(on, np.maximum(quant, eff), quant)
                 elif f.type == "sensor.dropout":
                     dropped |= on
-            vals = np.where(quant > 0, np.round(vals / np.where(quant > 0, quant, 1.0))
-                            * quant, vals)
+            vals = np.where(
+                quant > 0, np.round(vals / np.where(quant > 0, quant, 1.0)) * quant, vals
+            )
             clipped = np.zeros(nf, bool)
             if s.range is not None:
                 lo, hi = s.range
@@ -175,8 +209,9 @@ class MeasurementModel:
             # zero-order hold between sensor samples
             idx = np.cumsum(fresh) - 1
             held = np.where(idx >= 0, vals[np.maximum(idx, 0)] if nf else ch["held"], ch["held"])
-            held_clip = np.where(idx >= 0, clipped[np.maximum(idx, 0)] if nf else
-                                 ch["clip_held"], ch["clip_held"])
+            held_clip = np.where(
+                idx >= 0, clipped[np.maximum(idx, 0)] if nf else ch["clip_held"], ch["clip_held"]
+            )
             if nf:
                 ch["held"] = vals[-1]
                 ch["clip_held"] = bool(clipped[-1])

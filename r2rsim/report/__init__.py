@@ -14,13 +14,22 @@ import importlib
 #: not import what the diagnostics figures need (scikit-learn, the harness)
 _WHERE = {
     "decimate_minmax": "_data",
-    "plot_statistic": "_diagnostics", "plot_roc_pr": "_diagnostics",
-    "plot_metric": "_diagnostics", "plot_mdm": "_diagnostics",
-    "plot_gsmms_map": "_gsmms", "plot_gsmms_residuals": "_gsmms", "plot_severity": "_gsmms",
-    "plot_profiles": "_hsov", "plot_residual_qq": "_hsov", "plot_virtual_sensor": "_hsov",
-    "write_report": "_html", "report_figures": "_html",
+    "plot_statistic": "_diagnostics",
+    "plot_roc_pr": "_diagnostics",
+    "plot_metric": "_diagnostics",
+    "plot_mdm": "_diagnostics",
+    "plot_gsmms_map": "_gsmms",
+    "plot_gsmms_residuals": "_gsmms",
+    "plot_severity": "_gsmms",
+    "plot_profiles": "_hsov",
+    "plot_residual_qq": "_hsov",
+    "plot_virtual_sensor": "_hsov",
+    "write_report": "_html",
+    "report_figures": "_html",
     "require_matplotlib": "_mpl",
-    "plot_residuals": "_parity", "plot_sensitivity": "_parity", "plot_signature": "_parity",
+    "plot_residuals": "_parity",
+    "plot_sensitivity": "_parity",
+    "plot_signature": "_parity",
     "plot_run": "_run",
     "plot_sweep": "_sweep",
 }
@@ -40,15 +49,27 @@ def __dir__():
 
 __all__ = [
     # runs and sweeps (r2rsim plot)
-    "plot_run", "plot_sweep", "decimate_minmax",
+    "plot_run",
+    "plot_sweep",
+    "decimate_minmax",
     # diagnostics results (r2rsim diagnose / bench) and the HTML report (r2rsim report)
-    "plot_statistic", "plot_roc_pr", "plot_metric", "plot_mdm", "write_report",
+    "plot_statistic",
+    "plot_roc_pr",
+    "plot_metric",
+    "plot_mdm",
+    "write_report",
     "report_figures",
     "require_matplotlib",
     # residual-based diagnostics (the parity study, thesis Ch. 3)
-    "plot_residuals", "plot_signature", "plot_sensitivity",
+    "plot_residuals",
+    "plot_signature",
+    "plot_sensitivity",
     # GSMMS (thesis Ch. 4)
-    "plot_gsmms_map", "plot_gsmms_residuals", "plot_severity",
+    "plot_gsmms_map",
+    "plot_gsmms_residuals",
+    "plot_severity",
     # virtual sensors and regression models (thesis Ch. 2)
-    "plot_virtual_sensor", "plot_residual_qq", "plot_profiles",
+    "plot_virtual_sensor",
+    "plot_residual_qq",
+    "plot_profiles",
 ]

@@ -125,8 +125,10 @@ def _reading(root: Path, path: Path, verifier: Verifier | None = None):
             verifier.check(path.relative_to(root).as_posix())
         text = str(exc.args[0] if isinstance(exc, KeyError) and exc.args else exc).strip()
         why = text.splitlines()[0] if text else type(exc).__name__
-        raise InputError(f"dataset {root}: {path.relative_to(root)} cannot be read "
-                         f"({why}); `r2rsim validate {root}` checks every file") from None
+        raise InputError(
+            f"dataset {root}: {path.relative_to(root)} cannot be read "
+            f"({why}); `r2rsim validate {root}` checks every file"
+        ) from None
 
 
 def open_dataset(path) -> Path:
@@ -136,8 +138,11 @@ def open_dataset(path) -> Path:
     if not root.is_dir():
         raise InputError(f"{root}: no such dataset directory")
     refuse_unfinished(root)
-    if not is_dataset_dir(root) or not (root / "runs.parquet").is_file() \
-            or not (root / "samples").is_dir():
+    if (
+        not is_dataset_dir(root)
+        or not (root / "runs.parquet").is_file()
+        or not (root / "samples").is_dir()
+    ):
         raise InputError(f"{root}: not an r2rsim dataset (no runs.parquet and samples/)")
     return root
 
@@ -190,8 +195,9 @@ def resolve_run(root: Path, run_id: str | None, verifier: Verifier | None = None
     return run_id
 
 
-def open_run(root: Path, run_id: str, verifier: Verifier | None = None, *,
-             whole: bool = False) -> RunData:
+def open_run(
+    root: Path, run_id: str, verifier: Verifier | None = None, *, whole: bool = False
+) -> RunData:
     """Locate the run's samples and read their footers: schema, row-group statistics. With
     a ``verifier``, each file must be listed in manifest.json, and its sha256 is computed in
     the background while the figure reads it (``verifier.check()`` waits for it). ``whole``:
@@ -199,8 +205,9 @@ def open_run(root: Path, run_id: str, verifier: Verifier | None = None, *,
     of which a figure reads little: the sweep figure)."""
     files = sample_files(root, run_id)
     if not files:
-        raise InputError(f"dataset {root}: run {run_id} has no samples (samples/run_id="
-                         f"{run_id}/part-*.parquet)")
+        raise InputError(
+            f"dataset {root}: run {run_id} has no samples (samples/run_id={run_id}/part-*.parquet)"
+        )
     metas, data = [], [] if whole else None
     for f in files:
         rel = f.relative_to(root).as_posix()
@@ -213,10 +220,16 @@ def open_run(root: Path, run_id: str, verifier: Verifier | None = None, *,
                 verifier.start(rel, run_id, data[-1] if whole else None)
             metas.append(pq.read_metadata(pa.BufferReader(data[-1]) if whole else f))
             _stats(metas[-1], "t_s")  # the time column is there
-    numeric = [f.name for f in metas[0].schema.to_arrow_schema()
-               if f.name not in ("k", "t_s") and (pa.types.is_floating(f.type)
-                                                  or pa.types.is_integer(f.type)
-                                                  or pa.types.is_boolean(f.type))]
+    numeric = [
+        f.name
+        for f in metas[0].schema.to_arrow_schema()
+        if f.name not in ("k", "t_s")
+        and (
+            pa.types.is_floating(f.type)
+            or pa.types.is_integer(f.type)
+            or pa.types.is_boolean(f.type)
+        )
+    ]
     run = RunData(root, run_id, files, metas, numeric, np.nan, np.nan, verifier, data)
     # + 0.0: Parquet statistics store a float minimum of 0 as -0 (the format's rule)
     run.t_start, run.t_end = (v + 0.0 for v in _column_range(run, "t_s"))
@@ -226,8 +239,7 @@ def open_run(root: Path, run_id: str, verifier: Verifier | None = None, *,
 def _stats(meta: pq.FileMetaData, column: str) -> list:
     """The statistics of a top-level column in each row group (None where missing)."""
     # leaf columns, not Arrow fields: a list column (label.fault_ids) has its own paths
-    leaf = next((i for i in range(meta.num_columns) if meta.schema.column(i).path == column),
-                None)
+    leaf = next((i for i in range(meta.num_columns) if meta.schema.column(i).path == column), None)
     if leaf is None:
         raise KeyError(f"no column {column}")
     out = []
@@ -269,10 +281,11 @@ def select_channels(run: RunData, globs) -> list[str]:
     for g in globs:
         hits = [c for c in run.columns if fnmatch.fnmatchcase(c, g)]
         if not hits:
-            like = difflib.get_close_matches(g, run.columns, n=4, cutoff=0.3) \
-                or run.columns[:4]
-            raise InputError(f"dataset {run.root}: run {run.run_id}: channel glob '{g}' "
-                             f"matches no numeric column (e.g. {', '.join(like)})")
+            like = difflib.get_close_matches(g, run.columns, n=4, cutoff=0.3) or run.columns[:4]
+            raise InputError(
+                f"dataset {run.root}: run {run.run_id}: channel glob '{g}' "
+                f"matches no numeric column (e.g. {', '.join(like)})"
+            )
         picked.update(dict.fromkeys(hits))
     return list(picked)
 
@@ -282,8 +295,7 @@ def channel_units(root: Path, verifier: Verifier | None = None) -> dict[str, str
     return {c: unit for c, (unit, _) in channel_table(root, verifier).items()}
 
 
-def channel_table(root: Path, verifier: Verifier | None = None
-                  ) -> dict[str, tuple[str, str]]:
+def channel_table(root: Path, verifier: Verifier | None = None) -> dict[str, tuple[str, str]]:
     """``(unit, description)`` of each column from channels.parquet (empty when the file is
     missing; a description ``""`` when it has none). The description names the sensor type
     of a reading (``encoder 'enc_pull' on pull: measured ...``)."""
@@ -292,11 +304,11 @@ def channel_table(root: Path, verifier: Verifier | None = None
         return {}
     with _reading(root, f, verifier):
         table = pq.read_table(_whole(root, f.name, verifier))
-        ch = table.select(["channel", "unit", *(["description"] if "description" in
-                                                table.column_names else [])]).to_pandas()
+        ch = table.select(
+            ["channel", "unit", *(["description"] if "description" in table.column_names else [])]
+        ).to_pandas()
     desc = ch["description"].fillna("") if "description" in ch else [""] * len(ch)
-    return dict(zip(ch["channel"], zip(ch["unit"].fillna(""), desc, strict=True),
-                    strict=True))
+    return dict(zip(ch["channel"], zip(ch["unit"].fillna(""), desc, strict=True), strict=True))
 
 
 def is_encoder(description: str) -> bool:
@@ -304,20 +316,21 @@ def is_encoder(description: str) -> bool:
     return str(description).startswith("encoder ")
 
 
-def run_rows(root: Path, name: str, run_id: str, verifier: Verifier | None = None
-             ) -> pd.DataFrame:
+def run_rows(root: Path, name: str, run_id: str, verifier: Verifier | None = None) -> pd.DataFrame:
     """The run's rows of faults.parquet or events.parquet (empty when the file is missing)."""
     f = root / name
     if not f.is_file():
         return pd.DataFrame()
     with _reading(root, f, verifier):
-        df = pq.read_table(_whole(root, name, verifier),
-                           filters=[("run_id", "=", run_id)]).to_pandas()
+        df = pq.read_table(
+            _whole(root, name, verifier), filters=[("run_id", "=", run_id)]
+        ).to_pandas()
     return df.reset_index(drop=True)
 
 
-def run_rows_all(root: Path, name: str, columns: list[str],
-                 verifier: Verifier | None = None) -> pd.DataFrame:
+def run_rows_all(
+    root: Path, name: str, columns: list[str], verifier: Verifier | None = None
+) -> pd.DataFrame:
     """These columns (those the file has) of every row of faults.parquet or events.parquet
     (empty when the file is missing); the file is checked whole."""
     f = root / name
@@ -330,8 +343,11 @@ def run_rows_all(root: Path, name: str, columns: list[str],
 
 def _row_groups_in(meta: pq.FileMetaData, t0: float, t1: float) -> list[int]:
     """Row groups of a file that may hold samples with t0 <= t_s <= t1."""
-    return [g for g, st in enumerate(_stats(meta, "t_s"))
-            if st is None or (st.max >= t0 and st.min <= t1)]
+    return [
+        g
+        for g, st in enumerate(_stats(meta, "t_s"))
+        if st is None or (st.max >= t0 and st.min <= t1)
+    ]
 
 
 def iter_window(run: RunData, columns: list[str], t0: float, t1: float):
@@ -348,8 +364,10 @@ def iter_window(run: RunData, columns: list[str], t0: float, t1: float):
             t = table.column(0).to_numpy()
             inside = (t >= t0) & (t <= t1)
             if inside.any():
-                yield t[inside], {c: _floats(table.column(i + 1))[inside]
-                                  for i, c in enumerate(columns)}
+                yield (
+                    t[inside],
+                    {c: _floats(table.column(i + 1))[inside] for i, c in enumerate(columns)},
+                )
 
 
 def label_tables(root: Path, verifier: Verifier | None) -> tuple[list, list]:
@@ -376,8 +394,12 @@ def check_run_labels(run: RunData) -> None:
 
     v = run.verifier
     names = set(run.metas[0].schema.to_arrow_schema().names)
-    wanted = ["k", "t_s", *(c for c in QUICK_LABELS if c in names),
-              *sorted(c for c in names if c.startswith("label.ch."))]
+    wanted = [
+        "k",
+        "t_s",
+        *(c for c in QUICK_LABELS if c in names),
+        *sorted(c for c in names if c.startswith("label.ch.")),
+    ]
     sources = run.data or [None] * len(run.files)
     tables = []
     for path, meta, data in zip(run.files, run.metas, sources, strict=True):
@@ -388,17 +410,23 @@ def check_run_labels(run: RunData) -> None:
     runs, faults = label_tables(run.root, v)
     row = [r for r in runs if r["run_id"] == run.run_id]
     try:
-        problem = quick_label_problem(table, row[0], [f for f in faults
-                                                      if f["run_id"] == run.run_id]) \
-            if row else None
+        problem = (
+            quick_label_problem(table, row[0], [f for f in faults if f["run_id"] == run.run_id])
+            if row
+            else None
+        )
     except (KeyError, TypeError, ValueError, pa.ArrowException) as exc:
-        problem = (f"its labels cannot be checked ({type(exc).__name__}: {exc}): not a "
-                   f"complete r2rsim dataset")
+        problem = (
+            f"its labels cannot be checked ({type(exc).__name__}: {exc}): not a "
+            f"complete r2rsim dataset"
+        )
     if problem:
-        raise InputError(f"dataset {run.root}: run {run.run_id}: {problem}: the labels in the "
-                         f"samples differ from what faults.parquet and runs.parquet give "
-                         f"(edited after the writing?); refusing to use it (`r2rsim validate "
-                         f"{run.root}` lists every problem; --no-verify reads it anyway)")
+        raise InputError(
+            f"dataset {run.root}: run {run.run_id}: {problem}: the labels in the "
+            f"samples differ from what faults.parquet and runs.parquet give "
+            f"(edited after the writing?); refusing to use it (`r2rsim validate "
+            f"{run.root}` lists every problem; --no-verify reads it anyway)"
+        )
 
 
 def _floats(arr: pa.ChunkedArray) -> np.ndarray:
@@ -406,8 +434,9 @@ def _floats(arr: pa.ChunkedArray) -> np.ndarray:
     return arr.cast(pa.float64()).to_numpy(zero_copy_only=False)
 
 
-def read_envelopes(run: RunData, columns: list[str], t0: float, t1: float,
-                   n_buckets: int, means=()) -> dict[str, tuple[np.ndarray, ...]]:
+def read_envelopes(
+    run: RunData, columns: list[str], t0: float, t1: float, n_buckets: int, means=()
+) -> dict[str, tuple[np.ndarray, ...]]:
     """Each column's min/max envelope (:func:`decimate_minmax`) over [t0, t1], streamed: the
     chunks share bucket edges, so the result is the envelope of the whole window.
 
@@ -429,9 +458,13 @@ def read_envelopes(run: RunData, columns: list[str], t0: float, t1: float,
             else:
                 idx = _minmax_indices(y, starts)
                 parts[c].append((t[idx], y[idx]))
-    return {c: tuple(np.concatenate([p[i] for p in ps]) if ps else np.empty(0)
-                     for i in range(4 if c in means else 2))
-            for c, ps in parts.items()}
+    return {
+        c: tuple(
+            np.concatenate([p[i] for p in ps]) if ps else np.empty(0)
+            for i in range(4 if c in means else 2)
+        )
+        for c, ps in parts.items()
+    }
 
 
 def _bucket_means(t: np.ndarray, y: np.ndarray, starts: np.ndarray) -> tuple:
@@ -453,8 +486,16 @@ def _bucket_means(t: np.ndarray, y: np.ndarray, starts: np.ndarray) -> tuple:
 #: harness scores against (:func:`r2rsim.evaluate.harness.run_data`) and the labels the
 #: check compares with faults.parquet (:data:`r2rsim.dataset.labels.QUICK_LABELS`, and every
 #: ``label.ch.*``)
-LABEL_COLUMNS = ("k", "t_s", "label.is_faulty", "label.score_mask", "label.primary_type",
-                 "label.severity", "label.n_active", "label.mode")
+LABEL_COLUMNS = (
+    "k",
+    "t_s",
+    "label.is_faulty",
+    "label.score_mask",
+    "label.primary_type",
+    "label.severity",
+    "label.n_active",
+    "label.mode",
+)
 _NEEDED_LABELS = ("k", "t_s", "label.is_faulty", "label.score_mask", "label.primary_type")
 
 
@@ -509,25 +550,39 @@ def _label_runs(root: Path, verify: bool) -> list:
         for f in faults_t.to_pylist() if verify else ():
             fault_rows.setdefault(str(f["run_id"]), []).append(f)
         out = []
-        for info, row in zip(runs_t.to_pandas().to_dict("records"), runs_t.to_pylist(),
-                             strict=True):
+        for info, row in zip(
+            runs_t.to_pandas().to_dict("records"), runs_t.to_pylist(), strict=True
+        ):
             rid = str(row["run_id"])
             table = _label_table(root, rid, v)
             if verify:
                 try:
                     problem = quick_label_problem(table, row, fault_rows.get(rid, []))
                 except (KeyError, TypeError, ValueError, pa.ArrowException) as exc:
-                    raise v.fail(f"its labels cannot be checked ({type(exc).__name__}: "
-                                 f"{exc}): not a complete r2rsim dataset (--no-verify reads "
-                                 f"it anyway)", rid) from None
+                    raise v.fail(
+                        f"its labels cannot be checked ({type(exc).__name__}: "
+                        f"{exc}): not a complete r2rsim dataset (--no-verify reads "
+                        f"it anyway)",
+                        rid,
+                    ) from None
                 if problem:
-                    raise v.fail(f"{problem}: the labels in the samples differ from what "
-                                 f"faults.parquet and runs.parquet give (edited after the "
-                                 f"writing?); refusing to use it (`r2rsim validate {root}` "
-                                 f"lists every problem; --no-verify reads it anyway)", rid)
+                    raise v.fail(
+                        f"{problem}: the labels in the samples differ from what "
+                        f"faults.parquet and runs.parquet give (edited after the "
+                        f"writing?); refusing to use it (`r2rsim validate {root}` "
+                        f"lists every problem; --no-verify reads it anyway)",
+                        rid,
+                    )
             samples = table.to_pandas().set_index("k", drop=False).sort_index()
-            out.append(Run(rid, samples, faults[faults["run_id"].astype(str) == rid]
-                           .reset_index(drop=True), info, root))
+            out.append(
+                Run(
+                    rid,
+                    samples,
+                    faults[faults["run_id"].astype(str) == rid].reset_index(drop=True),
+                    info,
+                    root,
+                )
+            )
         v.check()
     return out
 
@@ -536,12 +591,17 @@ def _label_table(root: Path, run_id: str, v: Verifier) -> pa.Table:
     """The label columns of one run's samples files (each file hashed whole, from the
     bytes parsed)."""
     if run_id in ("", ".", "..") or any(c in run_id for c in "/\\\0"):
-        raise v.fail(f"run id {run_id!r} in runs.parquet is not a plain name (its samples "
-                     f"would lie outside samples/)")
+        raise v.fail(
+            f"run id {run_id!r} in runs.parquet is not a plain name (its samples "
+            f"would lie outside samples/)"
+        )
     files = sample_files(root, run_id)
     if not files:
-        raise v.fail("no samples file (samples/run_id=<id>/part-*.parquet): the directory "
-                     "is not a complete r2rsim dataset", run_id)
+        raise v.fail(
+            "no samples file (samples/run_id=<id>/part-*.parquet): the directory "
+            "is not a complete r2rsim dataset",
+            run_id,
+        )
     parts = []
     for f in files:
         rel = f.relative_to(root).as_posix()
@@ -551,15 +611,18 @@ def _label_table(root: Path, run_id: str, v: Verifier) -> pa.Table:
             v.start(rel, run_id, data)
             pf = pq.ParquetFile(pa.BufferReader(data))
             names = pf.schema_arrow.names
-            cols = [c for c in (*LABEL_COLUMNS, *sorted(n for n in names
-                                                        if n.startswith("label.ch.")))
-                    if c in names]
+            cols = [
+                c
+                for c in (*LABEL_COLUMNS, *sorted(n for n in names if n.startswith("label.ch.")))
+                if c in names
+            ]
             parts.append(pf.read(columns=cols))
         v.check(rel)  # a changed file is told as such, before anything else about it
-    table = parts[0] if len(parts) == 1 else pa.concat_tables(parts,
-                                                              promote_options="default")
+    table = parts[0] if len(parts) == 1 else pa.concat_tables(parts, promote_options="default")
     missing = [c for c in _NEEDED_LABELS if c not in table.column_names]
     if missing:
-        raise v.fail(f"the samples have no column {', '.join(missing)}: not a complete "
-                     f"r2rsim dataset", run_id)
+        raise v.fail(
+            f"the samples have no column {', '.join(missing)}: not a complete r2rsim dataset",
+            run_id,
+        )
     return table

@@ -55,8 +55,10 @@ def results_kind(path: str | Path) -> str:
         return "diagnose"
     if (d / BENCH_FILE).is_file():
         return "bench"
-    raise InputError(f"{d}: not an r2rsim results directory (no {DIAGNOSE_FILE} written by "
-                     f"`r2rsim diagnose`, no {BENCH_FILE} written by `r2rsim bench -o`)")
+    raise InputError(
+        f"{d}: not an r2rsim results directory (no {DIAGNOSE_FILE} written by "
+        f"`r2rsim diagnose`, no {BENCH_FILE} written by `r2rsim bench -o`)"
+    )
 
 
 #: the columns of predictions.parquet the figures use (the others are not read)
@@ -75,8 +77,9 @@ def _read_table(path: Path, columns=None) -> pd.DataFrame:
         return pd.read_parquet(path, columns=columns)
     except Exception as exc:  # noqa: BLE001 - pyarrow raises several types on bad files
         first = (str(exc).strip().splitlines() or [""])[0]
-        raise InputError(f"{path}: not a readable Parquet file ({type(exc).__name__}: "
-                         f"{first})") from None
+        raise InputError(
+            f"{path}: not a readable Parquet file ({type(exc).__name__}: {first})"
+        ) from None
 
 
 def results_table(results: Results) -> pd.DataFrame:
@@ -94,13 +97,14 @@ def results_table(results: Results) -> pd.DataFrame:
         table = _read_table(source)
     missing = {"condition", "fault", "magnitude", "metric", "value"} - set(table.columns)
     if missing or not {"method", "label"} & set(table.columns):
-        raise InputError(f"{f'{source}: ' if source else ''}not a results table of r2rsim "
-                         f"diagnose or bench: no column "
-                         f"{', '.join(sorted(missing) or ['method'])}")
+        raise InputError(
+            f"{f'{source}: ' if source else ''}not a results table of r2rsim "
+            f"diagnose or bench: no column "
+            f"{', '.join(sorted(missing) or ['method'])}"
+        )
     if "label" in table.columns:  # bench
         several = "study" in table.columns and table["study"].nunique() > 1
-        table["series"] = (table["study"] + "/" + table["label"] if several
-                           else table["label"])
+        table["series"] = table["study"] + "/" + table["label"] if several else table["label"]
     else:
         table["series"] = table["method"]
     if "causal" in table.columns:  # an offline method is named so in every figure
@@ -117,8 +121,9 @@ def _predictions(results: Results) -> pd.DataFrame:
         return results
     d = Path(results)
     if results_kind(d) != "diagnose" or not (d / PREDICTIONS_FILE).is_file():
-        raise InputError(f"{d}: no {PREDICTIONS_FILE} (written by `r2rsim diagnose`; a bench "
-                         f"directory has none)")
+        raise InputError(
+            f"{d}: no {PREDICTIONS_FILE} (written by `r2rsim diagnose`; a bench directory has none)"
+        )
     return _read_table(d / PREDICTIONS_FILE, PREDICTION_COLUMNS)
 
 
@@ -129,22 +134,27 @@ def _test_runs(datasets: Sequence[str | Path] | str | Path, run_ids) -> dict[str
         datasets = [datasets]
     datasets = list(datasets or [])
     if not datasets:
-        raise InputError("name the test datasets the results were scored on (their labels "
-                         "and faults are not in the results directory)")
+        raise InputError(
+            "name the test datasets the results were scored on (their labels "
+            "and faults are not in the results directory)"
+        )
     paths = [d for d in datasets if not isinstance(d, Run)]
     runs: dict[str, Run] = {}
     # only the label columns of the samples: the figures draw no channel
-    for r in [d for d in datasets if isinstance(d, Run)] + (label_runs(paths) if paths
-                                                             else []):
+    for r in [d for d in datasets if isinstance(d, Run)] + (label_runs(paths) if paths else []):
         if r.run_id in runs:
-            raise InputError(f"run {r.run_id} is in {runs[r.run_id].path} and in {r.path}; "
-                             f"name the test datasets only once")
+            raise InputError(
+                f"run {r.run_id} is in {runs[r.run_id].path} and in {r.path}; "
+                f"name the test datasets only once"
+            )
         runs[r.run_id] = r
     missing = [rid for rid in dict.fromkeys(run_ids) if rid not in runs]
     if missing:
-        raise InputError(f"run {missing[0]} of the predictions is in none of the datasets "
-                         f"{', '.join(str(getattr(d, 'path', d)) for d in datasets)}"
-                         + (f" ({len(missing) - 1} more missing)" if len(missing) > 1 else ""))
+        raise InputError(
+            f"run {missing[0]} of the predictions is in none of the datasets "
+            f"{', '.join(str(getattr(d, 'path', d)) for d in datasets)}"
+            + (f" ({len(missing) - 1} more missing)" if len(missing) > 1 else "")
+        )
     return runs
 
 
@@ -152,8 +162,10 @@ def _aligned(p: pd.DataFrame, run: Run) -> pd.DataFrame:
     """The predictions of one run in the order of its samples."""
     k = run.samples["k"].to_numpy(np.int64)
     if len(p) != len(k) or not np.array_equal(np.sort(p["k"].to_numpy(np.int64)), k):
-        raise InputError(f"run {run.run_id} of {run.path} has {len(k)} samples, the "
-                         f"predictions {len(p)} others: not the dataset it was scored on")
+        raise InputError(
+            f"run {run.run_id} of {run.path} has {len(k)} samples, the "
+            f"predictions {len(p)} others: not the dataset it was scored on"
+        )
     return p.set_index("k").loc[k]
 
 
@@ -166,8 +178,9 @@ def _theta(table: pd.DataFrame, series: str) -> float:
 # --------------------------------------------------------------------------- statistic
 
 
-def plot_statistic(results: str | Path, datasets, run_id: str | None = None, *,
-                   theta: float | None = None):
+def plot_statistic(
+    results: str | Path, datasets, run_id: str | None = None, *, theta: float | None = None
+):
     """The detector statistic of one test run over time, with the calibrated threshold, the
     plug-in's alarms and the fault windows.
 
@@ -198,8 +211,10 @@ def plot_statistic(results: str | Path, datasets, run_id: str | None = None, *,
     if run_id is None:
         run_id = next((i for i in ids if len(runs[i].faults)), ids[0])
     if run_id not in ids:
-        raise InputError(f"no run '{run_id}' in the predictions of {results} (runs: "
-                         f"{', '.join(ids[:5])}{', ...' if len(ids) > 5 else ''})")
+        raise InputError(
+            f"no run '{run_id}' in the predictions of {results} (runs: "
+            f"{', '.join(ids[:5])}{', ...' if len(ids) > 5 else ''})"
+        )
     run = runs[run_id]
     p = _aligned(preds[preds["run_id"] == run_id], run)
     t, stat, alarm = p["t_s"].to_numpy(), p["statistic"].to_numpy(), p["alarm"].to_numpy(bool)
@@ -215,17 +230,40 @@ def plot_statistic(results: str | Path, datasets, run_id: str | None = None, *,
     for f in run.faults.itertuples(index=False):
         end = f.end_t_s if np.isfinite(f.end_t_s) else t[-1]
         unit = getattr(f, "magnitude_unit", "") or ""
-        ax.axvspan(f.onset_t_s, min(end, t[-1]), color="tab:red", alpha=0.15,
-                   gid=f"fault:{f.fault_id}",
-                   label=f"fault {f.fault_type} on {f.target_id} ({f.magnitude:g} {unit})")
+        ax.axvspan(
+            f.onset_t_s,
+            min(end, t[-1]),
+            color="tab:red",
+            alpha=0.15,
+            gid=f"fault:{f.fault_id}",
+            label=f"fault {f.fault_type} on {f.target_id} ({f.magnitude:g} {unit})",
+        )
     ax.plot(t, stat, color="tab:blue", lw=0.8, label=f"statistic ({method})")
     if np.isfinite(theta):
-        ax.axhline(theta, color="k", ls="--", lw=1, gid="theta",
-                   label=f"threshold θ = {theta:.4g} (calibrated)")
-    ax.plot(t[alarm], stat[alarm], ls="none", marker="|", color="tab:orange", ms=8,
-            gid="alarms", label=f"alarm ({int(alarm.sum())} samples)")
-    ax.set(xlabel=axis_label("time", "s"), ylabel=axis_label("detector statistic", "1"),
-           xlim=(t[0], t[-1]), title=f"{method}: run {run_id}")
+        ax.axhline(
+            theta,
+            color="k",
+            ls="--",
+            lw=1,
+            gid="theta",
+            label=f"threshold θ = {theta:.4g} (calibrated)",
+        )
+    ax.plot(
+        t[alarm],
+        stat[alarm],
+        ls="none",
+        marker="|",
+        color="tab:orange",
+        ms=8,
+        gid="alarms",
+        label=f"alarm ({int(alarm.sum())} samples)",
+    )
+    ax.set(
+        xlabel=axis_label("time", "s"),
+        ylabel=axis_label("detector statistic", "1"),
+        xlim=(t[0], t[-1]),
+        title=f"{method}: run {run_id}",
+    )
     plain_ticks(ax, xbins=10)
     ax.legend(loc="upper left", fontsize="small")
     return fig
@@ -234,8 +272,9 @@ def plot_statistic(results: str | Path, datasets, run_id: str | None = None, *,
 # --------------------------------------------------------------------------- ROC / PR
 
 
-def _pooled_stratum(preds: pd.DataFrame, runs: dict[str, Run], condition: str, fault: str
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def _pooled_stratum(
+    preds: pd.DataFrame, runs: dict[str, Run], condition: str, fault: str
+) -> tuple[np.ndarray, np.ndarray]:
     """Scores and truth of the scored samples of one method's stratum, pooled as the
     harness does: a stratum holds the healthy runs of its condition(s) and the faulty runs of
     its fault(s); a nan statistic ranks lowest (below every finite one)."""
@@ -249,8 +288,9 @@ def _pooled_stratum(preds: pd.DataFrame, runs: dict[str, Run], condition: str, f
             continue
         p = _aligned(p, run)
         stat = p["statistic"].to_numpy(float)
-        data.append(run_data(run, np.where(np.isfinite(stat), stat, floor),
-                             p["alarm"].to_numpy(bool)))
+        data.append(
+            run_data(run, np.where(np.isfinite(stat), stat, floor), p["alarm"].to_numpy(bool))
+        )
     return pooled_scores(data)
 
 
@@ -287,22 +327,37 @@ def plot_roc_pr(results: Results, datasets, condition: str = ALL, fault: str = A
     for method, p in preds.groupby("method", sort=False):
         score, y = _pooled_stratum(p, runs, condition, fault)
         if not y.any() or y.all():
-            raise InputError(f"stratum {condition} × {fault} of {method}: the scored samples "
-                             f"are all {'faulty' if y.any() else 'fault-free'}; no curve")
+            raise InputError(
+                f"stratum {condition} × {fault} of {method}: the scored samples "
+                f"are all {'faulty' if y.any() else 'fault-free'}; no curve"
+            )
         fpr, tpr, _ = roc_curve(y, score)
         precision, recall, _ = precision_recall_curve(y, score)
-        ax_roc.plot(fpr, tpr, gid=f"roc:{method}",
-                    label=f"{method} (AUC {roc_auc(score, y):.3f})")
-        ax_pr.plot(recall, precision, drawstyle="steps-post", gid=f"pr:{method}",
-                   label=f"{method} (AP {average_precision(score, y):.3f})")
+        ax_roc.plot(fpr, tpr, gid=f"roc:{method}", label=f"{method} (AUC {roc_auc(score, y):.3f})")
+        ax_pr.plot(
+            recall,
+            precision,
+            drawstyle="steps-post",
+            gid=f"pr:{method}",
+            label=f"{method} (AP {average_precision(score, y):.3f})",
+        )
         prevalence = y.mean()
     ax_roc.plot([0, 1], [0, 1], color="0.6", ls=":", label="chance")
     ax_pr.axhline(prevalence, color="0.6", ls=":", label=f"chance ({prevalence:.2f})")
-    ax_roc.set(xlabel=axis_label("false-positive rate", "1"),
-               ylabel=axis_label("true-positive rate", "1"), title="ROC", xlim=(0, 1),
-               ylim=(0, 1.02))
-    ax_pr.set(xlabel=axis_label("recall", "1"), ylabel=axis_label("precision", "1"),
-              title="precision-recall", xlim=(0, 1), ylim=(0, 1.02))
+    ax_roc.set(
+        xlabel=axis_label("false-positive rate", "1"),
+        ylabel=axis_label("true-positive rate", "1"),
+        title="ROC",
+        xlim=(0, 1),
+        ylim=(0, 1.02),
+    )
+    ax_pr.set(
+        xlabel=axis_label("recall", "1"),
+        ylabel=axis_label("precision", "1"),
+        title="precision-recall",
+        xlim=(0, 1),
+        ylim=(0, 1.02),
+    )
     ax_roc.legend(loc="lower right", fontsize="small")
     ax_pr.legend(loc="best", fontsize="small")
     fig.suptitle(wrap_title(f"scored test samples, condition {condition}, fault {fault}", fig))
@@ -321,30 +376,38 @@ def _pooled_level(values) -> str | None:
     return vals.pop() if len(vals) == 1 else None
 
 
-def _metric_rows(table: pd.DataFrame, metric: str, by: str, condition: str | None,
-                 fault: str | None) -> pd.DataFrame:
+def _metric_rows(
+    table: pd.DataFrame, metric: str, by: str, condition: str | None, fault: str | None
+) -> pd.DataFrame:
     """The rows of one metric to draw against ``by``; the other stratum columns fixed to the
     given values, or to the pooled one (per condition for the fault)."""
     if metric not in set(table["metric"]):
-        raise InputError(f"no metric '{metric}' in the results (there are: "
-                         f"{', '.join(sorted(set(table['metric'])))})")
+        raise InputError(
+            f"no metric '{metric}' in the results (there are: "
+            f"{', '.join(sorted(set(table['metric'])))})"
+        )
     rows = table[table["metric"] == metric]
     rows = rows[rows["magnitude"].notna() if by == "magnitude" else rows["magnitude"].isna()]
     if by != "condition":
         cond = condition or _pooled_level(rows["condition"])
         if cond is None:
-            raise InputError(f"several conditions and none pools them: choose one of "
-                             f"{', '.join(sorted(set(rows['condition'])))}")
+            raise InputError(
+                f"several conditions and none pools them: choose one of "
+                f"{', '.join(sorted(set(rows['condition'])))}"
+            )
         rows = rows[rows["condition"] == cond]
     if fault is not None:
         rows = rows[rows["fault"] == fault]
     elif by == "condition":  # each condition pooled over its faults
         pooled = rows.groupby(["series", "condition"])["fault"].transform(
-            lambda f: _pooled_level(f) or "")
+            lambda f: _pooled_level(f) or ""
+        )
         rows = rows[rows["fault"] == pooled]
     if rows.empty:
-        raise InputError(f"no '{metric}' value to show by {by} (condition {condition or '-'}, "
-                         f"fault {fault or '-'})")
+        raise InputError(
+            f"no '{metric}' value to show by {by} (condition {condition or '-'}, "
+            f"fault {fault or '-'})"
+        )
     return rows
 
 
@@ -354,9 +417,15 @@ def _ylabel(metric: str) -> str:
     return axis_label(metric, m.unit if m is not None else "")
 
 
-def plot_metric(results: Results, metric: str = "dd_median_s", by: str = "condition",
-                condition: str | None = None, fault: str | None = None, *,
-                units: dict[str, str] | None = None):
+def plot_metric(
+    results: Results,
+    metric: str = "dd_median_s",
+    by: str = "condition",
+    condition: str | None = None,
+    fault: str | None = None,
+    *,
+    units: dict[str, str] | None = None,
+):
     """One metric of a results table by condition, fault or fault magnitude, per method.
 
     Parameters
@@ -393,8 +462,14 @@ def plot_metric(results: Results, metric: str = "dd_median_s", by: str = "condit
         several = rows["fault"].nunique() > 1
         for (series, f), g in rows.groupby(["series", "fault"], sort=False):
             g = g.sort_values("magnitude")
-            bars = ax.errorbar(g["magnitude"], g["value"], yerr=_ci(g), marker="o", capsize=3,
-                               label=f"{series} {f}" if several else series)
+            bars = ax.errorbar(
+                g["magnitude"],
+                g["value"],
+                yerr=_ci(g),
+                marker="o",
+                capsize=3,
+                label=f"{series} {f}" if several else series,
+            )
             bars.lines[0].set_gid(f"{series}|{f}")  # the data line (not the caps)
         ax.set_xlabel(axis_label("fault magnitude", _common_unit(rows["fault"], units)))
     else:
@@ -407,12 +482,26 @@ def plot_metric(results: Results, metric: str = "dd_median_s", by: str = "condit
             ax.bar(x, g["value"], width, yerr=_ci(g), capsize=3, gid=s, label=s)
             if metric in NULL_OF:  # a P_D is drawn with what chance alone gives
                 null = _null_rows(results, NULL_OF[metric], rows, s, by, levels)
-                ax.plot(x, null, ls="none", marker="_", markersize=14, mew=2, color="k",
-                        gid=f"null:{s}", label=NULL_OF[metric] if i == 0 else None)
+                ax.plot(
+                    x,
+                    null,
+                    ls="none",
+                    marker="_",
+                    markersize=14,
+                    mew=2,
+                    color="k",
+                    gid=f"null:{s}",
+                    label=NULL_OF[metric] if i == 0 else None,
+                )
         # category labels (faults are long: type:target) turned so that they never meet
         turn = by == "fault" or sum(len(str(v)) for v in levels) > 60
-        ax.set_xticks(np.arange(len(levels)), levels, rotation=30 if turn else 0,
-                      ha="right" if turn else "center", rotation_mode="anchor")
+        ax.set_xticks(
+            np.arange(len(levels)),
+            levels,
+            rotation=30 if turn else 0,
+            ha="right" if turn else "center",
+            rotation_mode="anchor",
+        )
         ax.set_xlabel(by)
     desc = METRICS[metric].description if metric in METRICS else ""
     ax.set(ylabel=_ylabel(metric))
@@ -455,14 +544,19 @@ def recorded_units(results) -> dict[str, str]:
         return {}
     roots = []
     for p in map(Path, paths):
-        roots += [p] if is_dataset_dir(p) else sorted(
-            d for d in p.iterdir() if d.is_dir() and is_dataset_dir(d))
+        roots += (
+            [p]
+            if is_dataset_dir(p)
+            else sorted(d for d in p.iterdir() if d.is_dir() and is_dataset_dir(d))
+        )
     out: dict[str, str] = {}
     for root in roots:
         try:
             with Verifier(root) as v:
-                faults = pd.read_parquet(io.BytesIO(v.read("faults.parquet")),
-                                         columns=["fault_type", "target_id", "magnitude_unit"])
+                faults = pd.read_parquet(
+                    io.BytesIO(v.read("faults.parquet")),
+                    columns=["fault_type", "target_id", "magnitude_unit"],
+                )
         except (InputError, OSError, ValueError, KeyError):
             continue
         for f in faults.itertuples(index=False):
@@ -481,8 +575,7 @@ def magnitude_unit(fault: str, units: dict[str, str] | None = None) -> str | Non
     from ..schema.faults import magnitude_unit as catalogue_unit
 
     ftype = fault.split(":", 1)[0]
-    if "+" in fault or ftype not in CATALOGUE or CATALOGUE[ftype].magnitude.startswith(
-            "reading"):
+    if "+" in fault or ftype not in CATALOGUE or CATALOGUE[ftype].magnitude.startswith("reading"):
         return None
     return catalogue_unit(ftype, None)
 
@@ -508,13 +601,15 @@ def _magnitude_quantity(fault: str) -> str:
 NULL_OF = {"pd": "pd_null", "pd_cal": "pd_null_cal"}
 
 
-def _null_rows(results: Results, null: str, rows: pd.DataFrame, series: str, by: str,
-               levels: list) -> np.ndarray:
+def _null_rows(
+    results: Results, null: str, rows: pd.DataFrame, series: str, by: str, levels: list
+) -> np.ndarray:
     """The null rates of one series at the strata of ``rows`` (nan where there is none)."""
     table = results_table(results)
     want = rows[rows["series"] == series][["condition", "fault"]].drop_duplicates()
-    n = table[(table["metric"] == null) & (table["series"] == series)
-              & table["magnitude"].isna()].merge(want, on=["condition", "fault"])
+    n = table[
+        (table["metric"] == null) & (table["series"] == series) & table["magnitude"].isna()
+    ].merge(want, on=["condition", "fault"])
     return n.set_index(by)["value"].reindex(levels).to_numpy(float)
 
 
@@ -528,8 +623,13 @@ def _ci(g: pd.DataFrame) -> np.ndarray | None:
     return np.clip(np.vstack([lo, hi]), 0, None)
 
 
-def plot_mdm(results: Results, calibrated: bool = False, condition: str | None = None, *,
-             units: dict[str, str] | None = None):
+def plot_mdm(
+    results: Results,
+    calibrated: bool = False,
+    condition: str | None = None,
+    *,
+    units: dict[str, str] | None = None,
+):
     """Detection probability against fault magnitude (MDM curves), one axes per fault, one
     line per method, with the P_D = 0.9 level and the MDM90 of the results table marked.
 
@@ -557,14 +657,17 @@ def plot_mdm(results: Results, calibrated: bool = False, condition: str | None =
     matplotlib.figure.Figure
     """
     Figure = require_matplotlib()
-    pd_name, mdm_name, null_name = (("pd_cal", "mdm90_cal", "pd_null_cal") if calibrated
-                                    else ("pd", "mdm90", "pd_null"))
+    pd_name, mdm_name, null_name = (
+        ("pd_cal", "mdm90_cal", "pd_null_cal") if calibrated else ("pd", "mdm90", "pd_null")
+    )
     table = results_table(results)
     if units is None:
         units = recorded_units(results)
     if not ((table["metric"] == pd_name) & table["magnitude"].notna()).any():
-        raise InputError(f"no per-magnitude {pd_name} in the results: MDM curves need a "
-                         f"fault run at several magnitudes")
+        raise InputError(
+            f"no per-magnitude {pd_name} in the results: MDM curves need a "
+            f"fault run at several magnitudes"
+        )
     rows = _metric_rows(table, pd_name, "magnitude", condition, None)
     cond = rows["condition"].iloc[0]
     faults = list(dict.fromkeys(rows["fault"]))
@@ -575,31 +678,56 @@ def plot_mdm(results: Results, calibrated: bool = False, condition: str | None =
         factor, shown = display_unit(unit, rows[rows["fault"] == f]["magnitude"])
         for series, g in rows[rows["fault"] == f].groupby("series", sort=False):
             g = g.sort_values("magnitude")
-            line, = ax.plot(g["magnitude"] * factor, g["value"], marker="o",
-                            gid=f"{series}|{f}", label=series)
-            null = table[(table["series"] == series) & (table["metric"] == null_name)
-                         & (table["condition"] == cond) & (table["fault"] == f)
-                         & table["magnitude"].notna()].sort_values("magnitude")
+            (line,) = ax.plot(
+                g["magnitude"] * factor, g["value"], marker="o", gid=f"{series}|{f}", label=series
+            )
+            null = table[
+                (table["series"] == series)
+                & (table["metric"] == null_name)
+                & (table["condition"] == cond)
+                & (table["fault"] == f)
+                & table["magnitude"].notna()
+            ].sort_values("magnitude")
             if not null.empty:  # what chance alone gives in the same windows
-                ax.plot(null["magnitude"] * factor, null["value"], ls=":", marker=".",
-                        color=line.get_color(), gid=f"null:{series}|{f}",
-                        label=f"{series}: {null_name} (chance)")
-            mdm = table[(table["series"] == series) & (table["metric"] == mdm_name)
-                        & (table["condition"] == cond) & (table["fault"] == f)
-                        & table["magnitude"].isna()]["value"]
+                ax.plot(
+                    null["magnitude"] * factor,
+                    null["value"],
+                    ls=":",
+                    marker=".",
+                    color=line.get_color(),
+                    gid=f"null:{series}|{f}",
+                    label=f"{series}: {null_name} (chance)",
+                )
+            mdm = table[
+                (table["series"] == series)
+                & (table["metric"] == mdm_name)
+                & (table["condition"] == cond)
+                & (table["fault"] == f)
+                & table["magnitude"].isna()
+            ]["value"]
             for i, x in enumerate(_mdm_marks(mdm, g["magnitude"])):
-                ax.axvline(x * factor, color=line.get_color(), ls="--", lw=1,
-                           gid=f"mdm:{series}|{f}",
-                           label=f"{series}: {mdm_name}" if i == 0 else None)
+                ax.axvline(
+                    x * factor,
+                    color=line.get_color(),
+                    ls="--",
+                    lw=1,
+                    gid=f"mdm:{series}|{f}",
+                    label=f"{series}: {mdm_name}" if i == 0 else None,
+                )
         ax.axhline(MDM_LEVEL, color="0.5", ls=":", label=f"P_D = {MDM_LEVEL}")
-        ax.set(xlabel=axis_label(_magnitude_quantity(f),
-                                  shown if unit is not None else UNKNOWN_UNIT),
-               ylabel=axis_label(pd_name, "1"), ylim=(-0.03, 1.03), title=f)
+        ax.set(
+            xlabel=axis_label(_magnitude_quantity(f), shown if unit is not None else UNKNOWN_UNIT),
+            ylabel=axis_label(pd_name, "1"),
+            ylim=(-0.03, 1.03),
+            title=f,
+        )
         plain_ticks(ax, xbins=6)
         ax.legend(fontsize="small")
     at = "at theta" if calibrated else "plug-in alarms"
-    fig.suptitle(wrap_title(f"detection probability by fault magnitude ({at}, condition "
-                            f"{cond})", fig), fontsize="large")
+    fig.suptitle(
+        wrap_title(f"detection probability by fault magnitude ({at}, condition {cond})", fig),
+        fontsize="large",
+    )
     return fig
 
 

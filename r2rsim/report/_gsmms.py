@@ -24,8 +24,9 @@ def _colours(n: int):
     return [cmap(i % 10) for i in range(n)]
 
 
-def plot_gsmms_map(estimator, runs: Sequence, x: str, y: str, *, max_points: int = 4000,
-                   title: str | None = None):
+def plot_gsmms_map(
+    estimator, runs: Sequence, x: str, y: str, *, max_points: int = 4000, title: str | None = None
+):
     """Samples of ``runs`` in the plane of two visible columns, coloured by their
     best-matching node, with the map's nodes and edges when both columns are partition
     features (thesis Fig. 4-8a/b).
@@ -91,8 +92,9 @@ def plot_gsmms_map(estimator, runs: Sequence, x: str, y: str, *, max_points: int
     return fig
 
 
-def plot_gsmms_residuals(estimator, runs: Mapping[str, object], *, relation: int = 0,
-                         title: str | None = None):
+def plot_gsmms_residuals(
+    estimator, runs: Mapping[str, object], *, relation: int = 0, title: str | None = None
+):
     """The node-standardised residual (P − μ_node)/σ_node over time of each named run, one
     axes per run, with the ±k_sigma threshold and the fault window shaded (thesis
     Fig. 4-9 / 4-10).
@@ -142,9 +144,14 @@ def plot_gsmms_residuals(estimator, runs: Mapping[str, object], *, relation: int
     return fig
 
 
-def plot_severity(values: Mapping[str, Mapping[float, float]], *,
-                  ylabel: str = "mean |residual| [σ]", xlabel: str = "fault magnitude",
-                  threshold: float | None = None, title: str | None = None):
+def plot_severity(
+    values: Mapping[str, Mapping[float, float]],
+    *,
+    ylabel: str = "mean |residual| [σ]",
+    xlabel: str = "fault magnitude",
+    threshold: float | None = None,
+    title: str | None = None,
+):
     """A residual summary against fault severity, one line per condition (thesis
     Fig. 4-8c/d).
 

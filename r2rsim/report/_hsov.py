@@ -13,9 +13,13 @@ from ..errors import InputError
 from ._mpl import require_matplotlib
 
 
-def plot_virtual_sensor(t, panels: Sequence[tuple[str, Mapping[str, np.ndarray]]],
-                        spans: Sequence[tuple[float, float]] = (), title: str | None = None,
-                        span_label: str = "transient"):
+def plot_virtual_sensor(
+    t,
+    panels: Sequence[tuple[str, Mapping[str, np.ndarray]]],
+    spans: Sequence[tuple[float, float]] = (),
+    title: str | None = None,
+    span_label: str = "transient",
+):
     """Estimated and measured (or true) signals over time, one axes per panel (Fig. 2-13).
 
     Parameters
@@ -46,8 +50,9 @@ def plot_virtual_sensor(t, panels: Sequence[tuple[str, Mapping[str, np.ndarray]]
         for label, y in curves.items():
             y = np.asarray(y, float)
             if y.shape != t.shape:
-                raise InputError(f"plot_virtual_sensor: '{label}' has {y.size} values for "
-                                 f"{t.size} times")
+                raise InputError(
+                    f"plot_virtual_sensor: '{label}' has {y.size} values for {t.size} times"
+                )
             ax.plot(t, y, lw=0.8, label=label)
         ax.set_ylabel(ylabel)
         ax.legend(loc="upper right", fontsize="small")
@@ -94,8 +99,12 @@ def plot_residual_qq(residuals: Mapping[str, np.ndarray], title: str | None = No
     return fig
 
 
-def plot_profiles(groups: Mapping[str, Sequence[tuple[np.ndarray, np.ndarray]]],
-                  ylabel: str, xlabel: str = "t - t_event [s]", title: str | None = None):
+def plot_profiles(
+    groups: Mapping[str, Sequence[tuple[np.ndarray, np.ndarray]]],
+    ylabel: str,
+    xlabel: str = "t - t_event [s]",
+    title: str | None = None,
+):
     """Aligned profiles of several cycles, one axes per group with a shared y axis
     (Fig. 2-15: tension around the roll change, normal cycles against dancer failures).
 
@@ -117,8 +126,7 @@ def plot_profiles(groups: Mapping[str, Sequence[tuple[np.ndarray, np.ndarray]]],
     axes = fig.subplots(1, len(groups), sharey=True, squeeze=False)[0]
     for ax, (label, profiles) in zip(axes, groups.items(), strict=True):
         for i, (x, y) in enumerate(profiles):
-            ax.plot(np.asarray(x, float), np.asarray(y, float), lw=0.9,
-                    label=f"{i + 1}")
+            ax.plot(np.asarray(x, float), np.asarray(y, float), lw=0.9, label=f"{i + 1}")
         ax.axvline(0.0, color="k", lw=0.8, ls=":")
         ax.set(xlabel=xlabel, title=label)
         if profiles:

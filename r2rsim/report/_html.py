@@ -38,15 +38,49 @@ MARKER = REPORT_MARKER
 #: metrics drawn by condition and by fault, when the results have several of either
 FIGURE_METRICS = ("far_ff", "pd", "dd_median_s", "roc_auc")
 #: columns of the summary table, when present (as printed by ``r2rsim diagnose``)
-SUMMARY_METRICS = ("far_ff", "far_pre", "fa_per_h", "dr", "dr_steady", "pd", "pd_null",
-                   "dd_median_s", "dd_p90_s", "n_missed", "pd_steady", "pd_steady_null",
-                   "roc_auc", "pr_auc", "vus_pr", "ia", "hit1", "mdm90", "far_ff_cal", "dr_cal",
-                   "pd_cal", "pd_null_cal", "dd_median_cal_s", "mdm90_cal")
+SUMMARY_METRICS = (
+    "far_ff",
+    "far_pre",
+    "fa_per_h",
+    "dr",
+    "dr_steady",
+    "pd",
+    "pd_null",
+    "dd_median_s",
+    "dd_p90_s",
+    "n_missed",
+    "pd_steady",
+    "pd_steady_null",
+    "roc_auc",
+    "pr_auc",
+    "vus_pr",
+    "ia",
+    "hit1",
+    "mdm90",
+    "far_ff_cal",
+    "dr_cal",
+    "pd_cal",
+    "pd_null_cal",
+    "dd_median_cal_s",
+    "mdm90_cal",
+)
 #: at most this many runs get a statistic plot (one per fault stratum)
 STATISTIC_RUNS = 6
 #: columns of the full table (the hashes go in the header)
-FULL_COLUMNS = ("study", "label", "method", "split", "condition", "fault", "magnitude",
-                "metric", "value", "ci_low", "ci_high", "n_runs")
+FULL_COLUMNS = (
+    "study",
+    "label",
+    "method",
+    "split",
+    "condition",
+    "fault",
+    "magnitude",
+    "metric",
+    "value",
+    "ci_low",
+    "ci_high",
+    "n_runs",
+)
 
 CSS = """
 body { font-family: sans-serif; margin: 2em; color: #222; }
@@ -61,8 +95,7 @@ figcaption, .note { color: #555; font-size: 0.9em; }
 """
 
 
-def write_report(results: str | Path, output: str | Path | None = None,
-                 datasets=None) -> Path:
+def write_report(results: str | Path, output: str | Path | None = None, datasets=None) -> Path:
     """Write a self-contained HTML report of a results directory.
 
     Parameters
@@ -105,15 +138,19 @@ def write_report(results: str | Path, output: str | Path | None = None,
     figures = _figures(src, kind, table, datasets, preds)
     if missing_note:
         figures.append(f"<p class='note'>{html.escape(missing_note)}</p>")
-    body = [f"<h1>r2rsim {kind} report</h1>", _header(src, kind, table),
-            "<h2>Summary</h2>", _summary(table), "<h2>Figures</h2>", *figures,
-            "<h2>All results</h2>",
-            f"<p class='note'>{len(table)} rows: every row of the results table.</p>",
-            _table(_full(table), table_id="results")]
+    body = [
+        f"<h1>r2rsim {kind} report</h1>",
+        _header(src, kind, table),
+        "<h2>Summary</h2>",
+        _summary(table),
+        "<h2>Figures</h2>",
+        *figures,
+        "<h2>All results</h2>",
+        f"<p class='note'>{len(table)} rows: every row of the results table.</p>",
+        _table(_full(table), table_id="results"),
+    ]
     _write_atomic(out, _page(f"r2rsim {kind} report: {src.name}", body))
     return out
-
-
 
 
 def _recorded_datasets(src: Path) -> tuple[list[str] | None, str | None]:
@@ -130,8 +167,10 @@ def _recorded_datasets(src: Path) -> tuple[list[str] | None, str | None]:
         raise InputError(f"{f}: not a datasets file written by r2rsim diagnose ({exc})") from exc
     gone = [p for p in paths if not Path(p).is_dir()]
     if gone or not paths:
-        return None, (f"the test datasets recorded in {DATASETS_FILE} are not found "
-                      f"({', '.join(gone)}): name them with --data")
+        return None, (
+            f"the test datasets recorded in {DATASETS_FILE} are not found "
+            f"({', '.join(gone)}): name them with --data"
+        )
     return paths, None
 
 
@@ -139,8 +178,10 @@ def _recorded_datasets(src: Path) -> tuple[list[str] | None, str | None]:
 
 
 def _header(src: Path, kind: str, table: pd.DataFrame) -> str:
-    items = {"results": f"{src} ({'r2rsim diagnose' if kind == 'diagnose' else 'r2rsim bench'})",
-             "methods": ", ".join(dict.fromkeys(table["series"]))}
+    items = {
+        "results": f"{src} ({'r2rsim diagnose' if kind == 'diagnose' else 'r2rsim bench'})",
+        "methods": ", ".join(dict.fromkeys(table["series"])),
+    }
     if "study" in table.columns:
         items["studies"] = ", ".join(dict.fromkeys(table["study"]))
     for col in ("params_sha256", "dataset_sha256"):
@@ -149,10 +190,10 @@ def _header(src: Path, kind: str, table: pd.DataFrame) -> str:
     theta = table[table["metric"] == "theta"]
     if len(theta):
         items["theta (M6, calibrated on the validation runs)"] = ", ".join(
-            f"{s} {v:.6g}" for s, v in zip(theta["series"], theta["value"], strict=True))
+            f"{s} {v:.6g}" for s, v in zip(theta["series"], theta["value"], strict=True)
+        )
     items["written by"] = f"r2rsim {__version__}"
-    rows = "".join(f"<li><b>{html.escape(k)}</b>: {html.escape(v)}</li>"
-                   for k, v in items.items())
+    rows = "".join(f"<li><b>{html.escape(k)}</b>: {html.escape(v)}</li>" for k, v in items.items())
     return f"<ul>{rows}</ul>"
 
 
@@ -161,14 +202,15 @@ def _summary(table: pd.DataFrame) -> str:
     columns."""
     m = table[table["magnitude"].isna() & table["metric"].isin(SUMMARY_METRICS)]
     keys = ["series", "condition", "fault"]
-    wide = m.pivot_table(index=keys, columns="metric", values="value", aggfunc="first",
-                         sort=False)
+    wide = m.pivot_table(index=keys, columns="metric", values="value", aggfunc="first", sort=False)
     cols = [c for c in SUMMARY_METRICS if c in wide.columns]
-    wide = wide[cols].rename_axis(columns=None).reset_index().rename(
-        columns={"series": "method"})
+    wide = wide[cols].rename_axis(columns=None).reset_index().rename(columns={"series": "method"})
     desc = "; ".join(f"{c}: {METRICS[c].description}" for c in cols if c in METRICS)
-    return (_table(wide, table_id="summary") + f"<p class='note'>{html.escape(desc)}</p>"
-            + f"<p class='note'>{html.escape(_thresholds(table))}</p>")
+    return (
+        _table(wide, table_id="summary")
+        + f"<p class='note'>{html.escape(desc)}</p>"
+        + f"<p class='note'>{html.escape(_thresholds(table))}</p>"
+    )
 
 
 def _thresholds(table: pd.DataFrame) -> str:
@@ -176,11 +218,17 @@ def _thresholds(table: pd.DataFrame) -> str:
     if "own_threshold" not in table.columns:
         return "Columns without _cal: at each plug-in's own threshold; _cal: at theta."
     how = {"val": "recalibrated on the val runs at alpha", "fit": "as its fit set it"}
-    by = (table.dropna(subset=["own_threshold"]).groupby("series", sort=False)["own_threshold"]
-          .first())
+    by = (
+        table.dropna(subset=["own_threshold"])
+        .groupby("series", sort=False)["own_threshold"]
+        .first()
+    )
     parts = [f"{s}: {how.get(v, v)}" for s, v in by.items()]
-    return ("Columns without _cal are at each plug-in's own threshold (" + "; ".join(parts)
-            + "); _cal columns at theta, calibrated on the val runs at alpha.")
+    return (
+        "Columns without _cal are at each plug-in's own threshold ("
+        + "; ".join(parts)
+        + "); _cal columns at theta, calibrated on the val runs at alpha."
+    )
 
 
 def _full(table: pd.DataFrame) -> pd.DataFrame:
@@ -189,8 +237,9 @@ def _full(table: pd.DataFrame) -> pd.DataFrame:
 
 def _table(df: pd.DataFrame, table_id: str) -> str:
     # to_html escapes every cell and header (escape=True)
-    text = df.to_html(index=False, na_rep="", border=0, table_id=table_id,
-                      float_format=lambda v: f"{v:.6g}")
+    text = df.to_html(
+        index=False, na_rep="", border=0, table_id=table_id, float_format=lambda v: f"{v:.6g}"
+    )
     return f"<div class='scroll'>{text}</div>"
 
 
@@ -220,8 +269,11 @@ def report_figures(results: str | Path, datasets=None) -> list:
     if datasets is not None and kind == "diagnose":
         preds = _predictions(src)
         datasets = list(_test_runs(datasets, preds["run_id"]).values())
-    return [item for item in _figures(src, kind, table, datasets, preds, render=_built)
-            if isinstance(item, tuple)]
+    return [
+        item
+        for item in _figures(src, kind, table, datasets, preds, render=_built)
+        if isinstance(item, tuple)
+    ]
 
 
 def _built(caption: str, plot, *args, **kwargs):
@@ -232,8 +284,7 @@ def _built(caption: str, plot, *args, **kwargs):
         return None
 
 
-def _figures(src: Path, kind: str, table: pd.DataFrame, runs, preds=None, render=None
-             ) -> list:
+def _figures(src: Path, kind: str, table: pd.DataFrame, runs, preds=None, render=None) -> list:
     """The figures as HTML; one that cannot be drawn from these results is a note.
     ``render(caption, plot, *args, **kwargs)`` makes each figure's entry (default: its
     HTML, :func:`_figure`)."""
@@ -244,22 +295,37 @@ def _figures(src: Path, kind: str, table: pd.DataFrame, runs, preds=None, render
             if _n_levels(table, metric, by) > 1:
                 out.append(figure(f"{metric} by {by}", plot_metric, table, metric, by))
     if (table["metric"].eq("pd") & table["magnitude"].notna()).any():
-        out.append(figure("detection probability by fault magnitude (MDM)", plot_mdm, table,
-                           units=fault_units(runs)))
+        out.append(
+            figure(
+                "detection probability by fault magnitude (MDM)",
+                plot_mdm,
+                table,
+                units=fault_units(runs),
+            )
+        )
     if kind != "diagnose":
         return out
     if runs is None:
-        out.append("<p class='note'>ROC/PR curves and the statistic over time need the test "
-                   "datasets (their labels are not in the results directory): "
-                   "<code>r2rsim report RESULTS --data DATASET...</code></p>")
+        out.append(
+            "<p class='note'>ROC/PR curves and the statistic over time need the test "
+            "datasets (their labels are not in the results directory): "
+            "<code>r2rsim report RESULTS --data DATASET...</code></p>"
+        )
         return out
     preds = _predictions(src) if preds is None else preds
-    out.append(figure("ROC and PR curves of the scored test samples", plot_roc_pr, preds,
-                       runs))
+    out.append(figure("ROC and PR curves of the scored test samples", plot_roc_pr, preds, runs))
     for rid in _example_runs(preds, runs):
         method = str(preds.loc[preds["run_id"] == rid, "method"].iloc[0])
-        out.append(figure(f"statistic of run {rid}", plot_statistic, preds, runs, rid,
-                           theta=_theta(table, method)))
+        out.append(
+            figure(
+                f"statistic of run {rid}",
+                plot_statistic,
+                preds,
+                runs,
+                rid,
+                theta=_theta(table, method),
+            )
+        )
     return out
 
 
@@ -288,14 +354,19 @@ def _html_figure(caption: str, plot, *args, **kwargs) -> str:
     fig.savefig(buf, format="png", dpi=100, metadata={"Software": None})
     data = base64.b64encode(buf.getvalue()).decode("ascii")
     cap = html.escape(caption)
-    return (f"<figure><img src=\"data:image/png;base64,{data}\" alt=\"{cap}\">"
-            f"<figcaption>{cap}</figcaption></figure>")
+    return (
+        f'<figure><img src="data:image/png;base64,{data}" alt="{cap}">'
+        f"<figcaption>{cap}</figcaption></figure>"
+    )
 
 
 def _page(title: str, body: list[str]) -> str:
-    return (f"{MARKER}\n<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
-            f"<title>{html.escape(title)}</title>\n<style>{CSS}</style>\n</head>\n<body>\n"
-            + "\n".join(body) + "\n</body>\n</html>\n")
+    return (
+        f'{MARKER}\n<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
+        f"<title>{html.escape(title)}</title>\n<style>{CSS}</style>\n</head>\n<body>\n"
+        + "\n".join(body)
+        + "\n</body>\n</html>\n"
+    )
 
 
 # --------------------------------------------------------------------------- writing
@@ -311,8 +382,10 @@ def _check_output(out: Path) -> None:
     if out.exists():
         with open(out, "rb") as f:
             if not f.read(len(MARKER)).startswith(MARKER.encode()):
-                raise InputError(f"{out}: exists and is not a report r2rsim wrote; remove it "
-                                 f"or choose another output")
+                raise InputError(
+                    f"{out}: exists and is not a report r2rsim wrote; remove it "
+                    f"or choose another output"
+                )
 
 
 def _write_atomic(out: Path, text: str) -> None:

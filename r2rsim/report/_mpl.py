@@ -22,9 +22,11 @@ def require_matplotlib():
     try:
         from matplotlib.figure import Figure
     except ImportError:
-        raise InputError("plotting needs matplotlib, which is not installed: "
-                         'pip install matplotlib (or pip install -e ".[plot]" in the r2rsim '
-                         "checkout)") from None
+        raise InputError(
+            "plotting needs matplotlib, which is not installed: "
+            'pip install matplotlib (or pip install -e ".[plot]" in the r2rsim '
+            "checkout)"
+        ) from None
     return Figure
 
 
@@ -40,8 +42,12 @@ def require_matplotlib():
 
 #: units that take an SI prefix when their values are small (below 1): lengths in mm or µm,
 #: angles in mrad, relative changes in ppm
-_PREFIXED = {"m": (("mm", 1e3), ("µm", 1e6)), "rad": (("mrad", 1e3), ("µrad", 1e6)),
-             "1": (("ppm", 1e6),), "rel": (("ppm", 1e6),)}
+_PREFIXED = {
+    "m": (("mm", 1e3), ("µm", 1e6)),
+    "rad": (("mrad", 1e3), ("µrad", 1e6)),
+    "1": (("ppm", 1e6),),
+    "rel": (("ppm", 1e6),),
+}
 #: how a unitless value is named in a label
 _UNITLESS = {"": "1", "1": "1", "rel": "relative"}
 

@@ -13,11 +13,17 @@ from ..errors import InputError
 from ._mpl import require_matplotlib
 
 
-def plot_residuals(series: Mapping[str, pd.DataFrame], columns: Sequence[str], *,
-                   time: str = "t_s", scale: Mapping[str, float] | None = None,
-                   threshold: float | None = None,
-                   spans: Sequence[tuple[float, float, str]] = (), title: str | None = None,
-                   ylabel: str | None = None):
+def plot_residuals(
+    series: Mapping[str, pd.DataFrame],
+    columns: Sequence[str],
+    *,
+    time: str = "t_s",
+    scale: Mapping[str, float] | None = None,
+    threshold: float | None = None,
+    spans: Sequence[tuple[float, float, str]] = (),
+    title: str | None = None,
+    ylabel: str | None = None,
+):
     """Per-sample columns over time, one axes per column, several series overlaid.
 
     Parameters
@@ -48,18 +54,27 @@ def plot_residuals(series: Mapping[str, pd.DataFrame], columns: Sequence[str], *
     for label, df in series.items():
         missing = [c for c in [time, *columns] if c not in df.columns]
         if missing:
-            raise InputError(f"plot_residuals: series '{label}' has no column "
-                             f"{', '.join(missing)}")
+            raise InputError(f"plot_residuals: series '{label}' has no column {', '.join(missing)}")
     fig = Figure(figsize=(8, 1.2 + 1.6 * len(columns)), layout="constrained")
     axes = fig.subplots(len(columns), 1, sharex=True, squeeze=False)[:, 0]
     for ax, col in zip(axes, columns, strict=True):
         for t0, t1, text in spans:
-            ax.axvspan(t0, t1, color="tab:red", alpha=0.12, gid=f"span:{text}",
-                       label=text if ax is axes[0] else None)
+            ax.axvspan(
+                t0,
+                t1,
+                color="tab:red",
+                alpha=0.12,
+                gid=f"span:{text}",
+                label=text if ax is axes[0] else None,
+            )
         s = 1.0 if scale is None else float(scale.get(col, 1.0))
         for label, df in series.items():
-            ax.plot(df[time].to_numpy(float), df[col].to_numpy(float) / s, lw=0.8,
-                    label=label if ax is axes[0] else None)
+            ax.plot(
+                df[time].to_numpy(float),
+                df[col].to_numpy(float) / s,
+                lw=0.8,
+                label=label if ax is axes[0] else None,
+            )
         if threshold is not None:
             for sign in (1, -1):
                 ax.axhline(sign * threshold, color="k", ls="--", lw=0.8, gid="threshold")
@@ -72,8 +87,13 @@ def plot_residuals(series: Mapping[str, pd.DataFrame], columns: Sequence[str], *
     return fig
 
 
-def plot_signature(table: pd.DataFrame, *, threshold: float | None = None,
-                   title: str | None = None, fmt: str = "{:+.1f}"):
+def plot_signature(
+    table: pd.DataFrame,
+    *,
+    threshold: float | None = None,
+    title: str | None = None,
+    fmt: str = "{:+.1f}",
+):
     """A signature matrix: rows are fault cases, columns residuals, cells the mean shift
     (e.g. in σ), annotated; cells with |value| ≥ ``threshold`` are outlined.
 
@@ -85,8 +105,9 @@ def plot_signature(table: pd.DataFrame, *, threshold: float | None = None,
     if table.empty:
         raise InputError("plot_signature: the table is empty")
     values = table.to_numpy(float)
-    fig = Figure(figsize=(1.6 + 1.2 * table.shape[1], 0.9 + 0.38 * table.shape[0]),
-                 layout="constrained")
+    fig = Figure(
+        figsize=(1.6 + 1.2 * table.shape[1], 0.9 + 0.38 * table.shape[0]), layout="constrained"
+    )
     ax = fig.add_subplot()
     lim = max(float(np.nanmax(np.abs(values))), 1e-12)
     im = ax.imshow(values, cmap="RdBu_r", vmin=-lim, vmax=lim, aspect="auto")
@@ -108,8 +129,9 @@ def _rectangle(j, i):
     return Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, lw=1.5, ec="k", gid="fired")
 
 
-def plot_sensitivity(series: Mapping[str, pd.DataFrame], columns: Sequence[str], *,
-                     title: str | None = None):
+def plot_sensitivity(
+    series: Mapping[str, pd.DataFrame], columns: Sequence[str], *, title: str | None = None
+):
     """Post-optimal sensitivities (e.g. ``dJ/d<p>`` of
     :meth:`r2rsim.diagnostics.parity.ParitySpaceDetector.sensitivity`) along data, one axes
     per column, one line per series (thesis Figs. 3-6, 3-7).

@@ -27,25 +27,61 @@ from ._mpl import axis_label, display_unit, plain_ticks, require_matplotlib, wra
 #: set-points, web speeds with the line speed set-point, dancer and festoon positions,
 #: roll radii and drive torques (states that never change, like an idler's radius, are
 #: left out of this default set)
-DEFAULT_CHANNELS = ("state.*.tension_N", "meas.*", "sp.*tension_N", "sp.line_speed_m_s",
-                    "state.*.surface_speed_m_s", "state.*.position_*", "state.*.radius_m",
-                    "act.*.torque_N_m")
+DEFAULT_CHANNELS = (
+    "state.*.tension_N",
+    "meas.*",
+    "sp.*tension_N",
+    "sp.line_speed_m_s",
+    "state.*.surface_speed_m_s",
+    "state.*.position_*",
+    "state.*.radius_m",
+    "act.*.torque_N_m",
+)
 #: words that name a physical quantity in a column name (``surface_speed_m_s``: speed); a
 #: column without one is its own quantity (``ctrl.x.error_N``: error)
-_QUANTITIES = ("tension", "speed", "position", "angle", "velocity", "radius", "diameter",
-               "torque", "force", "length", "strain", "inertia", "mass", "acceleration")
+_QUANTITIES = (
+    "tension",
+    "speed",
+    "position",
+    "angle",
+    "velocity",
+    "radius",
+    "diameter",
+    "torque",
+    "force",
+    "length",
+    "strain",
+    "inertia",
+    "mass",
+    "acceleration",
+)
 _AXES_HEIGHT_IN = 2.0
 _WIDTH_IN = 10.0
 #: colour and dash pattern of the set-points of one axes, in turn: each its own, all dark
 #: (a reading is a thin coloured line, a set-point a dark dashed one)
-SETPOINT_STYLES = (("k", "--"), ("0.45", "-."), ("k", ":"), ("0.45", (0, (6, 2, 1, 2, 1, 2))),
-                   ("k", (0, (1, 1))), ("0.45", (0, (8, 3))))
+SETPOINT_STYLES = (
+    ("k", "--"),
+    ("0.45", "-."),
+    ("k", ":"),
+    ("0.45", (0, (6, 2, 1, 2, 1, 2))),
+    ("k", (0, (1, 1))),
+    ("0.45", (0, (8, 3))),
+)
 
 
-def plot_run(dataset, run_id: str | None = None, channels=None, t0: float | None = None,
-             t1: float | None = None, *, n_buckets: int | None = None, faults: bool = True,
-             events: bool = True, figsize: tuple[float, float] | None = None,
-             verify: bool = True):
+def plot_run(
+    dataset,
+    run_id: str | None = None,
+    channels=None,
+    t0: float | None = None,
+    t1: float | None = None,
+    *,
+    n_buckets: int | None = None,
+    faults: bool = True,
+    events: bool = True,
+    figsize: tuple[float, float] | None = None,
+    verify: bool = True,
+):
     """Plot channels of one run against time.
 
     One axes per physical quantity and unit (span tensions, web speeds, positions, radii,
@@ -101,14 +137,14 @@ def plot_run(dataset, run_id: str | None = None, channels=None, t0: float | None
     Figure = require_matplotlib()
     root = open_dataset(dataset)
     with Verifier(root, verify) as v:
-        fig = _plot_run(root, v, run_id, channels, t0, t1, n_buckets, faults, events,
-                        figsize, Figure)
+        fig = _plot_run(
+            root, v, run_id, channels, t0, t1, n_buckets, faults, events, figsize, Figure
+        )
         verified(v)
     return fig
 
 
-def _plot_run(root, v, run_id, channels, t0, t1, n_buckets, faults, events, figsize,
-              Figure):
+def _plot_run(root, v, run_id, channels, t0, t1, n_buckets, faults, events, figsize, Figure):
     run = open_run(root, resolve_run(root, run_id, v), v)
     if v.verify:
         check_run_labels(run)  # the figure shades the fault windows faults.parquet gives
@@ -116,21 +152,25 @@ def _plot_run(root, v, run_id, channels, t0, t1, n_buckets, faults, events, figs
     t0 = run.t_start if t0 is None else float(t0)
     t1 = run.t_end if t1 is None else float(t1)
     if not t0 < t1 or t1 < run.t_start or t0 > run.t_end:
-        raise InputError(f"dataset {root}: run {run.run_id}: no samples between t0 = {t0:g} "
-                         f"and t1 = {t1:g} s (the run spans {run.t_start:g} to "
-                         f"{run.t_end:g} s)")
+        raise InputError(
+            f"dataset {root}: run {run.run_id}: no samples between t0 = {t0:g} "
+            f"and t1 = {t1:g} s (the run spans {run.t_start:g} to "
+            f"{run.t_end:g} s)"
+        )
     table = channel_table(root, v)
     units = {c: table.get(c, ("", ""))[0] for c in columns}
     encoders = {c for c in columns if is_encoder(table.get(c, ("", ""))[1])}
     groups = _group_by_quantity(columns, units)
-    fig = Figure(figsize=figsize or (_WIDTH_IN, 1.0 + _AXES_HEIGHT_IN * len(groups)),
-                 layout="constrained")
+    fig = Figure(
+        figsize=figsize or (_WIDTH_IN, 1.0 + _AXES_HEIGHT_IN * len(groups)), layout="constrained"
+    )
     n_buckets = n_buckets or int(fig.get_figwidth() * fig.dpi)
     data = read_envelopes(run, columns, t0, t1, n_buckets, means=encoders)
     axes = fig.subplots(len(groups), 1, sharex=True, squeeze=False)[:, 0]
     for ax, ((quantity, unit), group) in zip(axes, groups.items(), strict=True):
-        factor, shown = display_unit(unit, np.concatenate(
-            [np.ravel(data[c][1:]) for c in group] or [np.empty(0)]))
+        factor, shown = display_unit(
+            unit, np.concatenate([np.ravel(data[c][1:]) for c in group] or [np.empty(0)])
+        )
         _draw_channels(ax, group, data, factor)
         ax.set_ylabel(axis_label(quantity, shown))
         plain_ticks(ax, xbins=12)
@@ -138,14 +178,19 @@ def _plot_run(root, v, run_id, channels, t0, t1, n_buckets, faults, events, figs
     axes[-1].set_xlabel(axis_label("time", "s"))
     handles = []
     if faults:
-        handles += _shade_faults(axes, run_rows(root, "faults.parquet", run.run_id, v),
-                                 run.t_end, t0, t1)
+        handles += _shade_faults(
+            axes, run_rows(root, "faults.parquet", run.run_id, v), run.t_end, t0, t1
+        )
     if events:
-        handles += _mark_events(axes, run_rows(root, "events.parquet", run.run_id, v), t0,
-                                t1)
+        handles += _mark_events(axes, run_rows(root, "events.parquet", run.run_id, v), t0, t1)
     if handles:
-        fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 4),
-                   fontsize="small", frameon=False)
+        fig.legend(
+            handles=handles,
+            loc="outside lower center",
+            ncols=min(len(handles), 4),
+            fontsize="small",
+            frameon=False,
+        )
     fig.suptitle(wrap_title(f"{root.name}: {run.run_id}", fig, "medium"), fontsize="medium")
     return fig
 
@@ -168,8 +213,10 @@ def _channels(run, channels) -> list[str]:
     fixed = constant_columns(run, [c for c in picked if not c.startswith(("sp.", "meas."))])
     picked = [c for c in picked if c not in fixed]
     if not picked:
-        raise InputError(f"dataset {run.root}: run {run.run_id}: none of the default "
-                         f"channels varies; name some with channels=")
+        raise InputError(
+            f"dataset {run.root}: run {run.run_id}: none of the default "
+            f"channels varies; name some with channels="
+        )
     return picked
 
 
@@ -182,11 +229,12 @@ def _quantity(column: str, unit: str) -> str:
     if word:
         return "angular speed" if word == "speed" and unit == "rad/s" else word
     suffix = "_" + unit.replace("/", "_").replace("*", "_").replace("^", "")
-    return name[:-len(suffix)] if unit and name.endswith(suffix) else name
+    return name[: -len(suffix)] if unit and name.endswith(suffix) else name
 
 
-def _group_by_quantity(columns: list[str], units: dict[str, str]
-                       ) -> dict[tuple[str, str], list[str]]:
+def _group_by_quantity(
+    columns: list[str], units: dict[str, str]
+) -> dict[tuple[str, str], list[str]]:
     """Columns grouped by ``(quantity, unit)`` (one axes each), in order of first use."""
     groups: dict[tuple[str, str], list[str]] = {}
     for c in columns:
@@ -207,15 +255,21 @@ def _draw_channels(ax, columns: list[str], data: dict, factor: float = 1.0) -> N
             n_sp += 1
             ax.plot(t, y * factor, color=colour, ls=dashes, lw=1.2, label=c)
         elif band:
-            line, = ax.plot(t, y * factor, lw=1.0, label=c)
-            ax.fill_between(t, band[0] * factor, band[1] * factor, color=line.get_color(),
-                            alpha=0.25, lw=0, gid=f"band:{c}")
+            (line,) = ax.plot(t, y * factor, lw=1.0, label=c)
+            ax.fill_between(
+                t,
+                band[0] * factor,
+                band[1] * factor,
+                color=line.get_color(),
+                alpha=0.25,
+                lw=0,
+                gid=f"band:{c}",
+            )
         elif c.startswith("meas."):
             ax.plot(t, y * factor, lw=0.7, alpha=0.8, label=c)
         else:
             ax.plot(t, y * factor, lw=1.1, label=c)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="x-small",
-              frameon=False)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="x-small", frameon=False)
     ax.grid(True, alpha=0.3)
 
 
@@ -236,8 +290,16 @@ def _shade_faults(axes, faults, run_end: float, t0: float, t1: float) -> list:
         fid = f["fault_id"]
         for ax in axes:
             ax.axvspan(start, end, color=colour, alpha=0.15, lw=0, gid=f"fault:{fid}")
-        axes[0].text(max(start, t0), 0.98, f" {fid}", transform=axes[0].get_xaxis_transform(),
-                     va="top", fontsize="x-small", color=colour, clip_on=True)
+        axes[0].text(
+            max(start, t0),
+            0.98,
+            f" {fid}",
+            transform=axes[0].get_xaxis_transform(),
+            va="top",
+            fontsize="x-small",
+            color=colour,
+            clip_on=True,
+        )
         handles.append(Patch(color=colour, alpha=0.3, label=f"{fid}: {f['fault_type']}"))
     return handles
 
@@ -256,7 +318,15 @@ def _mark_events(axes, events, t0: float, t1: float) -> list:
     for i, (kind, rows) in enumerate(shown.groupby("kind", sort=True)):
         colour = colours(i % 8)
         for ax in axes:
-            ax.vlines(rows["t_s"].to_numpy(), 0, 1, transform=ax.get_xaxis_transform(),
-                      colors=[colour], linestyles=":", lw=1.0, gid=f"event:{kind}")
+            ax.vlines(
+                rows["t_s"].to_numpy(),
+                0,
+                1,
+                transform=ax.get_xaxis_transform(),
+                colors=[colour],
+                linestyles=":",
+                lw=1.0,
+                gid=f"event:{kind}",
+            )
         handles.append(Line2D([], [], color=colour, ls=":", label=f"{kind} ({len(rows)})"))
     return handles

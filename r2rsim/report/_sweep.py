@@ -38,9 +38,18 @@ STATISTICS = {
 }
 
 
-def plot_sweep(dataset, channel: str, statistic: str = "mean", axis: str | None = None, *,
-               group: str | None = None, t0: float | None = None, t1: float | None = None,
-               figsize: tuple[float, float] | None = None, verify: bool = True):
+def plot_sweep(
+    dataset,
+    channel: str,
+    statistic: str = "mean",
+    axis: str | None = None,
+    *,
+    group: str | None = None,
+    t0: float | None = None,
+    t1: float | None = None,
+    figsize: tuple[float, float] | None = None,
+    verify: bool = True,
+):
     """Plot a statistic of one channel, one point per run, against a sweep axis.
 
     Parameters
@@ -106,32 +115,53 @@ def plot_sweep(dataset, channel: str, statistic: str = "mean", axis: str | None 
     groups = runs.groupby(g_col, sort=True, dropna=False) if g_col else [(None, runs)]
     for i, (key, rows) in enumerate(groups):
         shown = _show(key)
-        label = None if g_col is None else (f"{g_col[len('axis.'):]} = {shown}"
-                                            + (g_unit if shown != "none" else ""))
+        label = (
+            None
+            if g_col is None
+            else (f"{g_col[len('axis.') :]} = {shown}" + (g_unit if shown != "none" else ""))
+        )
         # open markers of a shape per group: groups at the same point stay visible
-        x = (rows[x_col].map(categories.index).to_numpy() if text_x
-             else rows[x_col].to_numpy() * x_factor)
-        ax.plot(x, rows["value"].to_numpy() * y_factor,
-                ls="none", marker=MARKERS[i % len(MARKERS)], mfc="none", mew=1.5,
-                ms=8 + 2 * (i % 3), label=label)
+        x = (
+            rows[x_col].map(categories.index).to_numpy()
+            if text_x
+            else rows[x_col].to_numpy() * x_factor
+        )
+        ax.plot(
+            x,
+            rows["value"].to_numpy() * y_factor,
+            ls="none",
+            marker=MARKERS[i % len(MARKERS)],
+            mfc="none",
+            mew=1.5,
+            ms=8 + 2 * (i % 3),
+            label=label,
+        )
     if text_x:  # one tick per value, named shortly (the whole text is in runs.parquet)
-        ax.set_xticks(range(len(categories)), [_show(c) for c in categories], rotation=20,
-                      ha="right", rotation_mode="anchor")
+        ax.set_xticks(
+            range(len(categories)),
+            [_show(c) for c in categories],
+            rotation=20,
+            ha="right",
+            rotation_mode="anchor",
+        )
         ax.set_xmargin(0.2)
-        ax.set_xlabel(x_col[len("axis."):])
+        ax.set_xlabel(x_col[len("axis.") :])
     else:
-        ax.set_xlabel(axis_label(x_col[len("axis."):], x_shown))
+        ax.set_xlabel(axis_label(x_col[len("axis.") :], x_shown))
     ax.set_ylabel(axis_label(f"{statistic} of {channel}", y_shown))
     plain_ticks(ax, xbins=None if text_x else 8)
     if g_col:
         ax.legend(fontsize="small")
     ax.grid(True, alpha=0.3)
-    window = "" if t0 is None and t1 is None else \
-        f", t in [{_show(t0, 'start')}, {_show(t1, 'end')}] s"
+    window = (
+        "" if t0 is None and t1 is None else f", t in [{_show(t0, 'start')}, {_show(t1, 'end')}] s"
+    )
     note = (f"; {skipped} run(s) without samples left out" if skipped else "") + (
-        f"; {no_x} run(s) without a value of {x_col[len('axis.'):]} left out" if no_x else "")
-    fig.suptitle(wrap_title(f"{root.name}: {len(runs)} runs{window}{note}", fig, "medium"),
-                 fontsize="medium")
+        f"; {no_x} run(s) without a value of {x_col[len('axis.') :]} left out" if no_x else ""
+    )
+    fig.suptitle(
+        wrap_title(f"{root.name}: {len(runs)} runs{window}{note}", fig, "medium"), fontsize="medium"
+    )
     return fig
 
 
@@ -204,8 +234,11 @@ def _written_unit(root, rel: str, column: str, v) -> str:
     angular = re.search(r"rpm|rad|deg|rev|°", value) is not None
     for name, (_, si, _) in DIMENSIONS.items():
         want = {} if si == "1" else parse_any("1 " + si)[1]
-        if want == dims and (name not in ("frequency", "dimensionless") or not angular) \
-                and (name not in ("angular_speed", "angle") or angular):
+        if (
+            want == dims
+            and (name not in ("frequency", "dimensionless") or not angular)
+            and (name not in ("angular_speed", "angle") or angular)
+        ):
             return si
     return UNKNOWN_UNIT
 
@@ -223,29 +256,35 @@ def _show(value, missing: str = "none", width: int = 32) -> str:
     except ValueError:
         obj = None
     if isinstance(obj, dict) and "type" in obj:
-        text = str(obj["type"]) + (f" on {obj['target']}" if obj.get("target") else "") + (
-            f", {_show(obj['magnitude'])}" if obj.get("magnitude") is not None else "")
+        text = (
+            str(obj["type"])
+            + (f" on {obj['target']}" if obj.get("target") else "")
+            + (f", {_show(obj['magnitude'])}" if obj.get("magnitude") is not None else "")
+        )
         width = max(width, 48)
-    return text if len(text) <= width else text[:width - 1] + "…"
+    return text if len(text) <= width else text[: width - 1] + "…"
 
 
 def _axis_column(root, runs: pd.DataFrame, name: str | None) -> str:
     """The runs.parquet column of a sweep axis (``offset`` or ``axis.offset``)."""
     axes = [c for c in runs.columns if c.startswith("axis.")]
     if not axes:
-        raise InputError(f"dataset {root}: runs.parquet has no sweep axes (axis.* columns): "
-                         f"not a sweep; plot its runs with plot_run")
+        raise InputError(
+            f"dataset {root}: runs.parquet has no sweep axes (axis.* columns): "
+            f"not a sweep; plot its runs with plot_run"
+        )
     if name is None:
         return axes[0]
     col = name if name.startswith("axis.") else f"axis.{name}"
     if col not in axes:
-        raise InputError(f"dataset {root}: no sweep axis '{name}' (axes: "
-                         f"{', '.join(a[len('axis.'):] for a in axes)})")
+        raise InputError(
+            f"dataset {root}: no sweep axis '{name}' (axes: "
+            f"{', '.join(a[len('axis.') :] for a in axes)})"
+        )
     return col
 
 
-def _per_run(root, run_ids, channel: str, statistic: str, t0, t1, v=None
-             ) -> tuple[list, int]:
+def _per_run(root, run_ids, channel: str, statistic: str, t0, t1, v=None) -> tuple[list, int]:
     """The statistic of the channel for each run (NaN for a run without samples), and how
     many runs had no samples. Reads that one column of each run."""
     out, skipped = [], 0
@@ -257,8 +296,10 @@ def _per_run(root, run_ids, channel: str, statistic: str, t0, t1, v=None
         run = open_run(root, run_id, v, whole=READ_WHOLE_FILES and v is not None and v.verify)
         if channel not in run.columns:
             like = difflib.get_close_matches(channel, run.columns, n=4, cutoff=0.3)
-            raise InputError(f"dataset {root}: no numeric channel '{channel}'"
-                             + (f" (like: {', '.join(like)})" if like else ""))
+            raise InputError(
+                f"dataset {root}: no numeric channel '{channel}'"
+                + (f" (like: {', '.join(like)})" if like else "")
+            )
         lo = run.t_start if t0 is None else t0
         hi = run.t_end if t1 is None else t1
         chunks = [v[channel] for _, v in iter_window(run, [channel], lo, hi)]

@@ -6,5 +6,14 @@ from .loader import json_schema, load_line, load_scenario, read_yaml
 from .materials import MATERIALS
 from .scenario import Scenario
 
-__all__ = ["Line", "Scenario", "MATERIALS", "check_line", "json_schema", "load_line",
-           "load_scenario", "read_yaml", "reference_markdown"]
+__all__ = [
+    "Line",
+    "Scenario",
+    "MATERIALS",
+    "check_line",
+    "json_schema",
+    "load_line",
+    "load_scenario",
+    "read_yaml",
+    "reference_markdown",
+]

@@ -16,8 +16,7 @@ from .line import ID_PATTERN
 
 KINDS = ("line", "scenario", "sweep")
 _TITLES = {"line": "Line file", "scenario": "Scenario file", "sweep": "Sweep file"}
-_BOUNDS = (("minimum", "≥"), ("exclusiveMinimum", ">"), ("maximum", "≤"),
-           ("exclusiveMaximum", "<"))
+_BOUNDS = (("minimum", "≥"), ("exclusiveMinimum", ">"), ("maximum", "≤"), ("exclusiveMaximum", "<"))
 
 
 def _root(kind: str) -> type[BaseModel]:
@@ -56,8 +55,11 @@ def _ref_name(node: dict) -> str | None:
 
 
 def _bounds(node: dict) -> str:
-    parts = [f"{sign} {node[key] if isinstance(node[key], int) else format(node[key], 'g')}"
-             for key, sign in _BOUNDS if key in node]
+    parts = [
+        f"{sign} {node[key] if isinstance(node[key], int) else format(node[key], 'g')}"
+        for key, sign in _BOUNDS
+        if key in node
+    ]
     return f" ({', '.join(parts)})" if parts else ""
 
 
@@ -87,12 +89,13 @@ def _type(node: dict, kind: str) -> str:
     if t == "object":
         patterns = node.get("patternProperties", {})
         if len(patterns) == 1:
-            (pattern, values), = patterns.items()
+            ((pattern, values),) = patterns.items()
             keys = "ids" if pattern == ID_PATTERN else "paths" if kind == "sweep" else "keys"
             return f"mapping of {keys} to {_type(values, kind)}"
         values = node.get("additionalProperties")
-        return f"mapping of names to {_type(values, kind)}" if isinstance(values, dict) \
-            else "mapping"
+        return (
+            f"mapping of names to {_type(values, kind)}" if isinstance(values, dict) else "mapping"
+        )
     if t in ("number", "integer"):
         return f"{t}{_bounds(node)}"
     return t or "any"
@@ -154,8 +157,10 @@ def _table(kind: str, name: str, node: dict, model: type[BaseModel]) -> list[str
     lines = [f"### {kind}: {name}", ""] + ([doc, ""] if doc else [])
     lines += ["| key | type | default | meaning |", "| --- | --- | --- | --- |"]
     for key, prop in node.get("properties", {}).items():
-        lines.append(f"| `{key}` | {_type(prop, kind)} | {_default(model.model_fields[key])} "
-                     f"| {_meaning(prop)} |")
+        lines.append(
+            f"| `{key}` | {_type(prop, kind)} | {_default(model.model_fields[key])} "
+            f"| {_meaning(prop)} |"
+        )
     return lines + [""]
 
 
@@ -163,11 +168,15 @@ def reference_markdown(kinds=KINDS) -> str:
     """Markdown tables of every key of the given file kinds: one table per mapping, from
     the file's top level down, with each key's type (a quantity's dimension and SI unit),
     default and description."""
-    out = ["# Every key of the input files", "",
-           "Generated from r2rsim's schema models by `r2rsim schema --markdown`; do not edit. "
-           "A quantity takes an SI number or a string with units (`\"50 um\"`, README § A "
-           "line file). `r2rsim schema line|scenario|sweep` prints the same models as JSON "
-           "Schema for editors.", ""]
+    out = [
+        "# Every key of the input files",
+        "",
+        "Generated from r2rsim's schema models by `r2rsim schema --markdown`; do not edit. "
+        'A quantity takes an SI number or a string with units (`"50 um"`, README § A '
+        "line file). `r2rsim schema line|scenario|sweep` prints the same models as JSON "
+        "Schema for editors.",
+        "",
+    ]
     for kind in kinds:
         root = _root(kind)
         schema, models = root.model_json_schema(), _models(root)
@@ -186,6 +195,9 @@ def undocumented(kinds=KINDS) -> list[str]:
         schema = root.model_json_schema()
         nodes = {root.__name__: schema, **schema.get("$defs", {})}
         for name, node in nodes.items():
-            missing += [f"{kind}: {name}.{key}" for key, prop in
-                        node.get("properties", {}).items() if not _meaning(prop)]
+            missing += [
+                f"{kind}: {name}.{key}"
+                for key, prop in node.get("properties", {}).items()
+                if not _meaning(prop)
+            ]
     return missing

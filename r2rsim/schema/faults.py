@@ -47,62 +47,190 @@ class FaultType:
 
 
 _C = [
-    FaultType("sensor.offset", "sensor", "sensor", "reading", "loop",
-              "adds b to the reading"),
-    FaultType("sensor.gain", "sensor", "sensor", "rel", "loop",
-              "multiplies the reading by (1 + magnitude)"),
-    FaultType("sensor.drift", "sensor", "sensor", "reading/s", "loop",
-              "adds magnitude·(t - onset) to the reading"),
-    FaultType("sensor.stuck", "sensor", "sensor", "none", "loop",
-              "the reading freezes at its value at onset"),
-    FaultType("sensor.dropout", "sensor", "sensor", "none", "loop",
-              "no reading: recorded as NaN; a controller holds the last valid reading"),
-    FaultType("sensor.noise", "sensor", "sensor", "reading", "record",
-              "adds white noise of standard deviation magnitude at each sensor sample"),
-    FaultType("sensor.spike", "sensor", "sensor", "reading", "record",
-              "spikes of +-magnitude at random sensor samples (rate: spikes per second)"),
-    FaultType("sensor.quantization", "sensor", "sensor", "reading", "record",
-              "the reading is rounded to steps of magnitude"),
-    FaultType("sensor.delay", "sensor", "sensor", "s", "record",
-              "the reading lags by magnitude seconds"),
-    FaultType("actuator.bias", "actuator", "drive", "N*m", "model",
-              "the drive delivers its command + magnitude (then its torque limit)"),
-    FaultType("actuator.loss_of_effectiveness", "actuator", "drive", "rel", "model",
-              "the drive delivers (1 - magnitude) x its command, magnitude in (0, 1]"),
-    FaultType("actuator.stuck", "actuator", "drive", "none", "model",
-              "the drive torque freezes at its value at onset", ("step", "intermittent")),
-    FaultType("actuator.saturation", "actuator", "drive", "N*m", "model",
-              "the drive's torque limit falls to magnitude", ("step", "intermittent")),
-    FaultType("dancer.arm_stuck", "dancer", "dancer", "none", "model",
-              "the dancer arm or carriage seizes where it is: its spans become fixed "
-              "length", ("step", "intermittent")),
-    FaultType("dancer.loss_of_loading", "dancer", "dancer", "rel", "model",
-              "the loading actuator (air cylinder, torque motor) loses magnitude of its "
-              "force, magnitude in (0, 1]"),
-    FaultType("dancer.friction_increase", "dancer", "dancer", "rel", "model",
-              "the carriage/arm friction (viscous and Coulomb) grows by magnitude"),
-    FaultType("process.bearing_friction", "process", "roller", "rel", "model",
-              "the bearing friction (viscous and Coulomb) grows by magnitude"),
-    FaultType("process.eccentricity", "process", "eccentric", "m", "model",
-              "the roller turns about an axis magnitude off its centre: span lengths and "
-              "tension vary at the rotation frequency", ("step",)),
-    FaultType("process.modulus_change", "process", "unwind", "rel", "model",
-              "the web coming off the roll from onset has its modulus changed by magnitude "
-              "(new material) until the next splice", ("step",), end=False),
-    FaultType("process.draw_error", "process", "speed_node", "rel", "model",
-              "the effective radius is R x (1 + magnitude): the surface speed and torque "
-              "arm change, the drive's radius (and encoder) do not"),
-    FaultType("process.weak_splice", "process", "splicer", "N", "model",
-              "the first splice at or after onset makes a joint that breaks at magnitude N",
-              ("step",), end=False),
+    FaultType("sensor.offset", "sensor", "sensor", "reading", "loop", "adds b to the reading"),
+    FaultType(
+        "sensor.gain",
+        "sensor",
+        "sensor",
+        "rel",
+        "loop",
+        "multiplies the reading by (1 + magnitude)",
+    ),
+    FaultType(
+        "sensor.drift",
+        "sensor",
+        "sensor",
+        "reading/s",
+        "loop",
+        "adds magnitude·(t - onset) to the reading",
+    ),
+    FaultType(
+        "sensor.stuck",
+        "sensor",
+        "sensor",
+        "none",
+        "loop",
+        "the reading freezes at its value at onset",
+    ),
+    FaultType(
+        "sensor.dropout",
+        "sensor",
+        "sensor",
+        "none",
+        "loop",
+        "no reading: recorded as NaN; a controller holds the last valid reading",
+    ),
+    FaultType(
+        "sensor.noise",
+        "sensor",
+        "sensor",
+        "reading",
+        "record",
+        "adds white noise of standard deviation magnitude at each sensor sample",
+    ),
+    FaultType(
+        "sensor.spike",
+        "sensor",
+        "sensor",
+        "reading",
+        "record",
+        "spikes of +-magnitude at random sensor samples (rate: spikes per second)",
+    ),
+    FaultType(
+        "sensor.quantization",
+        "sensor",
+        "sensor",
+        "reading",
+        "record",
+        "the reading is rounded to steps of magnitude",
+    ),
+    FaultType(
+        "sensor.delay", "sensor", "sensor", "s", "record", "the reading lags by magnitude seconds"
+    ),
+    FaultType(
+        "actuator.bias",
+        "actuator",
+        "drive",
+        "N*m",
+        "model",
+        "the drive delivers its command + magnitude (then its torque limit)",
+    ),
+    FaultType(
+        "actuator.loss_of_effectiveness",
+        "actuator",
+        "drive",
+        "rel",
+        "model",
+        "the drive delivers (1 - magnitude) x its command, magnitude in (0, 1]",
+    ),
+    FaultType(
+        "actuator.stuck",
+        "actuator",
+        "drive",
+        "none",
+        "model",
+        "the drive torque freezes at its value at onset",
+        ("step", "intermittent"),
+    ),
+    FaultType(
+        "actuator.saturation",
+        "actuator",
+        "drive",
+        "N*m",
+        "model",
+        "the drive's torque limit falls to magnitude",
+        ("step", "intermittent"),
+    ),
+    FaultType(
+        "dancer.arm_stuck",
+        "dancer",
+        "dancer",
+        "none",
+        "model",
+        "the dancer arm or carriage seizes where it is: its spans become fixed length",
+        ("step", "intermittent"),
+    ),
+    FaultType(
+        "dancer.loss_of_loading",
+        "dancer",
+        "dancer",
+        "rel",
+        "model",
+        "the loading actuator (air cylinder, torque motor) loses magnitude of its "
+        "force, magnitude in (0, 1]",
+    ),
+    FaultType(
+        "dancer.friction_increase",
+        "dancer",
+        "dancer",
+        "rel",
+        "model",
+        "the carriage/arm friction (viscous and Coulomb) grows by magnitude",
+    ),
+    FaultType(
+        "process.bearing_friction",
+        "process",
+        "roller",
+        "rel",
+        "model",
+        "the bearing friction (viscous and Coulomb) grows by magnitude",
+    ),
+    FaultType(
+        "process.eccentricity",
+        "process",
+        "eccentric",
+        "m",
+        "model",
+        "the roller turns about an axis magnitude off its centre: span lengths and "
+        "tension vary at the rotation frequency",
+        ("step",),
+    ),
+    FaultType(
+        "process.modulus_change",
+        "process",
+        "unwind",
+        "rel",
+        "model",
+        "the web coming off the roll from onset has its modulus changed by magnitude "
+        "(new material) until the next splice",
+        ("step",),
+        end=False,
+    ),
+    FaultType(
+        "process.draw_error",
+        "process",
+        "speed_node",
+        "rel",
+        "model",
+        "the effective radius is R x (1 + magnitude): the surface speed and torque "
+        "arm change, the drive's radius (and encoder) do not",
+    ),
+    FaultType(
+        "process.weak_splice",
+        "process",
+        "splicer",
+        "N",
+        "model",
+        "the first splice at or after onset makes a joint that breaks at magnitude N",
+        ("step",),
+        end=False,
+    ),
 ]
 CATALOGUE: dict[str, FaultType] = {f.name: f for f in _C}
 
 #: fault types that may overlap on one target when both declare ``compose: superpose``
 #: (their effects add)
-SUPERPOSABLE = {"sensor.offset", "sensor.gain", "sensor.drift", "sensor.noise", "sensor.spike",
-                "actuator.bias", "process.draw_error", "process.bearing_friction",
-                "dancer.friction_increase"}
+SUPERPOSABLE = {
+    "sensor.offset",
+    "sensor.gain",
+    "sensor.drift",
+    "sensor.noise",
+    "sensor.spike",
+    "actuator.bias",
+    "process.draw_error",
+    "process.bearing_friction",
+    "dancer.friction_increase",
+}
 #: faults that take over their target completely: nothing superposes on them
 _EXCLUSIVE = {"sensor.stuck", "sensor.dropout", "actuator.stuck", "dancer.arm_stuck"}
 
@@ -122,22 +250,24 @@ class Uniform(Strict):
     """A value drawn uniformly from [low, high] (seeded by the fault-sampling stream)."""
 
     uniform: pair(NumberOrText) = Field(
-        description="[low, high]: the value is drawn uniformly between them")
+        description="[low, high]: the value is drawn uniformly between them"
+    )
 
 
 class LogUniform(Strict):
     """A value whose logarithm is uniform on [log low, log high] (low, high > 0)."""
 
     loguniform: pair(NumberOrText) = Field(
-        description="[low, high], both > 0: the logarithm of the value is drawn uniformly")
+        description="[low, high], both > 0: the logarithm of the value is drawn uniformly"
+    )
 
 
 class Choice(Strict):
     """One of the listed values, each equally likely."""
 
     choice: list[NumberOrText] = Field(
-        min_length=1, max_length=1000, description="the values to choose from, each equally "
-        "likely")
+        min_length=1, max_length=1000, description="the values to choose from, each equally likely"
+    )
 
 
 def _sampled_kind(value) -> str | None:
@@ -150,8 +280,12 @@ def _sampled_kind(value) -> str | None:
 # Tagged by the distribution's key, so each form is validated once: an untagged union of
 # strict models is tried strictly first, and before pydantic 2.11 the [low, high] list of
 # `uniform` then failed (a list is no tuple in strict mode) with a misleading message.
-Sampled = Annotated[Annotated[Uniform, Tag("uniform")] | Annotated[LogUniform, Tag("loguniform")]
-                    | Annotated[Choice, Tag("choice")], Discriminator(_sampled_kind)]
+Sampled = Annotated[
+    Annotated[Uniform, Tag("uniform")]
+    | Annotated[LogUniform, Tag("loguniform")]
+    | Annotated[Choice, Tag("choice")],
+    Discriminator(_sampled_kind),
+]
 
 
 class Profile(Strict):
@@ -163,12 +297,15 @@ class Profile(Strict):
     """
 
     shape: Literal["step", "ramp", "exp", "intermittent"] = Field(
-        "step", description="step, ramp, exp or intermittent: how the effect grows from onset")
+        "step", description="step, ramp, exp or intermittent: how the effect grows from onset"
+    )
     ramp: Annotated[Time, Field(gt=0)] | None = Field(
-        None, description="ramp: time to full magnitude; exp: time constant [s]")
+        None, description="ramp: time to full magnitude; exp: time constant [s]"
+    )
     period: Annotated[Time, Field(gt=0)] | None = Field(None, description="intermittent [s]")
     duty: Annotated[float, Field(gt=0, le=1)] | None = Field(
-        None, description="intermittent: fraction of each period the fault acts")
+        None, description="intermittent: fraction of each period the fault acts"
+    )
 
     @model_validator(mode="after")
     def _check(self):
@@ -188,28 +325,40 @@ class Fault(Strict):
 
     id: Id = Field(
         description="name of the fault instance, unique in the scenario (faults.parquet, label.* "
-        "columns)")
+        "columns)"
+    )
     type: Literal[tuple(CATALOGUE)] = Field(  # type: ignore[valid-type]
-        description="the fault type (r2rsim list faults)")
+        description="the fault type (r2rsim list faults)"
+    )
     target: Id = Field(description="sensor / element / dancer id, as the type requires")
     onset: Annotated[Time, Field(ge=0)] | Sampled = Field(
-        description="when the fault starts [s], or a distribution to draw it from")
+        description="when the fault starts [s], or a distribution to draw it from"
+    )
     end: Annotated[Time, Field(gt=0)] | None = Field(
-        None, description="when the fault stops acting; default: to the end of the run")
-    profile: Profile = Field(default_factory=Profile,
-                             description="time course of the effect (default: a step)")
+        None, description="when the fault stops acting; default: to the end of the run"
+    )
+    profile: Profile = Field(
+        default_factory=Profile, description="time course of the effect (default: a step)"
+    )
     magnitude: Annotated[float | str | Sampled | None, BeforeValidator(number_or_text)] = Field(
-        None, description="in the unit the type fixes (see `r2rsim list faults`); a number "
-        "is SI, a string may carry units ('5 N')")
+        None,
+        description="in the unit the type fixes (see `r2rsim list faults`); a number "
+        "is SI, a string may carry units ('5 N')",
+    )
     rate: Annotated[Frequency, Field(gt=0)] | None = Field(
-        None, description="sensor.spike: mean number of spikes per second")
+        None, description="sensor.spike: mean number of spikes per second"
+    )
     record_only: bool = Field(
-        False, description="a sensor fault that acts in the loop acts on the recorded "
+        False,
+        description="a sensor fault that acts in the loop acts on the recorded "
         "measurement only: a controller reading the sensor does not see it, and the process "
-        "is untouched (as when faults are injected into recorded data, thesis §3.5)")
+        "is untouched (as when faults are injected into recorded data, thesis §3.5)",
+    )
     compose: Literal["superpose"] | None = Field(
-        None, description="allow overlap with other faults on the same target that also "
-        "declare it: offsets and drifts add, gain changes add, noise variances add")
+        None,
+        description="allow overlap with other faults on the same target that also "
+        "declare it: offsets and drifts add, gain changes add, noise variances add",
+    )
 
     @model_validator(mode="after")
     def _check(self):
@@ -221,13 +370,16 @@ class Fault(Strict):
         if (self.type == "sensor.spike") != (self.rate is not None):
             raise ValueError("'rate' is required for sensor.spike and only for it")
         if self.profile.shape not in ft.profiles:
-            raise ValueError(f"{self.type} takes a {' or '.join(ft.profiles)} profile, not "
-                             f"{self.profile.shape}")
+            raise ValueError(
+                f"{self.type} takes a {' or '.join(ft.profiles)} profile, not {self.profile.shape}"
+            )
         if not ft.end and self.end is not None:
             raise ValueError(f"{self.type} lasts to the end of the run: leave out 'end'")
         if self.record_only and not (ft.target == "sensor" and ft.acts == "loop"):
-            raise ValueError(f"record_only applies to sensor faults that act in the loop; "
-                             f"{self.type} acts on the {ft.acts}")
+            raise ValueError(
+                f"record_only applies to sensor faults that act in the loop; "
+                f"{self.type} acts on the {ft.acts}"
+            )
         if self.type == "sensor.drift" and self.profile.shape != "step":
             raise ValueError("a drift grows by itself: use a step profile")
         if self.end is not None and isinstance(self.onset, float) and self.end <= self.onset:
@@ -235,19 +387,36 @@ class Fault(Strict):
         return self
 
 
-READING = {"load_cell": "force", "encoder": "angular_speed", "roll_diameter": "length",
-            "pitch_length": "length"}
-SI_UNIT = {"force": "N", "angular_speed": "rad/s", "length": "m", "angle": "rad",
-            "time": "s", "dimensionless": "rel"}
+READING = {
+    "load_cell": "force",
+    "encoder": "angular_speed",
+    "roll_diameter": "length",
+    "pitch_length": "length",
+}
+SI_UNIT = {
+    "force": "N",
+    "angular_speed": "rad/s",
+    "length": "m",
+    "angle": "rad",
+    "time": "s",
+    "dimensionless": "rel",
+}
 RATE_OF = {"force": "force_rate", "length": "speed", "angle": "angular_speed"}
 
 
 def magnitude_dimension(ftype: str, reading_dim: str | None) -> str | None:
     """The :data:`r2rsim.units.DIMENSIONS` key of a fault's magnitude, given the dimension of
     the target's reading (sensor faults; None otherwise). None: a plain SI number."""
-    return {"reading": reading_dim, "rel": "dimensionless", "s": "time", "none": None,
-            "reading/s": RATE_OF.get(reading_dim), "N*m": "torque", "N": "force",
-            "m": "length"}[CATALOGUE[ftype].magnitude]
+    return {
+        "reading": reading_dim,
+        "rel": "dimensionless",
+        "s": "time",
+        "none": None,
+        "reading/s": RATE_OF.get(reading_dim),
+        "N*m": "torque",
+        "N": "force",
+        "m": "length",
+    }[CATALOGUE[ftype].magnitude]
 
 
 def magnitude_unit(ftype: str, reading_dim: str | None) -> str:
@@ -266,15 +435,23 @@ def target_problem(ftype: str, target: str, line) -> str | None:
     sensors = {s.id for s in line.sensors}
     els = {e.id: (k, e) for k, e in enumerate(line.elements)}
     movers = [e.id for e in line.elements if e.type in ("dancer", "pivot_dancer")] + [
-        sp.id for sp in line.spans if sp.festoon is not None]
+        sp.id for sp in line.spans if sp.festoon is not None
+    ]
     if kind == "sensor":
-        return None if target in sensors else (
-            f"{ftype} targets a sensor; no sensor '{target}' in the line (known: "
-            f"{', '.join(sorted(sensors)) or 'none'})")
+        return (
+            None
+            if target in sensors
+            else (
+                f"{ftype} targets a sensor; no sensor '{target}' in the line (known: "
+                f"{', '.join(sorted(sensors)) or 'none'})"
+            )
+        )
     if kind == "dancer":
         if target not in movers:
-            return (f"{ftype} targets a dancer or festoon; none is called '{target}' (known: "
-                    f"{', '.join(movers) or 'none'})")
+            return (
+                f"{ftype} targets a dancer or festoon; none is called '{target}' (known: "
+                f"{', '.join(movers) or 'none'})"
+            )
         if ftype == "dancer.friction_increase":
             el = els.get(target)
             obj = el[1] if el else next(sp.festoon for sp in line.spans if sp.id == target)
@@ -282,16 +459,20 @@ def target_problem(ftype: str, target: str, line) -> str | None:
                 return f"'{target}' has no friction (damping, coulomb) to increase"
         return None
     if target not in els:
-        return (f"{ftype} targets an element; no element '{target}' in the line (known: "
-                f"{', '.join(els)})")
+        return (
+            f"{ftype} targets an element; no element '{target}' in the line (known: "
+            f"{', '.join(els)})"
+        )
     k, e = els[target]
     drive = getattr(e, "drive", None)
     if kind == "drive" and (drive is None or drive.type != "torque"):
         return f"{ftype} needs an element with a torque drive; '{target}' has none"
     ideal = drive is not None and drive.type == "ideal_speed"
     if kind in ("roller", "eccentric") and ideal:
-        return (f"'{target}' turns at an imposed speed (ideal_speed drive): its {ftype} "
-                f"would have no effect")
+        return (
+            f"'{target}' turns at an imposed speed (ideal_speed drive): its {ftype} "
+            f"would have no effect"
+        )
     if kind == "roller" and e.friction.viscous == 0 and e.friction.coulomb == 0:
         return f"'{target}' has no bearing friction (friction: viscous, coulomb) to increase"
     if kind == "eccentric":
@@ -314,8 +495,12 @@ _RANGES = {
     "sensor.spike": (0.0, math.inf, True, "needs a magnitude >= 0"),
     "sensor.quantization": (0.0, math.inf, True, "needs a magnitude >= 0"),
     "sensor.delay": (0.0, math.inf, True, "needs a magnitude >= 0"),
-    "sensor.gain": (-1.0, math.inf, False,
-                    "a gain change must be > -1 (the reading would vanish or flip sign)"),
+    "sensor.gain": (
+        -1.0,
+        math.inf,
+        False,
+        "a gain change must be > -1 (the reading would vanish or flip sign)",
+    ),
     "actuator.loss_of_effectiveness": (0.0, 1.0, False, "needs a magnitude in (0, 1]"),
     "actuator.saturation": (0.0, math.inf, True, "needs a torque limit >= 0"),
     "dancer.loss_of_loading": (0.0, 1.0, False, "needs a magnitude in (0, 1]"),
@@ -353,6 +538,7 @@ def reading_dimension(line, sensor) -> str | None:
 
 def bounds(value, dimension) -> tuple[float, float]:
     """Smallest and largest value a fixed value or distribution can take (SI)."""
+
     def si(v):
         return float(v) if dimension is None else parse_quantity(v, dimension)
 
@@ -379,8 +565,7 @@ def check_faults(scenario, line, file: str) -> None:
         problem = target_problem(f.type, f.target, line)
         if problem:
             raise InputError(problem, file=file, path=f"{where}.target")
-        rdim = reading_dimension(line, sensors.get(f.target) if ft.target == "sensor"
-                                 else None)
+        rdim = reading_dimension(line, sensors.get(f.target) if ft.target == "sensor" else None)
         try:
             lo, hi = bounds(f.onset, "time")
         except QuantityError as exc:
@@ -395,19 +580,32 @@ def check_faults(scenario, line, file: str) -> None:
                 raise InputError(problem, file=file, path=f"{where}.magnitude")
         if f.type == "process.weak_splice":
             splicer = next(e for e in line.elements if e.id == f.target).splicer
-            later = [ev for ev in scenario.events if ev.type == "splice" and ev.at >= lo
-                     and ev.element in (None, f.target)]
+            later = [
+                ev
+                for ev in scenario.events
+                if ev.type == "splice" and ev.at >= lo and ev.element in (None, f.target)
+            ]
             if not later and splicer.trigger_radius is None:
-                raise InputError(f"no splice on '{f.target}' at or after the onset: schedule "
-                                 "one (events: type splice) or give the splicer a "
-                                 "trigger_radius", file=file, path=f"{where}.onset")
+                raise InputError(
+                    f"no splice on '{f.target}' at or after the onset: schedule "
+                    "one (events: type splice) or give the splicer a "
+                    "trigger_radius",
+                    file=file,
+                    path=f"{where}.onset",
+                )
         drawn = "can be" if hi > lo else "is"
         if hi > scenario.duration:
-            raise InputError(f"onset {drawn} {hi:g} s, after the end of the run "
-                             f"({scenario.duration:g} s)", file=file, path=f"{where}.onset")
+            raise InputError(
+                f"onset {drawn} {hi:g} s, after the end of the run ({scenario.duration:g} s)",
+                file=file,
+                path=f"{where}.onset",
+            )
         if f.end is not None and f.end <= hi:  # a drawn onset: refused whatever the seed
-            raise InputError(f"end {f.end:g} s can come before the onset, which is drawn up "
-                             f"to {hi:g} s", file=file, path=f"{where}.end")
+            raise InputError(
+                f"end {f.end:g} s can come before the onset, which is drawn up to {hi:g} s",
+                file=file,
+                path=f"{where}.end",
+            )
         windows.append((lo, f.end if f.end is not None else math.inf))
     for i, a in enumerate(scenario.faults):
         for j in range(i):
@@ -421,13 +619,24 @@ def check_faults(scenario, line, file: str) -> None:
                 raise InputError(
                     f"faults '{b.id}' and '{a.id}' can overlap on '{a.target}' (from "
                     f"{max(alo, blo):g} s); declare compose: superpose on both, or separate "
-                    f"them in time", file=file, path=f"faults[{i}]")
+                    f"them in time",
+                    file=file,
+                    path=f"faults[{i}]",
+                )
             if not superposable(a.type, b.type):
                 raise InputError(
                     f"faults '{b.id}' ({b.type}) and '{a.id}' ({a.type}) overlap on "
                     f"'{a.target}' and cannot be superposed; separate them in time",
-                    file=file, path=f"faults[{i}]")
-            if a.profile.shape == "exp" and b.profile.shape == "exp" and \
-                    a.profile.ramp != b.profile.ramp:
-                raise InputError("two overlapping exp-profile faults on one target need the "
-                                 "same time constant", file=file, path=f"faults[{i}].profile")
+                    file=file,
+                    path=f"faults[{i}]",
+                )
+            if (
+                a.profile.shape == "exp"
+                and b.profile.shape == "exp"
+                and a.profile.ramp != b.profile.ramp
+            ):
+                raise InputError(
+                    "two overlapping exp-profile faults on one target need the same time constant",
+                    file=file,
+                    path=f"faults[{i}].profile",
+                )

@@ -80,8 +80,10 @@ class Web(Strict):
     given here overrides the preset."""
 
     material: Literal["PET", "paper", "aluminium", "aluminum", "copper"] | None = Field(
-        None, description="material preset that gives modulus, density and break_stress (each "
-        "can still be given here)")
+        None,
+        description="material preset that gives modulus, density and break_stress (each "
+        "can still be given here)",
+    )
     thickness: PosLength = Field(description="caliper t_w [m]")
     width: PosLength = Field(description="web width w [m]")
     modulus: Annotated[Pressure, Field(gt=0)] | None = Field(None, description="E (MD) [Pa]")
@@ -124,9 +126,11 @@ class Friction(Strict):
     """Bearing friction tau_f = viscous·omega + coulomb·tanh(omega/smoothing_speed)."""
 
     viscous: Annotated[ViscousTorque, Field(ge=0)] = Field(
-        0.0, description="viscous bearing friction coefficient: torque per angular speed [N m s]")
+        0.0, description="viscous bearing friction coefficient: torque per angular speed [N m s]"
+    )
     coulomb: Annotated[Torque, Field(ge=0)] = Field(
-        0.0, description="Coulomb (dry) bearing friction torque [N m]")
+        0.0, description="Coulomb (dry) bearing friction torque [N m]"
+    )
     smoothing_speed: Annotated[AngularSpeed, Field(gt=0)] = Field(
         1e-2, description="tanh smoothing of the Coulomb term near zero speed [rad/s]"
     )
@@ -146,21 +150,25 @@ class Drive(Strict):
     idealised studies."""
 
     type: Literal["torque", "ideal_speed"] = Field(
-        "torque", description="torque: a motor with a first-order torque loop, commanded by a "
+        "torque",
+        description="torque: a motor with a first-order torque loop, commanded by a "
         "controller or torque_command; ideal_speed: an imposed surface speed (line speed x (1 + "
-        "draw))")
+        "draw))",
+    )
     torque_lag: NonNegTime = Field(1e-3, description="current/torque loop time constant [s]")
     torque_max: Annotated[Torque, Field(gt=0)] | None = Field(
         None, description="torque saturation |tau| <= torque_max [N m]"
     )
     draw: Dimensionless = Field(0.0, description="ideal_speed only: relative speed offset")
     torque_ripple: TorqueRipple | None = Field(
-        None, description="sinusoidal torque disturbance added at the shaft (cogging, "
-        "gear mesh, an eccentric load)"
+        None,
+        description="sinusoidal torque disturbance added at the shaft (cogging, "
+        "gear mesh, an eccentric load)",
     )
     torque_command: Torque | None = Field(
-        None, description="torque drive without a controller: constant torque command [N m] "
-        "(positive drives the web forward); a scenario's programme can change it (torque:)"
+        None,
+        description="torque drive without a controller: constant torque command [N m] "
+        "(positive drives the web forward); a scenario's programme can change it (torque:)",
     )
 
 
@@ -175,17 +183,22 @@ class Roll(Strict):
     build_per_wrap: PosLength | None = Field(
         None, description="radial build per wrap c_w [m]; default: the web thickness"
     )
-    wound_in_strain: Dimensionless | Annotated[list[Dimensionless], Field(
-        min_length=1, max_length=3)] = Field(
-        0.0, description="strain frozen into the roll when it was wound (the unwind's inflow "
+    wound_in_strain: (
+        Dimensionless | Annotated[list[Dimensionless], Field(min_length=1, max_length=3)]
+    ) = Field(
+        0.0,
+        description="strain frozen into the roll when it was wound (the unwind's inflow "
         "strain): a number, or polynomial coefficients [e0, e1, e2] of e0 + e1·R + e2·R^2 over "
-        "the roll radius R in m, so tension drifts over a roll (thesis eq. 2.22)"
+        "the roll radius R in m, so tension drifts over a roll (thesis eq. 2.22)",
     )
 
     def wound_in_coefficients(self) -> tuple[float, float, float]:
         """(e0, e1, e2) of the wound-in strain e0 + e1·R + e2·R²."""
-        c = self.wound_in_strain if isinstance(self.wound_in_strain, list) else [
-            self.wound_in_strain]
+        c = (
+            self.wound_in_strain
+            if isinstance(self.wound_in_strain, list)
+            else [self.wound_in_strain]
+        )
         c = [*c, 0.0, 0.0, 0.0]
         return float(c[0]), float(c[1]), float(c[2])
 
@@ -193,24 +206,29 @@ class Roll(Strict):
 class _Element(Strict):
     id: Id = Field(
         description="name of the element, unique in the line (letters, digits, _); sensors and "
-        "controllers refer to it")
+        "controllers refer to it"
+    )
     stage: Annotated[int, Field(ge=1)] | None = Field(None, description="thesis stage 1..5")
     friction: Friction = Field(
-        default_factory=Friction, description="bearing friction of the element's shaft")
+        default_factory=Friction, description="bearing friction of the element's shaft"
+    )
     wrap_angle: Annotated[Angle, Field(gt=0, le=2 * math.pi)] | None = Field(
         None, description="wrap angle of the web on this element [rad]"
     )
     friction_coefficient: Annotated[Dimensionless, Field(gt=0)] | None = Field(
-        None, description="web-roller friction coefficient mu; with wrap_angle enables the "
-        "capstan (slip-risk) monitor"
+        None,
+        description="web-roller friction coefficient mu; with wrap_angle enables the "
+        "capstan (slip-risk) monitor",
     )
     position: Vec2 | None = Field(
-        None, description="roller centre [x, y] in m (y up); needed next to a dancer, whose "
-        "span lengths come from the geometry"
+        None,
+        description="roller centre [x, y] in m (y up); needed next to a dancer, whose "
+        "span lengths come from the geometry",
     )
     wrap: Wrap | None = Field(
-        None, description="direction the web travels around this roller seen with x right and "
-        "y up: cw or ccw; needed with position"
+        None,
+        description="direction the web travels around this roller seen with x right and "
+        "y up: cw or ccw; needed with position",
     )
 
 
@@ -234,13 +252,16 @@ class Splicer(Strict):
 
     type: Literal["zero_speed", "flying"] = Field(
         description="zero_speed: the roll stops for the splice while a dancer or festoon feeds "
-        "the line; flying: the new roll is spliced on at line speed")
+        "the line; flying: the new roll is spliced on at line speed"
+    )
     trigger_radius: PosLength | None = Field(
-        None, description="splice when the running roll's radius falls to this [m]; "
-        "otherwise only at the scenario's splice events"
+        None,
+        description="splice when the running roll's radius falls to this [m]; "
+        "otherwise only at the scenario's splice events",
     )
     joint: SpliceJoint = Field(
-        default_factory=SpliceJoint, description="the splice joint that travels with the web")
+        default_factory=SpliceJoint, description="the splice joint that travels with the web"
+    )
     fill_time: NonNegTime = Field(5.0, description="zero_speed: fill phase duration [s]")
     fill_overspeed: Annotated[Dimensionless, Field(ge=0, le=0.5)] = Field(
         0.08, description="zero_speed: relative overspeed of the unwind while filling/refilling"
@@ -253,12 +274,14 @@ class Splicer(Strict):
         2.0, description="zero_speed: surface acceleration of the new roll [m/s^2]"
     )
     refill_timeout: Annotated[Time, Field(gt=0)] = Field(
-        60.0, description="zero_speed: the refill ends when the dancer/festoon is back at its "
-        "set-point, or after this time [s]"
+        60.0,
+        description="zero_speed: the refill ends when the dancer/festoon is back at its "
+        "set-point, or after this time [s]",
     )
     speed_match_error: Annotated[Dimensionless, Field(gt=-0.5, lt=0.5)] = Field(
-        0.0, description="flying: relative surface-speed error of the new roll (diameter "
-        "error), delta in omega_new = v(1 + delta)/R_new"
+        0.0,
+        description="flying: relative surface-speed error of the new roll (diameter "
+        "error), delta in omega_new = v(1 + delta)/R_new",
     )
 
 
@@ -269,7 +292,8 @@ class Unwind(_Element):
     type: Literal["unwind"] = Field(description="selects an unwind")
     roll: Roll = Field(description="the roll the run starts with")
     drive: Drive = Field(
-        default_factory=Drive, description="the unwind's motor (default: a torque drive)")
+        default_factory=Drive, description="the unwind's motor (default: a torque drive)"
+    )
     spare_roll: Roll | None = Field(None, description="the roll loaded at each splice")
     splicer: Splicer | None = Field(None, description="roll changes; needs spare_roll")
 
@@ -280,7 +304,8 @@ class Rewind(_Element):
     type: Literal["rewind"] = Field(description="selects a rewind")
     roll: Roll = Field(description="the roll (core and the web already wound) the run starts with")
     drive: Drive = Field(
-        default_factory=Drive, description="the rewind's motor (default: a torque drive)")
+        default_factory=Drive, description="the rewind's motor (default: a torque drive)"
+    )
 
 
 class Idler(_Element):
@@ -297,9 +322,11 @@ class Driven(_Element):
     type: Literal["driven"] = Field(description="selects a driven roller")
     radius: PosLength = Field(description="roller radius [m]")
     inertia: Annotated[Inertia, Field(gt=0)] = Field(
-        description="roller and motor inertia [kg m^2]")
+        description="roller and motor inertia [kg m^2]"
+    )
     drive: Drive = Field(
-        default_factory=Drive, description="the roller's motor (default: a torque drive)")
+        default_factory=Drive, description="the roller's motor (default: a torque drive)"
+    )
 
 
 class PressureRoller(Strict):
@@ -307,9 +334,11 @@ class PressureRoller(Strict):
 
     radius: PosLength = Field(description="pressure roller radius [m]")
     inertia: Annotated[Inertia, Field(ge=0)] = Field(
-        description="pressure roller spin inertia [kg m^2]")
+        description="pressure roller spin inertia [kg m^2]"
+    )
     friction: Friction = Field(
-        default_factory=Friction, description="bearing friction of the pressure roller")
+        default_factory=Friction, description="bearing friction of the pressure roller"
+    )
 
 
 class Nip(_Element):
@@ -319,11 +348,14 @@ class Nip(_Element):
     type: Literal["nip"] = Field(description="selects a nip")
     radius: PosLength = Field(description="radius of the main (driven) roller [m]")
     inertia: Annotated[Inertia, Field(gt=0)] = Field(
-        description="spin inertia of the main roller [kg m^2]")
+        description="spin inertia of the main roller [kg m^2]"
+    )
     drive: Drive = Field(
-        default_factory=Drive, description="the main roller's motor (default: a torque drive)")
+        default_factory=Drive, description="the main roller's motor (default: a torque drive)"
+    )
     pressure_roller: PressureRoller = Field(
-        description="the undriven roller pressed on the main one; it turns with it without slip")
+        description="the undriven roller pressed on the main one; it turns with it without slip"
+    )
 
 
 class Dancer(_Element):
@@ -336,8 +368,8 @@ class Dancer(_Element):
     inertia: Annotated[Inertia, Field(gt=0)] = Field(description="roller spin inertia")
     position: Vec2 = Field(description="roller centre at travel 0 [m]")
     wrap: Wrap = Field(
-        description="direction the web travels around the dancer roller (x right, y up): cw or "
-        "ccw")
+        description="direction the web travels around the dancer roller (x right, y up): cw or ccw"
+    )
     direction: pair(float) = Field(
         (0.0, -1.0), description="unit vector along which the travel x grows (normalised)"
     )
@@ -348,18 +380,23 @@ class Dancer(_Element):
         0.0, description="actuator force along direction (air cylinder at regulated pressure)"
     )
     spring_stiffness: Annotated[Stiffness, Field(ge=0)] = Field(
-        0.0, description="spring on the carriage, force -spring_stiffness·(x - "
-        "spring_free_travel) [N/m]")
+        0.0,
+        description="spring on the carriage, force -spring_stiffness·(x - "
+        "spring_free_travel) [N/m]",
+    )
     spring_free_travel: Length = Field(
-        0.0, description="travel x at which the spring exerts no force [m]")
+        0.0, description="travel x at which the spring exerts no force [m]"
+    )
     damping: Annotated[Damping, Field(ge=0)] = Field(
-        0.0, description="viscous damping of the carriage [N s/m]")
+        0.0, description="viscous damping of the carriage [N s/m]"
+    )
     coulomb: Annotated[Force, Field(ge=0)] = Field(0.0, description="carriage Coulomb friction")
     smoothing_speed: Annotated[Speed, Field(gt=0)] = Field(
         1e-3, description="tanh smoothing of the Coulomb friction [m/s]"
     )
     gravity: pair(Acceleration) = Field(
-        GRAVITY, description="gravity vector [g_x, g_y] acting on the moving mass [m/s^2] (y up)")
+        GRAVITY, description="gravity vector [g_x, g_y] acting on the moving mass [m/s^2] (y up)"
+    )
 
 
 class Cylinder(Strict):
@@ -367,7 +404,8 @@ class Cylinder(Strict):
     constant force (physics.md §1.5). Positive force pushes the two points apart."""
 
     force: Force = Field(
-        description="constant cylinder force [N]; positive pushes the two points apart")
+        description="constant cylinder force [N]; positive pushes the two points apart"
+    )
     fixed_point: Vec2 = Field(description="the cylinder's fixed mounting point [x, y] [m]")
     arm_point: PosLength = Field(description="distance of the rod end from the pivot [m]")
 
@@ -377,7 +415,8 @@ class TorsionSpring(Strict):
 
     stiffness: Annotated[Torque, Field(ge=0)] = Field(description="[N m/rad]")
     free_angle: Angle = Field(
-        0.0, description="arm angle at which the spring exerts no torque [rad]")
+        0.0, description="arm angle at which the spring exerts no torque [rad]"
+    )
 
 
 class PivotDancer(_Element):
@@ -388,8 +427,8 @@ class PivotDancer(_Element):
     radius: PosLength = Field(description="dancer roller radius [m]")
     inertia: Annotated[Inertia, Field(gt=0)] = Field(description="roller spin inertia")
     wrap: Wrap = Field(
-        description="direction the web travels around the dancer roller (x right, y up): cw or "
-        "ccw")
+        description="direction the web travels around the dancer roller (x right, y up): cw or ccw"
+    )
     pivot: Vec2 = Field(description="arm pivot [x, y] [m]")
     arm_length: PosLength = Field(description="pivot to roller centre [m]")
     arm_angle: Angle = Field(description="arm angle from +x at t = 0 [rad]")
@@ -398,26 +437,34 @@ class PivotDancer(_Element):
         description="arm inertia about the pivot, without the roller [kg m^2]"
     )
     roller_mass: Annotated[Mass, Field(ge=0)] = Field(
-        0.0, description="mass of the roller at the arm's end [kg] (inertia about the pivot and "
-        "gravity)")
+        0.0,
+        description="mass of the roller at the arm's end [kg] (inertia about the pivot and "
+        "gravity)",
+    )
     arm_mass: Annotated[Mass, Field(ge=0)] = Field(
-        0.0, description="mass of the arm [kg] (gravity, at arm_com)")
-    arm_com: Length | None = Field(None, description="pivot to arm centre of mass; default "
-                                   "half the arm length")
+        0.0, description="mass of the arm [kg] (gravity, at arm_com)"
+    )
+    arm_com: Length | None = Field(
+        None, description="pivot to arm centre of mass; default half the arm length"
+    )
     cylinder: Cylinder | None = Field(None, description="air cylinder loading the arm")
     torsion_spring: TorsionSpring | None = Field(None, description="torsion spring at the pivot")
     torque: Torque = Field(0.0, description="torque motor at the pivot (active dancer)")
     damping: Annotated[ViscousTorque, Field(ge=0)] = Field(
-        0.0, description="viscous damping at the pivot [N m s/rad]")
+        0.0, description="viscous damping at the pivot [N m s/rad]"
+    )
     coulomb: Annotated[Torque, Field(ge=0)] = Field(
-        0.0, description="Coulomb friction torque at the pivot [N m]")
+        0.0, description="Coulomb friction torque at the pivot [N m]"
+    )
     smoothing_speed: Annotated[AngularSpeed, Field(gt=0)] = Field(
-        1e-3, description="tanh smoothing of the Coulomb friction [rad/s]")
+        1e-3, description="tanh smoothing of the Coulomb friction [rad/s]"
+    )
     gravity: pair(Acceleration) = Field(GRAVITY, description="gravity vector [g_x, g_y] [m/s^2]")
 
 
-Element = Annotated[Unwind | Rewind | Idler | Driven | Nip | Dancer | PivotDancer,
-                    Field(discriminator="type")]
+Element = Annotated[
+    Unwind | Rewind | Idler | Driven | Nip | Dancer | PivotDancer, Field(discriminator="type")
+]
 DANCERS = ("dancer", "pivot_dancer")
 ROTATING_WITH_DRIVE = ("unwind", "rewind", "driven", "nip")
 
@@ -427,9 +474,11 @@ class Festoon(Strict):
     carriage give 2n strands; the span length is ``length + 2n·x``."""
 
     moving_rollers: Annotated[int, Field(ge=1)] = Field(
-        description="rollers on the carriage (n); the stored web is 2n·x")
+        description="rollers on the carriage (n); the stored web is 2n·x"
+    )
     carriage_mass: Annotated[Mass, Field(gt=0)] = Field(
-        description="moving mass of the carriage with its rollers [kg]")
+        description="moving mass of the carriage with its rollers [kg]"
+    )
     stroke: pair(Length) = Field(description="carriage end stops [x_min, x_max] [m]")
     initial_position: Length = Field(description="carriage position x at t = 0 [m]")
     force: Force = Field(description="carriage actuator force along +x (storage grows) [N]")
@@ -437,11 +486,14 @@ class Festoon(Strict):
         0.0, description="gravity component along +x [m/s^2] (-9.81: storage grows upward)"
     )
     damping: Annotated[Damping, Field(ge=0)] = Field(
-        0.0, description="viscous damping of the carriage [N s/m]")
+        0.0, description="viscous damping of the carriage [N s/m]"
+    )
     coulomb: Annotated[Force, Field(ge=0)] = Field(
-        0.0, description="Coulomb friction force on the carriage [N]")
+        0.0, description="Coulomb friction force on the carriage [N]"
+    )
     smoothing_speed: Annotated[Speed, Field(gt=0)] = Field(
-        1e-3, description="tanh smoothing of the Coulomb friction [m/s]")
+        1e-3, description="tanh smoothing of the Coulomb friction [m/s]"
+    )
 
 
 class Span(Strict):
@@ -449,8 +501,9 @@ class Span(Strict):
 
     id: Id | None = Field(None, description="default: span1, span2, ... in web order")
     length: PosLength | None = Field(
-        None, description="free length [m]; omitted next to a dancer (from the geometry); "
-        "with a festoon, the length at carriage position 0"
+        None,
+        description="free length [m]; omitted next to a dancer (from the geometry); "
+        "with a festoon, the length at carriage position 0",
     )
     festoon: Festoon | None = Field(None, description="a festoon accumulator in this span")
 
@@ -459,13 +512,15 @@ NOISE_PER_SPEED_DOC = (
     "speed-dependent noise (vibration): a zero-mean Gaussian term of std noise_per_speed·|v| "
     "added to each recorded sample, v the web speed at the sensor [m/s] (the element's surface "
     "speed; for a span or festoon, that of its downstream element); in the reading's SI unit "
-    "per m/s (N·s/m for a load cell, s for a pitch or diameter). Not a labelled fault")
+    "per m/s (N·s/m for a load cell, s for a pitch or diameter). Not a labelled fault"
+)
 
 
 class _Sensor(Strict):
     id: Id = Field(
         description="name of the sensor, unique in the line; its columns are meas.<id>.* and "
-        "true.<id>.*")
+        "true.<id>.*"
+    )
     element: Id = Field(description="id of the element the sensor is on")
     rate: Annotated[Frequency, Field(gt=0)] | None = Field(
         None, description="sample rate [Hz]; default: the scenario's record rate"
@@ -473,13 +528,15 @@ class _Sensor(Strict):
     filter: NonNegTime = Field(0.0, description="first-order filter time constant [s]")
     gain: float = Field(1.0, description="calibration gain g in y = g·x + b")
     range: pair(float) | None = Field(
-        None, description="measuring range [low, high] in the reading's SI unit; recorded "
-        "samples outside are clipped and flagged (censored data)")
+        None,
+        description="measuring range [low, high] in the reading's SI unit; recorded "
+        "samples outside are clipped and flagged (censored data)",
+    )
     quantization: Annotated[float, Field(ge=0)] = Field(
-        0.0, description="resolution of the recorded reading (SI unit of the reading)")
+        0.0, description="resolution of the recorded reading (SI unit of the reading)"
+    )
     delay: NonNegTime = Field(0.0, description="transport/processing delay of the record [s]")
-    noise_per_speed: Annotated[float, Field(ge=0)] = Field(
-        0.0, description=NOISE_PER_SPEED_DOC)
+    noise_per_speed: Annotated[float, Field(ge=0)] = Field(0.0, description=NOISE_PER_SPEED_DOC)
 
     @model_validator(mode="after")
     def _check_range(self):
@@ -508,14 +565,19 @@ class Encoder(_Sensor):
 
     type: Literal["encoder"] = Field(description="selects an encoder")
     counts_per_rev: Annotated[int, Field(gt=0)] | None = Field(
-        None, description="edges per revolution: the recorded speed is the difference of the "
+        None,
+        description="edges per revolution: the recorded speed is the difference of the "
         "accumulated edge count over the counting window, times 2π/(counts_per_rev·window) "
-        "(unbiased; resolution one count per window). Default: an ideal (analogue) speed")
+        "(unbiased; resolution one count per window). Default: an ideal (analogue) speed",
+    )
     window: Annotated[Time, Field(gt=0)] | None = Field(
-        None, description="counting window of an encoder with counts_per_rev [s]; default: "
-        "one sensor sample period")
+        None,
+        description="counting window of an encoder with counts_per_rev [s]; default: "
+        "one sensor sample period",
+    )
     noise: Annotated[AngularSpeed, Field(ge=0)] = Field(
-        0.0, description="noise std of the speed reading [rad/s]")
+        0.0, description="noise std of the speed reading [rad/s]"
+    )
     offset: AngularSpeed = Field(0.0, description="calibration offset b [rad/s]")
 
     @model_validator(mode="after")
@@ -530,7 +592,8 @@ class RollDiameter(_Sensor):
 
     type: Literal["roll_diameter"] = Field(description="selects a roll-diameter sensor")
     noise: Annotated[Length, Field(ge=0)] = Field(
-        0.0, description="noise std of the diameter reading [m]")
+        0.0, description="noise std of the diameter reading [m]"
+    )
     offset: Length = Field(0.0, description="calibration offset b [m]")
 
 
@@ -540,11 +603,15 @@ class DancerPosition(_Sensor):
 
     type: Literal["dancer_position"] = Field(description="selects a dancer-position sensor")
     noise: NumberOrText = Field(
-        0.0, description="noise std of the position reading (≥ 0): a length, or an angle for "
-        "a pivoted dancer's arm; a number in m (rad) or a string with units")
+        0.0,
+        description="noise std of the position reading (≥ 0): a length, or an angle for "
+        "a pivoted dancer's arm; a number in m (rad) or a string with units",
+    )
     offset: NumberOrText = Field(
-        0.0, description="calibration offset b: a length, or an angle for a pivoted dancer's "
-        "arm; a number in m (rad) or a string with units")
+        0.0,
+        description="calibration offset b: a length, or an angle for a pivoted dancer's "
+        "arm; a number in m (rad) or a string with units",
+    )
 
 
 class RelaxedPitchLaw(Strict):
@@ -554,8 +621,10 @@ class RelaxedPitchLaw(Strict):
     q0: PosLength = Field(description="relaxed pitch at R = 0 [m]")
     q1: InverseArea = Field(description="coefficient of R³ [1/m²] (may be negative)")
     unwind: Id | None = Field(
-        None, description="the unwind whose roll radius R is used; default: the line's unwind "
-        "(the first element)")
+        None,
+        description="the unwind whose roll radius R is used; default: the line's unwind "
+        "(the first element)",
+    )
 
 
 class PitchVariation(Strict):
@@ -569,7 +638,8 @@ class PitchVariation(Strict):
     correlation_length: Annotated[Length, Field(ge=1e-3)] = Field(
         description="correlation length ℓ along the web [m] (correlation 1/e at lag ℓ, as "
         "for a wound_in_strain disturbance, whose correlation is exponential where this one "
-        "is Gaussian); at least 1 mm")
+        "is Gaussian); at least 1 mm"
+    )
 
 
 class PitchLength(Strict):
@@ -582,50 +652,62 @@ class PitchLength(Strict):
 
     id: Id = Field(
         description="name of the sensor, unique in the line; its columns are meas.<id>.* and "
-        "true.<id>.*")
+        "true.<id>.*"
+    )
     type: Literal["pitch_length"] = Field(description="selects a pitch-length (vision) sensor")
     span: Id = Field(description="id of the span the camera sees")
     relaxed_pitch: PosLength | None = Field(
-        None, description="constant pitch length L0 of the relaxed web [m]; give this or "
-        "relaxed_pitch_law")
+        None,
+        description="constant pitch length L0 of the relaxed web [m]; give this or "
+        "relaxed_pitch_law",
+    )
     relaxed_pitch_law: RelaxedPitchLaw | None = Field(
-        None, description="L0(R) = q0 + q1·R³ of the unwind roll's radius R (thesis eq. 2.24)")
+        None, description="L0(R) = q0 + q1·R³ of the unwind roll's radius R (thesis eq. 2.24)"
+    )
     pitch_variation: PitchVariation | None = Field(
-        None, description="zero-mean printing variation of L0, correlated along the web")
+        None, description="zero-mean printing variation of L0, correlated along the web"
+    )
     rate: Annotated[Frequency, Field(gt=0)] | None = Field(
-        None, description="sample rate [Hz]; default: the scenario's record rate")
+        None, description="sample rate [Hz]; default: the scenario's record rate"
+    )
     filter: NonNegTime = Field(0.0, description="first-order filter time constant [s]")
     gain: float = Field(1.0, description="calibration gain g in y = g·x + b")
     noise: Annotated[Length, Field(ge=0)] = Field(
-        0.0, description="noise std of the pitch reading [m]")
+        0.0, description="noise std of the pitch reading [m]"
+    )
     offset: Length = Field(0.0, description="calibration offset b [m]")
     range: pair(float) | None = Field(None, description="[low, high] in m")
     quantization: Annotated[float, Field(ge=0)] = Field(0.0, description="resolution [m]")
     delay: NonNegTime = Field(0.0, description="processing delay of the record [s]")
-    noise_per_speed: Annotated[float, Field(ge=0)] = Field(
-        0.0, description=NOISE_PER_SPEED_DOC)
+    noise_per_speed: Annotated[float, Field(ge=0)] = Field(0.0, description=NOISE_PER_SPEED_DOC)
 
     @model_validator(mode="after")
     def _check_pitch(self):
         if (self.relaxed_pitch is None) == (self.relaxed_pitch_law is None):
-            raise ValueError("give either relaxed_pitch (a constant L0) or relaxed_pitch_law "
-                             "(L0(R) = q0 + q1·R³), exactly one of them")
+            raise ValueError(
+                "give either relaxed_pitch (a constant L0) or relaxed_pitch_law "
+                "(L0(R) = q0 + q1·R³), exactly one of them"
+            )
         L0 = self.relaxed_pitch if self.relaxed_pitch is not None else self.relaxed_pitch_law.q0
         if self.pitch_variation is not None and not 10 * self.pitch_variation.std < L0:
-            raise ValueError(f"pitch_variation.std {self.pitch_variation.std:g} m must be below "
-                             f"a tenth of the relaxed pitch {L0:g} m")
+            raise ValueError(
+                f"pitch_variation.std {self.pitch_variation.std:g} m must be below "
+                f"a tenth of the relaxed pitch {L0:g} m"
+            )
         if self.range is not None and not self.range[0] < self.range[1]:
             raise ValueError("range must be [low, high] with low < high")
         return self
 
 
-Sensor = Annotated[LoadCell | Encoder | RollDiameter | DancerPosition | PitchLength,
-                   Field(discriminator="type")]
+Sensor = Annotated[
+    LoadCell | Encoder | RollDiameter | DancerPosition | PitchLength, Field(discriminator="type")
+]
 
 
 class _Controller(Strict):
     id: Id = Field(
-        description="name of the controller, unique in the line; its columns are ctrl.<id>.*")
+        description="name of the controller, unique in the line; its columns are ctrl.<id>.*"
+    )
     element: Id = Field(description="id of the element whose drive the controller commands")
     kp: float = Field(description="proportional gain")
     ki: Annotated[float, Field(ge=0)] = Field(0.0, description="integral gain")
@@ -641,8 +723,9 @@ class SpeedPI(_Controller):
     type: Literal["speed_pi"] = Field(description="selects a speed loop")
     master: bool = Field(False, description="the master speed node sets line speed (draw 0)")
     draw: Dimensionless = Field(
-        0.0, description="relative speed offset from line speed (0.01: 1 % faster); the master "
-        "has 0")
+        0.0,
+        description="relative speed offset from line speed (0.01: 1 % faster); the master has 0",
+    )
     torque_feedforward: bool = Field(True, description="add J·d(omega_ref)/dt")
     encoder: Id | None = Field(None, description="encoder sensor read; default true speed")
 
@@ -652,9 +735,11 @@ class InertiaEstimate(Strict):
     physics.md eq. 1.12 at the radius estimate) or a fixed ``value``."""
 
     factor: Annotated[Dimensionless, Field(ge=0)] | None = Field(
-        None, description="J_est = factor·J(R_hat); 1 is the exact inertia")
+        None, description="J_est = factor·J(R_hat); 1 is the exact inertia"
+    )
     value: Annotated[Inertia, Field(ge=0)] | None = Field(
-        None, description="J_est = value [kg m^2], whatever the radius")
+        None, description="J_est = value [kg m^2], whatever the radius"
+    )
 
     @model_validator(mode="after")
     def _check(self):
@@ -677,26 +762,38 @@ class FeedForward(Strict):
 
     tension: bool = Field(True, description="the tension term sgn·T_ref·R_hat")
     inertia: Annotated[
-        InertiaEstimate, BeforeValidator(_inertia_from_bool),
-        WithJsonSchema({"anyOf": [{"type": "boolean"}, InertiaEstimate.model_json_schema()],
-                        "description": "inertia compensation J_est·alpha: true (J(R_hat)), "
-                        "false (off), {factor: f} or {value: J}"})] = Field(
-        default_factory=lambda: InertiaEstimate(factor=1.0))
+        InertiaEstimate,
+        BeforeValidator(_inertia_from_bool),
+        WithJsonSchema(
+            {
+                "anyOf": [{"type": "boolean"}, InertiaEstimate.model_json_schema()],
+                "description": "inertia compensation J_est·alpha: true (J(R_hat)), "
+                "false (off), {factor: f} or {value: J}",
+            }
+        ),
+    ] = Field(default_factory=lambda: InertiaEstimate(factor=1.0))
     radius_rate: bool = Field(
-        True, description="the radius-rate part -sgn·c_w·v^2/(2π·R_hat^3) of alpha (the roll "
-        "must spin up as its radius shrinks, physics.md 1.4)")
-    friction: bool = Field(True, description="friction compensation tau_f(omega) with the "
-                                             "element's nominal friction")
+        True,
+        description="the radius-rate part -sgn·c_w·v^2/(2π·R_hat^3) of alpha (the roll "
+        "must spin up as its radius shrinks, physics.md 1.4)",
+    )
+    friction: bool = Field(
+        True, description="friction compensation tau_f(omega) with the element's nominal friction"
+    )
 
     def is_default(self) -> bool:
         """True when every term is on with the exact inertia."""
-        return (self.tension and self.radius_rate and self.friction
-                and self.inertia.factor == 1.0)
+        return self.tension and self.radius_rate and self.friction and self.inertia.factor == 1.0
 
     def is_off(self) -> bool:
         """True when every term is off (``feedforward: false``)."""
-        return not (self.tension or self.radius_rate or self.friction
-                    or self.inertia.value or self.inertia.factor)
+        return not (
+            self.tension
+            or self.radius_rate
+            or self.friction
+            or self.inertia.value
+            or self.inertia.factor
+        )
 
 
 def _feedforward_from_bool(v):
@@ -714,16 +811,22 @@ class TensionPI(_Controller):
     type: Literal["tension_pi"] = Field(description="selects a tension loop")
     sensor: Id = Field(description="id of the load_cell or pitch_length sensor the loop reads")
     setpoint: Annotated[Force, Field(ge=0)] = Field(
-        description="tension set-point [N] (the scenario's programme can change it)")
+        description="tension set-point [N] (the scenario's programme can change it)"
+    )
     output_limit: Annotated[float, Field(gt=0)] | None = Field(
         None, description="|PI output| limit: N (torque mode) or m/s (speed trim)"
     )
     feedforward: Annotated[
-        FeedForward, BeforeValidator(_feedforward_from_bool),
-        WithJsonSchema({"anyOf": [{"type": "boolean"}, FeedForward.model_json_schema()],
-                        "description": "torque mode: true (every term), false (none) or the "
-                        "terms {tension, inertia, radius_rate, friction}"})] = Field(
-        default_factory=FeedForward)
+        FeedForward,
+        BeforeValidator(_feedforward_from_bool),
+        WithJsonSchema(
+            {
+                "anyOf": [{"type": "boolean"}, FeedForward.model_json_schema()],
+                "description": "torque mode: true (every term), false (none) or the "
+                "terms {tension, inertia, radius_rate, friction}",
+            }
+        ),
+    ] = Field(default_factory=FeedForward)
     radius_sensor: Id | None = Field(
         None, description="roll_diameter sensor for the radius estimate; default true radius"
     )
@@ -739,8 +842,9 @@ class DancerPI(_Controller):
     type: Literal["dancer_pi"] = Field(description="selects a dancer (or festoon) position loop")
     dancer: Id = Field(description="dancer element id or festoon span id")
     sensor: Id | None = Field(None, description="dancer_position sensor; default true position")
-    setpoint: float | None = Field(None, description="position set-point; default the "
-                                   "initial position")
+    setpoint: float | None = Field(
+        None, description="position set-point; default the initial position"
+    )
     output_limit: Annotated[float, Field(gt=0)] | None = Field(None, description="[m/s]")
 
 
@@ -757,15 +861,17 @@ class Line(Strict):
     )
     web: Web = Field(description="the web material and its cross-section")
     elements: Annotated[list[Element], Field(min_length=2, max_length=MAX_LINE_ITEMS)] = Field(
-        description="rolls and rollers in web order; span i joins element i-1 to element i")
+        description="rolls and rollers in web order; span i joins element i-1 to element i"
+    )
     spans: Annotated[list[Span], Field(max_length=MAX_LINE_ITEMS)] = Field(
-        description="one entry per span (number of elements - 1), in web order")
+        description="one entry per span (number of elements - 1), in web order"
+    )
     sensors: Annotated[list[Sensor], Field(max_length=MAX_LINE_ITEMS)] = Field(
-        description="measurements; each records meas.* and true.* columns",
-        default_factory=list)
+        description="measurements; each records meas.* and true.* columns", default_factory=list
+    )
     controllers: Annotated[list[Controller], Field(max_length=MAX_LINE_ITEMS)] = Field(
-        description="speed, tension and dancer loops",
-        default_factory=list)
+        description="speed, tension and dancer loops", default_factory=list
+    )
 
     @model_validator(mode="after")
     def _cross_check(self):
@@ -813,10 +919,16 @@ def check_line(line: Line) -> list[tuple[str, str]]:
     """Cross-field checks of a line; returns ``[(yaml_path, message), ...]`` in the order
     of the checks (the first is the one reported)."""
     ix = _LineIndex.of(line)
-    return [*_check_topology(line), *_check_geometry(line), *_check_sensors(line, ix),
-            *_check_dancer_loops(line, ix), *_check_splicers(line, ix),
-            *_check_drive_loops(line, ix), *_check_tension_loops(line, ix),
-            *_check_torque_commands(line)]
+    return [
+        *_check_topology(line),
+        *_check_geometry(line),
+        *_check_sensors(line, ix),
+        *_check_dancer_loops(line, ix),
+        *_check_splicers(line, ix),
+        *_check_drive_loops(line, ix),
+        *_check_tension_loops(line, ix),
+        *_check_torque_commands(line),
+    ]
 
 
 @dataclass
@@ -832,14 +944,18 @@ class _LineIndex:
     @classmethod
     def of(cls, line: Line) -> _LineIndex:
         els = line.elements
-        festoons = {sp.id or f"span{i + 1}" for i, sp in enumerate(line.spans)
-                    if sp.festoon is not None}
-        return cls(by_id={e.id: (i, e) for i, e in enumerate(els)},
-                   movers={e.id for e in els if e.type in DANCERS} | festoons,
-                   sensors={s.id: s for s in line.sensors},
-                   span_names={sp.id or f"span{i + 1}" for i, sp in enumerate(line.spans)},
-                   speed_ctrl={c.element: j for j, c in enumerate(line.controllers)
-                               if c.type == "speed_pi"})
+        festoons = {
+            sp.id or f"span{i + 1}" for i, sp in enumerate(line.spans) if sp.festoon is not None
+        }
+        return cls(
+            by_id={e.id: (i, e) for i, e in enumerate(els)},
+            movers={e.id for e in els if e.type in DANCERS} | festoons,
+            sensors={s.id: s for s in line.sensors},
+            span_names={sp.id or f"span{i + 1}" for i, sp in enumerate(line.spans)},
+            speed_ctrl={
+                c.element: j for j, c in enumerate(line.controllers) if c.type == "speed_pi"
+            },
+        )
 
 
 def _check_topology(line: Line) -> list[tuple[str, str]]:
@@ -848,20 +964,34 @@ def _check_topology(line: Line) -> list[tuple[str, str]]:
     out: list[tuple[str, str]] = []
     els = line.elements
     if els[0].type != "unwind":
-        out.append(("elements[0].type",
-                    f"the first element must be an unwind, got '{els[0].type}'"))
+        out.append(
+            ("elements[0].type", f"the first element must be an unwind, got '{els[0].type}'")
+        )
     if els[-1].type != "rewind":
-        out.append((f"elements[{len(els) - 1}].type",
-                    f"the last element must be a rewind, got '{els[-1].type}'"))
+        out.append(
+            (
+                f"elements[{len(els) - 1}].type",
+                f"the last element must be a rewind, got '{els[-1].type}'",
+            )
+        )
     for i, e in enumerate(els[1:-1], start=1):
         if e.type in ("unwind", "rewind"):
             out.append((f"elements[{i}].type", f"'{e.type}' is allowed only at the line ends"))
     if len(line.spans) != len(els) - 1:
-        out.append(("spans", f"expected {len(els) - 1} spans (one between each pair of consecutive "
-                             f"elements), got {len(line.spans)}"))
+        out.append(
+            (
+                "spans",
+                f"expected {len(els) - 1} spans (one between each pair of consecutive "
+                f"elements), got {len(line.spans)}",
+            )
+        )
     seen: dict[str, str] = {}
-    groups = [("elements", els), ("spans", line.spans), ("sensors", line.sensors),
-              ("controllers", line.controllers)]
+    groups = [
+        ("elements", els),
+        ("spans", line.spans),
+        ("sensors", line.sensors),
+        ("controllers", line.controllers),
+    ]
     for group, items in groups:
         for i, item in enumerate(items):
             if item.id is None:
@@ -873,9 +1003,13 @@ def _check_topology(line: Line) -> list[tuple[str, str]]:
         if e.type in ("unwind", "rewind"):
             r = e.roll
             if r.core_radius >= r.outer_radius:
-                out.append((f"elements[{i}].roll.core_radius",
-                            f"core radius {r.core_radius:g} m must be smaller than the roll's "
-                            f"outer radius {r.outer_radius:g} m"))
+                out.append(
+                    (
+                        f"elements[{i}].roll.core_radius",
+                        f"core radius {r.core_radius:g} m must be smaller than the roll's "
+                        f"outer radius {r.outer_radius:g} m",
+                    )
+                )
     return out
 
 
@@ -891,22 +1025,33 @@ def _check_sensors(line: Line, ix: _LineIndex) -> list[tuple[str, str]]:
             continue
         if s.type == "dancer_position":
             if s.element not in ix.movers:
-                out.append((f"sensors[{j}].element",
-                            _missing("dancer or festoon span", s.element, ix.movers)))
+                out.append(
+                    (
+                        f"sensors[{j}].element",
+                        _missing("dancer or festoon span", s.element, ix.movers),
+                    )
+                )
             continue
         if s.element not in by_id:
             out.append((f"sensors[{j}].element", _missing("element", s.element, by_id)))
             continue
         _, e = by_id[s.element]
         if s.type == "roll_diameter" and e.type not in ("unwind", "rewind"):
-            out.append((f"sensors[{j}].element",
-                        f"a roll_diameter sensor needs an unwind or rewind, '{e.id}' is {e.type}"))
+            out.append(
+                (
+                    f"sensors[{j}].element",
+                    f"a roll_diameter sensor needs an unwind or rewind, '{e.id}' is {e.type}",
+                )
+            )
         if s.type in ("encoder", "load_cell") and not hasattr(e, "friction"):
             out.append((f"sensors[{j}].element", f"'{e.id}' cannot carry a {s.type}"))
-        elif s.type == "load_cell" and sum(load_cell_weights(line, by_id[s.element][0],
-                                                             s)) <= 1e-9:
-            out.append((f"sensors[{j}].axis_angle",
-                        f"load cell '{s.id}': its measuring axis sees no tension"))
+        elif s.type == "load_cell" and sum(load_cell_weights(line, by_id[s.element][0], s)) <= 1e-9:
+            out.append(
+                (
+                    f"sensors[{j}].axis_angle",
+                    f"load cell '{s.id}': its measuring axis sees no tension",
+                )
+            )
     return out
 
 
@@ -923,19 +1068,32 @@ def _check_dancer_loops(line: Line, ix: _LineIndex) -> list[tuple[str, str]]:
         if c.sensor is not None:
             s = sensors.get(c.sensor)
             if s is None or s.type != "dancer_position":
-                out.append((f"{p}.sensor", _missing("dancer_position sensor", c.sensor,
-                                                    {k: v for k, v in sensors.items()
-                                                     if v.type == "dancer_position"})))
+                out.append(
+                    (
+                        f"{p}.sensor",
+                        _missing(
+                            "dancer_position sensor",
+                            c.sensor,
+                            {k: v for k, v in sensors.items() if v.type == "dancer_position"},
+                        ),
+                    )
+                )
             elif s.element != c.dancer:
-                out.append((f"{p}.sensor", f"sensor '{s.id}' is on '{s.element}', not on "
-                                           f"'{c.dancer}'"))
+                out.append(
+                    (f"{p}.sensor", f"sensor '{s.id}' is on '{s.element}', not on '{c.dancer}'")
+                )
         if c.element not in ix.by_id:
             out.append((f"{p}.element", _missing("element", c.element, ix.by_id)))
             continue
         drive = getattr(ix.by_id[c.element][1], "drive", None)
         if drive is None or (drive.type == "torque" and c.element not in ix.speed_ctrl):
-            out.append((f"{p}.element", f"a dancer_pi trims a speed: '{c.element}' needs an "
-                                        f"ideal_speed drive or a speed_pi"))
+            out.append(
+                (
+                    f"{p}.element",
+                    f"a dancer_pi trims a speed: '{c.element}' needs an "
+                    f"ideal_speed drive or a speed_pi",
+                )
+            )
     return out
 
 
@@ -951,18 +1109,33 @@ def _check_splicers(line: Line, ix: _LineIndex) -> list[tuple[str, str]]:
         if e.spare_roll is None:
             out.append((f"{p}.spare_roll", "a splicer needs the spare roll it loads"))
         elif sp.trigger_radius is not None and not (
-                e.roll.core_radius < sp.trigger_radius < e.spare_roll.outer_radius):
-            out.append((f"{p}.splicer.trigger_radius",
-                        f"{sp.trigger_radius:g} m must lie between the core radius "
-                        f"{e.roll.core_radius:g} m and the spare roll's radius "
-                        f"{e.spare_roll.outer_radius:g} m"))
+            e.roll.core_radius < sp.trigger_radius < e.spare_roll.outer_radius
+        ):
+            out.append(
+                (
+                    f"{p}.splicer.trigger_radius",
+                    f"{sp.trigger_radius:g} m must lie between the core radius "
+                    f"{e.roll.core_radius:g} m and the spare roll's radius "
+                    f"{e.spare_roll.outer_radius:g} m",
+                )
+            )
         if sp.type == "zero_speed":
             if e.id not in ix.speed_ctrl and e.drive.type != "ideal_speed":
-                out.append((f"{p}.splicer.type", "a zero_speed splice stops the unwind under "
-                                                 "speed control: add a speed_pi on it"))
+                out.append(
+                    (
+                        f"{p}.splicer.type",
+                        "a zero_speed splice stops the unwind under "
+                        "speed control: add a speed_pi on it",
+                    )
+                )
             if not ix.movers:
-                out.append((f"{p}.splicer.type", "a zero_speed splice needs a dancer or a "
-                                                 "festoon to supply web while the roll stops"))
+                out.append(
+                    (
+                        f"{p}.splicer.type",
+                        "a zero_speed splice needs a dancer or a "
+                        "festoon to supply web while the roll stops",
+                    )
+                )
     return out
 
 
@@ -985,36 +1158,69 @@ def _check_drive_loops(line: Line, ix: _LineIndex) -> list[tuple[str, str]]:
             continue
         if c.type == "speed_pi":
             if speed_ctrl.get(c.element, j) != j:
-                out.append((f"{p}.element", f"'{e.id}' already has a speed controller "
-                                            f"(controllers[{speed_ctrl[c.element]}])"))
+                out.append(
+                    (
+                        f"{p}.element",
+                        f"'{e.id}' already has a speed controller "
+                        f"(controllers[{speed_ctrl[c.element]}])",
+                    )
+                )
             if drive.type != "torque":
-                out.append((f"{p}.element", f"speed_pi needs a torque drive; '{e.id}' has an "
-                                            f"ideal_speed drive (its speed is already imposed)"))
+                out.append(
+                    (
+                        f"{p}.element",
+                        f"speed_pi needs a torque drive; '{e.id}' has an "
+                        f"ideal_speed drive (its speed is already imposed)",
+                    )
+                )
             if c.encoder is not None:
                 s = sensors.get(c.encoder)
                 if s is None or s.type != "encoder":
                     out.append((f"{p}.encoder", _missing("encoder sensor", c.encoder, sensors)))
                 elif s.element != c.element:
-                    out.append((f"{p}.encoder", f"encoder '{s.id}' is on '{s.element}', not on "
-                                                f"'{c.element}'"))
+                    out.append(
+                        (
+                            f"{p}.encoder",
+                            f"encoder '{s.id}' is on '{s.element}', not on '{c.element}'",
+                        )
+                    )
             if c.master and c.draw != 0:
-                out.append((f"{p}.draw",
-                            "the master speed node defines line speed: draw must be 0"))
+                out.append(
+                    (f"{p}.draw", "the master speed node defines line speed: draw must be 0")
+                )
         else:
             s = sensors.get(c.sensor)
             if s is None or s.type not in ("load_cell", "pitch_length"):
-                out.append((f"{p}.sensor", _missing(
-                    "load_cell or pitch_length sensor", c.sensor,
-                    {k: v for k, v in sensors.items() if v.type in ("load_cell",
-                                                                    "pitch_length")})))
+                out.append(
+                    (
+                        f"{p}.sensor",
+                        _missing(
+                            "load_cell or pitch_length sensor",
+                            c.sensor,
+                            {
+                                k: v
+                                for k, v in sensors.items()
+                                if v.type in ("load_cell", "pitch_length")
+                            },
+                        ),
+                    )
+                )
             if c.radius_sensor is not None:
                 s = sensors.get(c.radius_sensor)
                 if s is None or s.type != "roll_diameter":
-                    out.append((f"{p}.radius_sensor",
-                                _missing("roll_diameter sensor", c.radius_sensor, sensors)))
+                    out.append(
+                        (
+                            f"{p}.radius_sensor",
+                            _missing("roll_diameter sensor", c.radius_sensor, sensors),
+                        )
+                    )
                 elif s.element != c.element:
-                    out.append((f"{p}.radius_sensor",
-                                f"sensor '{s.id}' is on '{s.element}', not on '{c.element}'"))
+                    out.append(
+                        (
+                            f"{p}.radius_sensor",
+                            f"sensor '{s.id}' is on '{s.element}', not on '{c.element}'",
+                        )
+                    )
     masters = [j for j, c in enumerate(line.controllers) if c.type == "speed_pi" and c.master]
     if len(masters) > 1:
         out.append((f"controllers[{masters[1]}].master", "only one master speed node is allowed"))
@@ -1035,23 +1241,42 @@ def _check_tension_loops(line: Line, ix: _LineIndex) -> list[tuple[str, str]]:
         if drive is None:
             continue
         if c.element in tension_ctrl:
-            out.append((f"{p}.element", f"'{e.id}' already has a tension controller "
-                                        f"(controllers[{tension_ctrl[c.element]}])"))
+            out.append(
+                (
+                    f"{p}.element",
+                    f"'{e.id}' already has a tension controller "
+                    f"(controllers[{tension_ctrl[c.element]}])",
+                )
+            )
         tension_ctrl[c.element] = j
         roll = e.type in ("unwind", "rewind")
         if drive.type == "torque" and not roll and c.element not in ix.speed_ctrl:
-            out.append((f"{p}.element", f"a tension_pi on driven element '{e.id}' trims its speed "
-                                        f"and needs a speed_pi on the same element"))
+            out.append(
+                (
+                    f"{p}.element",
+                    f"a tension_pi on driven element '{e.id}' trims its speed "
+                    f"and needs a speed_pi on the same element",
+                )
+            )
         if drive.type == "torque" and roll and c.element in ix.speed_ctrl:
-            out.append((f"{p}.element", f"'{e.id}' has both a speed_pi and a torque-mode "
-                                        f"tension_pi; use one of them"))
+            out.append(
+                (
+                    f"{p}.element",
+                    f"'{e.id}' has both a speed_pi and a torque-mode tension_pi; use one of them",
+                )
+            )
         if c.radius_sensor is not None and not roll:
             out.append((f"{p}.radius_sensor", "a radius sensor applies only to unwind/rewind"))
         ff = c.feedforward
         if not (roll and drive.type == "torque") and not (ff.is_default() or ff.is_off()):
-            out.append((f"{p}.feedforward", f"feed-forward terms apply to torque mode (a "
-                                            f"tension_pi on an unwind/rewind with a torque "
-                                            f"drive); on '{e.id}' the loop trims a speed"))
+            out.append(
+                (
+                    f"{p}.feedforward",
+                    f"feed-forward terms apply to torque mode (a "
+                    f"tension_pi on an unwind/rewind with a torque "
+                    f"drive); on '{e.id}' the loop trims a speed",
+                )
+            )
     return out
 
 
@@ -1063,8 +1288,9 @@ def _check_torque_commands(line: Line) -> list[tuple[str, str]]:
         if drive is None or drive.torque_command is None:
             continue
         if drive.type != "torque":
-            problem = "an ideal_speed drive imposes the speed; a torque command needs a " \
-                      "torque drive"
+            problem = (
+                "an ideal_speed drive imposes the speed; a torque command needs a torque drive"
+            )
         else:
             problem = torque_problem(line, e.id)
         if problem:
@@ -1110,15 +1336,21 @@ def draw_problem(line: Line, element_id: str) -> str | None:
         return None
     cc = _commanding_controller(line, element_id)
     if cc is None:
-        return (f"'{element_id}' has a torque drive without a speed_pi: it has no speed "
-                f"reference to draw")
+        return (
+            f"'{element_id}' has a torque drive without a speed_pi: it has no speed "
+            f"reference to draw"
+        )
     j, c = cc
     if c.type == "tension_pi":
-        return (f"'{element_id}' is tension-controlled in torque mode (controllers[{j}]): it "
-                f"has no speed reference to draw")
+        return (
+            f"'{element_id}' is tension-controlled in torque mode (controllers[{j}]): it "
+            f"has no speed reference to draw"
+        )
     if c.master:
-        return (f"'{element_id}' is the master speed node (controllers[{j}]): it defines line "
-                f"speed, so its draw stays 0")
+        return (
+            f"'{element_id}' is the master speed node (controllers[{j}]): it defines line "
+            f"speed, so its draw stays 0"
+        )
     return None
 
 
@@ -1129,13 +1361,17 @@ def torque_problem(line: Line, element_id: str) -> str | None:
     if problem:
         return problem
     if drive.type != "torque":
-        return (f"'{element_id}' has an ideal_speed drive (its speed is imposed); a torque "
-                f"command needs a torque drive")
+        return (
+            f"'{element_id}' has an ideal_speed drive (its speed is imposed); a torque "
+            f"command needs a torque drive"
+        )
     cc = _commanding_controller(line, element_id)
     if cc is not None:
         j, c = cc
-        return (f"the torque of '{element_id}' is commanded by {c.type} '{c.id}' "
-                f"(controllers[{j}]); a torque command is for a drive without a controller")
+        return (
+            f"the torque of '{element_id}' is commanded by {c.type} '{c.id}' "
+            f"(controllers[{j}]); a torque command is for a drive without a controller"
+        )
     return None
 
 
@@ -1165,10 +1401,15 @@ def _check_pitch_law(j: int, s, by_id) -> list[tuple[str, str]]:
     rolls = [e.roll] + ([e.spare_roll] if e.spare_roll is not None else [])
     for r in rolls:
         for R in (r.core_radius, r.outer_radius):
-            L0 = law.q0 + law.q1 * R ** 3
+            L0 = law.q0 + law.q1 * R**3
             if not L0 > 0:
-                return [(f"{p}.q1", f"L0 = q0 + q1·R³ = {L0:g} m at R = {R:g} m of '{e.id}'; "
-                                    "the relaxed pitch must stay positive over the roll")]
+                return [
+                    (
+                        f"{p}.q1",
+                        f"L0 = q0 + q1·R³ = {L0:g} m at R = {R:g} m of '{e.id}'; "
+                        "the relaxed pitch must stay positive over the roll",
+                    )
+                ]
     return []
 
 
@@ -1182,11 +1423,21 @@ def _check_geometry(line: Line) -> list[tuple[str, str]]:
         a, b = els[i], els[i + 1]
         near_dancer = a.type in DANCERS or b.type in DANCERS
         if a.type in DANCERS and b.type in DANCERS:
-            out.append((f"spans[{i}]", f"two dancers next to each other ('{a.id}', '{b.id}') "
-                                       f"are not supported; put a roller between them"))
+            out.append(
+                (
+                    f"spans[{i}]",
+                    f"two dancers next to each other ('{a.id}', '{b.id}') "
+                    f"are not supported; put a roller between them",
+                )
+            )
         elif near_dancer and sp.length is not None:
-            out.append((f"spans[{i}].length", "the length of a span next to a dancer comes from "
-                                              "the geometry (positions); leave it out"))
+            out.append(
+                (
+                    f"spans[{i}].length",
+                    "the length of a span next to a dancer comes from "
+                    "the geometry (positions); leave it out",
+                )
+            )
         elif not near_dancer and sp.length is None:
             out.append((f"spans[{i}].length", "missing: give the span's free length"))
         if sp.festoon is not None:
@@ -1194,14 +1445,23 @@ def _check_geometry(line: Line) -> list[tuple[str, str]]:
             if near_dancer:
                 out.append((f"spans[{i}].festoon", "a festoon span cannot end on a dancer"))
             if not f.stroke[0] < f.stroke[1]:
-                out.append((f"spans[{i}].festoon.stroke", "must be [x_min, x_max] with "
-                                                          "x_min < x_max"))
+                out.append(
+                    (f"spans[{i}].festoon.stroke", "must be [x_min, x_max] with x_min < x_max")
+                )
             elif not f.stroke[0] <= f.initial_position <= f.stroke[1]:
-                out.append((f"spans[{i}].festoon.initial_position",
-                            f"{f.initial_position:g} m is outside the stroke {list(f.stroke)}"))
+                out.append(
+                    (
+                        f"spans[{i}].festoon.initial_position",
+                        f"{f.initial_position:g} m is outside the stroke {list(f.stroke)}",
+                    )
+                )
             elif sp.length is not None and sp.length + 2 * f.moving_rollers * f.stroke[0] <= 0:
-                out.append((f"spans[{i}].festoon.stroke", "the span length "
-                                                          "length + 2n·x_min must stay positive"))
+                out.append(
+                    (
+                        f"spans[{i}].festoon.stroke",
+                        "the span length length + 2n·x_min must stay positive",
+                    )
+                )
     for i, e in enumerate(els):
         if e.type not in DANCERS:
             continue
@@ -1213,25 +1473,39 @@ def _check_geometry(line: Line) -> list[tuple[str, str]]:
             if not lo < hi:
                 out.append((f"{p}.travel_range", "must be [x_min, x_max] with x_min < x_max"))
             elif not lo <= e.initial_travel <= hi:
-                out.append((f"{p}.initial_travel",
-                            f"{e.initial_travel:g} m is outside the travel range {[lo, hi]}"))
+                out.append(
+                    (
+                        f"{p}.initial_travel",
+                        f"{e.initial_travel:g} m is outside the travel range {[lo, hi]}",
+                    )
+                )
         else:
             lo, hi = e.angle_range
             if e.position is not None:
-                out.append((f"{p}.position", "a pivot dancer's roller position follows from "
-                                             "pivot, arm_length and arm_angle; leave it out"))
+                out.append(
+                    (
+                        f"{p}.position",
+                        "a pivot dancer's roller position follows from "
+                        "pivot, arm_length and arm_angle; leave it out",
+                    )
+                )
             if not lo < hi:
                 out.append((f"{p}.angle_range", "must be [min, max] with min < max"))
             elif not lo <= e.arm_angle <= hi:
-                out.append((f"{p}.arm_angle", f"{e.arm_angle:g} rad is outside the angle range "
-                                              f"{[lo, hi]}"))
+                out.append(
+                    (f"{p}.arm_angle", f"{e.arm_angle:g} rad is outside the angle range {[lo, hi]}")
+                )
         placed = True
         for j in (i - 1, i + 1):
             n = els[j]
             if n.position is None or n.wrap is None:
                 placed = False
-                out.append((f"elements[{j}].position",
-                            f"'{n.id}' is next to dancer '{e.id}': give its position and wrap"))
+                out.append(
+                    (
+                        f"elements[{j}].position",
+                        f"'{n.id}' is next to dancer '{e.id}': give its position and wrap",
+                    )
+                )
         problem = dancer_overlap(line, i) if placed and not out else None
         if problem:
             out.append((p, problem))
@@ -1253,8 +1527,10 @@ def dancer_offsets(line: Line, k: int) -> tuple[float, float]:
     between roller centres: upstream (neighbour k-1 to the dancer) and downstream."""
     e, a, b = line.elements[k], line.elements[k - 1], line.elements[k + 1]
     sd = wrap_sign(e)
-    return (sd * e.radius - wrap_sign(a) * roller_radius(a),
-            wrap_sign(b) * roller_radius(b) - sd * e.radius)
+    return (
+        sd * e.radius - wrap_sign(a) * roller_radius(a),
+        wrap_sign(b) * roller_radius(b) - sd * e.radius,
+    )
 
 
 def dancer_centre(e, q: float) -> tuple[float, float]:
@@ -1265,8 +1541,7 @@ def dancer_centre(e, q: float) -> tuple[float, float]:
         nrm = math.hypot(nx, ny)
         nx, ny = nx / nrm, ny / nrm  # (as the compiled record holds them)
         return e.position[0] + q * nx, e.position[1] + q * ny
-    return (e.pivot[0] + e.arm_length * math.cos(q),
-            e.pivot[1] + e.arm_length * math.sin(q))
+    return (e.pivot[0] + e.arm_length * math.cos(q), e.pivot[1] + e.arm_length * math.sin(q))
 
 
 def dancer_overlap(line: Line, k: int) -> str | None:
@@ -1278,12 +1553,16 @@ def dancer_overlap(line: Line, k: int) -> str | None:
     du, dd = dancer_offsets(line, k)
     for q in (lo, hi, q0):
         cx, cy = dancer_centre(e, q)
-        for side, (x, y), delta in (("upstream", line.elements[k - 1].position, du),
-                                    ("downstream", line.elements[k + 1].position, dd)):
+        for side, (x, y), delta in (
+            ("upstream", line.elements[k - 1].position, du),
+            ("downstream", line.elements[k + 1].position, dd),
+        ):
             dist = math.hypot(cx - x, cy - y)
             if dist <= abs(delta) + 1e-9:
-                return (f"at position {q:g} the dancer roller overlaps its {side} neighbour "
-                        f"(centre distance {dist:.4g} m): check positions and ranges")
+                return (
+                    f"at position {q:g} the dancer roller overlaps its {side} neighbour "
+                    f"(centre distance {dist:.4g} m): check positions and ranges"
+                )
     return None
 
 

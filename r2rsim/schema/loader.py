@@ -50,7 +50,8 @@ class _Loader(_BaseLoader):
             seen: dict = {}
             for key_node, _ in node.value:
                 if key_node.tag == "tag:yaml.org,2002:merge" or not isinstance(
-                        key_node, yaml.ScalarNode):
+                    key_node, yaml.ScalarNode
+                ):
                     continue  # '<<' merges may be overridden; other keys fail as unhashable
                 key = self.construct_object(key_node)
                 try:
@@ -58,15 +59,20 @@ class _Loader(_BaseLoader):
                 except TypeError:
                     continue
                 if first is not key_node:
-                    raise _Problem(f"duplicate key '{key}' (first given at line "
-                                   f"{first.start_mark.line + 1}); give each key once",
-                                   key_node.start_mark)
+                    raise _Problem(
+                        f"duplicate key '{key}' (first given at line "
+                        f"{first.start_mark.line + 1}); give each key once",
+                        key_node.start_mark,
+                    )
         return super().construct_mapping(node, deep=deep)
 
     def construct_yaml_int(self, node):
         if len(node.value) > limits.MAX_INT_CHARS:
-            raise _Problem(f"an integer of {len(node.value)} characters is too long (at most "
-                           f"{limits.MAX_INT_CHARS})", node.start_mark)
+            raise _Problem(
+                f"an integer of {len(node.value)} characters is too long (at most "
+                f"{limits.MAX_INT_CHARS})",
+                node.start_mark,
+            )
         return super().construct_yaml_int(node)
 
 
@@ -76,10 +82,15 @@ _Loader.add_constructor("tag:yaml.org,2002:int", _Loader.construct_yaml_int)
 _Loader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
     re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
-    list("-+0123456789"))
+    list("-+0123456789"),
+)
 
-_BOMS = ((codecs.BOM_UTF32_LE, "UTF-32"), (codecs.BOM_UTF32_BE, "UTF-32"),
-         (codecs.BOM_UTF16_LE, "UTF-16"), (codecs.BOM_UTF16_BE, "UTF-16"))
+_BOMS = (
+    (codecs.BOM_UTF32_LE, "UTF-32"),
+    (codecs.BOM_UTF32_BE, "UTF-32"),
+    (codecs.BOM_UTF16_LE, "UTF-16"),
+    (codecs.BOM_UTF16_BE, "UTF-16"),
+)
 _CONTROL = re.compile(r"[\x00-\x08\x0b\x0c\x0e-\x1f\x7f]")
 
 
@@ -100,12 +111,18 @@ def _read_bytes(path: Path) -> bytes:
     try:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
-            kind = ("a directory" if stat.S_ISDIR(st.st_mode) else
-                    "a FIFO (named pipe)" if stat.S_ISFIFO(st.st_mode) else
-                    "a device" if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else
-                    "a socket" if stat.S_ISSOCK(st.st_mode) else "not a regular file")
-            raise InputError(f"is {kind}; line and scenario files must be regular files",
-                             file=file)
+            kind = (
+                "a directory"
+                if stat.S_ISDIR(st.st_mode)
+                else "a FIFO (named pipe)"
+                if stat.S_ISFIFO(st.st_mode)
+                else "a device"
+                if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode)
+                else "a socket"
+                if stat.S_ISSOCK(st.st_mode)
+                else "not a regular file"
+            )
+            raise InputError(f"is {kind}; line and scenario files must be regular files", file=file)
         if st.st_size > limits.MAX_FILE_BYTES:
             raise InputError(_too_big(st.st_size), file=file)
         with os.fdopen(fd, "rb") as f:
@@ -122,8 +139,10 @@ def _read_bytes(path: Path) -> bytes:
 
 
 def _too_big(size: int) -> str:
-    return (f"the file is {size} bytes, more than the limit of {limits.MAX_FILE_BYTES} bytes "
-            "(1 MiB; docs/security.md)")
+    return (
+        f"the file is {size} bytes, more than the limit of {limits.MAX_FILE_BYTES} bytes "
+        "(1 MiB; docs/security.md)"
+    )
 
 
 def _decode(data: bytes, file: str) -> str:
@@ -133,18 +152,24 @@ def _decode(data: bytes, file: str) -> str:
         if data.startswith(bom):
             raise InputError(f"the file is {name} text; save it as UTF-8", file=file)
     if data.startswith(codecs.BOM_UTF8):
-        data = data[len(codecs.BOM_UTF8):]
+        data = data[len(codecs.BOM_UTF8) :]
     nul = data.find(b"\x00")
     if nul >= 0:
-        raise InputError("the file contains NUL bytes (a binary file, or UTF-16 text without "
-                         "a byte-order mark?); save it as UTF-8 text", file=file,
-                         path=_where(data, nul))
+        raise InputError(
+            "the file contains NUL bytes (a binary file, or UTF-16 text without "
+            "a byte-order mark?); save it as UTF-8 text",
+            file=file,
+            path=_where(data, nul),
+        )
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise InputError(f"not UTF-8 text: byte 0x{data[exc.start]:02x} cannot be read "
-                         "(Latin-1 or another encoding?); save the file as UTF-8", file=file,
-                         path=_where(data, exc.start)) from None
+        raise InputError(
+            f"not UTF-8 text: byte 0x{data[exc.start]:02x} cannot be read "
+            "(Latin-1 or another encoding?); save the file as UTF-8",
+            file=file,
+            path=_where(data, exc.start),
+        ) from None
 
 
 def _where(data, offset: int) -> str:
@@ -167,7 +192,8 @@ def _check_nesting(text: str) -> None:
         _nesting_events(text, _Loader)
     except yaml.YAMLError as exc:
         if _Loader is yaml.SafeLoader or "nesting depth" not in str(
-                getattr(exc, "problem", None) or exc):
+            getattr(exc, "problem", None) or exc
+        ):
             raise
         _nesting_events(text, yaml.SafeLoader)
         raise
@@ -179,8 +205,10 @@ def _nesting_events(text: str, loader) -> None:
         if isinstance(ev, (yaml.SequenceStartEvent, yaml.MappingStartEvent)):
             depth += 1
             if depth > limits.MAX_NESTING:
-                raise _Problem(f"lists and mappings are nested more than "
-                               f"{limits.MAX_NESTING} levels deep", ev.start_mark)
+                raise _Problem(
+                    f"lists and mappings are nested more than {limits.MAX_NESTING} levels deep",
+                    ev.start_mark,
+                )
         elif isinstance(ev, (yaml.SequenceEndEvent, yaml.MappingEndEvent)):
             depth -= 1
 
@@ -206,23 +234,36 @@ def _check_values(data: Any, file: str) -> None:
         node, depth = entry[0], entry[1]
         count += 1
         if count > limits.MAX_VALUES:
-            raise InputError(f"the file expands to more than {limits.MAX_VALUES} values "
-                             "(YAML aliases that repeat other aliases?)", file=file)
+            raise InputError(
+                f"the file expands to more than {limits.MAX_VALUES} values "
+                "(YAML aliases that repeat other aliases?)",
+                file=file,
+            )
         if depth > limits.MAX_NESTING:
-            raise InputError(f"lists and mappings are nested more than {limits.MAX_NESTING} "
-                             "levels deep (through YAML aliases; one that refers to itself?)",
-                             file=file, path=path_of(entry[2]))
+            raise InputError(
+                f"lists and mappings are nested more than {limits.MAX_NESTING} "
+                "levels deep (through YAML aliases; one that refers to itself?)",
+                file=file,
+                path=path_of(entry[2]),
+            )
         if isinstance(node, str):
             m = _CONTROL.search(node)
             if m:
-                raise InputError(f"the string contains the control character "
-                                 f"{m.group()!r} (NUL, escape and other control characters "
-                                 "are not allowed)", file=file, path=path_of(entry))
+                raise InputError(
+                    f"the string contains the control character "
+                    f"{m.group()!r} (NUL, escape and other control characters "
+                    "are not allowed)",
+                    file=file,
+                    path=path_of(entry),
+                )
         elif isinstance(node, dict):
             for k, v in node.items():
                 if isinstance(k, str) and _CONTROL.search(k):
-                    raise InputError(f"the key {k!r} contains a control character", file=file,
-                                     path=path_of(entry))
+                    raise InputError(
+                        f"the key {k!r} contains a control character",
+                        file=file,
+                        path=path_of(entry),
+                    )
                 stack.append((v, depth + 1, entry, k))
         elif isinstance(node, list):
             stack.extend((v, depth + 1, entry, i) for i, v in enumerate(node))
@@ -245,18 +286,23 @@ def read_yaml(path: str | Path) -> Any:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else None
         if isinstance(exc, yaml.reader.ReaderError) or (
-                mark is None and isinstance(getattr(exc, "position", None), int)):
+            mark is None and isinstance(getattr(exc, "position", None), int)
+        ):
             where = _where(text, exc.position)
             ch = exc.character
-            problem = (f"unacceptable character U+{ch:04X} ({exc.reason})" if isinstance(ch, int)
-                       else f"unacceptable character {ch!r}")
+            problem = (
+                f"unacceptable character U+{ch:04X} ({exc.reason})"
+                if isinstance(ch, int)
+                else f"unacceptable character {ch!r}"
+            )
         else:
             problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
         prefix = "" if isinstance(exc, _Problem) else "invalid YAML: "
         raise InputError(f"{prefix}{problem}", file=file, path=where) from None
     except (RecursionError, MemoryError, ValueError, OverflowError) as exc:
-        raise InputError(f"invalid YAML: {str(exc).splitlines()[0] if str(exc) else exc!r}",
-                         file=file) from None
+        raise InputError(
+            f"invalid YAML: {str(exc).splitlines()[0] if str(exc) else exc!r}", file=file
+        ) from None
     if not isinstance(data, dict):
         raise InputError("expected a mapping of keys at the top level", file=file)
     _check_values(data, file)
@@ -290,7 +336,8 @@ def _locate(loc: tuple, data: Any) -> tuple[str, int, tuple | None]:
         elif isinstance(node, dict) and node.get("type") == part:
             continue  # discriminated-union tag: the one member tried, not an alternative
         elif (node is not None and not isinstance(node, dict)) or (
-                isinstance(node, dict) and _UNION_LABEL.match(str(part))):
+            isinstance(node, dict) and _UNION_LABEL.match(str(part))
+        ):
             if member is None:  # the tag of a union member pydantic tried
                 member = (out, str(part))
         else:
@@ -318,8 +365,9 @@ def _union_errors(errors: list[dict], data: Any) -> list[dict]:
     for members in unions.values():
         depth = {tag: max(info[i][1] for i in idx) for tag, idx in members.items()}
         best = [tag for tag in members if depth[tag] == max(depth.values())]
-        typed = {tag for tag in best
-                 if all(errors[i]["type"].endswith("_type") for i in members[tag])}
+        typed = {
+            tag for tag in best if all(errors[i]["type"].endswith("_type") for i in members[tag])
+        }
         if len(typed) < len(best):
             best = [tag for tag in best if tag not in typed]
         drop |= {i for tag, idx in members.items() if tag not in best for i in idx}
@@ -341,8 +389,12 @@ def _describe(err: dict) -> tuple[str, str | None]:
     if kind == "union_tag_not_found":
         return "missing key 'type'", None
     if kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
-        op = {"greater_than": ">", "greater_than_equal": ">=", "less_than": "<",
-              "less_than_equal": "<="}[kind]
+        op = {
+            "greater_than": ">",
+            "greater_than_equal": ">=",
+            "less_than": "<",
+            "less_than_equal": "<=",
+        }[kind]
         bound = next(iter(ctx.values())) if ctx else "?"
         return f"must be {op} {bound}, got {inp!r}", None
     if kind == "literal_error":
@@ -351,23 +403,35 @@ def _describe(err: dict) -> tuple[str, str | None]:
         return f"{inp!r} is not a valid id (letters, digits and '_', starting with a letter)", None
     if kind == "finite_number":
         return f"{inp} is not a finite number (.nan and .inf are not allowed)", None
-    if kind in ("float_type", "int_type", "bool_type", "float_parsing", "int_parsing",
-                "int_from_float"):
-        want = {"bool_type": "true or false", "int_type": "a whole number",
-                "int_parsing": "a whole number", "int_from_float": "a whole number"}.get(
-                    kind, "a number")
+    if kind in (
+        "float_type",
+        "int_type",
+        "bool_type",
+        "float_parsing",
+        "int_parsing",
+        "int_from_float",
+    ):
+        want = {
+            "bool_type": "true or false",
+            "int_type": "a whole number",
+            "int_parsing": "a whole number",
+            "int_from_float": "a whole number",
+        }.get(kind, "a number")
         if isinstance(inp, bool):
             return f"expected {want}, got {str(inp).lower()} (a boolean)", None
         return f"expected {want}, got {inp!r}", None
     if kind == "too_long":
         n, most = ctx.get("actual_length"), ctx.get("max_length")
-        return (f"too many entries ({n}); at most {most} (docs/security.md)"
-                if n is not None else f"too many entries; at most {most}"), None
+        return (
+            f"too many entries ({n}); at most {most} (docs/security.md)"
+            if n is not None
+            else f"too many entries; at most {most}"
+        ), None
     if kind == "recursion_loop":
         return "the data refers to itself (a YAML alias inside its own anchor)", None
     msg = err["msg"]
     if msg.startswith("Value error, "):
-        msg = msg[len("Value error, "):]
+        msg = msg[len("Value error, ") :]
     return msg, None
 
 
@@ -413,7 +477,8 @@ def allowed_keys(tp, loc: tuple) -> set[str]:
             if tagged:
                 return set().union(*(allowed_keys(m, loc[1:]) for m in tagged))
             if _UNION_LABEL.match(loc[0]) and not any(
-                    _is_model(m) and loc[0] in m.model_fields for m in members):
+                _is_model(m) and loc[0] in m.model_fields for m in members
+            ):
                 return set().union(*(allowed_keys(m, loc[1:]) for m in members))
         return set().union(*(allowed_keys(m, loc) for m in members))
     if not loc:
@@ -466,8 +531,9 @@ def suggestion(key: Any, allowed: set[str], present=()) -> list[str] | None:
     if not isinstance(key, str):
         return None
     left = sorted(k for k in allowed if k not in present and k != key)
-    close = difflib.get_close_matches(key, left, n=3, cutoff=0.7) or \
-        difflib.get_close_matches(key.lower(), left, n=3, cutoff=0.7)
+    close = difflib.get_close_matches(key, left, n=3, cutoff=0.7) or difflib.get_close_matches(
+        key.lower(), left, n=3, cutoff=0.7
+    )
     return close or None
 
 
@@ -486,15 +552,19 @@ def _unknown_keys_first(errors: list[dict], model, data: Any) -> tuple[list[dict
         if err["type"] == "extra_forbidden":
             allowed = allowed_keys(model, tuple(err["loc"][:-1]))
             parent = _parent(data, _data_parts(err["loc"][:-1], data))
-            hint = suggestion(err["loc"][-1], allowed,
-                              parent.keys() if isinstance(parent, dict) else ())
+            hint = suggestion(
+                err["loc"][-1], allowed, parent.keys() if isinstance(parent, dict) else ()
+            )
             if hint is not None:
                 hints[id(err)] = hint
     missing = {(tuple(e["loc"][:-1]), e["loc"][-1]): e for e in errors if e["type"] == "missing"}
     first, drop = [], set()
     for err in errors:
-        gone = [missing[key] for key in ((tuple(err["loc"][:-1]), h)
-                                         for h in hints.get(id(err), ())) if key in missing]
+        gone = [
+            missing[key]
+            for key in ((tuple(err["loc"][:-1]), h) for h in hints.get(id(err), ()))
+            if key in missing
+        ]
         if gone:
             first.append(err)
             drop.add(id(gone[0]))
@@ -502,8 +572,9 @@ def _unknown_keys_first(errors: list[dict], model, data: Any) -> tuple[list[dict
     return first + rest, hints
 
 
-def validation_errors(exc: ValidationError, data: Any, model=None,
-                      file: str | None = None) -> list[tuple[str, str]]:
+def validation_errors(
+    exc: ValidationError, data: Any, model=None, file: str | None = None
+) -> list[tuple[str, str]]:
     """All problems of a failed validation as ``[(yaml_path, message), ...]``.
 
     With the ``model`` validated, an unknown key gets the allowed key closest to it ("did you
@@ -560,13 +631,19 @@ class _SourceLines:
         node, key_node = self.root, None
         for part in parts:
             if isinstance(node, yaml.MappingNode):
-                found = [(k, v) for k, v in node.value
-                         if isinstance(k, yaml.ScalarNode) and k.value == str(part)]
+                found = [
+                    (k, v)
+                    for k, v in node.value
+                    if isinstance(k, yaml.ScalarNode) and k.value == str(part)
+                ]
                 if not found:
                     return None
                 key_node, node = found[-1]
-            elif isinstance(node, yaml.SequenceNode) and isinstance(part, int) and \
-                    part < len(node.value):
+            elif (
+                isinstance(node, yaml.SequenceNode)
+                and isinstance(part, int)
+                and part < len(node.value)
+            ):
                 key_node, node = None, node.value[part]
             else:
                 return None
@@ -585,8 +662,10 @@ def _validate(model, data: Any, file: str):
         path, msg = problems[0]
         if len(problems) > 1:
             msg, nl, quoted = msg.partition("\n")  # the quoted source line stays last
-            msg += f" (and {len(problems) - 1} more problem{'s' if len(problems) > 2 else ''}; " \
-                   f"`r2rsim validate` lists them all){nl}{quoted}"
+            msg += (
+                f" (and {len(problems) - 1} more problem{'s' if len(problems) > 2 else ''}; "
+                f"`r2rsim validate` lists them all){nl}{quoted}"
+            )
         err = InputError(msg, file=file, path=path or None)
         err.problems = problems
         raise err from None
@@ -640,19 +719,25 @@ def line_path_of(scenario_data: dict, scenario_file: str | Path) -> Path:
         line_path = (source.parent / name).resolve()
         found = line_path.exists()
     except (OSError, ValueError) as exc:
-        raise InputError(f"cannot use '{name}' as a path ({exc})", file=str(source),
-                         path="line") from None
+        raise InputError(
+            f"cannot use '{name}' as a path ({exc})", file=str(source), path="line"
+        ) from None
     if found and not line_path.is_file():  # a device (/dev/zero), FIFO or directory
-        raise InputError(f"'{name}' is not a regular file ({line_path}); a line file "
-                         "must be one", file=str(source), path="line")
+        raise InputError(
+            f"'{name}' is not a regular file ({line_path}); a line file must be one",
+            file=str(source),
+            path="line",
+        )
     if not found:
-        raise InputError(f"line file '{name}' not found (looked at {line_path})",
-                         file=str(source), path="line")
+        raise InputError(
+            f"line file '{name}' not found (looked at {line_path})", file=str(source), path="line"
+        )
     return line_path
 
 
-def build_scenario(data: dict, line_data: dict | Line, file: str, line_file: str
-                   ) -> tuple[Scenario, Line]:
+def build_scenario(
+    data: dict, line_data: dict | Line, file: str, line_file: str
+) -> tuple[Scenario, Line]:
     """Validate a scenario and its line from parsed mappings (what :func:`load_scenario`
     does after reading the files; a sweep calls it with its overrides applied).
 
@@ -702,8 +787,10 @@ def _report(problems: list[tuple[str, str, str]], file: str) -> None:
     if errors:
         path, msg = errors[0]
         if len(errors) > 1:
-            msg += f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''}; " \
-                   f"`r2rsim validate` lists them all)"
+            msg += (
+                f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''}; "
+                f"`r2rsim validate` lists them all)"
+            )
         err = InputError(msg, file=file, path=path)
         err.problems = errors
         raise err
@@ -718,8 +805,11 @@ def check_scenario_against_line(scenario: Scenario, line: Line, file: str) -> No
         for cid in step.tension or {}:
             if cid not in tension_ids:
                 known = ", ".join(sorted(tension_ids)) or "none defined"
-                raise InputError(f"no tension controller '{cid}' in the line (known: {known})",
-                                 file=file, path=f"programme[{i}].tension.{cid}")
+                raise InputError(
+                    f"no tension controller '{cid}' in the line (known: {known})",
+                    file=file,
+                    path=f"programme[{i}].tension.{cid}",
+                )
         for eid in step.draw or {}:
             problem = draw_problem(line, eid)
             if problem:
@@ -729,31 +819,45 @@ def check_scenario_against_line(scenario: Scenario, line: Line, file: str) -> No
             if problem:
                 raise InputError(problem, file=file, path=f"programme[{i}].torque.{eid}")
         if step.rate is not None and step.line_speed is None:
-            raise InputError("rate applies to a line_speed change", file=file,
-                             path=f"programme[{i}].rate")
+            raise InputError(
+                "rate applies to a line_speed change", file=file, path=f"programme[{i}].rate"
+            )
     splicers = [e.id for e in line.elements if getattr(e, "splicer", None) is not None]
     movers = _mover_ids(line)
     for i, ev in enumerate(scenario.events):
         if ev.type == "splice":
             if not splicers:
-                raise InputError("no unwind of the line has a splicer: give the unwind a "
-                                 "'splicer:' (docs/keys.md) to splice onto a new roll",
-                                 file=file, path=f"events[{i}]")
+                raise InputError(
+                    "no unwind of the line has a splicer: give the unwind a "
+                    "'splicer:' (docs/keys.md) to splice onto a new roll",
+                    file=file,
+                    path=f"events[{i}]",
+                )
             if ev.element is None and len(splicers) > 1:
-                raise InputError(f"name the unwind to splice (unwinds with a splicer: "
-                                 f"{', '.join(splicers)})", file=file,
-                                 path=f"events[{i}].element")
+                raise InputError(
+                    f"name the unwind to splice (unwinds with a splicer: {', '.join(splicers)})",
+                    file=file,
+                    path=f"events[{i}].element",
+                )
             if ev.element is not None and ev.element not in splicers:
-                raise InputError(f"no unwind with a splicer named '{ev.element}' (known: "
-                                 f"{', '.join(splicers) or 'none'})", file=file,
-                                 path=f"events[{i}].element")
+                raise InputError(
+                    f"no unwind with a splicer named '{ev.element}' (known: "
+                    f"{', '.join(splicers) or 'none'})",
+                    file=file,
+                    path=f"events[{i}].element",
+                )
         if ev.type == "dancer_seize" and ev.element not in movers:
-            raise InputError(f"no dancer or festoon named '{ev.element}' (known: "
-                             f"{', '.join(movers) or 'none'})", file=file,
-                             path=f"events[{i}].element")
+            raise InputError(
+                f"no dancer or festoon named '{ev.element}' (known: {', '.join(movers) or 'none'})",
+                file=file,
+                path=f"events[{i}].element",
+            )
         if ev.at > scenario.duration:
-            raise InputError(f"at {ev.at:g} s is after the end of the run ({scenario.duration:g}"
-                             f" s)", file=file, path=f"events[{i}].at")
+            raise InputError(
+                f"at {ev.at:g} s is after the end of the run ({scenario.duration:g} s)",
+                file=file,
+                path=f"events[{i}].at",
+            )
     check_faults(scenario, line, file)
     check_disturbances(scenario, line, file)
     check_variability(scenario, line, file)
@@ -761,15 +865,17 @@ def check_scenario_against_line(scenario: Scenario, line: Line, file: str) -> No
     for key in ("span_tension", "slack"):
         for sid in getattr(scenario.initial, key):
             if sid not in span_ids:
-                raise InputError(f"no span '{sid}' in the line", file=file,
-                                 path=f"initial.{key}.{sid}")
+                raise InputError(
+                    f"no span '{sid}' in the line", file=file, path=f"initial.{key}.{sid}"
+                )
     _check_initial_positions(scenario, line, file)
 
 
 def _mover_ids(line) -> list[str]:
     """Ids of the line's dancers and festoon carriages, in line order."""
     return [e.id for e in line.elements if e.type in DANCERS] + [
-        s.id for s in line.spans if s.festoon is not None]
+        s.id for s in line.spans if s.festoon is not None
+    ]
 
 
 def _check_initial_positions(scenario, line, file: str) -> None:
@@ -779,8 +885,11 @@ def _check_initial_positions(scenario, line, file: str) -> None:
     for mid, value in scenario.initial.position.items():
         path = f"initial.position.{mid}"
         if mid not in movers:
-            raise InputError(f"no dancer or festoon named '{mid}' (known: "
-                             f"{', '.join(movers) or 'none'})", file=file, path=path)
+            raise InputError(
+                f"no dancer or festoon named '{mid}' (known: {', '.join(movers) or 'none'})",
+                file=file,
+                path=path,
+            )
         el = next((e for e in line.elements if e.id == mid and e.type in DANCERS), None)
         sp = next((s for s in line.spans if s.id == mid and s.festoon is not None), None)
         if el is not None and el.type == "pivot_dancer":
@@ -794,9 +903,12 @@ def _check_initial_positions(scenario, line, file: str) -> None:
         except QuantityError as exc:
             raise InputError(str(exc), file=file, path=path) from None
         if not lo < q < hi:
-            raise InputError(f"{q:g} is not strictly inside the end stops [{lo:g}, {hi:g}] "
-                             f"({what}, SI units); a start on a stop would not latch there",
-                             file=file, path=path)
+            raise InputError(
+                f"{q:g} is not strictly inside the end stops [{lo:g}, {hi:g}] "
+                f"({what}, SI units); a start on a stop would not latch there",
+                file=file,
+                path=path,
+            )
         scenario.initial.position[mid] = q
 
 
@@ -804,6 +916,7 @@ def _sines_top(d, v_max: float) -> float:
     """Highest frequency [Hz] of a sum-of-sinusoids disturbance
     (:data:`r2rsim.compile.disturbances.CUTOFF` corner frequencies)."""
     from ..compile.disturbances import CUTOFF
+
     if d.type == "bearing_drag":
         return CUTOFF * d.bandwidth
     return CUTOFF * v_max / (2.0 * math.pi * d.correlation_length)
@@ -812,55 +925,81 @@ def _sines_top(d, v_max: float) -> float:
 def check_disturbances(scenario, line, file: str) -> None:
     """Targets and values of the scenario's process disturbances."""
     eccentric_faults = {f.target for f in scenario.faults if f.type == "process.eccentricity"}
-    v_max = max((abs(s.line_speed) for s in scenario.programme if s.line_speed is not None),
-                default=0.0)
+    v_max = max(
+        (abs(s.line_speed) for s in scenario.programme if s.line_speed is not None), default=0.0
+    )
     ids = [e.id for e in line.elements]
     for i, d in enumerate(scenario.disturbances):
         where = f"disturbances[{i}]"
         if d.element not in ids:
-            raise InputError(f"no element '{d.element}' in the line (known: {', '.join(ids)})",
-                             file=file, path=f"{where}.element")
+            raise InputError(
+                f"no element '{d.element}' in the line (known: {', '.join(ids)})",
+                file=file,
+                path=f"{where}.element",
+            )
         e = line.element(d.element)
         drive = getattr(e, "drive", None)
         problem = None
         if d.type == "out_of_round":  # the same rules as an eccentricity fault
             problem = target_problem("process.eccentricity", d.element, line)
             if problem is None and d.element in eccentric_faults:
-                problem = (f"'{d.element}' is out of round and also has a "
-                           "process.eccentricity fault; give it one or the other")
+                problem = (
+                    f"'{d.element}' is out of round and also has a "
+                    "process.eccentricity fault; give it one or the other"
+                )
         elif d.type == "wound_in_strain" and e.type != "unwind":
             problem = f"wound_in_strain applies to an unwind; '{d.element}' is a {e.type}"
-        elif d.type == "wound_in_strain" and d.shape == "table" and \
-                limits.wound_in_strain_points(
-                v_max, scenario.duration, d.correlation_length) > limits.MAX_SAMPLES:
-            raise InputError(f"a correlation length of {d.correlation_length:g} m needs a table "
-                             f"of more than {limits.MAX_SAMPLES:.0e} points (ten per "
-                             f"correlation length over the {v_max:g} m/s x "
-                             f"{scenario.duration:g} s of web of this run; docs/security.md)",
-                             file=file, path=f"{where}.correlation_length")
-        elif d.type != "out_of_round" and d.shape != "table" and _sines_top(d, v_max) > \
-                0.5 * scenario.record_rate:
+        elif (
+            d.type == "wound_in_strain"
+            and d.shape == "table"
+            and limits.wound_in_strain_points(v_max, scenario.duration, d.correlation_length)
+            > limits.MAX_SAMPLES
+        ):
+            raise InputError(
+                f"a correlation length of {d.correlation_length:g} m needs a table "
+                f"of more than {limits.MAX_SAMPLES:.0e} points (ten per "
+                f"correlation length over the {v_max:g} m/s x "
+                f"{scenario.duration:g} s of web of this run; docs/security.md)",
+                file=file,
+                path=f"{where}.correlation_length",
+            )
+        elif (
+            d.type != "out_of_round"
+            and d.shape != "table"
+            and _sines_top(d, v_max) > 0.5 * scenario.record_rate
+        ):
             what = "bandwidth" if d.type == "bearing_drag" else "correlation_length"
-            raise InputError(f"its highest frequency, {_sines_top(d, v_max):.3g} Hz (ten times "
-                             "the corner of its spectrum"
-                             + ("" if d.type == "bearing_drag" else f" at {v_max:g} m/s")
-                             + "), is above half the record rate "
-                             f"({0.5 * scenario.record_rate:g} Hz): the solver would have to "
-                             "follow a disturbance the samples cannot show; give a "
-                             + ("lower bandwidth" if d.type == "bearing_drag" else
-                                "longer correlation length") + " or a higher record rate",
-                             file=file, path=f"{where}.{what}")
+            raise InputError(
+                f"its highest frequency, {_sines_top(d, v_max):.3g} Hz (ten times "
+                "the corner of its spectrum"
+                + ("" if d.type == "bearing_drag" else f" at {v_max:g} m/s")
+                + "), is above half the record rate "
+                f"({0.5 * scenario.record_rate:g} Hz): the solver would have to "
+                "follow a disturbance the samples cannot show; give a "
+                + ("lower bandwidth" if d.type == "bearing_drag" else "longer correlation length")
+                + " or a higher record rate",
+                file=file,
+                path=f"{where}.{what}",
+            )
         elif d.type == "bearing_drag" and drive is not None and drive.type == "ideal_speed":
-            problem = (f"'{d.element}' turns at an imposed speed (ideal_speed drive): a drag "
-                       "torque would have no effect")
+            problem = (
+                f"'{d.element}' turns at an imposed speed (ideal_speed drive): a drag "
+                "torque would have no effect"
+            )
         if problem:
-            raise InputError(problem.replace("process.eccentricity", "out_of_round"),
-                             file=file, path=f"{where}.element")
+            raise InputError(
+                problem.replace("process.eccentricity", "out_of_round"),
+                file=file,
+                path=f"{where}.element",
+            )
         if d.type == "out_of_round":
             if d.eccentricity >= e.radius:
-                raise InputError(f"an eccentricity of {d.eccentricity:g} m is not less than "
-                                 f"the roller radius {e.radius:g} m", file=file,
-                                 path=f"{where}.eccentricity")
+                raise InputError(
+                    f"an eccentricity of {d.eccentricity:g} m is not less than "
+                    f"the roller radius {e.radius:g} m",
+                    file=file,
+                    path=f"{where}.eccentricity",
+                )
             continue
         try:
             std = d.std_si()
@@ -887,63 +1026,100 @@ def check_variability(scenario, line, file: str) -> None:
         return w
 
     unwinds = [e.id for e in line.elements if e.type == "unwind"]
-    material = [uid for uid, r in var.rolls.items()
-                if r.modulus or r.thickness or r.relaxed_pitch]
+    material = [uid for uid, r in var.rolls.items() if r.modulus or r.thickness or r.relaxed_pitch]
     for uid, r in var.rolls.items():
         where = f"variability.rolls.{uid}"
         if uid not in unwinds:
-            raise InputError(f"no unwind '{uid}' in the line (unwinds: "
-                             f"{', '.join(unwinds) or 'none'})", file=file, path=where)
+            raise InputError(
+                f"no unwind '{uid}' in the line (unwinds: {', '.join(unwinds) or 'none'})",
+                file=file,
+                path=where,
+            )
         if len(material) > 1 and uid == material[1]:
-            raise InputError("the web's modulus, thickness and relaxed pitch vary with the "
-                             f"rolls of one unwind only (already '{material[0]}')", file=file,
-                             path=where)
+            raise InputError(
+                "the web's modulus, thickness and relaxed pitch vary with the "
+                f"rolls of one unwind only (already '{material[0]}')",
+                file=file,
+                path=where,
+            )
         e = line.element(uid)
         rolls = [e.roll] + ([e.spare_roll] if e.spare_roll is not None else [])
-        checks = [("modulus", line.web.modulus, "pressure", 0.0, "0"),
-                  ("thickness", line.web.thickness, "length", 0.0, "0")]
-        checks += [("outer_radius", roll.outer_radius, "length", roll.core_radius,
-                    f"the core radius {roll.core_radius:g} m") for roll in rolls]
+        checks = [
+            ("modulus", line.web.modulus, "pressure", 0.0, "0"),
+            ("thickness", line.web.thickness, "length", 0.0, "0"),
+        ]
+        checks += [
+            (
+                "outer_radius",
+                roll.outer_radius,
+                "length",
+                roll.core_radius,
+                f"the core radius {roll.core_radius:g} m",
+            )
+            for roll in rolls
+        ]
         for name, nominal, dim, low, what in checks:
             spread = getattr(r, name)
             if spread is None:
                 continue
             path = f"{where}.{name}.{spread.key}"
             if nominal - width(spread, nominal, dim, path) <= low:
-                raise InputError(f"{name} {nominal:g} could be drawn down to {what} or "
-                                 "below (a normal draw reaches 4 standard deviations)",
-                                 file=file, path=path)
+                raise InputError(
+                    f"{name} {nominal:g} could be drawn down to {what} or "
+                    "below (a normal draw reaches 4 standard deviations)",
+                    file=file,
+                    path=path,
+                )
         if r.wound_in_strain is not None:
             path = f"{where}.wound_in_strain.{r.wound_in_strain.key}"
             e0 = max(abs(roll.wound_in_coefficients()[0]) for roll in rolls)
-            if e0 + width(r.wound_in_strain, 0.0, "dimensionless", path) \
-                    >= plausibility.WOUND_IN_STRAIN_MAX:
-                raise InputError(f"the wound-in strain could be drawn to "
-                                 f"{plausibility.WOUND_IN_STRAIN_MAX:g} or beyond, where "
-                                 "Hooke's law no longer describes the web (a normal draw "
-                                 "reaches 4 standard deviations)", file=file, path=path)
+            if (
+                e0 + width(r.wound_in_strain, 0.0, "dimensionless", path)
+                >= plausibility.WOUND_IN_STRAIN_MAX
+            ):
+                raise InputError(
+                    f"the wound-in strain could be drawn to "
+                    f"{plausibility.WOUND_IN_STRAIN_MAX:g} or beyond, where "
+                    "Hooke's law no longer describes the web (a normal draw "
+                    "reaches 4 standard deviations)",
+                    file=file,
+                    path=path,
+                )
         if r.relaxed_pitch is not None:
-            _check_pitch_offset(line, uid, r.relaxed_pitch, width, file,
-                                f"{where}.relaxed_pitch.{r.relaxed_pitch.key}")
+            _check_pitch_offset(
+                line,
+                uid,
+                r.relaxed_pitch,
+                width,
+                file,
+                f"{where}.relaxed_pitch.{r.relaxed_pitch.key}",
+            )
     sensors = {s.id: s for s in line.sensors}
     for sid, cal in var.sensors.items():
         where = f"variability.sensors.{sid}"
         if sid not in sensors:
-            raise InputError(f"no sensor '{sid}' in the line (known: "
-                             f"{', '.join(sensors) or 'none'})", file=file, path=where)
+            raise InputError(
+                f"no sensor '{sid}' in the line (known: {', '.join(sensors) or 'none'})",
+                file=file,
+                path=where,
+            )
         s = sensors[sid]
         if cal.gain is not None:
             path = f"{where}.gain.{cal.gain.key}"
             if s.gain - width(cal.gain, s.gain, "dimensionless", path) <= 0:
-                raise InputError(f"gain {s.gain:g} could be drawn down to 0 or below",
-                                 file=file, path=path)
+                raise InputError(
+                    f"gain {s.gain:g} could be drawn down to 0 or below", file=file, path=path
+                )
         if cal.offset is not None:
             path = f"{where}.offset.{cal.offset.key}"
             w = width(cal.offset, s.offset, sensor_dimension(line, s)[0], path)
             if abs(s.offset) + w > plausibility.READING_MAX:
-                raise InputError(f"the offset could be drawn beyond any sensor's reading "
-                                 f"({plausibility.READING_MAX:g} in its SI unit)", file=file,
-                                 path=path)
+                raise InputError(
+                    f"the offset could be drawn beyond any sensor's reading "
+                    f"({plausibility.READING_MAX:g} in its SI unit)",
+                    file=file,
+                    path=path,
+                )
 
 
 def _check_pitch_offset(line, uid, spread, width, file, path) -> None:
@@ -951,15 +1127,23 @@ def _check_pitch_offset(line, uid, spread, width, file, path) -> None:
     keeps every such sensor's L0 positive at the cut of a draw."""
     readers = [s for s in line.sensors if s.type == "pitch_length" and pitch_unwind(line, s) == uid]
     if not readers:
-        raise InputError(f"no pitch_length sensor reads the web of '{uid}' (a sensor reads "
-                         "the unwind of its relaxed_pitch_law, default the line's first "
-                         "element)", file=file, path=path)
+        raise InputError(
+            f"no pitch_length sensor reads the web of '{uid}' (a sensor reads "
+            "the unwind of its relaxed_pitch_law, default the line's first "
+            "element)",
+            file=file,
+            path=path,
+        )
     w = width(spread, 0.0, "length", path)
     for s in readers:
         L0 = s.relaxed_pitch if s.relaxed_pitch is not None else s.relaxed_pitch_law.q0
         if w >= 0.1 * L0:
-            raise InputError(f"the offset could reach {w:g} m, a tenth or more of the "
-                             f"relaxed pitch {L0:g} m of sensor '{s.id}'", file=file, path=path)
+            raise InputError(
+                f"the offset could reach {w:g} m, a tenth or more of the "
+                f"relaxed pitch {L0:g} m of sensor '{s.id}'",
+                file=file,
+                path=path,
+            )
 
 
 def json_schema(kind: str) -> str:

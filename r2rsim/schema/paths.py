@@ -32,8 +32,10 @@ def split_root(path: str) -> tuple[str, list[str | int]]:
     parts = parse(path)
     if parts[0] == "line":
         if len(parts) == 1:
-            raise PathError("the line file itself cannot be swept (one sweep runs one line "
-                            "file; its values can: line.web.thickness, ...)")
+            raise PathError(
+                "the line file itself cannot be swept (one sweep runs one line "
+                "file; its values can: line.web.thickness, ...)"
+            )
         return "line", parts[1:]
     return "scenario", parts
 
@@ -102,12 +104,15 @@ def set_value(data, parts: list, value) -> str:
 def remove(data, parts: list) -> str:
     """Remove the list element chosen by its id at ``parts``; returns the index path."""
     if isinstance(parts[-1], int):
-        raise PathError("null removes a list element chosen by its id (faults.my_fault); "
-                        f"an index ([{parts[-1]}]) would shift the others")
+        raise PathError(
+            "null removes a list element chosen by its id (faults.my_fault); "
+            f"an index ([{parts[-1]}]) would shift the others"
+        )
     parent, key, where = resolve(data, parts)
     if not isinstance(parent, list):
-        raise PathError(f"null removes a list element chosen by its id; {_shown(parts)} is a "
-                        f"key of a mapping")
+        raise PathError(
+            f"null removes a list element chosen by its id; {_shown(parts)} is a key of a mapping"
+        )
     del parent[key]
     return where
 

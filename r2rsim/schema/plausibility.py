@@ -158,15 +158,19 @@ MAGNITUDE_MAX: dict[str, tuple[float, str]] = {
     "acceleration": (1.0e3, "100 g: lines accelerate at a few m/s^2, gravity is 9.81 m/s^2"),
     # time constants, delays, splice phases, ramps: none outlasts the longest run
     "time": (MAX_DURATION_S, "longer than the longest run (1e6 s)"),
-    "frequency": (1.0e6, "1 MHz: above any drive or sensor bandwidth (current loops run at "
-                  "0.5-2 kHz)"),
+    "frequency": (
+        1.0e6,
+        "1 MHz: above any drive or sensor bandwidth (current loops run at 0.5-2 kHz)",
+    ),
     "force": (FORCE_MAX, "steel strip runs at up to ~1 MN, film and paper at 0.1-20 kN"),
     # a spring on a dancer carriage; a steel bar of 1 cm^2 x 20 cm is 1e8 N/m
     "stiffness": (1.0e9, "stiffer than a steel bar used as a spring (1e8 N/m)"),
     "damping": (1.0e9, "a damper force of 1 MN at 1 mm/s"),
     # dancer, arm and carriage masses
-    "mass": (1.0e6, "1000 t: heavier than any roll or carriage (a full paper-machine reel is "
-             "~100 t)"),
+    "mass": (
+        1.0e6,
+        "1000 t: heavier than any roll or carriage (a full paper-machine reel is ~100 t)",
+    ),
     # (verification lines stand in for an infinitely heavy roller with 1e8 kg m^2)
     "inertia": (1.0e10, "a full paper-machine reel is ~2e5 kg m^2, a Yankee dryer ~1e6"),
     # drive limits, commands and ripple, dancer torques and torsion springs [N m/rad]
@@ -199,8 +203,7 @@ def _roll_inertia(roll, web) -> float:
     """J(R) at the roll's starting radius (physics.md eq. 1.12), for order-of-magnitude use."""
     cw = roll.build_per_wrap or web.thickness
     rho_w = web.density * web.thickness / cw * web.width
-    return roll.core_inertia + 0.5 * math.pi * rho_w * (roll.outer_radius ** 4
-                                                        - roll.core_radius ** 4)
+    return roll.core_inertia + 0.5 * math.pi * rho_w * (roll.outer_radius**4 - roll.core_radius**4)
 
 
 def _node_inertia(e, web) -> float | None:
@@ -234,8 +237,17 @@ def line_problems(line) -> list[tuple[str, str, str]]:
     def warn(path, msg):
         out.append((WARNING, path, msg))
 
-    for check in (_web_properties, _web_wraps, _web_strength, _roll_sizes, _span_lengths,
-                  _frictions, _wound_in_strains, _sensor_values, _dancer_setpoints):
+    for check in (
+        _web_properties,
+        _web_wraps,
+        _web_strength,
+        _roll_sizes,
+        _span_lengths,
+        _frictions,
+        _wound_in_strains,
+        _sensor_values,
+        _dancer_setpoints,
+    ):
         check(line, err, warn)
     # tension set-points
     for j, c in enumerate(line.controllers):
@@ -251,23 +263,41 @@ def _web_properties(line, err, warn) -> None:
     """Modulus, density, thickness and width against the range of real webs."""
     web = line.web
     if web.modulus > MODULUS_MAX:
-        err("web.modulus", f"{_fmt(web.modulus)} Pa is stiffer than diamond (1.2e12 Pa), the "
-            "stiffest solid; web moduli are 3-130 GPa (physics.md §2.1)")
+        err(
+            "web.modulus",
+            f"{_fmt(web.modulus)} Pa is stiffer than diamond (1.2e12 Pa), the "
+            "stiffest solid; web moduli are 3-130 GPa (physics.md §2.1)",
+        )
     elif not MODULUS_RANGE[0] <= web.modulus <= MODULUS_RANGE[1]:
-        warn("web.modulus", f"{_fmt(web.modulus)} Pa is outside the range of webs (10 MPa to "
-             "450 GPa; physics.md §2.1: 3-130 GPa)")
+        warn(
+            "web.modulus",
+            f"{_fmt(web.modulus)} Pa is outside the range of webs (10 MPa to "
+            "450 GPa; physics.md §2.1: 3-130 GPa)",
+        )
     if web.density > DENSITY_MAX:
-        err("web.density", f"{_fmt(web.density)} kg/m^3 is denser than osmium (22 590 kg/m^3), "
-            "the densest element")
+        err(
+            "web.density",
+            f"{_fmt(web.density)} kg/m^3 is denser than osmium (22 590 kg/m^3), "
+            "the densest element",
+        )
     elif not DENSITY_RANGE[0] <= web.density <= DENSITY_RANGE[1]:
-        warn("web.density", f"{_fmt(web.density)} kg/m^3 is outside the range of webs (100 to "
-             "20 000 kg/m^3; physics.md §2.1: 600-8960)")
+        warn(
+            "web.density",
+            f"{_fmt(web.density)} kg/m^3 is outside the range of webs (100 to "
+            "20 000 kg/m^3; physics.md §2.1: 600-8960)",
+        )
     if not THICKNESS_RANGE[0] <= web.thickness <= THICKNESS_RANGE[1]:
-        warn("web.thickness", f"{_fmt(web.thickness * 1e6)} µm is outside the range of webs "
-             "(1 µm to 5 mm; physics.md §2.1: 6-250 µm)")
+        warn(
+            "web.thickness",
+            f"{_fmt(web.thickness * 1e6)} µm is outside the range of webs "
+            "(1 µm to 5 mm; physics.md §2.1: 6-250 µm)",
+        )
     if not WIDTH_RANGE[0] <= web.width <= WIDTH_RANGE[1]:
-        warn("web.width", f"{_fmt(web.width)} m is outside the range of webs (10 mm to 12 m; "
-             "physics.md §2.1: 0.3-10 m)")
+        warn(
+            "web.width",
+            f"{_fmt(web.width)} m is outside the range of webs (10 mm to 12 m; "
+            "physics.md §2.1: 0.3-10 m)",
+        )
 
 
 def _web_wraps(line, err, warn) -> None:
@@ -282,9 +312,12 @@ def _web_wraps(line, err, warn) -> None:
     if radii:
         r_min, where = min(radii)
         if web.thickness >= r_min:
-            err("web.thickness", f"a web {_fmt(web.thickness)} m thick cannot wrap a roller of "
+            err(
+                "web.thickness",
+                f"a web {_fmt(web.thickness)} m thick cannot wrap a roller of "
                 f"radius {_fmt(r_min)} m ({where}): a web is thin compared with its rollers "
-                "(physics.md §2.1: 6-250 µm)")
+                "(physics.md §2.1: 6-250 µm)",
+            )
 
 
 def _web_strength(line, err, warn) -> None:
@@ -292,17 +325,26 @@ def _web_strength(line, err, warn) -> None:
     web = line.web
     if web.break_stress is None:
         if web.breakable:
-            warn("web.break_stress", "not given, and no material preset gives one: the web "
-                 "can never break in this simulation, whatever its tension; give break_stress "
-                 "(physics.md §2.1: PET 210 MPa, paper ~27 MPa, aluminium 100 MPa), or "
-                 "breakable: false to say so")
+            warn(
+                "web.break_stress",
+                "not given, and no material preset gives one: the web "
+                "can never break in this simulation, whatever its tension; give break_stress "
+                "(physics.md §2.1: PET 210 MPa, paper ~27 MPa, aluminium 100 MPa), or "
+                "breakable: false to say so",
+            )
     elif web.break_stress > BREAK_STRESS_MAX:
-        err("web.break_stress", f"{_fmt(web.break_stress)} Pa is above the ideal strength of "
-            "graphene (~1.3e11 Pa); web break stresses are 27-400 MPa (physics.md §2.1)")
+        err(
+            "web.break_stress",
+            f"{_fmt(web.break_stress)} Pa is above the ideal strength of "
+            "graphene (~1.3e11 Pa); web break stresses are 27-400 MPa (physics.md §2.1)",
+        )
     elif web.break_stress / web.modulus > BREAK_STRAIN_MAX:
-        warn("web.break_stress", f"the web would stretch by {web.break_stress / web.modulus:.0%}"
-             " before it breaks (break_stress / modulus): the linear-elastic span model "
-             "T = EA·strain is not meant for that")
+        warn(
+            "web.break_stress",
+            f"the web would stretch by {web.break_stress / web.modulus:.0%}"
+            " before it breaks (break_stress / modulus): the linear-elastic span model "
+            "T = EA·strain is not meant for that",
+        )
 
 
 def _roll_sizes(line, err, warn) -> None:
@@ -315,10 +357,12 @@ def _roll_sizes(line, err, warn) -> None:
                 continue
             cw = roll.build_per_wrap or web.thickness
             if roll.core_radius < roll.outer_radius and cw >= roll.outer_radius - roll.core_radius:
-                warn(f"elements[{i}].{key}.outer_radius",
-                     f"the roll holds less than one wrap of web ({_fmt(cw)} m per wrap between "
-                     f"radii {_fmt(roll.core_radius)} and {_fmt(roll.outer_radius)} m): it is "
-                     "empty at once")
+                warn(
+                    f"elements[{i}].{key}.outer_radius",
+                    f"the roll holds less than one wrap of web ({_fmt(cw)} m per wrap between "
+                    f"radii {_fmt(roll.core_radius)} and {_fmt(roll.outer_radius)} m): it is "
+                    "empty at once",
+                )
 
 
 def _span_lengths(line, err, warn) -> None:
@@ -328,17 +372,31 @@ def _span_lengths(line, err, warn) -> None:
         if sp.length is None:
             continue
         if sp.length < SPAN_MIN:
-            err(f"spans[{i}].length", f"a free span of {_fmt(sp.length)} m is shorter than "
+            err(
+                f"spans[{i}].length",
+                f"a free span of {_fmt(sp.length)} m is shorter than "
                 "1 mm: spans run between roller surfaces (nip and S-wrap spans are 30-300 mm, "
                 "physics.md §2.2), and the model cannot integrate a span this stiff "
-                f"(EA/L = {_fmt(web.EA / sp.length)} N/m)")
+                f"(EA/L = {_fmt(web.EA / sp.length)} N/m)",
+            )
         elif sp.length > SPAN_MAX:
-            err(f"spans[{i}].length", _outside(
-                "span length", sp.length, "m", SPAN_MIN, SPAN_MAX, "the longest free spans "
-                "(dryer and oven spans) are ~30 m"))
+            err(
+                f"spans[{i}].length",
+                _outside(
+                    "span length",
+                    sp.length,
+                    "m",
+                    SPAN_MIN,
+                    SPAN_MAX,
+                    "the longest free spans (dryer and oven spans) are ~30 m",
+                ),
+            )
         elif not SPAN_RANGE[0] <= sp.length <= SPAN_RANGE[1]:
-            warn(f"spans[{i}].length", f"{_fmt(sp.length)} m is outside the range of free "
-                 "spans (10 mm to 100 m; physics.md §2.2: 0.03-30 m)")
+            warn(
+                f"spans[{i}].length",
+                f"{_fmt(sp.length)} m is outside the range of free "
+                "spans (10 mm to 100 m; physics.md §2.2: 0.03-30 m)",
+            )
 
 
 def _frictions(line, err, warn) -> None:
@@ -347,11 +405,16 @@ def _frictions(line, err, warn) -> None:
         if e.type == "nip":
             frictions.append(("pressure_roller.friction", e.pressure_roller.friction))
         for where, f in frictions:
-            for key, value, unit in (("coulomb", f.coulomb, "N m"),
-                                     ("viscous", f.viscous, "N m s")):
+            for key, value, unit in (
+                ("coulomb", f.coulomb, "N m"),
+                ("viscous", f.viscous, "N m s"),
+            ):
                 if value > TORQUE_MAX:
-                    err(f"elements[{i}].{where}.{key}", f"{_fmt(value)} {unit} is beyond any "
-                        f"bearing (at most {_fmt(TORQUE_MAX)} {unit})")
+                    err(
+                        f"elements[{i}].{where}.{key}",
+                        f"{_fmt(value)} {unit} is beyond any "
+                        f"bearing (at most {_fmt(TORQUE_MAX)} {unit})",
+                    )
 
 
 def _wound_in_strains(line, err, warn) -> None:
@@ -364,10 +427,13 @@ def _wound_in_strains(line, err, warn) -> None:
             for R in (roll.core_radius, roll.outer_radius):
                 strain = e0 + e1 * R + e2 * R * R
                 if abs(strain) >= WOUND_IN_STRAIN_MAX:
-                    err(f"elements[{i}].{key}.wound_in_strain", f"a wound-in strain of "
+                    err(
+                        f"elements[{i}].{key}.wound_in_strain",
+                        f"a wound-in strain of "
                         f"{_fmt(strain)} at R = {_fmt(R)} m: at a strain of "
                         f"{WOUND_IN_STRAIN_MAX:g} or more Hooke's law no longer describes "
-                        "the web")
+                        "the web",
+                    )
                     break
 
 
@@ -375,24 +441,40 @@ def _sensor_values(line, err, warn) -> None:
     for i, s in enumerate(line.sensors):
         p = f"sensors[{i}]"
         if not GAIN_RANGE[0] <= s.gain <= GAIN_RANGE[1]:
-            err(f"{p}.gain", f"a calibration gain of {_fmt(s.gain)} is not a calibration "
+            err(
+                f"{p}.gain",
+                f"a calibration gain of {_fmt(s.gain)} is not a calibration "
                 f"(from {GAIN_RANGE[0]:g} to {GAIN_RANGE[1]:g}; a sensor.gain fault models a "
-                "gain error)")
-        for key, value in (("noise", s.noise), ("offset", abs(s.offset)),
-                           ("noise_per_speed", s.noise_per_speed * SPEED_MAX)):
+                "gain error)",
+            )
+        for key, value in (
+            ("noise", s.noise),
+            ("offset", abs(s.offset)),
+            ("noise_per_speed", s.noise_per_speed * SPEED_MAX),
+        ):
             if value > READING_MAX:
-                err(f"{p}.{key}", f"{_fmt(getattr(s, key))} is beyond any sensor's reading "
+                err(
+                    f"{p}.{key}",
+                    f"{_fmt(getattr(s, key))} is beyond any sensor's reading "
                     f"(at most {READING_MAX:g} in the reading's SI unit"
-                    + (f", at {SPEED_MAX:g} m/s" if key == "noise_per_speed" else "") + ")")
+                    + (f", at {SPEED_MAX:g} m/s" if key == "noise_per_speed" else "")
+                    + ")",
+                )
         if 0.0 < s.quantization < QUANTIZATION_MIN:
-            err(f"{p}.quantization", f"{_fmt(s.quantization)} is finer than any instrument "
-                f"(0, for none, or at least {QUANTIZATION_MIN:g})")
+            err(
+                f"{p}.quantization",
+                f"{_fmt(s.quantization)} is finer than any instrument "
+                f"(0, for none, or at least {QUANTIZATION_MIN:g})",
+            )
         if s.type == "pitch_length":
             L0 = s.relaxed_pitch if s.relaxed_pitch is not None else s.relaxed_pitch_law.q0
             key = "relaxed_pitch" if s.relaxed_pitch is not None else "relaxed_pitch_law.q0"
             if L0 > SPAN_RANGE[1]:
-                err(f"{p}.{key}", f"a relaxed pitch of {_fmt(L0)} m is longer than any span "
-                    f"({SPAN_RANGE[1]:g} m)")
+                err(
+                    f"{p}.{key}",
+                    f"a relaxed pitch of {_fmt(L0)} m is longer than any span "
+                    f"({SPAN_RANGE[1]:g} m)",
+                )
             elif s.relaxed_pitch_law is not None:
                 _pitch_law(line, s, p, err)
 
@@ -408,11 +490,14 @@ def _pitch_law(line, s, p, err) -> None:
         return  # reported by the schema
     for roll in [e.roll] + ([e.spare_roll] if e.spare_roll is not None else []):
         for R in (roll.core_radius, roll.outer_radius):
-            L0 = law.q0 + law.q1 * R ** 3
+            L0 = law.q0 + law.q1 * R**3
             if L0 > SPAN_RANGE[1]:
-                err(f"{p}.relaxed_pitch_law.q1", f"a relaxed pitch of {_fmt(L0)} m at R = "
+                err(
+                    f"{p}.relaxed_pitch_law.q1",
+                    f"a relaxed pitch of {_fmt(L0)} m at R = "
                     f"{_fmt(R)} m of '{e.id}' (q0 + q1·R³) is longer than any span "
-                    f"({SPAN_RANGE[1]:g} m)")
+                    f"({SPAN_RANGE[1]:g} m)",
+                )
                 return
 
 
@@ -422,39 +507,80 @@ def _dancer_setpoints(line, err, warn) -> None:
     for j, c in enumerate(line.controllers):
         if c.type != "dancer_pi" or c.setpoint is None:
             continue
-        hi, unit = ((MAGNITUDE_MAX["angle"][0], "rad") if kinds.get(c.dancer) == "pivot_dancer"
-                    else (TRAVEL_MAX, "m"))
+        hi, unit = (
+            (MAGNITUDE_MAX["angle"][0], "rad")
+            if kinds.get(c.dancer) == "pivot_dancer"
+            else (TRAVEL_MAX, "m")
+        )
         if not -hi <= c.setpoint <= hi:
-            err(f"controllers[{j}].setpoint", _outside(
-                "position set-point", c.setpoint, unit, -hi, hi, "beyond the travel of "
-                "any dancer or festoon (an arm angle within one turn, a stroke of at most "
-                "30 m)"))
+            err(
+                f"controllers[{j}].setpoint",
+                _outside(
+                    "position set-point",
+                    c.setpoint,
+                    unit,
+                    -hi,
+                    hi,
+                    "beyond the travel of "
+                    "any dancer or festoon (an arm angle within one turn, a stroke of at most "
+                    "30 m)",
+                ),
+            )
 
 
 #: bounds of particular fields (by field name, in any model), before MAGNITUDE_MAX:
 #: (what, low, high, why)
-_RADIUS = ("radius", *RADIUS_LIMITS, "rollers and rolls run from ~5 mm (tape lines) to ~3.4 m "
-           "(Yankee dryers)")
-_TRAVEL = ("travel", -TRAVEL_MAX, TRAVEL_MAX, "no carriage travels further than the longest "
-           "span (real strokes are 0.1-30 m)")
+_RADIUS = (
+    "radius",
+    *RADIUS_LIMITS,
+    "rollers and rolls run from ~5 mm (tape lines) to ~3.4 m (Yankee dryers)",
+)
+_TRAVEL = (
+    "travel",
+    -TRAVEL_MAX,
+    TRAVEL_MAX,
+    "no carriage travels further than the longest span (real strokes are 0.1-30 m)",
+)
 FIELD_BOUNDS: dict[str, tuple[str, float, float, str]] = {
-    "radius": _RADIUS, "core_radius": _RADIUS, "outer_radius": _RADIUS,
+    "radius": _RADIUS,
+    "core_radius": _RADIUS,
+    "outer_radius": _RADIUS,
     "trigger_radius": _RADIUS,
-    "thickness": ("thickness", *THICKNESS_LIMITS, "webs run from ~1 µm (capacitor film) to "
-                  "~25 mm (steel strip)"),
-    "build_per_wrap": ("build per wrap", *THICKNESS_LIMITS, "the range of web thicknesses, "
-                       "~1 µm (capacitor film) to ~25 mm (steel strip)"),
+    "thickness": (
+        "thickness",
+        *THICKNESS_LIMITS,
+        "webs run from ~1 µm (capacitor film) to ~25 mm (steel strip)",
+    ),
+    "build_per_wrap": (
+        "build per wrap",
+        *THICKNESS_LIMITS,
+        "the range of web thicknesses, ~1 µm (capacitor film) to ~25 mm (steel strip)",
+    ),
     "width": ("width", 0.0, WIDTH_MAX, "the widest paper machines make ~11 m"),
-    "friction_coefficient": ("friction coefficient", 0.0, FRICTION_COEFFICIENT_MAX,
-                             "rubber-covered rollers reach 1-2"),
-    "travel_range": _TRAVEL, "initial_travel": _TRAVEL, "spring_free_travel": _TRAVEL,
-    "stroke": _TRAVEL, "initial_position": _TRAVEL,
-    "moving_rollers": ("moving_rollers", 1, FESTOON_ROLLERS_MAX, "festoons have up to a few "
-                       "tens"),
-    "window": ("counting window", ENCODER_WINDOW_MIN, MAX_DURATION_S, "one count in the window "
-               "reads 2π/(counts_per_rev·window)"),
-    "direction": ("direction component", -1.0e3, 1.0e3, "a direction is normalised: give a "
-                  "unit vector"),
+    "friction_coefficient": (
+        "friction coefficient",
+        0.0,
+        FRICTION_COEFFICIENT_MAX,
+        "rubber-covered rollers reach 1-2",
+    ),
+    "travel_range": _TRAVEL,
+    "initial_travel": _TRAVEL,
+    "spring_free_travel": _TRAVEL,
+    "stroke": _TRAVEL,
+    "initial_position": _TRAVEL,
+    "moving_rollers": ("moving_rollers", 1, FESTOON_ROLLERS_MAX, "festoons have up to a few tens"),
+    "window": (
+        "counting window",
+        ENCODER_WINDOW_MIN,
+        MAX_DURATION_S,
+        "one count in the window reads 2π/(counts_per_rev·window)",
+    ),
+    "direction": (
+        "direction component",
+        -1.0e3,
+        1.0e3,
+        "a direction is normalised: give a unit vector",
+    ),
 }
 #: fields with a bound of their own elsewhere: sensor readings (READING_MAX), calibration
 #: gains, tension set-points (tension_problems), dancer set-points, wound-in strains
@@ -472,8 +598,10 @@ def _field_info(model: type, name: str) -> tuple[str | None, str, bool]:
         for m in meta:
             if isinstance(m, WithJsonSchema) and "x-dimension" in (m.json_schema or {}):
                 if found["dim"] is None:
-                    found["dim"], found["unit"] = m.json_schema["x-dimension"], \
-                        m.json_schema["x-unit"]
+                    found["dim"], found["unit"] = (
+                        m.json_schema["x-dimension"],
+                        m.json_schema["x-unit"],
+                    )
             elif isinstance(m, annotated_types.Gt | annotated_types.Ge):
                 bound = m.gt if isinstance(m, annotated_types.Gt) else m.ge
                 found["nonneg"] = found["nonneg"] or bound >= 0
@@ -499,15 +627,17 @@ def _numbers(value, path: str, model: type | None = None, name: str = ""):
     values of a mapping at ``path.key``."""
     if isinstance(value, BaseModel):
         for key in type(value).model_fields:
-            yield from _numbers(getattr(value, key), f"{path}.{key}" if path else key,
-                                type(value), key)
+            yield from _numbers(
+                getattr(value, key), f"{path}.{key}" if path else key, type(value), key
+            )
     elif isinstance(value, dict):
         for k, v in value.items():
             yield from _numbers(v, f"{path}.{k}", model, name)
     elif isinstance(value, list | tuple):
         for i, v in enumerate(value):
-            yield from _numbers(v, f"{path}[{i}]" if isinstance(v, BaseModel) else path,
-                                model, name)
+            yield from _numbers(
+                v, f"{path}[{i}]" if isinstance(v, BaseModel) else path, model, name
+            )
     elif isinstance(value, int | float) and not isinstance(value, bool) and model is not None:
         yield path, model, name, value
 
@@ -543,8 +673,14 @@ def _torque_mode_roll(line, controller_id: str | None):
         return None
     e = next((e for e in line.elements if e.id == c.element), None)
     drive = getattr(e, "drive", None)
-    if e is None or e.type not in ("unwind", "rewind") or drive is None or \
-            drive.type != "torque" or drive.torque_max is None or getattr(e, "roll", None) is None:
+    if (
+        e is None
+        or e.type not in ("unwind", "rewind")
+        or drive is None
+        or drive.type != "torque"
+        or drive.torque_max is None
+        or getattr(e, "roll", None) is None
+    ):
         return None
     if any(o.type == "speed_pi" and o.element == e.id for o in line.controllers):
         return None  # a speed trim: the tension comes from the draw, not from this torque
@@ -562,42 +698,72 @@ def _break_by_torque(line, tension: float, controller_id: str | None) -> str:
         return ": the web breaks"
     tau, r0, core = e.drive.torque_max, e.roll.outer_radius, e.roll.core_radius
     held0 = tau / r0
-    why = (f"'{controller_id}' commands the torque of '{e.id}', whose torque_max "
-           f"{_fmt(tau)} N m holds at most torque_max / R = {_fmt(held0)} N at its starting "
-           f"radius {_fmt(r0)} m")
+    why = (
+        f"'{controller_id}' commands the torque of '{e.id}', whose torque_max "
+        f"{_fmt(tau)} N m holds at most torque_max / R = {_fmt(held0)} N at its starting "
+        f"radius {_fmt(r0)} m"
+    )
     if held0 >= T_break:
         return ": the web breaks"
     if e.type == "unwind" and tau / core >= T_break:
-        return (f": the web breaks only once the roll has unwound to a radius of "
-                f"{_fmt(tau / T_break)} m (torque_max / break tension): {why}")
+        return (
+            f": the web breaks only once the roll has unwound to a radius of "
+            f"{_fmt(tau / T_break)} m (torque_max / break tension): {why}"
+        )
     if e.type == "unwind":
         why += f" and {_fmt(tau / core)} N at its core radius {_fmt(core)} m"
     else:
         why += " (less as the roll grows)"
-    return (f", but the web does not break: {why}; the drive saturates and the tension stays "
-            "below the set-point and the break tension (the dynamic tension of accelerating "
-            "the roll aside)")
+    return (
+        f", but the web does not break: {why}; the drive saturates and the tension stays "
+        "below the set-point and the break tension (the dynamic tension of accelerating "
+        "the roll aside)"
+    )
 
 
-def tension_problems(line, tension: float, path: str,
-                     controller_id: str | None = None) -> list[tuple[str, str, str]]:
+def tension_problems(
+    line, tension: float, path: str, controller_id: str | None = None
+) -> list[tuple[str, str, str]]:
     """A tension set-point or initial tension against the web's break tension and EA; a
     set-point of ``controller_id`` above the break tension also against what its drive can
     hold (:func:`_break_by_torque`)."""
     web = line.web
     if tension > FORCE_MAX:
-        return [(ERROR, path, _outside("tension", tension, "N", 0.0, FORCE_MAX, "film and "
-                                       "paper lines run at 0.1-20 kN, steel strip at up to "
-                                       "~1 MN"))]
+        return [
+            (
+                ERROR,
+                path,
+                _outside(
+                    "tension",
+                    tension,
+                    "N",
+                    0.0,
+                    FORCE_MAX,
+                    "film and paper lines run at 0.1-20 kN, steel strip at up to ~1 MN",
+                ),
+            )
+        ]
     out = []
     if tension > web.break_tension:
-        out.append((WARNING, path, f"{_fmt(tension)} N is above the web's break tension "
-                    f"{_fmt(web.break_tension)} N (break_stress x thickness x width)"
-                    f"{_break_by_torque(line, tension, controller_id)}"))
+        out.append(
+            (
+                WARNING,
+                path,
+                f"{_fmt(tension)} N is above the web's break tension "
+                f"{_fmt(web.break_tension)} N (break_stress x thickness x width)"
+                f"{_break_by_torque(line, tension, controller_id)}",
+            )
+        )
     if 0 < tension / web.EA < STRAIN_RESOLUTION:
-        out.append((WARNING, path, f"{_fmt(tension)} N stretches the web by only "
-                    f"{tension / web.EA:.1e} (T/EA, EA = {_fmt(web.EA)} N): below 1e-9 the span "
-                    "states cannot resolve the tension, which becomes rounding noise"))
+        out.append(
+            (
+                WARNING,
+                path,
+                f"{_fmt(tension)} N stretches the web by only "
+                f"{tension / web.EA:.1e} (T/EA, EA = {_fmt(web.EA)} N): below 1e-9 the span "
+                "states cannot resolve the tension, which becomes rounding noise",
+            )
+        )
     return out
 
 
@@ -611,8 +777,11 @@ def _sensor_spans(line, sensor_id: str) -> list[float]:
     k = next((k for k, e in enumerate(line.elements) if e.id == s.element), None)
     if k is None:
         return []
-    return [line.spans[i].length for i in (k - 1, k)
-            if 0 <= i < len(line.spans) and line.spans[i].length]
+    return [
+        line.spans[i].length
+        for i in (k - 1, k)
+        if 0 <= i < len(line.spans) and line.spans[i].length
+    ]
 
 
 def controller_problems(line) -> list[tuple[str, str, str]]:
@@ -635,14 +804,20 @@ def controller_problems(line) -> list[tuple[str, str, str]]:
                 kind = f"speed loop (kp/J, J = {_fmt(J)} kg m^2)"
                 lag = getattr(getattr(e, "drive", None), "torque_lag", 0.0)
                 if lag > 0:
-                    limit, why = SPEED_OVER_TORQUE / lag, \
-                        f"ten times its drive's torque loop (1/torque_lag = {_fmt(1 / lag)} rad/s)"
+                    limit, why = (
+                        SPEED_OVER_TORQUE / lag,
+                        f"ten times its drive's torque loop (1/torque_lag = {_fmt(1 / lag)} rad/s)",
+                    )
         elif c.type == "tension_pi" and e is not None:
             lengths = _sensor_spans(line, c.sensor)
             L = min(lengths) if lengths else None
             roll = e.type in ("unwind", "rewind")
-            torque_mode = roll and getattr(e, "drive", None) is not None and \
-                e.drive.type == "torque" and c.element not in speed_ctrl
+            torque_mode = (
+                roll
+                and getattr(e, "drive", None) is not None
+                and e.drive.type == "torque"
+                and c.element not in speed_ctrl
+            )
             if L and torque_mode:
                 wn = _radius(e) * math.sqrt(web.EA / (_roll_inertia(e.roll, web) * L))
                 rates = (math.sqrt(kp) * wn, (ki * wn * wn) ** (1 / 3))
@@ -651,31 +826,54 @@ def controller_problems(line) -> list[tuple[str, str, str]]:
                 g = web.EA / L
                 rates = (kp * g, math.sqrt(ki * g))
                 kind = f"speed-trim tension loop (kp·EA/L, EA/L = {_fmt(g)} N/m)"
-            limit, why = TRIM_RATE_WARN, "the speed loops it trims (10-50 Hz; tension loops " \
-                                         "run at 0.5-5 Hz, physics.md §1.10)"
+            limit, why = (
+                TRIM_RATE_WARN,
+                "the speed loops it trims (10-50 Hz; tension loops "
+                "run at 0.5-5 Hz, physics.md §1.10)",
+            )
         elif c.type == "dancer_pi":
             rates = (kp / 2, math.sqrt(ki / 2))
             kind = "dancer loop (kp/2)"
-            limit, why = TRIM_RATE_WARN, "the speed loops it trims (10-50 Hz; dancer loops " \
-                                         "run at 0.5-5 Hz, physics.md §1.10)"
+            limit, why = (
+                TRIM_RATE_WARN,
+                "the speed loops it trims (10-50 Hz; dancer loops "
+                "run at 0.5-5 Hz, physics.md §1.10)",
+            )
         aw = c.anti_windup_gain
         if aw is not None and aw > LOOP_RATE_MAX:
-            out.append((ERROR, f"{p}.anti_windup_gain", f"{_fmt(aw)} 1/s is faster than any "
-                        f"loop ({_fmt(LOOP_RATE_MAX)} rad/s at most)"))
+            out.append(
+                (
+                    ERROR,
+                    f"{p}.anti_windup_gain",
+                    f"{_fmt(aw)} 1/s is faster than any loop ({_fmt(LOOP_RATE_MAX)} rad/s at most)",
+                )
+            )
         if rates is None:
             continue
         rate = max(rates)
         key = "kp" if rates[0] >= rates[1] else "ki"
         if rate > LOOP_RATE_MAX:
-            out.append((ERROR, f"{p}.{key}", f"these gains (kp {_fmt(c.kp)}, ki {_fmt(ki)}) make "
-                        f"a {kind} of about {_fmt(rate)} rad/s, above "
-                        f"{_fmt(LOOP_RATE_MAX)} rad/s (160 kHz): no drive is that fast (current "
-                        "loops run at 0.5-2 kHz, physics.md §1.10), and the solver would need "
-                        "sub-microsecond steps"))
+            out.append(
+                (
+                    ERROR,
+                    f"{p}.{key}",
+                    f"these gains (kp {_fmt(c.kp)}, ki {_fmt(ki)}) make "
+                    f"a {kind} of about {_fmt(rate)} rad/s, above "
+                    f"{_fmt(LOOP_RATE_MAX)} rad/s (160 kHz): no drive is that fast (current "
+                    "loops run at 0.5-2 kHz, physics.md §1.10), and the solver would need "
+                    "sub-microsecond steps",
+                )
+            )
         elif limit is not None and rate > limit:
-            out.append((WARNING, f"{p}.{key}", f"these gains (kp {_fmt(c.kp)}, ki {_fmt(ki)}) "
-                        f"make a {kind} of about {_fmt(rate)} rad/s, faster than {why}: expect "
-                        "oscillation or a very slow run"))
+            out.append(
+                (
+                    WARNING,
+                    f"{p}.{key}",
+                    f"these gains (kp {_fmt(c.kp)}, ki {_fmt(ki)}) "
+                    f"make a {kind} of about {_fmt(rate)} rad/s, faster than {why}: expect "
+                    "oscillation or a very slow run",
+                )
+            )
     return out
 
 
@@ -690,25 +888,53 @@ def scenario_problems(scenario, line) -> list[tuple[str, str, str]]:
         if st.line_speed is not None:
             v = abs(st.line_speed)
             if v >= wave:
-                out.append((ERROR, f"{p}.line_speed", f"{_fmt(st.line_speed)} m/s is faster "
-                            f"than the web's longitudinal wave speed sqrt(E/rho) = {_fmt(wave)} "
-                            "m/s: the span model assumes the web moves far slower than its "
-                            "strain waves (physics.md §2.1)"))
+                out.append(
+                    (
+                        ERROR,
+                        f"{p}.line_speed",
+                        f"{_fmt(st.line_speed)} m/s is faster "
+                        f"than the web's longitudinal wave speed sqrt(E/rho) = {_fmt(wave)} "
+                        "m/s: the span model assumes the web moves far slower than its "
+                        "strain waves (physics.md §2.1)",
+                    )
+                )
             elif v > LINE_SPEED_LIMIT:
-                out.append((ERROR, f"{p}.line_speed", _outside(
-                    "line speed", st.line_speed, "m/s", -LINE_SPEED_LIMIT, LINE_SPEED_LIMIT,
-                    "the fastest web lines (paper machines, slitter-rewinders) run at 35-50 "
-                    "m/s")))
+                out.append(
+                    (
+                        ERROR,
+                        f"{p}.line_speed",
+                        _outside(
+                            "line speed",
+                            st.line_speed,
+                            "m/s",
+                            -LINE_SPEED_LIMIT,
+                            LINE_SPEED_LIMIT,
+                            "the fastest web lines (paper machines, slitter-rewinders) run "
+                            "at 35-50 m/s",
+                        ),
+                    )
+                )
             elif v > SPEED_MAX:
-                out.append((WARNING, f"{p}.line_speed", f"{_fmt(st.line_speed)} m/s is faster "
-                            "than any line in physics.md §2.2 (paper machines: 15-35 m/s)"))
+                out.append(
+                    (
+                        WARNING,
+                        f"{p}.line_speed",
+                        f"{_fmt(st.line_speed)} m/s is faster "
+                        "than any line in physics.md §2.2 (paper machines: 15-35 m/s)",
+                    )
+                )
         for cid, T in (st.tension or {}).items():
             out += tension_problems(line, T, f"{p}.tension.{cid}", cid)
     init = scenario.initial
     if init.tension is not None:
-        out += [(lvl, path, msg + ("" if "break tension" not in msg else
-                                   " at t = 0 (the run ends there)"))
-                for lvl, path, msg in tension_problems(line, init.tension, "initial.tension")]
+        out += [
+            (
+                lvl,
+                path,
+                msg + ("" if "break tension" not in msg else " at t = 0 (the run ends there)"),
+            )
+            for lvl, path, msg in tension_problems(line, init.tension, "initial.tension")
+        ]
     for sid, T in init.span_tension.items():
         out += tension_problems(line, T, f"initial.span_tension.{sid}")
     out += disturbance_problems(scenario)
@@ -724,8 +950,14 @@ def disturbance_problems(scenario) -> list[tuple[str, str, str]]:
         p = f"disturbances[{i}]"
         if d.type == "out_of_round":
             if d.element in eccentric:
-                out.append((ERROR, f"{p}.element", f"'{d.element}' is already out of round "
-                            f"(disturbances[{eccentric[d.element]}]): give one eccentricity"))
+                out.append(
+                    (
+                        ERROR,
+                        f"{p}.element",
+                        f"'{d.element}' is already out of round "
+                        f"(disturbances[{eccentric[d.element]}]): give one eccentricity",
+                    )
+                )
             eccentric.setdefault(d.element, i)
             continue
         try:
@@ -733,10 +965,22 @@ def disturbance_problems(scenario) -> list[tuple[str, str, str]]:
         except ValueError:  # a bad unit: the loader reports it with its path
             continue
         if d.type == "bearing_drag" and std > TORQUE_MAX:
-            out.append((ERROR, f"{p}.std", f"a drag torque of {_fmt(std)} N m is beyond any "
-                        f"bearing (at most {_fmt(TORQUE_MAX)} N m)"))
+            out.append(
+                (
+                    ERROR,
+                    f"{p}.std",
+                    f"a drag torque of {_fmt(std)} N m is beyond any "
+                    f"bearing (at most {_fmt(TORQUE_MAX)} N m)",
+                )
+            )
         if d.type == "wound_in_strain" and 4 * std >= WOUND_IN_STRAIN_MAX:
-            out.append((ERROR, f"{p}.std", f"a wound-in strain of std {_fmt(std)} reaches "
-                        f"{WOUND_IN_STRAIN_MAX:g} within 4 standard deviations, where Hooke's "
-                        "law no longer describes the web"))
+            out.append(
+                (
+                    ERROR,
+                    f"{p}.std",
+                    f"a wound-in strain of std {_fmt(std)} reaches "
+                    f"{WOUND_IN_STRAIN_MAX:g} within 4 standard deviations, where Hooke's "
+                    "law no longer describes the web",
+                )
+            )
     return out

@@ -54,8 +54,9 @@ def number_or_text(value):
     unit its context fixes): refuses booleans and non-finite numbers with one message,
     before a union's members would each report their own."""
     if isinstance(value, bool):
-        raise ValueError(f"expected a number or a string with units, got {str(value).lower()} "
-                         "(a boolean)")
+        raise ValueError(
+            f"expected a number or a string with units, got {str(value).lower()} (a boolean)"
+        )
     if isinstance(value, float) and not math.isfinite(value):
         raise ValueError(f"{value} is not a finite number (.nan and .inf are not allowed)")
     return value

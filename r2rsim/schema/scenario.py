@@ -39,31 +39,41 @@ class ProgrammeStep(Strict):
 
     at: Annotated[Time, Field(ge=0)] = Field(description="time of the change [s]")
     line_speed: Speed | None = Field(
-        None, description="new line speed [m/s] (the master speed node's surface speed)")
+        None, description="new line speed [m/s] (the master speed node's surface speed)"
+    )
     tension: dict[Id, Annotated[Force, Field(ge=0)]] | None = Field(
         None, description="new set-points of tension controllers, by controller id"
     )
     draw: dict[Id, Annotated[Dimensionless, Field(gt=-1)]] | None = Field(
-        None, description="new draws (relative speed offsets to the line speed) of "
-        "elements with an ideal_speed drive or a non-master speed_pi, by element id"
+        None,
+        description="new draws (relative speed offsets to the line speed) of "
+        "elements with an ideal_speed drive or a non-master speed_pi, by element id",
     )
     torque: dict[Id, Torque] | None = Field(
-        None, description="new torque commands [N m] of torque drives without a controller, "
-        "by element id"
+        None,
+        description="new torque commands [N m] of torque drives without a controller, "
+        "by element id",
     )
     ramp: Annotated[Time, Field(ge=0)] | None = Field(None, description="ramp duration [s]")
     rate: Annotated[Acceleration, Field(gt=0)] | None = Field(
         None, description="line-speed ramp rate [m/s^2] (instead of ramp)"
     )
     mode: Id | None = Field(
-        None, description="operating-mode name from this step on (label.mode), e.g. OC1")
+        None, description="operating-mode name from this step on (label.mode), e.g. OC1"
+    )
 
     @model_validator(mode="after")
     def _check(self):
-        if (self.line_speed is None and not self.tension and not self.draw
-                and not self.torque and self.mode is None):
-            raise ValueError("a programme step must change line_speed, tension, draw, torque "
-                             "or mode")
+        if (
+            self.line_speed is None
+            and not self.tension
+            and not self.draw
+            and not self.torque
+            and self.mode is None
+        ):
+            raise ValueError(
+                "a programme step must change line_speed, tension, draw, torque or mode"
+            )
         if self.ramp is not None and self.rate is not None:
             raise ValueError("give either ramp (a duration) or rate, not both")
         return self
@@ -80,10 +90,13 @@ class ScenarioEvent(Strict):
     at: Annotated[Time, Field(ge=0)] = Field(description="time of the event [s]")
     type: Literal["splice", "e_stop", "dancer_seize"] = Field(
         description="splice: start a roll change; e_stop: ramp the line speed down to 0; "
-        "dancer_seize: the dancer or festoon carriage seizes where it is")
+        "dancer_seize: the dancer or festoon carriage seizes where it is"
+    )
     element: Id | None = Field(
-        None, description="splice: the unwind (default the only one with a splicer); "
-        "dancer_seize: the dancer or festoon span")
+        None,
+        description="splice: the unwind (default the only one with a splicer); "
+        "dancer_seize: the dancer or festoon span",
+    )
     deceleration: Annotated[Acceleration, Field(gt=0)] | None = Field(
         None, description="e_stop: line deceleration limit [m/s^2]"
     )
@@ -102,29 +115,39 @@ class Initial(Strict):
     ``nominal``: all nodes at line speed, every span at ``tension`` (overridable per span)."""
 
     state: Literal["steady", "nominal"] = Field(
-        "steady", description="steady: the steady state at the t = 0 set-points; nominal: every "
-        "node at line speed, every span at tension")
+        "steady",
+        description="steady: the steady state at the t = 0 set-points; nominal: every "
+        "node at line speed, every span at tension",
+    )
     tension: Annotated[Force, Field(ge=0)] | None = Field(
-        None, description="nominal mode: tension of every span [N]; default the first "
-        "tension set-point, else 0"
+        None,
+        description="nominal mode: tension of every span [N]; default the first "
+        "tension set-point, else 0",
     )
     span_tension: dict[Id, Annotated[Force, Field(ge=0)]] = Field(
-        default_factory=dict, description="nominal mode: tension [N] of single spans, by span "
-        "id, instead of tension")
+        default_factory=dict,
+        description="nominal mode: tension [N] of single spans, by span id, instead of tension",
+    )
     slack: dict[Id, Annotated[Length, Field(gt=0)]] = Field(
-        default_factory=dict, description="nominal mode: web [m] a span holds beyond its taut "
+        default_factory=dict,
+        description="nominal mode: web [m] a span holds beyond its taut "
         "length, by span id (less than half the span): the span starts slack, at 0 N, as a "
-        "web threaded slack before a start-up")
+        "web threaded slack before a start-up",
+    )
     position: dict[Id, NumberOrText] = Field(
-        default_factory=dict, description="nominal mode: position at t = 0 of a dancer or "
+        default_factory=dict,
+        description="nominal mode: position at t = 0 of a dancer or "
         "festoon carriage, by id (arm angle for a pivot dancer, travel [m] otherwise), strictly "
-        "inside its end stops; default the line's initial position")
+        "inside its end stops; default the line's initial position",
+    )
 
     @model_validator(mode="after")
     def _check(self):
         if self.state == "steady" and (self.slack or self.position):
-            raise ValueError("slack and position set a nominal start; give state: nominal "
-                             "(a steady state has no slack and fixes the dancer positions)")
+            raise ValueError(
+                "slack and position set a nominal start; give state: nominal "
+                "(a steady state has no slack and fixes the dancer positions)"
+            )
         return self
 
 
@@ -132,28 +155,36 @@ class SolverOptions(Strict):
     """Integrator settings (solver.md §6)."""
 
     backend: Literal["cvode", "radau5", "radau"] = Field(
-        "radau5", description="radau5: r2rsim's compiled Radau IIA, order 5 (default: the "
+        "radau5",
+        description="radau5: r2rsim's compiled Radau IIA, order 5 (default: the "
         "fastest at equal accuracy on the project's benchmark); cvode: SUNDIALS CVODE BDF2 "
-        "(scikit-sundae); radau: scipy's Radau (cross-check)")
+        "(scikit-sundae); radau: scipy's Radau (cross-check)",
+    )
     rtol: Annotated[float, Field(gt=0, lt=1)] = Field(
-        1e-6, description="relative tolerance of the integrator")
+        1e-6, description="relative tolerance of the integrator"
+    )
     atol_scale: Annotated[float, Field(gt=0)] = Field(
         1.0, description="multiplies the per-state absolute tolerances"
     )
     max_order: Annotated[int, Field(ge=1, le=5)] = Field(
-        2, description="CVODE's BDF order limit (cvode only); 2 is A-stable (orders 3-5 are "
-        "unstable on web modes)"
+        2,
+        description="CVODE's BDF order limit (cvode only); 2 is A-stable (orders 3-5 are "
+        "unstable on web modes)",
     )
     chunk_memory_mb: Annotated[float, Field(gt=0)] = Field(
         64.0, description="memory for one integration chunk of dense output"
     )
     max_steps_per_s: Annotated[float, Field(gt=0)] = Field(
-        5.0e4, description="step budget per simulated second (of at least 1 s): a run that "
+        5.0e4,
+        description="step budget per simulated second (of at least 1 s): a run that "
         "needs more ends as 'solver_failure: step budget' instead of running for hours (the "
-        "shipped scenarios take 25-250 steps/s on radau5, about 10x on cvode)")
+        "shipped scenarios take 25-250 steps/s on radau5, about 10x on cvode)",
+    )
     max_wall_s: Annotated[float, Field(gt=0)] | None = Field(
-        None, description="wall-clock budget of the integration [s]; off by default, since "
-        "it makes the data depend on the machine's speed")
+        None,
+        description="wall-clock budget of the integration [s]; off by default, since "
+        "it makes the data depend on the machine's speed",
+    )
 
 
 class Expect(Strict):
@@ -161,9 +192,11 @@ class Expect(Strict):
     exits non-zero from ``r2rsim run`` (its data kept and marked in ``runs.parquet``)."""
 
     termination: list[Literal["web_break", "roll_empty"]] = Field(
-        default_factory=list, description="early endings that are the point of the scenario "
+        default_factory=list,
+        description="early endings that are the point of the scenario "
         "(e.g. [web_break] for a dancer failure that breaks the web); a solver failure is "
-        "never expected")
+        "never expected",
+    )
 
     @field_validator("termination", mode="before")
     @classmethod
@@ -177,11 +210,14 @@ class SplitBySeed(Strict):
 
     by: Literal["seed"] = Field(description="assign the split from the run's seed")
     train: Annotated[float, Field(ge=0, le=1)] = Field(
-        0.6, description="fraction of seeds in the train split")
+        0.6, description="fraction of seeds in the train split"
+    )
     val: Annotated[float, Field(ge=0, le=1)] = Field(
-        0.2, description="fraction of seeds in the val split")
+        0.2, description="fraction of seeds in the val split"
+    )
     test: Annotated[float, Field(ge=0, le=1)] = Field(
-        0.2, description="fraction of seeds in the test split")
+        0.2, description="fraction of seeds in the test split"
+    )
 
     @model_validator(mode="after")
     def _check(self):
@@ -217,43 +253,58 @@ class Disturbance(Strict):
 
     type: Literal["bearing_drag", "wound_in_strain", "out_of_round"] = Field(
         description="bearing_drag: a random drag torque on a roller; wound_in_strain: strain "
-        "wound into an unwind's roll, varying along the web; out_of_round: an eccentric roller")
+        "wound into an unwind's roll, varying along the web; out_of_round: an eccentric roller"
+    )
     element: Id = Field(
-        description="id of the roller (bearing_drag, out_of_round) or unwind (wound_in_strain)")
+        description="id of the roller (bearing_drag, out_of_round) or unwind (wound_in_strain)"
+    )
     std: NumberOrText | None = Field(
-        None, description="bearing_drag: torque [N m]; wound_in_strain: strain [1]. The "
+        None,
+        description="bearing_drag: torque [N m]; wound_in_strain: strain [1]. The "
         "standard deviation: with shape sines, the mean square of every realisation over a "
-        "long record is exactly std^2 (32 terms of equal power)")
+        "long record is exactly std^2 (32 terms of equal power)",
+    )
     bandwidth: Annotated[Frequency, Field(gt=0)] | None = Field(
-        None, description="bearing_drag: corner frequency f_c [Hz] of the first-order "
+        None,
+        description="bearing_drag: corner frequency f_c [Hz] of the first-order "
         "spectrum S(f) ~ 1/(1 + (f/f_c)^2), autocorrelation exp(-2 pi f_c |lag|); with shape "
-        "sines the spectrum is cut off at 10 f_c")
+        "sines the spectrum is cut off at 10 f_c",
+    )
     correlation_length: Annotated[Length, Field(gt=0)] | None = Field(
-        None, description="wound_in_strain: correlation length l_c [m] along the unwound web, "
+        None,
+        description="wound_in_strain: correlation length l_c [m] along the unwound web, "
         "autocorrelation exp(-|lag|/l_c) (a first-order spectrum of corner 1/(2 pi l_c) per "
         "metre); with shape sines the spectrum is cut off at 10/(2 pi l_c) per metre, "
-        "wavelengths down to 0.63 l_c")
+        "wavelengths down to 0.63 l_c",
+    )
     eccentricity: Annotated[Length, Field(gt=0)] | None = Field(
-        None, description="out_of_round: distance of the axis of rotation from the roller's "
-        "centre [m]")
+        None,
+        description="out_of_round: distance of the axis of rotation from the roller's centre [m]",
+    )
     shape: Literal["sines", "table"] | None = Field(
-        None, description="bearing_drag and wound_in_strain: 'sines' (default), a smooth sum "
+        None,
+        description="bearing_drag and wound_in_strain: 'sines' (default), a smooth sum "
         "of 32 sinusoids with random phases and frequencies drawn from the declared spectrum "
         "cut off at 10 times its corner; 'table', the earlier first-order autoregressive "
         "table interpolated linearly (on the sample grid for a bearing drag, ten points per "
         "correlation length for a wound-in strain), to reproduce data made before r2rsim "
         "issue 16. A table has a kink at every grid point, which the stiff solver must "
-        "resolve: about ten times the RHS evaluations")
+        "resolve: about ten times the RHS evaluations",
+    )
 
     @model_validator(mode="after")
     def _check(self):
-        need = {"bearing_drag": ("std", "bandwidth"),
-                "wound_in_strain": ("std", "correlation_length"),
-                "out_of_round": ("eccentricity",)}[self.type]
+        need = {
+            "bearing_drag": ("std", "bandwidth"),
+            "wound_in_strain": ("std", "correlation_length"),
+            "out_of_round": ("eccentricity",),
+        }[self.type]
         for k in ("std", "bandwidth", "correlation_length", "eccentricity"):
             if (getattr(self, k) is None) == (k in need):
-                raise ValueError(f"a {self.type} disturbance "
-                                 + (f"needs '{k}'" if k in need else f"takes no '{k}'"))
+                raise ValueError(
+                    f"a {self.type} disturbance "
+                    + (f"needs '{k}'" if k in need else f"takes no '{k}'")
+                )
         if self.type == "out_of_round" and self.shape is not None:
             raise ValueError("an out_of_round disturbance takes no 'shape'")
         return self
@@ -261,54 +312,68 @@ class Disturbance(Strict):
     def std_si(self) -> float:
         """``std`` in SI (a torque for bearing drag, a plain number for a strain); raises
         :class:`r2rsim.units.QuantityError` for a bad unit."""
-        return parse_quantity(self.std, "torque" if self.type == "bearing_drag"
-                              else "dimensionless")
+        return parse_quantity(
+            self.std, "torque" if self.type == "bearing_drag" else "dimensionless"
+        )
 
 
 class Scenario(Strict):
     """An operating scenario for a line."""
 
     name: Id | None = Field(
-        None, description="the run's name, an identifier (letters, digits and '_', starting "
+        None,
+        description="the run's name, an identifier (letters, digits and '_', starting "
         "with a letter): it names the run id <name>__s<seed> and paths in the dataset; "
-        "default the file name")
+        "default the file name",
+    )
     description: str | None = Field(None, description="free text")
     line: str = Field(description="path of the line file, relative to the scenario file")
     duration: Annotated[Time, Field(gt=0)] = Field(description="simulated time [s]")
     record_rate: Annotated[Frequency, Field(gt=0)] = Field(
-        1000.0, description="rate of the recorded samples [Hz]")
+        1000.0, description="rate of the recorded samples [Hz]"
+    )
     seed: Annotated[int, Field(ge=0, le=limits.MAX_SEED)] = Field(
-        0, description="root seed, 0 to 2**64 - 1")
+        0, description="root seed, 0 to 2**64 - 1"
+    )
     output: str | None = Field(
-        None, description="output directory, relative to the scenario file and inside the "
+        None,
+        description="output directory, relative to the scenario file and inside the "
         "directory that holds it (-o writes anywhere); default runs/<scenario name> in the "
-        "working directory"
+        "working directory",
     )
     initial: Initial = Field(default_factory=Initial, description="the state at t = 0")
-    programme: Annotated[list[ProgrammeStep], Field(max_length=limits.MAX_PROGRAMME_STEPS)] = \
-        Field(default_factory=list, description="set-point changes in time order; the first, "
-              "at 0 s, sets the starting line speed and set-points")
+    programme: Annotated[list[ProgrammeStep], Field(max_length=limits.MAX_PROGRAMME_STEPS)] = Field(
+        default_factory=list,
+        description="set-point changes in time order; the first, "
+        "at 0 s, sets the starting line speed and set-points",
+    )
     events: Annotated[list[ScenarioEvent], Field(max_length=limits.MAX_EVENTS)] = Field(
         description="scheduled discrete events: splices, e-stops, dancer seizures",
-        default_factory=list)
+        default_factory=list,
+    )
     solver: SolverOptions = Field(default_factory=SolverOptions, description="integrator settings")
     warmup: Annotated[Time, Field(ge=0)] = Field(
         0.0, description="initial period labelled 'warmup' in the dataset [s]"
     )
     faults: Annotated[list[Fault], Field(max_length=limits.MAX_FAULTS)] = Field(
         description="the faults injected into the run (labelled; r2rsim list faults)",
-        default_factory=list)
-    disturbances: Annotated[list[Disturbance], Field(max_length=limits.MAX_DISTURBANCES)] = \
-        Field(default_factory=list, description="process disturbances, always present and "
-              "not labelled")
+        default_factory=list,
+    )
+    disturbances: Annotated[list[Disturbance], Field(max_length=limits.MAX_DISTURBANCES)] = Field(
+        default_factory=list, description="process disturbances, always present and not labelled"
+    )
     variability: Variability | None = Field(
-        None, description="unlabelled spread between rolls (modulus, thickness, starting "
+        None,
+        description="unlabelled spread between rolls (modulus, thickness, starting "
         "radius, wound-in strain) and runs (bearing friction, sensor calibration), drawn "
-        "from the run's process stream and recorded in variability.parquet")
+        "from the run's process stream and recorded in variability.parquet",
+    )
     split: Literal["train", "val", "test"] | SplitBySeed | None = Field(
-        None, description="data split of the run: fixed, or {by: seed, train:, val:, test:}")
-    expect: Expect = Field(default_factory=Expect,
-                           description="how the run is meant to end ({termination: web_break})")
+        None, description="data split of the run: fixed, or {by: seed, train:, val:, test:}"
+    )
+    expect: Expect = Field(
+        default_factory=Expect, description="how the run is meant to end ({termination: web_break})"
+    )
 
     @model_validator(mode="after")
     def _check(self):
@@ -318,8 +383,10 @@ class Scenario(Strict):
         last = -1.0
         for i, step in enumerate(self.programme):
             if step.at < last:
-                raise ValueError(f"@programme[{i}].at@ steps must be in time order "
-                                 f"({step.at:g} s comes after {last:g} s)")
+                raise ValueError(
+                    f"@programme[{i}].at@ steps must be in time order "
+                    f"({step.at:g} s comes after {last:g} s)"
+                )
             last = step.at
         ids = [f.id for f in self.faults]
         for i, f in enumerate(self.faults):

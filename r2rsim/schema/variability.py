@@ -28,22 +28,32 @@ class Spread(Strict):
     ``rel_tolerance``."""
 
     std: NumberOrText | None = Field(
-        None, description="normal, standard deviation in the value's unit (cut at 4 std)")
+        None, description="normal, standard deviation in the value's unit (cut at 4 std)"
+    )
     rel_std: Annotated[Dimensionless, Field(ge=0, le=0.2)] | None = Field(
-        None, description="normal, standard deviation as a fraction of the nominal value, "
-        "e.g. '2 %' (cut at 4 std)")
+        None,
+        description="normal, standard deviation as a fraction of the nominal value, "
+        "e.g. '2 %' (cut at 4 std)",
+    )
     tolerance: NumberOrText | None = Field(
-        None, description="uniform within +- tolerance, in the value's unit")
+        None, description="uniform within +- tolerance, in the value's unit"
+    )
     rel_tolerance: Annotated[Dimensionless, Field(ge=0, le=0.5)] | None = Field(
-        None, description="uniform within +- a fraction of the nominal value, e.g. '0.5 %'")
+        None, description="uniform within +- a fraction of the nominal value, e.g. '0.5 %'"
+    )
 
     @model_validator(mode="after")
     def _one(self):
-        given = [k for k in ("std", "rel_std", "tolerance", "rel_tolerance")
-                 if getattr(self, k) is not None]
+        given = [
+            k
+            for k in ("std", "rel_std", "tolerance", "rel_tolerance")
+            if getattr(self, k) is not None
+        ]
         if len(given) != 1:
-            raise ValueError("give exactly one of std, rel_std, tolerance and rel_tolerance"
-                             + (f" (got {', '.join(given)})" if given else ""))
+            raise ValueError(
+                "give exactly one of std, rel_std, tolerance and rel_tolerance"
+                + (f" (got {', '.join(given)})" if given else "")
+            )
         return self
 
     @property
@@ -54,8 +64,11 @@ class Spread(Strict):
     @property
     def key(self) -> str:
         """The one key given."""
-        return next(k for k in ("std", "rel_std", "tolerance", "rel_tolerance")
-                    if getattr(self, k) is not None)
+        return next(
+            k
+            for k in ("std", "rel_std", "tolerance", "rel_tolerance")
+            if getattr(self, k) is not None
+        )
 
     def si(self, nominal: float, dimension: str) -> tuple[str, float]:
         """``("normal" | "uniform", width)``: the standard deviation or half-width in SI
@@ -81,28 +94,36 @@ class RollVariability(Strict):
     at t = 0 and again for each roll a splice loads."""
 
     modulus: Spread | None = Field(
-        None, description="the roll's web modulus E [Pa]; its E·A enters the spans as the "
-        "roll's web does")
+        None,
+        description="the roll's web modulus E [Pa]; its E·A enters the spans as the "
+        "roll's web does",
+    )
     thickness: Spread | None = Field(
-        None, description="the roll's web thickness [m]: its E·A and its radial build")
-    outer_radius: Spread | None = Field(
-        None, description="the roll's starting radius [m]")
+        None, description="the roll's web thickness [m]: its E·A and its radial build"
+    )
+    outer_radius: Spread | None = Field(None, description="the roll's starting radius [m]")
     wound_in_strain: Spread | None = Field(
-        None, description="an offset on the roll's wound-in strain (the e0 of the roll's "
-        "law; std or tolerance, since the nominal may be 0)")
+        None,
+        description="an offset on the roll's wound-in strain (the e0 of the roll's "
+        "law; std or tolerance, since the nominal may be 0)",
+    )
     relaxed_pitch: Spread | None = Field(
-        None, description="an offset [m] on the relaxed pitch L0 of the roll's printed web, "
+        None,
+        description="an offset [m] on the relaxed pitch L0 of the roll's printed web, "
         "read by the pitch_length sensors on this unwind's web (std or tolerance); it "
-        "reaches a sensor with the roll's web")
+        "reaches a sensor with the roll's web",
+    )
 
 
 class SensorCalibration(Strict):
     """A sensor's calibration error of one run: its gain and offset in y = g·x + b."""
 
-    gain: Spread | None = Field(None, description="calibration gain g (nominal from the "
-                                "line, usually 1)")
-    offset: Spread | None = Field(None, description="calibration offset b, in the sensor's "
-                                  "unit (N, rad/s, m)")
+    gain: Spread | None = Field(
+        None, description="calibration gain g (nominal from the line, usually 1)"
+    )
+    offset: Spread | None = Field(
+        None, description="calibration offset b, in the sensor's unit (N, rad/s, m)"
+    )
 
 
 class Variability(Strict):
@@ -111,32 +132,46 @@ class Variability(Strict):
     never in the columns a method sees (docs/dataset.md §8.1; this module's docstring)."""
 
     rolls: dict[Id, RollVariability] = Field(
-        default_factory=dict, description="per unwind id: what differs between its rolls")
+        default_factory=dict, description="per unwind id: what differs between its rolls"
+    )
     friction: Spread | None = Field(
-        None, description="per run and element: the bearing friction (viscous and Coulomb "
-        "together) as a fraction of the line's value (rel_std or rel_tolerance)")
+        None,
+        description="per run and element: the bearing friction (viscous and Coulomb "
+        "together) as a fraction of the line's value (rel_std or rel_tolerance)",
+    )
     sensors: dict[Id, SensorCalibration] = Field(
-        default_factory=dict, description="per sensor id: its calibration error in this run")
+        default_factory=dict, description="per sensor id: its calibration error in this run"
+    )
 
     @model_validator(mode="after")
     def _check(self):
         if self.friction is not None and not self.friction.relative:
-            raise ValueError("@variability.friction@ the friction spread is relative: "
-                             "give rel_std or rel_tolerance")
+            raise ValueError(
+                "@variability.friction@ the friction spread is relative: "
+                "give rel_std or rel_tolerance"
+            )
         for eid, r in self.rolls.items():
             w = r.wound_in_strain
             if w is not None and w.relative:
-                raise ValueError(f"@variability.rolls.{eid}.wound_in_strain@ give std or "
-                                 "tolerance (the nominal wound-in strain may be 0)")
+                raise ValueError(
+                    f"@variability.rolls.{eid}.wound_in_strain@ give std or "
+                    "tolerance (the nominal wound-in strain may be 0)"
+                )
             p = r.relaxed_pitch
             if p is not None and p.relative:
-                raise ValueError(f"@variability.rolls.{eid}.relaxed_pitch@ give std or "
-                                 "tolerance: the value is an offset on the sensors' L0 [m]")
+                raise ValueError(
+                    f"@variability.rolls.{eid}.relaxed_pitch@ give std or "
+                    "tolerance: the value is an offset on the sensors' L0 [m]"
+                )
         return self
 
 
-_SENSOR_UNIT = {"load_cell": ("force", "N"), "encoder": ("angular_speed", "rad/s"),
-                "roll_diameter": ("length", "m"), "pitch_length": ("length", "m")}
+_SENSOR_UNIT = {
+    "load_cell": ("force", "N"),
+    "encoder": ("angular_speed", "rad/s"),
+    "roll_diameter": ("length", "m"),
+    "pitch_length": ("length", "m"),
+}
 
 
 def sensor_dimension(line, sensor) -> tuple[str, str]:

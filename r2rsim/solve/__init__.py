@@ -3,5 +3,11 @@
 from .initial import nominal_state, steady_state
 from .simulate import Event, SimulationResult, SolverSettings, simulate
 
-__all__ = ["Event", "SimulationResult", "SolverSettings", "nominal_state", "simulate",
-           "steady_state"]
+__all__ = [
+    "Event",
+    "SimulationResult",
+    "SolverSettings",
+    "nominal_state",
+    "simulate",
+    "steady_state",
+]

@@ -176,8 +176,9 @@ class DiscreteLogic:
         Length of the run [s] (bounds the breakpoints of an intermittent fault).
     """
 
-    def __init__(self, cl: CompiledLine, events=(), faults=(), duration: float = math.inf,
-                 rolls=None):
+    def __init__(
+        self, cl: CompiledLine, events=(), faults=(), duration: float = math.inf, rolls=None
+    ):
         self.cl = cl
         self.rolls = rolls  # RollDraws: the varied rolls a splice loads (None: the spare)
         self.line = cl.line
@@ -186,15 +187,15 @@ class DiscreteLogic:
         self._material: dict[int, tuple[float, float | None]] = {}
         self._queue: list[_Action] = []
         self._seq = 0
-        self.splicing: dict[int, str] = {}   # unwind node -> phase
+        self.splicing: dict[int, str] = {}  # unwind node -> phase
         self._saved_integral: dict[int, float] = {}
         self.terminate_reason: str | None = None
         self._breakpoints: list[float] = []
         self._sensor_faults: dict[int, list] = {}
-        self._param_faults: dict[int, list] = {}   # P index -> faults
-        self._slot: dict[int, int] = {}            # P index -> slot
+        self._param_faults: dict[int, list] = {}  # P index -> faults
+        self._slot: dict[int, int] = {}  # P index -> slot
         self._base: dict[int, float] = {}
-        self._weak_splice: dict[int, float] = {}   # unwind node -> joint break tension
+        self._weak_splice: dict[int, float] = {}  # unwind node -> joint break tension
         self._schedule_sensor_faults(faults, duration)
         self._schedule_model_faults(faults, duration)
         # scheduled events after the faults: a fault at the time of an event acts on it
@@ -207,8 +208,12 @@ class DiscreteLogic:
         sensor_idx = {s.id: j for j, s in enumerate(self.cl.sensors)}
         in_loop = loop_sensor_ids(self.cl.line)
         for f in faults:
-            if f.kind.acts != "loop" or f.kind.target != "sensor" or f.target not in in_loop \
-                    or f.record_only:
+            if (
+                f.kind.acts != "loop"
+                or f.kind.target != "sensor"
+                or f.target not in in_loop
+                or f.record_only
+            ):
                 continue
             j = sensor_idx[f.target]
             self._sensor_faults.setdefault(j, []).append(f)
@@ -229,14 +234,17 @@ class DiscreteLogic:
                     self._push(tb, kind, -1, {"fault": f})
                 continue
             idx, _ = spec
-            if f.type == "process.eccentricity" and \
-                    f"{f.target}.angle" not in cl.state_names:
-                raise ValueError(f"fault '{f.id}': compile the line with its faults "
-                                 "(compile_line(line, programme, faults)) for the angle state")
+            if f.type == "process.eccentricity" and f"{f.target}.angle" not in cl.state_names:
+                raise ValueError(
+                    f"fault '{f.id}': compile the line with its faults "
+                    "(compile_line(line, programme, faults)) for the angle state"
+                )
             if idx not in self._slot:
                 if len(self._slot) >= cl.I[H_NFS]:
-                    raise ValueError(f"fault '{f.id}': no parameter slot left; compile the "
-                                     "line with its faults (compile_line(..., faults=...))")
+                    raise ValueError(
+                        f"fault '{f.id}': no parameter slot left; compile the "
+                        "line with its faults (compile_line(..., faults=...))"
+                    )
                 self._slot[idx] = len(self._slot)
                 self._base[idx] = float(cl.P[idx])
             self._param_faults.setdefault(idx, []).append(f)
@@ -295,8 +303,15 @@ class DiscreteLogic:
     def _do_splice(self, t, y, a, log):
         k = a.target
         if k in self.splicing:
-            log.append(Event(t, "splice", self.cl.node_ids[k], "ignored",
-                                "splice requested while one is in progress"))
+            log.append(
+                Event(
+                    t,
+                    "splice",
+                    self.cl.node_ids[k],
+                    "ignored",
+                    "splice requested while one is in progress",
+                )
+            )
             return y
         sp = self.line.elements[k].splicer
         if sp.type == "flying":
@@ -378,8 +393,11 @@ class DiscreteLogic:
             if ix >= 0:
                 y[ix] = self._saved_integral.get(c, 0.0)
         del self.splicing[k]
-        log.append(self._phase(t, k, "complete", "splice complete" + (
-            " (refill timed out)" if timeout else "")))
+        log.append(
+            self._phase(
+                t, k, "complete", "splice complete" + (" (refill timed out)" if timeout else "")
+            )
+        )
         return y
 
     def _do_e_stop(self, t, y, a, log):
@@ -394,9 +412,9 @@ class DiscreteLogic:
         vals = [float(P[bv + m]) for m in keep] + [v, 0.0]
         if len(times) > mx:
             times, vals = times[-mx:], vals[-mx:]
-        P[bt:bt + mx] = math.inf
-        P[bt:bt + len(times)] = times
-        P[bv:bv + len(vals)] = vals
+        P[bt : bt + mx] = math.inf
+        P[bt : bt + len(times)] = times
+        P[bv : bv + len(vals)] = vals
         I[I[H_OFF_SCHN]] = len(times)
         self.cl.programme.times[0], self.cl.programme.values[0] = times, vals
         self._breakpoints = [*self._breakpoints, t, t + v / decel]
@@ -405,9 +423,16 @@ class DiscreteLogic:
             for c in self._dancer_loops(k):
                 P[I[H_OFF_CP] + c * NCP + CP_GATE] = 1.0
             del self.splicing[k]
-        log.append(Event(t, "e_stop", "line", "start",
-                            f"e-stop: line speed {v:.3g} m/s -> 0 at {decel:g} m/s^2",
-                            {"deceleration_m_s2": decel}))
+        log.append(
+            Event(
+                t,
+                "e_stop",
+                "line",
+                "start",
+                f"e-stop: line speed {v:.3g} m/s -> 0 at {decel:g} m/s^2",
+                {"deceleration_m_s2": decel},
+            )
+        )
         self._push(t + v / decel, "stopped")
         return y
 
@@ -425,8 +450,16 @@ class DiscreteLogic:
         y[I[I[H_OFF_MI] + m * NMI + MI_QD]] = 0.0
         q = float(y[I[I[H_OFF_MI] + m * NMI + MI_Q]])
         mid = self.cl.mover_ids[m]
-        log.append(Event(t, "dancer_seized", mid, "start",
-                         f"{mid} seizes at position {q:.4g}{why}", {"position": q}))
+        log.append(
+            Event(
+                t,
+                "dancer_seized",
+                mid,
+                "start",
+                f"{mid} seizes at position {q:.4g}{why}",
+                {"position": q},
+            )
+        )
         return y
 
     def _do_sensor_fault(self, t, y, a, log):
@@ -466,16 +499,20 @@ class DiscreteLogic:
         I = cl.I
         if f.kind.target == "dancer":
             m = cl.mover_ids.index(f.target)
-            field_, K = {"dancer.loss_of_loading": (MP_LOADF, -1.0),
-                         "dancer.friction_increase": (MP_FRICF, 1.0)}.get(f.type, (None, 0))
+            field_, K = {
+                "dancer.loss_of_loading": (MP_LOADF, -1.0),
+                "dancer.friction_increase": (MP_FRICF, 1.0),
+            }.get(f.type, (None, 0))
             return None if field_ is None else (I[H_OFF_MP] + m * NMP + field_, K)
         k = cl.node_ids.index(f.target)
-        field_, K = {"actuator.bias": (NP_TBIAS, 1.0),
-                     "actuator.loss_of_effectiveness": (NP_TEFF, -1.0),
-                     "actuator.saturation": (NP_TMAX, 1.0),
-                     "process.bearing_friction": (NP_FRICF, 1.0),
-                     "process.draw_error": (NP_REFF, 1.0),
-                     "process.eccentricity": (NP_ECC, 1.0)}.get(f.type, (None, 0))
+        field_, K = {
+            "actuator.bias": (NP_TBIAS, 1.0),
+            "actuator.loss_of_effectiveness": (NP_TEFF, -1.0),
+            "actuator.saturation": (NP_TMAX, 1.0),
+            "process.bearing_friction": (NP_FRICF, 1.0),
+            "process.draw_error": (NP_REFF, 1.0),
+            "process.eccentricity": (NP_ECC, 1.0),
+        }.get(f.type, (None, 0))
         return None if field_ is None else (self._np(k, field_), K)
 
     def _do_param_fault(self, t, y, a, log):
@@ -545,8 +582,11 @@ class DiscreteLogic:
             mid = self.cl.mover_ids[m]
             q = float(y[I[I[H_OFF_MI] + m * NMI + MI_Q]])
             P[bm + MP_MODE] = 0.0  # free again; its end stops are re-detected as events
-            log.append(Event(t, "dancer_seized", mid, "end", f"{mid} is free again ({f.id})",
-                             {"position": q}))
+            log.append(
+                Event(
+                    t, "dancer_seized", mid, "end", f"{mid} is free again ({f.id})", {"position": q}
+                )
+            )
         return y
 
     def _do_modulus_change(self, t, y, a, log):
@@ -557,10 +597,14 @@ class DiscreteLogic:
             return y
         k = self.cl.node_ids.index(f.target)
         ratio, dl0 = self._material.get(k, (1.0, None))
-        self._open_material(k, y[self._ni(k, NI_U)], ratio * (1.0 + f.magnitude),
-                            f"fault '{f.id}': no splice-joint slot for the new material; "
-                            "compile the line with its faults (compile_line(..., faults=...))",
-                            dl0)
+        self._open_material(
+            k,
+            y[self._ni(k, NI_U)],
+            ratio * (1.0 + f.magnitude),
+            f"fault '{f.id}': no splice-joint slot for the new material; "
+            "compile the line with its faults (compile_line(..., faults=...))",
+            dl0,
+        )
         return y
 
     def _do_weak_splice(self, t, y, a, log):
@@ -570,8 +614,9 @@ class DiscreteLogic:
             self._weak_splice[self.cl.node_ids.index(f.target)] = f.magnitude
         return y
 
-    def _open_material(self, k: int, u_now: float, ea_ratio: float, no_slot: str,
-                       dl0: float | None = None) -> None:
+    def _open_material(
+        self, k: int, u_now: float, ea_ratio: float, no_slot: str, dl0: float | None = None
+    ) -> None:
         """From ``u_now`` the unwind at node k pays out web of E·A x ``ea_ratio`` (over the
         first roll's; a modulus change, or a new roll's web) and relaxed-pitch offset ``dl0``
         [m] (None: that of the first roll): an open-ended joint, closed by the next roll
@@ -639,8 +684,9 @@ class DiscreteLogic:
             return y, log, kind in MODE_EVENTS or kind == EV_JOINT_BREAK
         return y, log, True
 
-    def _on_stop(self, m: int, lo: bool, on: bool, t: float, y: np.ndarray, comp: str,
-                 log: list) -> None:
+    def _on_stop(
+        self, m: int, lo: bool, on: bool, t: float, y: np.ndarray, comp: str, log: list
+    ) -> None:
         """A dancer or festoon carriage reaches (on) or leaves (off) an end stop: it latches
         there at rest, then moves freely again."""
         I, P = self.cl.I, self.cl.P
@@ -654,13 +700,27 @@ class DiscreteLogic:
             P[bm + MP_MODE] = -1.0 if lo else 1.0
             y[iq] = P[bm + (MP_QMIN if lo else MP_QMAX)]
             y[iqd] = 0.0
-            log.append(Event(t, EVENT_NAMES[kind], comp, "start",
-                             f"{comp} hits its {'lower' if lo else 'upper'} stop at "
-                             f"{v:.3g}/s", {"velocity": v}))
+            log.append(
+                Event(
+                    t,
+                    EVENT_NAMES[kind],
+                    comp,
+                    "start",
+                    f"{comp} hits its {'lower' if lo else 'upper'} stop at {v:.3g}/s",
+                    {"velocity": v},
+                )
+            )
         elif not on and P[bm + MP_MODE] in (-1.0, 1.0):
             P[bm + MP_MODE] = 0.0
-            log.append(Event(t, EVENT_NAMES[kind], comp, "end",
-                             f"{comp} leaves its {'lower' if lo else 'upper'} stop"))
+            log.append(
+                Event(
+                    t,
+                    EVENT_NAMES[kind],
+                    comp,
+                    "end",
+                    f"{comp} leaves its {'lower' if lo else 'upper'} stop",
+                )
+            )
 
     def _on_joint_pass(self, m: int, t: float, y: np.ndarray, comp: str, log: list) -> None:
         """A splice joint's lead or trail crosses a node: it enters the next span, or has
@@ -672,15 +732,28 @@ class DiscreteLogic:
             P[bj + JP_SPAN] += 1.0
             sp = int(P[bj + JP_SPAN])
             if sp < nS:
-                log.append(Event(t, "splice_joint", comp, self.cl.span_ids[sp],
-                                 f"{comp} passes {self.cl.node_ids[sp]} into "
-                                 f"{self.cl.span_ids[sp]}"))
+                log.append(
+                    Event(
+                        t,
+                        "splice_joint",
+                        comp,
+                        self.cl.span_ids[sp],
+                        f"{comp} passes {self.cl.node_ids[sp]} into {self.cl.span_ids[sp]}",
+                    )
+                )
         else:  # the trail crossed a node: the joint has left a span
             P[bj + JP_TSPAN] += 1.0
             if int(P[bj + JP_TSPAN]) >= nS:
                 P[bj + JP_ACTIVE] = 0.0
-                log.append(Event(t, "splice_joint", comp, "end",
-                                 f"{comp} is wound into {self.cl.node_ids[-1]}"))
+                log.append(
+                    Event(
+                        t,
+                        "splice_joint",
+                        comp,
+                        "end",
+                        f"{comp} is wound into {self.cl.node_ids[-1]}",
+                    )
+                )
 
     def _on_joint_break(self, m: int, t: float, y: np.ndarray, log: list) -> None:
         """A weak splice joint breaks: the run ends with a web break."""
@@ -688,9 +761,16 @@ class DiscreteLogic:
         sp = int(self.cl.P[self.cl.I[H_OFF_JP] + js * NJP + JP_SPAN])
         span = self.cl.span_ids[sp]
         T = float(self.cl.outputs(t, y[None, :])[0][self.cl.aux_index(f"{span}.tension_N")])
-        log.append(Event(t, "web_break", span, "start",
-                         f"web break at the splice joint in {span} at {T:.1f} N",
-                         {"tension_N": T, "at_splice_joint": True}))
+        log.append(
+            Event(
+                t,
+                "web_break",
+                span,
+                "start",
+                f"web break at the splice joint in {span} at {T:.1f} N",
+                {"tension_N": T, "at_splice_joint": True},
+            )
+        )
         self.terminate_reason = "web_break"
 
     # ---- helpers ----------------------------------------------------------------------------
@@ -712,6 +792,7 @@ class DiscreteLogic:
 
     def _line_speed(self, t, k):
         from ..compile.kernels import setpoint
+
         self.cl.set_segment_start(t)
         return float(setpoint(self.cl.I, self.cl.P, 0, t)[0])
 
@@ -725,18 +806,24 @@ class DiscreteLogic:
         name = f"draw:{self.cl.node_ids[k]}"
         if name in self.cl.programme.names:  # a programmed draw
             draw = self.cl.programme.value(name, t)
-        return (self._line_speed(t, k) * (1.0 + draw) * P[self._np(k, NP_VGAIN)]
-                + P[self._np(k, NP_VOFF)]
-                + P[self._np(k, NP_VSLOPE)] * (t - P[self._np(k, NP_VT0)]))
+        return (
+            self._line_speed(t, k) * (1.0 + draw) * P[self._np(k, NP_VGAIN)]
+            + P[self._np(k, NP_VOFF)]
+            + P[self._np(k, NP_VSLOPE)] * (t - P[self._np(k, NP_VT0)])
+        )
 
     def _joint_lead_crossed(self, bj: int, t: float, y: np.ndarray) -> bool:
         """At a joint-pass event: True if the joint's lead reached a node, False if its
         trail did (whichever of the two is closer to its node)."""
         cl, P = self.cl, self.cl.P
         aux = cl.outputs(np.array([t]), y[None, :])[0]
-        ell = np.array([aux[cl.aux_index(f"{s}.length_m")]
-                        / (1.0 + aux[cl.aux_index(f"{s}.geometric_strain")])
-                        for s in cl.span_ids])
+        ell = np.array(
+            [
+                aux[cl.aux_index(f"{s}.length_m")]
+                / (1.0 + aux[cl.aux_index(f"{s}.geometric_strain")])
+                for s in cl.span_ids
+            ]
+        )
         c = np.concatenate([[0.0], np.cumsum(ell)])  # node positions from the splice node
         lead = y[self._ni(int(P[bj + JP_NODE]), NI_U)] - P[bj + JP_U0]
         trail = lead - P[bj + JP_LEN]
@@ -768,16 +855,32 @@ class DiscreteLogic:
         slot = self._splice_joint(k, sp, u_now)
         self._material.pop(k, None)  # the new roll's web is the line's again, unless:
         if ea_ratio is not None:
-            self._open_material(k, u_now, ea_ratio, dl0=dl0, no_slot=(
-                f"no splice-joint slot for the web of the roll loaded on '{e.id}'; compile "
-                "the line with extra_joint_slots=joint_slots_needed(scenario, line)"))
-        log.append(Event(t, "splice", e.id, "swap",
-                            f"roll change: radius {R_old:.4g} m -> {new.outer_radius:.4g} m"
-                            + (f", speed-match error {sp.speed_match_error:+.2%}" if flying
-                               else ""),
-                            {"radius_old_m": R_old, "radius_new_m": new.outer_radius,
-                             "joint_slot": slot,
-                             **({"roll_drawn": drawn} if drawn else {})}))
+            self._open_material(
+                k,
+                u_now,
+                ea_ratio,
+                dl0=dl0,
+                no_slot=(
+                    f"no splice-joint slot for the web of the roll loaded on '{e.id}'; compile "
+                    "the line with extra_joint_slots=joint_slots_needed(scenario, line)"
+                ),
+            )
+        log.append(
+            Event(
+                t,
+                "splice",
+                e.id,
+                "swap",
+                f"roll change: radius {R_old:.4g} m -> {new.outer_radius:.4g} m"
+                + (f", speed-match error {sp.speed_match_error:+.2%}" if flying else ""),
+                {
+                    "radius_old_m": R_old,
+                    "radius_new_m": new.outer_radius,
+                    "joint_slot": slot,
+                    **({"roll_drawn": drawn} if drawn else {}),
+                },
+            )
+        )
         if slot is not None:
             self._joint_born_broken(t, y, k, slot, log)
         return y
@@ -792,8 +895,9 @@ class DiscreteLogic:
         P[self._np(k, NP_JC)] = new.core_inertia
         P[self._np(k, NP_CW)] = cw
         P[self._np(k, NP_RHOW)] = web.density * web.thickness / cw * web.width
-        (P[self._np(k, NP_EPSW)], P[self._np(k, NP_EPSW1)],
-         P[self._np(k, NP_EPSW2)]) = new.wound_in_coefficients()
+        (P[self._np(k, NP_EPSW)], P[self._np(k, NP_EPSW1)], P[self._np(k, NP_EPSW2)]) = (
+            new.wound_in_coefficients()
+        )
 
     def _restart_loops(self, k, y, R_old, new):
         """Bumpless transfer: the tension trims of the old roll restart from zero; the
@@ -819,8 +923,7 @@ class DiscreteLogic:
         I, P = self.cl.I, self.cl.P
         for js in range(self.cl.n_joint_slots):
             bj = I[H_OFF_JP] + js * NJP
-            if P[bj + JP_ACTIVE] != 0.0 and P[bj + JP_NODE] == k and \
-                    P[bj + JP_LEN] == OPEN_JOINT:
+            if P[bj + JP_ACTIVE] != 0.0 and P[bj + JP_NODE] == k and P[bj + JP_LEN] == OPEN_JOINT:
                 P[bj + JP_LEN] = u_now - P[bj + JP_U0]
                 P[bj + JP_TSPAN] = float(k)  # its trail leaves the roll now
 
@@ -837,8 +940,11 @@ class DiscreteLogic:
         P[bj + JP_U0] = u_now
         P[bj + JP_LEN] = sp.joint.length
         P[bj + JP_RATIO] = sp.joint.stiffness_ratio
-        P[bj + JP_TBRK] = (sp.joint.break_tension if sp.joint.break_tension is not None
-                           else self.line.web.break_tension)
+        P[bj + JP_TBRK] = (
+            sp.joint.break_tension
+            if sp.joint.break_tension is not None
+            else self.line.web.break_tension
+        )
         if k in self._weak_splice:
             P[bj + JP_TBRK] = self._weak_splice.pop(k)
         P[bj + JP_SPAN] = float(k)
@@ -854,9 +960,15 @@ class DiscreteLogic:
         span = self.cl.span_ids[k]
         T = float(self.cl.outputs(t, y[None, :])[0][self.cl.aux_index(f"{span}.tension_N")])
         if T >= P[bj + JP_TBRK]:
-            log.append(Event(t, "web_break", span, "start",
-                             f"web break at the new splice joint in {span}"
-                             f" at {T:.1f} N (joint strength {P[bj + JP_TBRK]:.1f} N)",
-                             {"tension_N": T, "at_splice_joint": True}))
+            log.append(
+                Event(
+                    t,
+                    "web_break",
+                    span,
+                    "start",
+                    f"web break at the new splice joint in {span}"
+                    f" at {T:.1f} N (joint strength {P[bj + JP_TBRK]:.1f} N)",
+                    {"tension_N": T, "at_splice_joint": True},
+                )
+            )
             self.terminate_reason = "web_break"
-

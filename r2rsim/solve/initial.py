@@ -22,11 +22,14 @@ from ..compile.layout import (
 from ..errors import InputError
 
 
-def nominal_state(cl: CompiledLine, tension: float | None = None,
-                  span_tension: dict[str, float] | None = None,
-                  slack: dict[str, float] | None = None,
-                  position: dict[str, float] | None = None,
-                  file: str | None = None) -> np.ndarray:
+def nominal_state(
+    cl: CompiledLine,
+    tension: float | None = None,
+    span_tension: dict[str, float] | None = None,
+    slack: dict[str, float] | None = None,
+    position: dict[str, float] | None = None,
+    file: str | None = None,
+) -> np.ndarray:
     """All nodes at the t = 0 line speed (times their draw), every span at ``tension``.
 
     Drive torques and speed-loop integrators are set so that every roller is in torque
@@ -125,9 +128,11 @@ def _slack(cl: CompiledLine, y: np.ndarray, slack: dict, file: str | None) -> No
     for sid, extra in slack.items():
         length = aux[cl.aux_index(f"{sid}.length_m")]
         if not extra < 0.5 * length:
-            raise InputError(f"{extra:g} m of slack is not below half the span's length "
-                             f"({length:g} m at t = 0)", file=file,
-                             path=f"initial.slack.{sid}")
+            raise InputError(
+                f"{extra:g} m of slack is not below half the span's length ({length:g} m at t = 0)",
+                file=file,
+                path=f"initial.slack.{sid}",
+            )
         y[cl.index(f"{sid}.strain")] = -extra / length
 
 
@@ -139,15 +144,21 @@ def _filters_at_input(cl: CompiledLine, y: np.ndarray) -> None:
         for s in cl.sensors:
             name = f"{s.id}.filtered"
             if name in cl.state_names:
-                q = {"load_cell": "tension_N", "encoder": "speed_rad_s",
-                     "roll_diameter": "diameter_m", "pitch_length": "pitch_m"}.get(s.type)
-                q = q or next(n.split(".", 1)[1] for n in cl.aux_names
-                              if n.startswith(f"{s.id}.position_"))
+                q = {
+                    "load_cell": "tension_N",
+                    "encoder": "speed_rad_s",
+                    "roll_diameter": "diameter_m",
+                    "pitch_length": "pitch_m",
+                }.get(s.type)
+                q = q or next(
+                    n.split(".", 1)[1] for n in cl.aux_names if n.startswith(f"{s.id}.position_")
+                )
                 y[cl.index(name)] = s.gain * aux[cl.aux_index(f"{s.id}.{q}")] + s.offset
 
 
-def steady_state(cl: CompiledLine, y_guess: np.ndarray, tol: float = 1e-10,
-                 max_iter: int = 60) -> np.ndarray | None:
+def steady_state(
+    cl: CompiledLine, y_guess: np.ndarray, tol: float = 1e-10, max_iter: int = 60
+) -> np.ndarray | None:
     """The steady state at the t = 0 set-points near ``y_guess``.
 
     Newton's method with a backtracking line search on dy/dt = 0 for every state except
@@ -269,8 +280,8 @@ def lu_factor(a: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         if p != j:
             lu[[j, p]] = lu[[p, j]]
             perm[[j, p]] = perm[[p, j]]
-        lu[j + 1:, j] /= lu[j, j]
-        lu[j + 1:, j + 1:] -= np.multiply.outer(lu[j + 1:, j], lu[j, j + 1:])
+        lu[j + 1 :, j] /= lu[j, j]
+        lu[j + 1 :, j + 1 :] -= np.multiply.outer(lu[j + 1 :, j], lu[j, j + 1 :])
     return lu, perm
 
 
@@ -281,7 +292,9 @@ def lu_solve(factors: tuple[np.ndarray, np.ndarray], b: np.ndarray) -> np.ndarra
     x = np.array(b, dtype=float)[perm]
     n = lu.shape[0]
     for j in range(n):  # L y = P b
-        x[j + 1:] -= np.multiply.outer(lu[j + 1:, j], x[j]) if x.ndim > 1 else lu[j + 1:, j] * x[j]
+        x[j + 1 :] -= (
+            np.multiply.outer(lu[j + 1 :, j], x[j]) if x.ndim > 1 else lu[j + 1 :, j] * x[j]
+        )
     for j in range(n - 1, -1, -1):  # U x = y
         x[j] /= lu[j, j]
         x[:j] -= np.multiply.outer(lu[:j, j], x[j]) if x.ndim > 1 else lu[:j, j] * x[j]

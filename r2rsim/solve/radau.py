@@ -34,11 +34,13 @@ _S6 = math.sqrt(6.0)
 #: nodes of the 3-stage Radau IIA method
 C = np.array([(4.0 - _S6) / 10.0, (4.0 + _S6) / 10.0, 1.0])
 #: its Butcher matrix (Hairer & Wanner II, Table IV.5.6)
-A = np.array([
-    [(88.0 - 7.0 * _S6) / 360.0, (296.0 - 169.0 * _S6) / 1800.0, (-2.0 + 3.0 * _S6) / 225.0],
-    [(296.0 + 169.0 * _S6) / 1800.0, (88.0 + 7.0 * _S6) / 360.0, (-2.0 - 3.0 * _S6) / 225.0],
-    [(16.0 - _S6) / 36.0, (16.0 + _S6) / 36.0, 1.0 / 9.0],
-])
+A = np.array(
+    [
+        [(88.0 - 7.0 * _S6) / 360.0, (296.0 - 169.0 * _S6) / 1800.0, (-2.0 + 3.0 * _S6) / 225.0],
+        [(296.0 + 169.0 * _S6) / 1800.0, (88.0 + 7.0 * _S6) / 360.0, (-2.0 - 3.0 * _S6) / 225.0],
+        [(16.0 - _S6) / 36.0, (16.0 + _S6) / 36.0, 1.0 / 9.0],
+    ]
+)
 #: embedded error estimate: err = (gamma/h I - J)^-1 (f(t, y) + sum_s E_s Z_s / h)  (IV.8.20)
 E = np.array([-13.0 - 7.0 * _S6, -13.0 + 7.0 * _S6, -1.0]) / 3.0
 
@@ -69,6 +71,7 @@ def _dec_eigenvector(m, lam_re: Decimal, lam_im: Decimal) -> list[tuple[Decimal,
     """The eigenvector (complex, as (re, im) pairs) of a 3x3 matrix ``m`` for the eigenvalue
     ``lam_re + i lam_im``, scaled to a last component of 1: rows 1-2 of (m - lam I) v = 0
     solved for v1, v2 by Cramer's rule."""
+
     def mul(x, y):
         return x[0] * y[0] - x[1] * y[1], x[0] * y[1] + x[1] * y[0]
 
@@ -84,8 +87,11 @@ def _dec_eigenvector(m, lam_re: Decimal, lam_im: Decimal) -> list[tuple[Decimal,
     a21, a22 = (m[1][0], zero), (m[1][1] - lam_re, -lam_im)
     r1, r2 = (-m[0][2], zero), (-m[1][2], zero)
     det = sub(mul(a11, a22), mul(a12, a21))
-    return [div(sub(mul(r1, a22), mul(a12, r2)), det),
-            div(sub(mul(a11, r2), mul(a21, r1)), det), (Decimal(1), zero)]
+    return [
+        div(sub(mul(r1, a22), mul(a12, r2)), det),
+        div(sub(mul(a11, r2), mul(a21, r1)), det),
+        (Decimal(1), zero),
+    ]
 
 
 def _constants():
@@ -102,9 +108,11 @@ def _constants():
     with localcontext() as ctx:
         ctx.prec = _DIGITS
         s6 = Decimal(6).sqrt()
-        a = [[(88 - 7 * s6) / 360, (296 - 169 * s6) / 1800, (-2 + 3 * s6) / 225],
-             [(296 + 169 * s6) / 1800, (88 + 7 * s6) / 360, (-2 - 3 * s6) / 225],
-             [(16 - s6) / 36, (16 + s6) / 36, Decimal(1) / 9]]
+        a = [
+            [(88 - 7 * s6) / 360, (296 - 169 * s6) / 1800, (-2 + 3 * s6) / 225],
+            [(296 + 169 * s6) / 1800, (88 + 7 * s6) / 360, (-2 - 3 * s6) / 225],
+            [(16 - s6) / 36, (16 + s6) / 36, Decimal(1) / 9],
+        ]
         ainv = _dec_inverse(a)
         s = Decimal(9) ** (Decimal(1) / 3)
         gamma = 30 / (6 + s * (s - 1))
@@ -120,8 +128,13 @@ def _constants():
         def as_float(m):
             return np.array([[float(x) for x in row] for row in m])
 
-        return (float(gamma), complex(float(alpha), -float(beta)), as_float(t),
-                as_float(_dec_inverse(t)), as_float(p))
+        return (
+            float(gamma),
+            complex(float(alpha), -float(beta)),
+            as_float(t),
+            as_float(_dec_inverse(t)),
+            as_float(p),
+        )
 
 
 GAMMA, MU, T, TI, P = _constants()
@@ -133,10 +146,12 @@ EPS = float(np.finfo(float).eps)
 
 #: status codes of :func:`integrate`
 DONE, ROOT, FAIL_SMALL_STEP, FAIL_MAX_STEPS, FAIL_NONFINITE = 0, 1, 2, 3, 4
-MESSAGES = {FAIL_SMALL_STEP: "Radau: step size below its minimum (the Newton iteration "
-                             "fails or the error test cannot be met)",
-            FAIL_MAX_STEPS: "Radau: maximum number of steps reached",
-            FAIL_NONFINITE: "Radau: the state or its derivative is not finite (nan or inf)"}
+MESSAGES = {
+    FAIL_SMALL_STEP: "Radau: step size below its minimum (the Newton iteration "
+    "fails or the error test cannot be met)",
+    FAIL_MAX_STEPS: "Radau: maximum number of steps reached",
+    FAIL_NONFINITE: "Radau: the state or its derivative is not finite (nan or inf)",
+}
 
 
 # ---- powers without libm --------------------------------------------------------------------
@@ -310,8 +325,28 @@ def _build_integrate(stamp):
     """The integrator, compiled against the line kernel of hash ``stamp``."""
 
     @njit(cache=True)
-    def integrate(t0, t_end, y0, tq, out, rtol, atol, max_steps, line, rows, cols, kl, ku,
-                  consts, g_start, y_root, dirs, vals, h_init, jac_ready):
+    def integrate(
+        t0,
+        t_end,
+        y0,
+        tq,
+        out,
+        rtol,
+        atol,
+        max_steps,
+        line,
+        rows,
+        cols,
+        kl,
+        ku,
+        consts,
+        g_start,
+        y_root,
+        dirs,
+        vals,
+        h_init,
+        jac_ready,
+    ):
         """Integrate the compiled line from ``(t0, y0)`` to ``t_end``.
 
         Parameters
@@ -464,15 +499,17 @@ def _build_integrate(stamp):
                         _fill_band(ab_r, rows, cols, vals, gamma / h, ku2)
                         _fill_band(ab_c, rows, cols, vals, mu / h, ku2)
                         nlu += 1
-                        if not (band_lu(ab_r, piv_r, n, kl, ku2)
-                                and band_lu(ab_c, piv_c, n, kl, ku2)):
+                        if not (
+                            band_lu(ab_r, piv_r, n, kl, ku2) and band_lu(ab_c, piv_c, n, kl, ku2)
+                        ):
                             break
                         lu_valid = True
                     # simplified Newton iteration on the transformed collocation system
                     for s in range(3):
                         for i in range(n):
-                            Wn[s, i] = (TIm[s, 0] * Z[0, i] + TIm[s, 1] * Z[1, i]
-                                        + TIm[s, 2] * Z[2, i])
+                            Wn[s, i] = (
+                                TIm[s, 0] * Z[0, i] + TIm[s, 1] * Z[1, i] + TIm[s, 2] * Z[2, i]
+                            )
                     dW_norm_old = -1.0
                     rate = -1.0
                     finite = True
@@ -481,15 +518,15 @@ def _build_integrate(stamp):
                         for s in range(3):
                             for i in range(n):
                                 ytmp[i] = y[i] + Z[s, i]
-                            evaluate(t + Cn[s] * h, ytmp, F[s], J1, rhs_mode, I, Pl, W, GI, GC,
-                                     GV, aux0)
+                            evaluate(
+                                t + Cn[s] * h, ytmp, F[s], J1, rhs_mode, I, Pl, W, GI, GC, GV, aux0
+                            )
                             nfev += 1
                         for i in range(n):
                             fr = TIm[0, 0] * F[0, i] + TIm[0, 1] * F[1, i] + TIm[0, 2] * F[2, i]
                             f1 = TIm[1, 0] * F[0, i] + TIm[1, 1] * F[1, i] + TIm[1, 2] * F[2, i]
                             f2 = TIm[2, 0] * F[0, i] + TIm[2, 1] * F[1, i] + TIm[2, 2] * F[2, i]
-                            if not (math.isfinite(fr) and math.isfinite(f1)
-                                    and math.isfinite(f2)):
+                            if not (math.isfinite(fr) and math.isfinite(f1) and math.isfinite(f2)):
                                 finite = False
                             dW[0, i] = fr - gamma / h * Wn[0, i]
                             rhs_c[i] = complex(f1, f2) - mu / h * complex(Wn[1, i], Wn[2, i])
@@ -507,18 +544,22 @@ def _build_integrate(stamp):
                         dW_norm = math.sqrt(s2 / (3 * n))
                         if dW_norm_old >= 0.0:
                             rate = dW_norm / dW_norm_old
-                        if rate >= 0.0 and (rate >= 1.0 or _ipow(rate, NEWTON_MAXITER - k)
-                                            / (1.0 - rate) * dW_norm > newton_tol):
+                        if rate >= 0.0 and (
+                            rate >= 1.0
+                            or _ipow(rate, NEWTON_MAXITER - k) / (1.0 - rate) * dW_norm > newton_tol
+                        ):
                             break
                         for s in range(3):
                             for i in range(n):
                                 Wn[s, i] += dW[s, i]
                         for s in range(3):
                             for i in range(n):
-                                Z[s, i] = (Tm[s, 0] * Wn[0, i] + Tm[s, 1] * Wn[1, i]
-                                           + Tm[s, 2] * Wn[2, i])
-                        if dW_norm == 0.0 or (rate >= 0.0
-                                              and rate / (1.0 - rate) * dW_norm < newton_tol):
+                                Z[s, i] = (
+                                    Tm[s, 0] * Wn[0, i] + Tm[s, 1] * Wn[1, i] + Tm[s, 2] * Wn[2, i]
+                                )
+                        if dW_norm == 0.0 or (
+                            rate >= 0.0 and rate / (1.0 - rate) * dW_norm < newton_tol
+                        ):
                             converged = True
                             break
                         dW_norm_old = dW_norm
@@ -557,8 +598,7 @@ def _build_integrate(stamp):
                     lu_valid = False
                     rejected = True
                 elif err_norm > 1.0:
-                    h_abs *= max(MIN_FACTOR, safety * _predict(h_abs, h_abs_old, err_norm,
-                                                                err_old))
+                    h_abs *= max(MIN_FACTOR, safety * _predict(h_abs, h_abs_old, err_norm, err_old))
                     lu_valid = False
                     rejected = True
                 else:

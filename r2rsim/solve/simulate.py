@@ -116,9 +116,17 @@ class _CVODEBackend:
         self.cl = cl
         rhs, jac = cl.make_rhs(), cl.make_jac()
         self.rhs = rhs
-        common = dict(method="BDF", rtol=s.rtol, atol=cl.atol * s.atol_scale,
-                      linsolver="band", lband=max(cl.lband, 0), uband=max(cl.uband, 0),
-                      jacfn=jac, max_order=s.max_order, max_num_steps=200000)
+        common = dict(
+            method="BDF",
+            rtol=s.rtol,
+            atol=cl.atol * s.atol_scale,
+            linsolver="band",
+            lband=max(cl.lband, 0),
+            uband=max(cl.uband, 0),
+            jacfn=jac,
+            max_order=s.max_order,
+            max_num_steps=200000,
+        )
         self.solver = CVODE(rhs, **common)
 
         from ..compile import kernels
@@ -132,8 +140,7 @@ class _CVODEBackend:
         if len(cl.event_kinds):
             eventsfn.terminal = [True] * len(cl.event_kinds)
             eventsfn.direction = [0] * len(cl.event_kinds)
-            self.locator = CVODE(rhs, eventsfn=eventsfn, num_events=len(cl.event_kinds),
-                                 **common)
+            self.locator = CVODE(rhs, eventsfn=eventsfn, num_events=len(cl.event_kinds), **common)
         self.nfev = 0
         self.njev = 0
         self.steps = 0
@@ -166,8 +173,9 @@ class _CVODEBackend:
 
         cl = self.cl
         hot = find_events and len(cl.event_kinds) > 0
-        res = self._quiet((self.locator if hot else self.solver).solve,
-                          np.array([tspan[0], tspan[-1]]), y0)
+        res = self._quiet(
+            (self.locator if hot else self.solver).solve, np.array([tspan[0], tspan[-1]]), y0
+        )
         self.nfev += int(res.nfev)
         self.njev += int(res.njev)
         ts = np.ascontiguousarray(res.t)
@@ -175,13 +183,15 @@ class _CVODEBackend:
         self.steps += len(ts) - 1
         root = None
         if hot and res.status == 2:
-            root = (float(res.t_events[-1]), np.array(res.y_events[-1]),
-                    np.asarray(res.i_events)[-1])
+            root = (
+                float(res.t_events[-1]),
+                np.array(res.y_events[-1]),
+                np.asarray(res.i_events)[-1],
+            )
         elif not res.success:
             root = res.message
         fs = np.empty_like(ys)
-        kernels.rhs_rows(ts, ys, fs, cl.I, cl.P, cl._W, cl._GI, cl._GC, cl._GV, cl._J1,
-                         cl._aux0)
+        kernels.rhs_rows(ts, ys, fs, cl.I, cl.P, cl._W, cl._GI, cl._GC, cl._GV, cl._J1, cl._aux0)
         if root is not None:
             keep = tspan <= ts[-1]
             out = np.empty((int(keep.sum()), cl.n_states))
@@ -231,8 +241,9 @@ class _RadauBackend:
             return out
 
         def jac(t, y):
-            kernels.jac_values(t, np.ascontiguousarray(y), JJ, cl.I, cl.P, cl._W, cl._GI,
-                               cl._GC, cl._GV, yd, vals)
+            kernels.jac_values(
+                t, np.ascontiguousarray(y), JJ, cl.I, cl.P, cl._W, cl._GI, cl._GC, cl._GV, yd, vals
+            )
             return sps.csc_matrix((vals.copy(), (rows, cols)), shape=(n, n))
 
         self.fun, self.jac = fun, jac
@@ -243,9 +254,18 @@ class _RadauBackend:
     def _ivp(self, tspan, y0, events=None):
         from scipy.integrate import solve_ivp
 
-        return solve_ivp(self.fun, (tspan[0], tspan[-1]), y0, method="Radau", t_eval=tspan,
-                         jac=self.jac, rtol=self.s.rtol, atol=self.cl.atol * self.s.atol_scale,
-                         events=events, dense_output=events is not None)
+        return solve_ivp(
+            self.fun,
+            (tspan[0], tspan[-1]),
+            y0,
+            method="Radau",
+            t_eval=tspan,
+            jac=self.jac,
+            rtol=self.s.rtol,
+            atol=self.cl.atol * self.s.atol_scale,
+            events=events,
+            dense_output=events is not None,
+        )
 
     def solve(self, tspan, y0, find_events=False, resume=False):
         if not np.all(np.isfinite(y0)):  # solve_ivp raises on it: a failure like any other
@@ -264,8 +284,10 @@ class _RadauBackend:
         m = len(cl.event_kinds)
         evs = []
         for i in range(m):
+
             def ev(t, y, i=i):
                 return cl.events(t, y)[0][i]
+
             ev.terminal = True
             ev.direction = 0
             evs.append(ev)
@@ -316,8 +338,18 @@ class _Radau5Backend:
         self.rows = np.ascontiguousarray(rows, np.int64)
         self.cols = np.ascontiguousarray(cols, np.int64)
         # the Jacobian kernel writes the pattern entries of a dense (n, n) array
-        self.line = (cl.I, cl.P, cl._W, cl._GI, cl._GC, cl._GV, cl._aux0, np.zeros((n, n)),
-                     np.zeros(n), cl._J1)
+        self.line = (
+            cl.I,
+            cl.P,
+            cl._W,
+            cl._GI,
+            cl._GC,
+            cl._GV,
+            cl._aux0,
+            np.zeros((n, n)),
+            np.zeros(n),
+            cl._J1,
+        )
         m = len(cl.event_kinds)
         self.g = np.zeros(m)
         self.y_root = np.zeros(n)
@@ -338,17 +370,36 @@ class _Radau5Backend:
         warm = resume and self.h_next > 0.0
         try:
             status, t_reached, n_out, nfev, njev, nlu, nsteps, self.h_next = r.integrate(
-                float(tq[0]), float(tq[-1]), np.ascontiguousarray(y0, float), tq, out,
-                self.rtol, self.atol, 200000, self.line, self.rows, self.cols,
-                max(cl.lband, 0), max(cl.uband, 0), r.CONSTS, self.g, self.y_root, self.dirs,
-                self.vals, self.h_next if warm else 0.0, warm)
+                float(tq[0]),
+                float(tq[-1]),
+                np.ascontiguousarray(y0, float),
+                tq,
+                out,
+                self.rtol,
+                self.atol,
+                200000,
+                self.line,
+                self.rows,
+                self.cols,
+                max(cl.lband, 0),
+                max(cl.uband, 0),
+                r.CONSTS,
+                self.g,
+                self.y_root,
+                self.dirs,
+                self.vals,
+                self.h_next if warm else 0.0,
+                warm,
+            )
         except ArithmeticError as exc:
             # a division by zero in the compiled code (numba raises as Python does): values
             # so large that the arithmetic broke down. The chunk's samples are lost with it;
             # the run ends as a solver failure at the chunk's start.
             self.h_next = 0.0
-            self.arithmetic_error = (f"{type(exc).__name__} in the compiled integrator "
-                                     f"({exc}): the states left the range of floating point")
+            self.arithmetic_error = (
+                f"{type(exc).__name__} in the compiled integrator "
+                f"({exc}): the states left the range of floating point"
+            )
             return _ARITHMETIC, float(tq[0]), tq[:0], out[:0]
         self.nfev += nfev
         self.njev += njev
@@ -383,27 +434,36 @@ class _Radau5Backend:
 def _message(cl: CompiledLine, kind: int, comp: str, on: bool, aux: np.ndarray) -> tuple:
     """Event state label, message and values for the log."""
     if kind == EV_SLACK:
-        return ("start" if on else "end",
-                f"{comp} {'goes slack' if on else 'is taut again'}", {})
+        return ("start" if on else "end", f"{comp} {'goes slack' if on else 'is taut again'}", {})
     if kind == EV_BREAK:
         T = aux[cl.aux_index(f"{comp}.tension_N")]
         return "start", f"web break in {comp} at {T:.1f} N", {"tension_N": float(T)}
     if kind == EV_CAPSTAN:
         ratio = aux[cl.aux_index(f"{comp}.tension_ratio")]
-        return ("start" if on else "end",
-                f"{comp} {'reaches' if on else 'leaves'} its capstan limit (T_hi/T_lo = "
-                f"{ratio:.4f})", {"tension_ratio": float(ratio)})
+        return (
+            "start" if on else "end",
+            f"{comp} {'reaches' if on else 'leaves'} its capstan limit (T_hi/T_lo = {ratio:.4f})",
+            {"tension_ratio": float(ratio)},
+        )
     if kind == EV_EMPTY:
         return "start", f"{comp} roll is empty (core reached)", {}
     return "", "", {}
 
 
-def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
-             y0: np.ndarray | None = None, settings: SolverSettings | None = None,
-             on_chunk: ChunkCallback | None = None,
-             progress: Callable[[float], None] | None = None,
-             initial_state_mode: str = "given", outputs: bool = True,
-             events=(), faults=(), rolls=None) -> SimulationResult:
+def simulate(
+    cl: CompiledLine,
+    duration: float,
+    record_rate: float = 1000.0,
+    y0: np.ndarray | None = None,
+    settings: SolverSettings | None = None,
+    on_chunk: ChunkCallback | None = None,
+    progress: Callable[[float], None] | None = None,
+    initial_state_mode: str = "given",
+    outputs: bool = True,
+    events=(),
+    faults=(),
+    rolls=None,
+) -> SimulationResult:
     """Integrate a compiled line over ``[0, duration]`` and sample it at ``record_rate``.
 
     Parameters
@@ -449,25 +509,60 @@ def simulate(cl: CompiledLine, duration: float, record_rate: float = 1000.0,
         y0 = nominal_state(cl)
         initial_state_mode = "nominal"
     y0 = np.array(y0, dtype=float)
-    backend = {"cvode": _CVODEBackend, "radau": _RadauBackend,
-               "radau5": _Radau5Backend}[s.backend](cl, s)
+    backend = {"cvode": _CVODEBackend, "radau": _RadauBackend, "radau5": _Radau5Backend}[s.backend](
+        cl, s
+    )
     dt = 1.0 / record_rate
     n_samples = int(math.floor(duration * record_rate + 1e-9)) + 1
     sample_t = np.arange(n_samples) * dt
     # the discrete logic changes modes and parameters in place; the compiled line is put
     # back as it was when the run ends, so it can be run again
-    saved = (cl.I.copy(), cl.P.copy(), [list(v) for v in cl.programme.times],
-             [list(v) for v in cl.programme.values])
+    saved = (
+        cl.I.copy(),
+        cl.P.copy(),
+        [list(v) for v in cl.programme.times],
+        [list(v) for v in cl.programme.values],
+    )
     try:
-        return _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mode,
-                    outputs, events, faults, backend, sample_t, wall0, rolls)
+        return _run(
+            cl,
+            duration,
+            record_rate,
+            y0,
+            s,
+            on_chunk,
+            progress,
+            initial_state_mode,
+            outputs,
+            events,
+            faults,
+            backend,
+            sample_t,
+            wall0,
+            rolls,
+        )
     finally:
         cl.I[:], cl.P[:] = saved[0], saved[1]
         cl.programme.times, cl.programme.values = saved[2], saved[3]
 
 
-def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mode, outputs,
-         events, faults, backend, sample_t, wall0, rolls=None):
+def _run(
+    cl,
+    duration,
+    record_rate,
+    y0,
+    s,
+    on_chunk,
+    progress,
+    initial_state_mode,
+    outputs,
+    events,
+    faults,
+    backend,
+    sample_t,
+    wall0,
+    rolls=None,
+):
     keep = on_chunk is None
     kept_t, kept_y, kept_a = [], [], []
 
@@ -482,19 +577,46 @@ def _run(cl, duration, record_rate, y0, s, on_chunk, progress, initial_state_mod
         else:
             on_chunk(t, Y, A)
 
-    loop = _EventLoop(cl, DiscreteLogic(cl, events, faults, duration, rolls), duration, s,
-                      backend, sample_t, emit, progress, wall0)
+    loop = _EventLoop(
+        cl,
+        DiscreteLogic(cl, events, faults, duration, rolls),
+        duration,
+        s,
+        backend,
+        sample_t,
+        emit,
+        progress,
+        wall0,
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         loop.run(y0)
     T_all, Y_all, A_all = _kept(cl, kept_t, kept_y, kept_a, keep, outputs)
     wall = _time.perf_counter() - wall0
-    stats = {"nfev": backend.nfev, "njev": backend.njev, "restarts": loop.restarts,
-             "wall_s": wall, "steps": backend.steps if s.backend != "radau" else None,
-             "solver": describe_settings(s), "n_samples": int(loop.k_next),
-             "solver_messages": list(getattr(backend, "messages", []))[:20]}
-    return SimulationResult(cl, T_all, Y_all, A_all, loop.log, loop.terminated, loop.reason,
-                            loop.t_term, stats, duration, initial_state_mode, y0)
+    stats = {
+        "nfev": backend.nfev,
+        "njev": backend.njev,
+        "restarts": loop.restarts,
+        "wall_s": wall,
+        "steps": backend.steps if s.backend != "radau" else None,
+        "solver": describe_settings(s),
+        "n_samples": int(loop.k_next),
+        "solver_messages": list(getattr(backend, "messages", []))[:20],
+    }
+    return SimulationResult(
+        cl,
+        T_all,
+        Y_all,
+        A_all,
+        loop.log,
+        loop.terminated,
+        loop.reason,
+        loop.t_term,
+        stats,
+        duration,
+        initial_state_mode,
+        y0,
+    )
 
 
 class _EventLoop:
@@ -515,10 +637,10 @@ class _EventLoop:
         self.step_budget = s.max_steps_per_s * max(duration, 1.0)
         self.compile0 = compile_seconds()
         self.prog_breaks = sorted(b for b in cl.programme.breakpoints if 0.0 < b < duration)
-        self.rows_per_chunk = max(16, int(s.chunk_memory_mb * 1e6 / 8 / max(
-            cl.n_states + len(cl.aux_names), 1)))
-        self.mode_idx = np.array([m for m, k in enumerate(cl.event_kinds)
-                                  if k in MODE_EVENTS], int)
+        self.rows_per_chunk = max(
+            16, int(s.chunk_memory_mb * 1e6 / 8 / max(cl.n_states + len(cl.aux_names), 1))
+        )
+        self.mode_idx = np.array([m for m, k in enumerate(cl.event_kinds) if k in MODE_EVENTS], int)
         self.log: list[Event] = []
         self.t, self.y, self.flags = 0.0, None, None  # set by run
         self.k_next = 0  # next sample index to emit
@@ -532,13 +654,13 @@ class _EventLoop:
         cl.set_segment_start(0.0)
         self.y, entries = logic.apply_due(0.0, y0.copy())
         self.log.extend(entries)
-        self.flags = (cl.events(0.0, self.y)[0] < 0 if len(cl.event_kinds)
-                      else np.zeros(0, bool))
+        self.flags = cl.events(0.0, self.y)[0] < 0 if len(cl.event_kinds) else np.zeros(0, bool)
         self.t = 0.0
         y_start = self.y.copy()
         if _broken_at_start(cl, self.y, self.flags, self.log):
-            self.k_next = _emit_samples(self.emit, self.sample_t, self.k_next,
-                                        np.array([0.0]), self.y[None, :])
+            self.k_next = _emit_samples(
+                self.emit, self.sample_t, self.k_next, np.array([0.0]), self.y[None, :]
+            )
             self.terminated, self.reason, self.t_term = True, EVENT_NAMES[EV_BREAK], 0.0
         while self.t < self.duration - 1e-12 and not self.terminated:
             if logic.next_time() <= self.t + 1e-12 and not self._apply_due():
@@ -547,8 +669,9 @@ class _EventLoop:
             if event is not None:
                 self._fire_at(*event)
         if self.k_next == 0:  # ended (or too short) before its first sample: record t = 0
-            self.k_next = _emit_samples(self.emit, self.sample_t, 0, np.array([0.0]),
-                                        y_start[None, :])
+            self.k_next = _emit_samples(
+                self.emit, self.sample_t, 0, np.array([0.0]), y_start[None, :]
+            )
 
     def _refresh_mode_flags(self, t, y, flags):
         # after a discrete change the mode events' functions mean something new: re-read
@@ -582,17 +705,29 @@ class _EventLoop:
         self.cl.set_segment_start(t)
         # samples in [t, t_seg_end]; a sample on a segment's end belongs to the next
         # segment: it sees the discrete change made there (a fault acts from its onset on)
-        k_end = int(np.searchsorted(self.sample_t, t_seg_end + (
-            1e-9 if t_seg_end >= self.duration else -1e-9), side="right"))
+        k_end = int(
+            np.searchsorted(
+                self.sample_t,
+                t_seg_end + (1e-9 if t_seg_end >= self.duration else -1e-9),
+                side="right",
+            )
+        )
         k_hi = min(k_end, self.k_next + self.rows_per_chunk)
         tspan = _chunk_times(t, self.sample_t, self.k_next, k_hi, k_end, t_seg_end)
-        tt, Y, err, ts, ys, root = self.backend.solve(tspan, self.y, find_events=self.hot,
-                                                      resume=self.resume)
+        tt, Y, err, ts, ys, root = self.backend.solve(
+            tspan, self.y, find_events=self.hot, resume=self.resume
+        )
         self.resume = False
         self.restarts += 1
         if err is None:
-            err = _over_budget(self.s, self.backend.steps, self.step_budget, self.wall0, ts,
-                               compile_seconds() - self.compile0)
+            err = _over_budget(
+                self.s,
+                self.backend.steps,
+                self.step_budget,
+                self.wall0,
+                ts,
+                compile_seconds() - self.compile0,
+            )
         if err is not None:
             self.k_next = _emit_samples(self.emit, self.sample_t, self.k_next, tt, Y, k_end)
             self.terminated, self.reason = True, f"solver_failure: {err}"
@@ -607,13 +742,11 @@ class _EventLoop:
         samples before it emitted) when the function touched 0 and turned back."""
         t_ev, y_ev, dirs = root
         # a falling event function makes the condition (g < 0) true
-        which = np.array([m for m in np.nonzero(dirs)[0]
-                          if (dirs[m] < 0) != self.flags[m]], int)
+        which = np.array([m for m in np.nonzero(dirs)[0] if (dirs[m] < 0) != self.flags[m]], int)
         if len(which):
             return t_ev, y_ev, which, tt, Y
         before = tt < t_ev - 1e-12
-        self.k_next = _emit_samples(self.emit, self.sample_t, self.k_next, tt[before],
-                                    Y[before])
+        self.k_next = _emit_samples(self.emit, self.sample_t, self.k_next, tt[before], Y[before])
         if t_ev <= self.t + 1e-12:  # stuck on a root at the start: step past it
             self.hot = False
         self.t, self.y = t_ev, y_ev.copy()
@@ -623,8 +756,11 @@ class _EventLoop:
         """Event detection at the solver's steps (as CVODE's own root finding does): the
         first event located exactly, or None with the chunk's samples emitted."""
         cl, backend = self.cl, self.backend
-        hit = (_event_on_steps(cl, self.flags, ts, ys)
-               if len(cl.event_kinds) and not backend.locates_events(self.hot) else None)
+        hit = (
+            _event_on_steps(cl, self.flags, ts, ys)
+            if len(cl.event_kinds) and not backend.locates_events(self.hot)
+            else None
+        )
         if hit is None:
             self.k_next = _emit_samples(self.emit, self.sample_t, self.k_next, tt, Y, k_end)
             self.t, self.y = float(tt[-1]), Y[-1].copy()
@@ -643,8 +779,7 @@ class _EventLoop:
             which = np.nonzero(cond[hit_row] != self.flags)[0]
         else:  # only the events found at this root flip; others seen from here on
             t_ev, y_ev, which = found
-            which = np.array([m for m in which if cond[hit_row, m] != self.flags[m]]
-                             or which)
+            which = np.array([m for m in which if cond[hit_row, m] != self.flags[m]] or which)
         return t_ev, y_ev, which, tt, Y
 
     def _fire_at(self, t_ev, y_ev, which, tt, Y) -> None:
@@ -652,8 +787,7 @@ class _EventLoop:
         discrete logic act on them."""
         self.hot = True
         before = tt < t_ev - 1e-12
-        self.k_next = _emit_samples(self.emit, self.sample_t, self.k_next, tt[before],
-                                    Y[before])
+        self.k_next = _emit_samples(self.emit, self.sample_t, self.k_next, tt[before], Y[before])
         new_flags = self.flags.copy()
         new_flags[which] = ~self.flags[which]
         y_ev, ended = _fire(self.cl, self.logic, self.log, which, new_flags, t_ev, y_ev)
@@ -679,13 +813,22 @@ def _broken_at_start(cl, y, flags, log: list) -> bool:
         aux0 = cl.outputs(np.array([0.0]), y[None, :])[0]
         for m in broken:
             state, msg, vals = _message(cl, EV_BREAK, cl.event_components[m], True, aux0)
-            log.append(Event(0.0, EVENT_NAMES[EV_BREAK], cl.event_components[m], state,
-                             msg + " (above the break tension from the start)", vals))
+            log.append(
+                Event(
+                    0.0,
+                    EVENT_NAMES[EV_BREAK],
+                    cl.event_components[m],
+                    state,
+                    msg + " (above the break tension from the start)",
+                    vals,
+                )
+            )
     return bool(broken)
 
 
-def _chunk_times(t: float, sample_t, k_next: int, k_hi: int, k_end: int,
-                 t_seg_end: float) -> np.ndarray:
+def _chunk_times(
+    t: float, sample_t, k_next: int, k_hi: int, k_end: int, t_seg_end: float
+) -> np.ndarray:
     """The output times of the next chunk: its start ``t``, the samples after it, and the
     chunk's end (the segment's end, or the last sample at a memory boundary)."""
     t_chunk_end = t_seg_end if k_hi == k_end else float(sample_t[k_hi - 1])
@@ -743,14 +886,22 @@ def _kept(cl, kept_t, kept_y, kept_a, keep: bool, outputs: bool):
     return np.zeros(0), np.zeros((0, cl.n_states)), np.zeros((0, len(cl.aux_names)))
 
 
-def _over_budget(s: SolverSettings, steps: int | None, step_budget: float, wall0: float,
-                 ts: np.ndarray, compiled_s: float) -> str | None:
+def _over_budget(
+    s: SolverSettings,
+    steps: int | None,
+    step_budget: float,
+    wall0: float,
+    ts: np.ndarray,
+    compiled_s: float,
+) -> str | None:
     """Why the run must stop now (its step or wall-clock budget is spent), or None. The
     wall-clock budget does not count ``compiled_s``, numba compiling (a cold cache)."""
     t = float(ts[-1]) if ts is not None and len(ts) else 0.0
     if steps is not None and steps > step_budget:
-        return (f"step budget: {steps} steps by t = {t:.6g} s (solver.max_steps_per_s x "
-                f"duration = {step_budget:.3g})")
+        return (
+            f"step budget: {steps} steps by t = {t:.6g} s (solver.max_steps_per_s x "
+            f"duration = {step_budget:.3g})"
+        )
     if s.max_wall_s is not None and _time.perf_counter() - wall0 > s.max_wall_s + compiled_s:
         return f"wall-clock budget: solver.max_wall_s = {s.max_wall_s:g} s spent by t = {t:.6g} s"
     return None
@@ -762,10 +913,12 @@ def _emit_samples(emit, sample_t, k_next, tt, Y, k_stop=None) -> int:
     if len(tt) == 0:
         return k_next
     idx = np.searchsorted(sample_t, tt - 1e-9)
-    ok = (idx < (len(sample_t) if k_stop is None else k_stop)) & (np.abs(
-        sample_t[np.minimum(idx, len(sample_t) - 1)] - tt) < 1e-9) & (idx >= k_next)
+    ok = (
+        (idx < (len(sample_t) if k_stop is None else k_stop))
+        & (np.abs(sample_t[np.minimum(idx, len(sample_t) - 1)] - tt) < 1e-9)
+        & (idx >= k_next)
+    )
     if np.any(ok):
         emit(tt[ok], Y[ok])
         return int(idx[ok][-1]) + 1
     return k_next
-

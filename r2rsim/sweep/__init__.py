@@ -24,8 +24,17 @@ from ..units import QuantityError, parse_quantity
 from ._plan import RunSpec, SweepPlan, load_sweep, plan_sweep
 from ._store import Outcome, SweepStore, write_failure
 
-__all__ = ["RunSpec", "SweepPlan", "SweepSummary", "choose_workers", "default_workers",
-           "load_sweep", "plan_sweep", "planned_seconds", "run_sweep"]
+__all__ = [
+    "RunSpec",
+    "SweepPlan",
+    "SweepSummary",
+    "choose_workers",
+    "default_workers",
+    "load_sweep",
+    "plan_sweep",
+    "planned_seconds",
+    "run_sweep",
+]
 
 #: simulated seconds of runs that pay for one more local worker process. A worker's start
 #: (spawn, imports, loading numba's cached kernels) costs ~1.4-1.8 s of CPU, while the
@@ -117,28 +126,43 @@ class SweepSummary:
 
     def format(self) -> str:
         n_failed = self.failed + self.skipped_failed
-        state = (" (unfinished)" if not self.complete else
-                 f" (incomplete: {n_failed} of {self.n_runs} runs failed)" if n_failed else "")
-        lines = [f"dataset      {self.output}{state}",
-                 f"runs         {self.n_runs}: {self.done} done, {self.failed} failed, "
-                 f"{self.skipped} skipped (already done"
-                 + (f", {self.skipped_failed} of them failed before" if self.skipped_failed
-                    else "") + ")",
-                 f"executor     {self.executor}",
-                 f"simulated    {self.simulated_s:.1f} s of line time in {self.wall_s:.1f} s "
-                 f"wall ({self.runs_per_minute:.1f} runs per minute)"]
+        state = (
+            " (unfinished)"
+            if not self.complete
+            else f" (incomplete: {n_failed} of {self.n_runs} runs failed)"
+            if n_failed
+            else ""
+        )
+        lines = [
+            f"dataset      {self.output}{state}",
+            f"runs         {self.n_runs}: {self.done} done, {self.failed} failed, "
+            f"{self.skipped} skipped (already done"
+            + (f", {self.skipped_failed} of them failed before" if self.skipped_failed else "")
+            + ")",
+            f"executor     {self.executor}",
+            f"simulated    {self.simulated_s:.1f} s of line time in {self.wall_s:.1f} s "
+            f"wall ({self.runs_per_minute:.1f} runs per minute)",
+        ]
         for rid, why in self.failures[:20]:
             lines.append(f"FAILED       {rid}: {why}")
         if len(self.failures) > 20:
-            lines.append(f"  ... {len(self.failures) - 20} more (failures.parquet, "
-                         f"runs.parquet termination_reason)")
+            lines.append(
+                f"  ... {len(self.failures) - 20} more (failures.parquet, "
+                f"runs.parquet termination_reason)"
+            )
         return "\n".join(lines)
 
 
-def run_sweep(sweep_path: str | Path, output: str | Path | None = None, *,
-              workers: int | None = None, scheduler: str | None = None,
-              retry_failed: bool = False, overwrite: bool = False,
-              progress=None) -> SweepSummary:
+def run_sweep(
+    sweep_path: str | Path,
+    output: str | Path | None = None,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    retry_failed: bool = False,
+    overwrite: bool = False,
+    progress=None,
+) -> SweepSummary:
     """Run a sweep file into one dataset.
 
     Parameters
@@ -187,8 +211,10 @@ def run_sweep(sweep_path: str | Path, output: str | Path | None = None, *,
     if workers < 0 or (scheduler is not None and workers < 1):
         raise InputError(f"--workers must be >= {1 if scheduler else 0}, got {workers}")
     if workers > limits.MAX_LOCAL_WORKERS and scheduler in (None, "local"):
-        raise InputError(f"--workers {workers}: at most {limits.MAX_LOCAL_WORKERS} worker "
-                         "processes on one machine (docs/security.md)")
+        raise InputError(
+            f"--workers {workers}: at most {limits.MAX_LOCAL_WORKERS} worker "
+            "processes on one machine (docs/security.md)"
+        )
     store = SweepStore(out, plan, overwrite)
     store.inspect()
     outcomes = store.outcomes(retry_failed)
@@ -196,8 +222,9 @@ def run_sweep(sweep_path: str | Path, output: str | Path | None = None, *,
     planned = planned_seconds(todo) if chosen else None
     if chosen:
         workers = choose_workers(planned, len(todo), workers)
-    summary = SweepSummary(out, len(plan.runs), warnings=plan.warnings,
-                           executor=_describe(workers, scheduler, planned))
+    summary = SweepSummary(
+        out, len(plan.runs), warnings=plan.warnings, executor=_describe(workers, scheduler, planned)
+    )
     summary.skipped = len(outcomes)
     summary.skipped_failed = sum(o.status == "failed" for o in outcomes.values())
     summary.failures = [(k, o.reason) for k, o in outcomes.items() if o.status == "failed"]
@@ -220,15 +247,17 @@ def run_sweep(sweep_path: str | Path, output: str | Path | None = None, *,
         def on_result(spec, rec):
             if rec["status"] == "failed" and not rec["has_data"]:
                 write_failure(store.work, spec, rec["reason"])  # the worker died
-            outcomes[spec.run_id] = Outcome(rec["status"], "work" if rec["has_data"]
-                                            else None, rec["reason"])
+            outcomes[spec.run_id] = Outcome(
+                rec["status"], "work" if rec["has_data"] else None, rec["reason"]
+            )
             summary.add(spec.run_id, rec)
             if progress:
                 progress(summary.done + summary.failed, len(todo), rec)
 
         if not todo:
             summary.executor = "none (nothing to run" + (
-                "; the changed sweep file applied)" if store.mode == "reopen" else ")")
+                "; the changed sweep file applied)" if store.mode == "reopen" else ")"
+            )
         elif scheduler is not None:
             _execute.run_dask(todo, work, on_result, scheduler, min(workers, len(todo)))
         elif workers == 0:

@@ -30,8 +30,19 @@ CONNECT_TIMEOUT_S = 30
 #: errno values that say the machine failed, not the run: no space or quota left, a
 #: read-only file system, no permission, an I/O error, no file handles left
 ENVIRONMENT_ERRNOS = frozenset(
-    e for e in (errno.ENOSPC, getattr(errno, "EDQUOT", None), errno.EROFS, errno.EACCES,
-                errno.EPERM, errno.EIO, errno.EMFILE, errno.ENFILE) if e is not None)
+    e
+    for e in (
+        errno.ENOSPC,
+        getattr(errno, "EDQUOT", None),
+        errno.EROFS,
+        errno.EACCES,
+        errno.EPERM,
+        errno.EIO,
+        errno.EMFILE,
+        errno.ENFILE,
+    )
+    if e is not None
+)
 
 
 def environment_error(exc: BaseException | None) -> OSError | None:
@@ -64,35 +75,68 @@ def run_one(spec, work: str) -> dict:
     done = finished(Path(work) / spec.run_id, spec.config_sha256)
     if done is not None:  # written by a worker that died before it could report it
         reason = failed_reason(done)
-        return {"run_id": spec.run_id, "status": "failed" if reason else "done",
-                "reason": reason, "has_data": True, "simulated_s": done["simulated_s"],
-                "solver_s": done["wallclock_s"], "wall_s": time.perf_counter() - t0}
+        return {
+            "run_id": spec.run_id,
+            "status": "failed" if reason else "done",
+            "reason": reason,
+            "has_data": True,
+            "simulated_s": done["simulated_s"],
+            "solver_s": done["wallclock_s"],
+            "wall_s": time.perf_counter() - t0,
+        }
     try:
         with warnings.catch_warnings():  # reported once, by the plan
             warnings.simplefilter("ignore", PlausibilityWarning)
             scenario_data, line_data = spec.data()
-            scenario, line = build_scenario(scenario_data, line_data, spec.source,
-                                            spec.line_file)
+            scenario, line = build_scenario(scenario_data, line_data, spec.source, spec.line_file)
         scenario.seed = spec.seed
-        plan = RunPlan(scenario, line, spec.name, spec.source, spec.config_sha256, {},
-                       {"sweep": spec.columns["sweep"]}, spec.line_config)
+        plan = RunPlan(
+            scenario,
+            line,
+            spec.name,
+            spec.source,
+            spec.config_sha256,
+            {},
+            {"sweep": spec.columns["sweep"]},
+            spec.line_config,
+        )
         # labels are derived once, not read back again per run (~20 ms of a 60 ms run);
         # `r2rsim validate` checks the finished dataset in full
-        s = execute(plan, Path(work) / spec.run_id, run_id=spec.run_id,
-                    run_columns=run_columns(spec), clean_stale=False, check_labels=False)
+        s = execute(
+            plan,
+            Path(work) / spec.run_id,
+            run_id=spec.run_id,
+            run_columns=run_columns(spec),
+            clean_stale=False,
+            check_labels=False,
+        )
     except Exception as exc:  # noqa: BLE001 - a failed run is recorded, the sweep goes on
         env = environment_error(exc)
         if env is not None:  # what the writer had written is removed (DatasetWriter.abort)
             raise env from None
         reason = f"{type(exc).__name__}: {exc}"
         write_failure(work, spec, reason, traceback.format_exc())
-        return {"run_id": spec.run_id, "status": "failed", "reason": reason, "has_data": False,
-                "simulated_s": 0.0, "solver_s": 0.0, "wall_s": time.perf_counter() - t0}
-    reason = failed_reason({"termination_reason": s.termination_reason,
-                            "nonfinite_from_t_s": s.nonfinite_t})
-    return {"run_id": spec.run_id, "status": "failed" if reason else "done", "reason": reason,
-            "has_data": True, "simulated_s": s.simulated_s, "solver_s": s.wall_s,
-            "wall_s": time.perf_counter() - t0}
+        return {
+            "run_id": spec.run_id,
+            "status": "failed",
+            "reason": reason,
+            "has_data": False,
+            "simulated_s": 0.0,
+            "solver_s": 0.0,
+            "wall_s": time.perf_counter() - t0,
+        }
+    reason = failed_reason(
+        {"termination_reason": s.termination_reason, "nonfinite_from_t_s": s.nonfinite_t}
+    )
+    return {
+        "run_id": spec.run_id,
+        "status": "failed" if reason else "done",
+        "reason": reason,
+        "has_data": True,
+        "simulated_s": s.simulated_s,
+        "solver_s": s.wall_s,
+        "wall_s": time.perf_counter() - t0,
+    }
 
 
 def run_serial(specs, work: str, on_result) -> None:
@@ -113,8 +157,9 @@ def _worker_init(parent: int) -> None:
     atexit.register(gc.freeze)
     import threading
 
-    threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True,
-                     name="r2rsim-parent-watch").start()
+    threading.Thread(
+        target=_exit_with_parent, args=(parent,), daemon=True, name="r2rsim-parent-watch"
+    ).start()
 
 
 def _exit_with_parent(parent: int) -> None:
@@ -149,9 +194,16 @@ def _died(spec, attempts: dict) -> dict | None:
     attempts[spec.run_id] = attempts.get(spec.run_id, 0) + 1
     if attempts[spec.run_id] < MAX_ATTEMPTS:
         return None
-    return {"run_id": spec.run_id, "status": "failed", "has_data": False,
-            "reason": f"the worker process running it died {MAX_ATTEMPTS} times (killed, or "
-                      f"out of memory?)", "simulated_s": 0.0, "solver_s": 0.0, "wall_s": 0.0}
+    return {
+        "run_id": spec.run_id,
+        "status": "failed",
+        "has_data": False,
+        "reason": f"the worker process running it died {MAX_ATTEMPTS} times (killed, or "
+        f"out of memory?)",
+        "simulated_s": 0.0,
+        "solver_s": 0.0,
+        "wall_s": 0.0,
+    }
 
 
 def _pool(workers: int):
@@ -159,8 +211,12 @@ def _pool(workers: int):
     from concurrent.futures import ProcessPoolExecutor
 
     with _one_thread_each():
-        return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=_worker_init, initargs=(os.getpid(),))
+        return ProcessPoolExecutor(
+            workers,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=_worker_init,
+            initargs=(os.getpid(),),
+        )
 
 
 def _workers_start() -> bool:
@@ -227,9 +283,10 @@ def run_processes(specs, work: str, on_result, workers: int, task=None) -> None:
         if lost and not _workers_start():
             raise R2RError(
                 "the worker processes die as they start. From a Python script, call "
-                "run_sweep() under `if __name__ == \"__main__\":` (each worker process "
+                'run_sweep() under `if __name__ == "__main__":` (each worker process '
                 "imports the script); --workers 0 runs the sweep in this process. The "
-                "finished runs are kept")
+                "finished runs are kept"
+            )
         for spec in lost:  # alone: its own worker died
             rec = _died(spec, attempts)
             if rec is None:
@@ -241,7 +298,7 @@ def run_processes(specs, work: str, on_result, workers: int, task=None) -> None:
 def _stop(pool) -> None:
     """Terminate the pool's workers now (an interrupt, SIGTERM); what they were writing is
     left as temporaries that the next sweep into the directory removes."""
-    for p in list(getattr(pool, "_processes", {}) .values()):
+    for p in list(getattr(pool, "_processes", {}).values()):
         with contextlib.suppress(Exception):
             p.terminate()
 
@@ -264,9 +321,11 @@ def _distributed():
     try:
         import distributed
     except ImportError:
-        raise InputError("--scheduler needs dask.distributed: pip install "
-                         "'dask[distributed]' (or pip install -e \".[dask]\" in the r2rsim "
-                         "checkout)") from None
+        raise InputError(
+            "--scheduler needs dask.distributed: pip install "
+            "'dask[distributed]' (or pip install -e \".[dask]\" in the r2rsim "
+            "checkout)"
+        ) from None
     return distributed
 
 
@@ -275,8 +334,10 @@ def _connect(scheduler: str):
     try:
         return _distributed().Client(scheduler, timeout=CONNECT_TIMEOUT_S)
     except (OSError, TimeoutError, ValueError) as exc:
-        raise InputError(f"--scheduler: cannot reach a Dask scheduler at '{scheduler}' "
-                         f"({type(exc).__name__}: {exc})") from None
+        raise InputError(
+            f"--scheduler: cannot reach a Dask scheduler at '{scheduler}' "
+            f"({type(exc).__name__}: {exc})"
+        ) from None
 
 
 def run_dask(specs, work: str, on_result, scheduler: str, workers: int) -> None:
@@ -297,21 +358,35 @@ def run_dask(specs, work: str, on_result, scheduler: str, workers: int) -> None:
             # freed memory back to the kernel at once, and every run takes ~16x the page
             # faults and ~35 % more time (a run's memory is flat; a value the user set in the
             # environment still reaches the workers)
-            with _one_thread_each(), dask_config.set(
-                    {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+            with (
+                _one_thread_each(),
+                dask_config.set(
+                    {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
+                ),
+            ):
                 # the scheduler's HTTP server (metrics) starts even without a dashboard, on
                 # port 8787 unless told otherwise: a free port instead, so that two sweeps
                 # (or a user's own cluster) do not warn "Port 8787 is already in use"
-                cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                       dashboard_address=None, silence_logs=logging.ERROR,
-                                       scheduler_kwargs={"dashboard": False,
-                                                         "dashboard_address": "127.0.0.1:0"})
+                cluster = LocalCluster(
+                    n_workers=workers,
+                    threads_per_worker=1,
+                    processes=True,
+                    dashboard_address=None,
+                    silence_logs=logging.ERROR,
+                    scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
+                )
             client = Client(cluster)
         else:
             client = _connect(scheduler)
         try:
-            _dask_loop(client, as_completed, specs, work, on_result,
-                       max(2 * workers, 2 * len(client.nthreads() or {0: 1})))
+            _dask_loop(
+                client,
+                as_completed,
+                specs,
+                work,
+                on_result,
+                max(2 * workers, 2 * len(client.nthreads() or {0: 1})),
+            )
         finally:
             client.close()
     finally:
@@ -342,8 +417,9 @@ def _scheduler_lost(exc: BaseException) -> bool:
     import asyncio
     import concurrent.futures
 
-    return isinstance(exc, (asyncio.CancelledError, concurrent.futures.CancelledError)) \
-        or type(exc).__name__ in ("CommClosedError", "FutureCancelledError")
+    return isinstance(exc, (asyncio.CancelledError, concurrent.futures.CancelledError)) or type(
+        exc
+    ).__name__ in ("CommClosedError", "FutureCancelledError")
 
 
 def _dask_loop(client, as_completed, specs, work, on_result, window: int) -> None:
@@ -353,8 +429,10 @@ def _dask_loop(client, as_completed, specs, work, on_result, window: int) -> Non
     queue = list(reversed(specs))
     pending = {}
     ac = as_completed()
-    lost = R2RError("the Dask scheduler went away; the finished runs are kept: run the same "
-                    "command again to continue")
+    lost = R2RError(
+        "the Dask scheduler went away; the finished runs are kept: run the same "
+        "command again to continue"
+    )
 
     def submit():
         while queue and len(pending) < window:
@@ -380,9 +458,15 @@ def _dask_loop(client, as_completed, specs, work, on_result, window: int) -> Non
                 env = environment_error(exc)
                 if env is not None:  # a full or read-only disk: the sweep stops
                     raise env from None
-                rec = {"run_id": spec.run_id, "status": "failed", "has_data": False,
-                       "reason": f"{type(exc).__name__}: {exc}", "simulated_s": 0.0,
-                       "solver_s": 0.0, "wall_s": 0.0}
+                rec = {
+                    "run_id": spec.run_id,
+                    "status": "failed",
+                    "has_data": False,
+                    "reason": f"{type(exc).__name__}: {exc}",
+                    "simulated_s": 0.0,
+                    "solver_s": 0.0,
+                    "wall_s": 0.0,
+                }
             f.release()
             on_result(spec, rec)
         submit()

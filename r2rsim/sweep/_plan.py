@@ -23,9 +23,12 @@ from ..schema.sweep import Axis, Sweep
 from ..units import QuantityError, parse_any
 
 #: scenario keys a sweep sets itself (run ids, seeds, where the data goes)
-_RESERVED = {"name": "the base scenario's name is kept as scenario_id",
-             "seed": "give the sweep's seeds: instead", "output": "the sweep writes one "
-             "dataset", "line": "one sweep runs one line file"}
+_RESERVED = {
+    "name": "the base scenario's name is kept as scenario_id",
+    "seed": "give the sweep's seeds: instead",
+    "output": "the sweep writes one dataset",
+    "line": "one sweep runs one line file",
+}
 #: invalid combinations listed in full; more are counted
 MAX_LISTED = 50
 
@@ -100,9 +103,13 @@ class SweepPlan:
         base = self.file.resolve().parent
         target = (base / self.sweep.output).resolve()
         if target == base or not target.is_relative_to(base):
-            raise InputError(f"'{self.sweep.output}' is outside the sweep's directory {base}: "
-                             f"output names a directory inside it; to write elsewhere give "
-                             f"-o", file=str(self.file), path="output")
+            raise InputError(
+                f"'{self.sweep.output}' is outside the sweep's directory {base}: "
+                f"output names a directory inside it; to write elsewhere give "
+                f"-o",
+                file=str(self.file),
+                path="output",
+            )
         return base / self.sweep.output
 
 
@@ -110,12 +117,13 @@ def load_sweep(path: str | Path) -> Sweep:
     """Read and validate a sweep file (its own keys; :func:`plan_sweep` checks the runs)."""
     path = Path(path)
     sweep = _validate(Sweep, read_yaml(path), str(path))
-    for where, p in [*((f"set.{k}", k) for k in sweep.set),
-                     *((f"axes[{i}].path", a.path) for i, a in enumerate(sweep.axes))]:
+    for where, p in [
+        *((f"set.{k}", k) for k in sweep.set),
+        *((f"axes[{i}].path", a.path) for i, a in enumerate(sweep.axes)),
+    ]:
         root = _paths.parse(p)[0]
         if root in _RESERVED and len(_paths.parse(p)) == 1:
-            raise InputError(f"'{p}' is not swept: {_RESERVED[root]}", file=str(path),
-                             path=where)
+            raise InputError(f"'{p}' is not swept: {_RESERVED[root]}", file=str(path), path=where)
         try:
             _paths.split_root(p)
         except _paths.PathError as exc:
@@ -155,34 +163,49 @@ def _axis_values(axis: Axis, file: str, where: str) -> list:
         return [float(v) for v in np.linspace(start, stop, r.num)]
     step = nums[2]
     if step == 0 or (stop - start) * step < 0:
-        raise InputError(f"step {step:g} does not lead from {start:g} to {stop:g}", file=file,
-                         path=f"{where}.range.step")
+        raise InputError(
+            f"step {step:g} does not lead from {start:g} to {stop:g}",
+            file=file,
+            path=f"{where}.range.step",
+        )
     if not math.isfinite(stop - start):
-        raise InputError(f"the range from {start:g} to {stop:g} is wider than floating point "
-                         "can hold", file=file, path=f"{where}.range")
+        raise InputError(
+            f"the range from {start:g} to {stop:g} is wider than floating point can hold",
+            file=file,
+            path=f"{where}.range",
+        )
     count = (stop - start) / step  # inf for a step near 1e-320
     if not count <= limits.MAX_AXIS_VALUES:
-        raise InputError(f"the range from {start:g} to {stop:g} in steps of {step:g} has "
-                         f"more than {limits.MAX_AXIS_VALUES} values", file=file,
-                         path=f"{where}.range")
+        raise InputError(
+            f"the range from {start:g} to {stop:g} in steps of {step:g} has "
+            f"more than {limits.MAX_AXIS_VALUES} values",
+            file=file,
+            path=f"{where}.range",
+        )
     n = math.floor(count * (1 + 1e-12) + 1e-9) + 1
     if n > limits.MAX_AXIS_VALUES:
-        raise InputError(f"the range has {n} values; at most {limits.MAX_AXIS_VALUES}",
-                         file=file, path=f"{where}.range")
+        raise InputError(
+            f"the range has {n} values; at most {limits.MAX_AXIS_VALUES}",
+            file=file,
+            path=f"{where}.range",
+        )
     return [start + i * step for i in range(n)]
 
 
 def _distribution(axis: Axis, file: str, where: str):
     """A function ``rng -> value`` of a uniform or log-uniform axis (SI)."""
     key = "uniform" if axis.uniform is not None else "loguniform"
-    lo, hi = _same_dims([_si(v, file, f"{where}.{key}") for v in getattr(axis, key)], file,
-                        f"{where}.{key}")
+    lo, hi = _same_dims(
+        [_si(v, file, f"{where}.{key}") for v in getattr(axis, key)], file, f"{where}.{key}"
+    )
     if not lo < hi:
-        raise InputError(f"low {lo:g} must be below high {hi:g}", file=file,
-                         path=f"{where}.{key}")
+        raise InputError(f"low {lo:g} must be below high {hi:g}", file=file, path=f"{where}.{key}")
     if not math.isfinite(hi - lo):  # numpy's uniform cannot draw from a wider interval
-        raise InputError(f"the interval from {lo:g} to {hi:g} is wider than floating point "
-                         "can hold", file=file, path=f"{where}.{key}")
+        raise InputError(
+            f"the interval from {lo:g} to {hi:g} is wider than floating point can hold",
+            file=file,
+            path=f"{where}.{key}",
+        )
     if key == "uniform":
         return lambda rng: float(rng.uniform(lo, hi))
     if lo <= 0:
@@ -217,10 +240,12 @@ def combinations(sweep: Sweep, file: str) -> list[tuple]:
     if sweep.combine == "zip":
         lengths = {len(v) for v in values}
         if len(lengths) > 1:
-            shown = ", ".join(f"{a.path}: {len(v)}" for a, v in zip(sweep.axes, values,
-                                                                    strict=True))
-            raise InputError(f"combine: zip needs axes of equal length ({shown})", file=file,
-                             path="axes")
+            shown = ", ".join(
+                f"{a.path}: {len(v)}" for a, v in zip(sweep.axes, values, strict=True)
+            )
+            raise InputError(
+                f"combine: zip needs axes of equal length ({shown})", file=file, path="axes"
+            )
         _check_count(len(values[0]) * n_seeds, file)
         return list(zip(*values, strict=True))
     _check_count(math.prod(len(v) for v in values) * n_seeds, file)
@@ -229,8 +254,12 @@ def combinations(sweep: Sweep, file: str) -> list[tuple]:
 
 def _check_count(n: int, file: str) -> None:
     if n > limits.MAX_SWEEP_RUNS:
-        raise InputError(f"the sweep makes {n} runs; at most {limits.MAX_SWEEP_RUNS} "
-                         f"(docs/security.md): split it", file=file, path="axes")
+        raise InputError(
+            f"the sweep makes {n} runs; at most {limits.MAX_SWEEP_RUNS} "
+            f"(docs/security.md): split it",
+            file=file,
+            path="axes",
+        )
 
 
 def _digest(obj) -> str:
@@ -287,9 +316,10 @@ class _Combination:
     def applies(self, i: int) -> bool:
         """Whether axis ``i`` has an effect (it is not inside an element another removed)."""
         root, where = self.where[i]
-        return not any(root == r and where != w and (where.startswith(w + ".")
-                                                     or where.startswith(w + "["))
-                       for r, w in self.removed)
+        return not any(
+            root == r and where != w and (where.startswith(w + ".") or where.startswith(w + "["))
+            for r, w in self.removed
+        )
 
 
 def _apply_set(sweep: Sweep, scenario: dict, line: dict, file: str) -> None:
@@ -310,8 +340,11 @@ def _blame(exc: InputError, combo: _Combination, sweep: Sweep, files: dict) -> l
         r, where = combo.where[i]
         if r != root:
             continue
-        if path == where or path.startswith((where + ".", where + "[")) or \
-                (path and where.startswith((path + ".", path + "["))):
+        if (
+            path == where
+            or path.startswith((where + ".", where + "["))
+            or (path and where.startswith((path + ".", path + "[")))
+        ):
             out.append(i)
     return out
 
@@ -361,13 +394,17 @@ class _Checker:
                 # combination without it (a grid of [null, fault] x magnitudes has one
                 # run without the fault, not one per magnitude)
                 return None
-            self.fail(k, [
-                f"{file}: draws {self.ids[digest]} and {k} of combine: random make the same "
-                f"run ({_shown(sweep, combo.values)}): the axes' values repeat; draw from "
-                f"uniform or loguniform, draw fewer (n), or combine by grid"
-                if sweep.combine == "random" else
-                f"{file}: combinations {self.ids[digest]} and {k} make the same run "
-                f"({_shown(sweep, combo.values)}): a value is listed twice"])
+            self.fail(
+                k,
+                [
+                    f"{file}: draws {self.ids[digest]} and {k} of combine: random make the same "
+                    f"run ({_shown(sweep, combo.values)}): the axes' values repeat; draw from "
+                    f"uniform or loguniform, draw fewer (n), or combine by grid"
+                    if sweep.combine == "random"
+                    else f"{file}: combinations {self.ids[digest]} and {k} make the same run "
+                    f"({_shown(sweep, combo.values)}): a value is listed twice"
+                ],
+            )
             return None
         self.ids[digest] = k
         try:
@@ -379,8 +416,14 @@ class _Checker:
             return None
         data = {"scenario": combo.scenario, "line": combo.line}
         configs = [_digest({**data, "seed": seed, "r2rsim": __version__}) for seed in self.seeds]
-        return _Made(combo.values, digest, configs, _axis_row(sweep, combo, scenario, line),
-                     json.dumps(combo.applied, sort_keys=True, default=repr), scenario.name)
+        return _Made(
+            combo.values,
+            digest,
+            configs,
+            _axis_row(sweep, combo, scenario, line),
+            json.dumps(combo.applied, sort_keys=True, default=repr),
+            scenario.name,
+        )
 
     def _validate(self, combo: _Combination):
         with warnings.catch_warnings(record=True) as caught:
@@ -389,8 +432,9 @@ class _Checker:
             line = self.lines.get(key)
             if line is None:
                 line = self.lines[key] = load_line(combo.line, file=self.files["line"])
-            scenario, line = build_scenario(combo.scenario, line, self.files["scenario"],
-                                            self.files["line"])
+            scenario, line = build_scenario(
+                combo.scenario, line, self.files["scenario"], self.files["line"]
+            )
         for w in caught:
             msg = w.message.format() if hasattr(w.message, "format") else str(w.message)
             self.warnings[msg] = self.warnings.get(msg, 0) + 1
@@ -402,8 +446,9 @@ class _Checker:
             from ..run import sample_columns
 
             try:
-                self.columns_of[structure] = sample_columns(scenario, line,
-                                                            file=self.files["scenario"])
+                self.columns_of[structure] = sample_columns(
+                    scenario, line, file=self.files["scenario"]
+                )
             except R2RError as exc:
                 self.fail(k, [f"{self.file}: {_shown(self.sweep, combo.values)}: {exc}"])
                 return False
@@ -412,10 +457,15 @@ class _Checker:
             self.first = (cols, k)
         elif cols != self.first[0]:
             diff = sorted(set(cols) ^ set(self.first[0]))[:3]
-            self.fail(k, [f"{self.file}: {_shown(self.sweep, combo.values)}: the runs of this "
-                          f"combination have other sample columns than those of combination "
-                          f"{self.first[1]} ({', '.join(diff)}...); one dataset holds runs of "
-                          f"one set of columns: make two sweeps"])
+            self.fail(
+                k,
+                [
+                    f"{self.file}: {_shown(self.sweep, combo.values)}: the runs of this "
+                    f"combination have other sample columns than those of combination "
+                    f"{self.first[1]} ({', '.join(diff)}...); one dataset holds runs of "
+                    f"one set of columns: make two sweeps"
+                ],
+            )
             return False
         return True
 
@@ -428,15 +478,18 @@ class _Checker:
         for p in self.problems:
             counts[p] = counts.get(p, 0) + 1
         # the sweep file is named once, in front of the list
-        problems = [p.removeprefix(f"{self.file}: ") + ("" if n == 1 else
-                                                         f" (in {n} combinations)")
-                    for p, n in counts.items()]
+        problems = [
+            p.removeprefix(f"{self.file}: ") + ("" if n == 1 else f" (in {n} combinations)")
+            for p, n in counts.items()
+        ]
         more = len(problems) - MAX_LISTED
         listed = problems[:MAX_LISTED] + ([f"... and {more} more"] if more > 0 else [])
         n = len(self.invalid)
-        err = InputError(f"{n} of {_count(n_combos, 'combination')} {'is' if n == 1 else 'are'}"
-                         f" invalid (nothing was run):\n  " + "\n  ".join(listed),
-                         file=self.file)
+        err = InputError(
+            f"{n} of {_count(n_combos, 'combination')} {'is' if n == 1 else 'are'}"
+            f" invalid (nothing was run):\n  " + "\n  ".join(listed),
+            file=self.file,
+        )
         err.problems = [("", p) for p in problems]
         raise err
 
@@ -460,20 +513,27 @@ def plan_sweep(path: str | Path) -> SweepPlan:
     sweep = load_sweep(path)
     scenario_path = path.parent / sweep.scenario
     if not scenario_path.is_file():
-        raise InputError(f"scenario file '{sweep.scenario}' "
-                         + ("is not a regular file" if scenario_path.exists() else "not found")
-                         + f" (looked at {scenario_path.resolve()})", file=file, path="scenario")
+        raise InputError(
+            f"scenario file '{sweep.scenario}' "
+            + ("is not a regular file" if scenario_path.exists() else "not found")
+            + f" (looked at {scenario_path.resolve()})",
+            file=file,
+            path="scenario",
+        )
     base = read_yaml(scenario_path)
     line_path = line_path_of(base, scenario_path)
     base_line = read_yaml(line_path)
     files = {"scenario": str(scenario_path), "line": str(line_path)}
     _apply_set(sweep, base, base_line, file)
-    seeds = (list(sweep.seeds) if isinstance(sweep.seeds, list) else
-             [sweep.seed + i for i in range(sweep.seeds)] if sweep.seeds is not None else
-             [base.get("seed", 0) if isinstance(base.get("seed"), int) else 0])
+    seeds = (
+        list(sweep.seeds)
+        if isinstance(sweep.seeds, list)
+        else [sweep.seed + i for i in range(sweep.seeds)]
+        if sweep.seeds is not None
+        else [base.get("seed", 0) if isinstance(base.get("seed"), int) else 0]
+    )
     if seeds[-1] > limits.MAX_SEED:
-        raise InputError(f"the last seed {seeds[-1]} is above 2**64 - 1", file=file,
-                         path="seeds")
+        raise InputError(f"the last seed {seeds[-1]} is above 2**64 - 1", file=file, path="seeds")
     combos = combinations(sweep, file)
     template = Template(base, base_line, tuple(a.path for a in sweep.axes))
     checker = _Checker(sweep, file, files, seeds)
@@ -490,20 +550,25 @@ def plan_sweep(path: str | Path) -> SweepPlan:
             made.append(record)
     checker.raise_problems(len(combos))
     axes, runs = _runs(sweep, made, seeds, template, files, scenario_path, line_path)
-    line_copy = (line_path.name if line_path.name != scenario_path.name
-                 else f"line.{line_path.name}")
-    copies = {f"sweep/{path.name}": path.read_text(encoding="utf-8"),
-              f"scenario/{scenario_path.name}": scenario_path.read_text(encoding="utf-8"),
-              f"scenario/{line_copy}": line_path.read_text(encoding="utf-8")}
-    shown_warnings = [m if n == 1 else f"{m} (in {n} combinations)"
-                      for m, n in checker.warnings.items()]
-    return SweepPlan(sweep, path, scenario_path, line_path, runs, len(made), seeds, axes,
-                     copies, shown_warnings)
+    line_copy = line_path.name if line_path.name != scenario_path.name else f"line.{line_path.name}"
+    copies = {
+        f"sweep/{path.name}": path.read_text(encoding="utf-8"),
+        f"scenario/{scenario_path.name}": scenario_path.read_text(encoding="utf-8"),
+        f"scenario/{line_copy}": line_path.read_text(encoding="utf-8"),
+    }
+    shown_warnings = [
+        m if n == 1 else f"{m} (in {n} combinations)" for m, n in checker.warnings.items()
+    ]
+    return SweepPlan(
+        sweep, path, scenario_path, line_path, runs, len(made), seeds, axes, copies, shown_warnings
+    )
 
 
 def _shown(sweep: Sweep, values: tuple) -> str:
-    return ", ".join(f"{a.path} = {_value(v)}" for a, v in zip(sweep.axes, values, strict=True)) \
+    return (
+        ", ".join(f"{a.path} = {_value(v)}" for a, v in zip(sweep.axes, values, strict=True))
         or "the base scenario"
+    )
 
 
 def _check_aliases(sweep: Sweep, combo: _Combination, file: str) -> None:
@@ -514,9 +579,12 @@ def _check_aliases(sweep: Sweep, combo: _Combination, file: str) -> None:
     for i, where in sorted(combo.where.items()):
         if where in seen:
             j = seen[where]
-            raise InputError(f"'{sweep.axes[i].path}' is the value axes[{j}] sweeps "
-                             f"('{sweep.axes[j].path}'); sweep it once", file=file,
-                             path=f"axes[{i}].path")
+            raise InputError(
+                f"'{sweep.axes[i].path}' is the value axes[{j}] sweeps "
+                f"('{sweep.axes[j].path}'); sweep it once",
+                file=file,
+                path=f"axes[{i}].path",
+            )
         seen[where] = i
 
 
@@ -537,15 +605,18 @@ def _problems(exc: InputError, combo, sweep, files, file) -> list[str]:
         one = InputError(msg, file=exc.file, path=p or None)
         blamed = _blame(one, combo, sweep, files)
         if blamed:
-            who = "; ".join(f"axes[{i}] ({sweep.axes[i].path}) = {_value(combo.values[i])}"
-                            for i in blamed)
+            who = "; ".join(
+                f"axes[{i}] ({sweep.axes[i].path}) = {_value(combo.values[i])}" for i in blamed
+            )
         else:
             who = _shown(sweep, combo.values)
         for i in blamed:  # the error is about a mapping the path made on its way
             root, where = combo.where[i]
             if i in combo.missing and p and where.startswith((p + ".", p + "[")):
-                who += (f": the path leads nowhere in the base {root} ({combo.missing[i]}); "
-                        f"the sweep made a mapping on the way")
+                who += (
+                    f": the path leads nowhere in the base {root} ({combo.missing[i]}); "
+                    f"the sweep made a mapping on the way"
+                )
                 break
         out.append(f"{file}: {who}: {one.format()}")
     return out
@@ -602,20 +673,49 @@ def _axis_row(sweep: Sweep, combo: _Combination, scenario, line) -> dict:
 def _runs(sweep, made: list[_Made], seeds, template, files, scenario_path, line_path):
     """The axes' descriptions and the runs (combination by combination, seeds inside)."""
     kinds = {a.column: _column_type([m.row[a.column] for m in made]) for a in sweep.axes}
-    axes = [{"column": a.column, "path": a.path, "type": kinds[a.column],
-             "source": next(k for k in ("values", "range", "uniform", "loguniform")
-                            if getattr(a, k) is not None)} for a in sweep.axes]
-    types = (("sweep", "string"), ("combination", "int64"),
-             *((a.column, kinds[a.column]) for a in sweep.axes),
-             ("overrides_json", "string"), ("config_sha256", "string"))
+    axes = [
+        {
+            "column": a.column,
+            "path": a.path,
+            "type": kinds[a.column],
+            "source": next(
+                k for k in ("values", "range", "uniform", "loguniform") if getattr(a, k) is not None
+            ),
+        }
+        for a in sweep.axes
+    ]
+    types = (
+        ("sweep", "string"),
+        ("combination", "int64"),
+        *((a.column, kinds[a.column]) for a in sweep.axes),
+        ("overrides_json", "string"),
+        ("config_sha256", "string"),
+    )
     runs = []
     base_name = next((m.name for m in made if m.name), None) or scenario_path.stem
     for k, m in enumerate(made):
         for seed, config in zip(seeds, m.configs, strict=True):
-            cols = {"sweep": sweep.name, "combination": k,
-                    **{c: _as_type(v, kinds[c]) for c, v in m.row.items()},
-                    "overrides_json": m.overrides_json, "config_sha256": config}
-            runs.append(RunSpec(f"{sweep.name}__{m.digest}__s{seed}", seed, k, m.values,
-                                template, files["scenario"], files["line"],
-                                m.name or base_name, line_path.stem, config, cols, types))
+            cols = {
+                "sweep": sweep.name,
+                "combination": k,
+                **{c: _as_type(v, kinds[c]) for c, v in m.row.items()},
+                "overrides_json": m.overrides_json,
+                "config_sha256": config,
+            }
+            runs.append(
+                RunSpec(
+                    f"{sweep.name}__{m.digest}__s{seed}",
+                    seed,
+                    k,
+                    m.values,
+                    template,
+                    files["scenario"],
+                    files["line"],
+                    m.name or base_name,
+                    line_path.stem,
+                    config,
+                    cols,
+                    types,
+                )
+            )
     return axes, runs

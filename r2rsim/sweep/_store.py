@@ -55,8 +55,12 @@ WORK = ".work"
 TABLES = tuple(t for t in RUN_TABLES if t != "channels")
 #: the temporaries of the marker and the manifest (written, then renamed)
 _TOP_TEMP = re.compile(rf"^(?:{re.escape(MARKER)}|{re.escape(MANIFEST)})\.tmp-(?P<pid>[0-9]+)$")
-_PYARROW_TYPES = {"string": pa.string(), "float64": pa.float64(), "bool": pa.bool_(),
-                  "int64": pa.int64()}
+_PYARROW_TYPES = {
+    "string": pa.string(),
+    "float64": pa.float64(),
+    "bool": pa.bool_(),
+    "int64": pa.int64(),
+}
 
 
 def run_columns(spec) -> dict[str, pa.Array]:
@@ -66,8 +70,14 @@ def run_columns(spec) -> dict[str, pa.Array]:
 
 def failures_schema(plan) -> pa.Schema:
     types = plan.runs[0].column_types if plan.runs else ()
-    return pa.schema([("run_id", pa.string()), ("seed", pa.uint64()),
-                      *((c, _PYARROW_TYPES[t]) for c, t in types), ("error", pa.string())])
+    return pa.schema(
+        [
+            ("run_id", pa.string()),
+            ("seed", pa.uint64()),
+            *((c, _PYARROW_TYPES[t]) for c, t in types),
+            ("error", pa.string()),
+        ]
+    )
 
 
 def finished(path: Path, config_sha256: str) -> dict | None:
@@ -88,8 +98,17 @@ def write_failure(work: Path, spec, reason: str, detail: str | None = None) -> N
     if path.exists():
         return
     tmp = Path(work) / f".{spec.run_id}.failed.tmp-{os.getpid()}"
-    tmp.write_text(json.dumps({"run_id": spec.run_id, "config_sha256": spec.config_sha256,
-                               "error": reason, "traceback": detail}), encoding="utf-8")
+    tmp.write_text(
+        json.dumps(
+            {
+                "run_id": spec.run_id,
+                "config_sha256": spec.config_sha256,
+                "error": reason,
+                "traceback": detail,
+            }
+        ),
+        encoding="utf-8",
+    )
     os.replace(tmp, path)
 
 
@@ -132,11 +151,14 @@ class SweepStore:
         what may not be written to; nothing is written."""
         out = self.out
         if out.is_symlink():
-            raise InputError(f"output directory '{out}' is a symbolic link; give the "
-                             f"directory it points to, or another one, with -o")
+            raise InputError(
+                f"output directory '{out}' is a symbolic link; give the "
+                f"directory it points to, or another one, with -o"
+            )
         if out.exists() and not out.is_dir():
-            raise InputError(f"output '{out}' exists and is not a directory; choose another "
-                             f"with -o")
+            raise InputError(
+                f"output '{out}' exists and is not a directory; choose another with -o"
+            )
         name = self.plan.sweep.name
         if self.marker.is_file():
             try:
@@ -146,9 +168,11 @@ class SweepStore:
             if not isinstance(info, dict):
                 info = {}
             if info.get("sweep") != name:
-                raise InputError(f"output directory '{out}' holds an unfinished sweep "
-                                 f"'{info.get('sweep')}', not '{name}': choose another "
-                                 f"directory with -o")
+                raise InputError(
+                    f"output directory '{out}' holds an unfinished sweep "
+                    f"'{info.get('sweep')}', not '{name}': choose another "
+                    f"directory with -o"
+                )
             self.mode = "resume"
             manifest, _ = read_manifest(out)
             if manifest and (manifest.get("sweep") or {}).get("name") == name:
@@ -159,27 +183,34 @@ class SweepStore:
             return
         manifest, why = read_manifest(out)
         if manifest is None:
-            raise InputError(f"output directory '{out}' exists and is not an r2rsim dataset "
-                             f"({why}); choose another directory with -o")
+            raise InputError(
+                f"output directory '{out}' exists and is not an r2rsim dataset "
+                f"({why}); choose another directory with -o"
+            )
         same = (manifest.get("sweep") or {}).get("name") == name
         if same and not self.overwrite:
             problems = dataset_problems(out, hashes=False)
             if problems:
-                raise InputError(f"output directory '{out}' holds sweep '{name}' but its "
-                                 f"files differ from its manifest.json ({problems[0]}); "
-                                 f"r2rsim does not continue it: choose another directory")
+                raise InputError(
+                    f"output directory '{out}' holds sweep '{name}' but its "
+                    f"files differ from its manifest.json ({problems[0]}); "
+                    f"r2rsim does not continue it: choose another directory"
+                )
             self.mode, self.final = "reopen", manifest
             return
         problems = dataset_problems(out)
         if problems:
-            raise InputError(f"output directory '{out}' exists and is not an intact r2rsim "
-                             f"dataset ({problems[0]}); choose another directory with -o")
+            raise InputError(
+                f"output directory '{out}' exists and is not an intact r2rsim "
+                f"dataset ({problems[0]}); choose another directory with -o"
+            )
         if not self.overwrite:
             sweep = manifest.get("sweep")
-            what = (f"sweep '{sweep.get('name')}'" if isinstance(sweep, dict)
-                    else "a run's dataset")
-            raise InputError(f"output directory '{out}' holds {what}; pass --overwrite to "
-                             f"replace it, or choose another directory with -o")
+            what = f"sweep '{sweep.get('name')}'" if isinstance(sweep, dict) else "a run's dataset"
+            raise InputError(
+                f"output directory '{out}' holds {what}; pass --overwrite to "
+                f"replace it, or choose another directory with -o"
+            )
         self.mode = "replace"
 
     def outcomes(self, retry_failed: bool) -> dict[str, Outcome]:
@@ -200,16 +231,20 @@ class SweepStore:
         if self.work.is_dir():
             self._work_outcomes(plan_ids, found, foreign, changed)
         if foreign:
-            raise InputError(f"output directory '{self.out}' holds {len(foreign)} run(s) this "
-                             f"sweep file does not make (e.g. {foreign[0]}): was the sweep "
-                             f"file changed? Restore it, or write to another directory with -o"
-                             + (" (or --overwrite)" if self.mode == "reopen" else ""))
+            raise InputError(
+                f"output directory '{self.out}' holds {len(foreign)} run(s) this "
+                f"sweep file does not make (e.g. {foreign[0]}): was the sweep "
+                f"file changed? Restore it, or write to another directory with -o"
+                + (" (or --overwrite)" if self.mode == "reopen" else "")
+            )
         if changed:
-            raise InputError(f"{len(changed)} run(s) in '{self.out}' were made from another "
-                             f"base scenario, line, sweep file `set:` or r2rsim version (e.g. "
-                             f"{changed[0]}); "
-                             f"continuing would mix them: write to another directory with -o"
-                             + (" (or --overwrite)" if self.mode == "reopen" else ""))
+            raise InputError(
+                f"{len(changed)} run(s) in '{self.out}' were made from another "
+                f"base scenario, line, sweep file `set:` or r2rsim version (e.g. "
+                f"{changed[0]}); "
+                f"continuing would mix them: write to another directory with -o"
+                + (" (or --overwrite)" if self.mode == "reopen" else "")
+            )
         if retry_failed:
             found = {k: o for k, o in found.items() if o.status != "failed"}
         return found
@@ -283,8 +318,9 @@ class SweepStore:
         axes (a renamed axis renames a column of runs.parquet)."""
         if self.final is None:
             return False
-        stored = {rel for rel in self.final.get("files", {})
-                  if rel.startswith(("sweep/", "scenario/"))}
+        stored = {
+            rel for rel in self.final.get("files", {}) if rel.startswith(("sweep/", "scenario/"))
+        }
         if stored != set(self.plan.files):
             return False
         for rel, text in self.plan.files.items():
@@ -294,8 +330,10 @@ class SweepStore:
             except (OSError, UnicodeDecodeError):
                 return False
         sweep = self.final.get("sweep") or {}
-        return (sweep.get("axes") == self.plan.axes
-                and sweep.get("file") == f"sweep/{self.plan.file.name}")
+        return (
+            sweep.get("axes") == self.plan.axes
+            and sweep.get("file") == f"sweep/{self.plan.file.name}"
+        )
 
     # ------------------------------------------------------------------ writing
     def begin(self) -> None:
@@ -306,9 +344,16 @@ class SweepStore:
         created = not self.marker.exists()
         if created:
             tmp = self.out / f"{MARKER}.tmp-{os.getpid()}"
-            tmp.write_text(json.dumps({"sweep": self.plan.sweep.name,
-                                       "r2rsim_version": __version__,
-                                       "sweep_file": self.plan.file.name}), encoding="utf-8")
+            tmp.write_text(
+                json.dumps(
+                    {
+                        "sweep": self.plan.sweep.name,
+                        "r2rsim_version": __version__,
+                        "sweep_file": self.plan.file.name,
+                    }
+                ),
+                encoding="utf-8",
+            )
             os.replace(tmp, self.marker)
         self._lock = open(self.marker, "rb")  # noqa: SIM115 - held for the whole sweep
         try:
@@ -320,16 +365,20 @@ class SweepStore:
         except OSError:
             self._lock.close()
             self._lock = None
-            raise InputError(f"another r2rsim sweep is writing '{self.out}'; wait for it, or "
-                             f"choose another directory with -o") from None
+            raise InputError(
+                f"another r2rsim sweep is writing '{self.out}'; wait for it, or "
+                f"choose another directory with -o"
+            ) from None
         if created and self.mode == "resume":
             # the unfinished sweep inspected a moment ago was finished (or removed) by
             # another sweep before this one could lock it: what was read of it is stale
             self._lock.close()
             self._lock = None
             self.marker.unlink(missing_ok=True)
-            raise InputError(f"another r2rsim sweep finished writing '{self.out}' while this "
-                             f"one was starting; run the command again")
+            raise InputError(
+                f"another r2rsim sweep finished writing '{self.out}' while this "
+                f"one was starting; run the command again"
+            )
         self._remove_dead_top_temporaries()
         self.work.mkdir(exist_ok=True)
         clean_stale(self.work)
@@ -388,13 +437,15 @@ class SweepStore:
             for p in sorted(top.rglob("*")):
                 rel = p.relative_to(self.out).as_posix()
                 if p.is_dir() and not p.is_symlink():
-                    if not (name == "samples" and p.parent == top
-                            and p.name.startswith("run_id=")):
+                    if not (name == "samples" and p.parent == top and p.name.startswith("run_id=")):
                         found.append(rel + "/")
                 elif rel not in ours and not (
-                        p.name == "part-0.parquet" and not p.is_symlink()
-                        and p.parent.parent == top and name == "samples"
-                        and p.parent.name.removeprefix("run_id=") in runs):
+                    p.name == "part-0.parquet"
+                    and not p.is_symlink()
+                    and p.parent.parent == top
+                    and name == "samples"
+                    and p.parent.name.removeprefix("run_id=") in runs
+                ):
                     found.append(rel)
         return found
 
@@ -402,10 +453,12 @@ class SweepStore:
         """Refuse to continue a sweep whose directory holds files r2rsim did not write."""
         foreign = self.foreign_files()
         if foreign:
-            raise InputError(f"output directory '{self.out}' holds an unfinished sweep and "
-                             f"{len(foreign)} file(s) r2rsim did not write ("
-                             f"{', '.join(foreign[:3])}{', ...' if len(foreign) > 3 else ''})"
-                             f": move them out of it, then run the sweep again to finish it")
+            raise InputError(
+                f"output directory '{self.out}' holds an unfinished sweep and "
+                f"{len(foreign)} file(s) r2rsim did not write ("
+                f"{', '.join(foreign[:3])}{', ...' if len(foreign) > 3 else ''})"
+                f": move them out of it, then run the sweep again to finish it"
+            )
 
     def finalise(self, outcomes: dict[str, Outcome]) -> Path:
         """Build the dataset from the runs' outcomes (every run of the plan has one)."""
@@ -414,22 +467,30 @@ class SweepStore:
         if tmp.exists():
             shutil.rmtree(tmp)
         tmp.mkdir()
-        failed = [spec.run_id for spec in self.plan.runs
-                  if outcomes[spec.run_id].status == "failed"]
-        meta = {b"r2rsim.schema_version": SCHEMA_VERSION.encode(),
-                b"r2rsim.version": __version__.encode(),
-                b"r2rsim.sweep": self.plan.sweep.name.encode(),
-                # a sweep with failed runs is never taken for a complete one
-                b"r2rsim.sweep.n_runs": str(len(self.plan.runs)).encode(),
-                b"r2rsim.sweep.n_failed": str(len(failed)).encode()}
+        failed = [
+            spec.run_id for spec in self.plan.runs if outcomes[spec.run_id].status == "failed"
+        ]
+        meta = {
+            b"r2rsim.schema_version": SCHEMA_VERSION.encode(),
+            b"r2rsim.version": __version__.encode(),
+            b"r2rsim.sweep": self.plan.sweep.name.encode(),
+            # a sweep with failed runs is never taken for a complete one
+            b"r2rsim.sweep.n_runs": str(len(self.plan.runs)).encode(),
+            b"r2rsim.sweep.n_failed": str(len(failed)).encode(),
+        }
         run_ids, failure_rows, channels = self._merge_tables(outcomes, tmp, meta)
-        pq.write_table(pa.Table.from_pylist(failure_rows, schema=failures_schema(self.plan))
-                       .replace_schema_metadata(meta), tmp / "failures.parquet",
-                       compression="zstd")
+        pq.write_table(
+            pa.Table.from_pylist(
+                failure_rows, schema=failures_schema(self.plan)
+            ).replace_schema_metadata(meta),
+            tmp / "failures.parquet",
+            compression="zstd",
+        )
         if channels is None:
             channels = pa.table({"channel": pa.array([], pa.string())})
-        pq.write_table(channels.replace_schema_metadata(meta), tmp / "channels.parquet",
-                       compression="zstd")
+        pq.write_table(
+            channels.replace_schema_metadata(meta), tmp / "channels.parquet", compression="zstd"
+        )
         known_sha = self._place_samples(outcomes)
         self._install(tmp, run_ids, [r["run_id"] for r in failure_rows], failed, known_sha)
         return self.out
@@ -440,38 +501,54 @@ class SweepStore:
         table (None when no run finished)."""
         old = _OldTables(self.out) if self.final is not None else None
         writers: dict[str, _TableWriter] = {}
-        schemas = {"faults": FAULTS_SCHEMA, "events": EVENTS_SCHEMA,
-                   "variability": VARIABILITY_SCHEMA}
+        schemas = {
+            "faults": FAULTS_SCHEMA,
+            "events": EVENTS_SCHEMA,
+            "variability": VARIABILITY_SCHEMA,
+        }
         channels, old_channels, seen_channels = None, False, set()
         run_ids, failure_rows = [], []
         try:
             for spec in self.plan.runs:
                 o = outcomes[spec.run_id]
                 if o.where is None:
-                    failure_rows.append({"run_id": spec.run_id, "seed": spec.seed,
-                                         **spec.columns, "error": o.reason})
+                    failure_rows.append(
+                        {
+                            "run_id": spec.run_id,
+                            "seed": spec.seed,
+                            **spec.columns,
+                            "error": o.reason,
+                        }
+                    )
                     continue
                 run_ids.append(spec.run_id)
                 for name in TABLES:
-                    table = (read_parquet_file(self.work / spec.run_id / f"{name}.parquet")
-                             if o.where == "work" else old.rows(name, spec.run_id))
+                    table = (
+                        read_parquet_file(self.work / spec.run_id / f"{name}.parquet")
+                        if o.where == "work"
+                        else old.rows(name, spec.run_id)
+                    )
                     if name == "runs":  # as this plan numbers and names them
                         table = _sweep_columns(table, spec)
                     schema = schemas.get(name) or table.schema.remove_metadata()
                     schemas[name] = schema
                     if name not in writers:
-                        writers[name] = _TableWriter(tmp / f"{name}.parquet",
-                                                     schema.with_metadata(meta))
+                        writers[name] = _TableWriter(
+                            tmp / f"{name}.parquet", schema.with_metadata(meta)
+                        )
                     writers[name].add(table.replace_schema_metadata(None).cast(schema))
                 if o.where == "work" or not old_channels:
-                    channels = self._add_channels(channels, spec.run_id, o.where,
-                                                  seen_channels)
+                    channels = self._add_channels(channels, spec.run_id, o.where, seen_channels)
                     old_channels = old_channels or o.where != "work"
             for name in TABLES:
                 if name not in writers:  # no run has data
-                    pq.write_table(pa.Table.from_pylist([], schema=schemas.get(
-                        name, pa.schema([("run_id", pa.string())]))).replace_schema_metadata(
-                        meta), tmp / f"{name}.parquet", compression="zstd")
+                    pq.write_table(
+                        pa.Table.from_pylist(
+                            [], schema=schemas.get(name, pa.schema([("run_id", pa.string())]))
+                        ).replace_schema_metadata(meta),
+                        tmp / f"{name}.parquet",
+                        compression="zstd",
+                    )
         finally:
             for w in writers.values():
                 w.close()
@@ -485,12 +562,23 @@ class SweepStore:
         if sha is not None and sha in seen:
             return channels
         seen.add(sha)
-        return _merge_channels(channels, read_parquet_file(
-            self.work / run_id / "channels.parquet" if where == "work"
-            else self.out / "channels.parquet"))
+        return _merge_channels(
+            channels,
+            read_parquet_file(
+                self.work / run_id / "channels.parquet"
+                if where == "work"
+                else self.out / "channels.parquet"
+            ),
+        )
 
-    def _install(self, tmp: Path, run_ids: list[str], without_data: list[str],
-                 failed: list[str], known_sha: dict) -> None:
+    def _install(
+        self,
+        tmp: Path,
+        run_ids: list[str],
+        without_data: list[str],
+        failed: list[str],
+        known_sha: dict,
+    ) -> None:
         """Move the merged tables into the dataset, write the plan's files and the manifest,
         and remove the work directory and the marker: the dataset is complete."""
         # the old manifest stays until the new one replaces it: the marker already says the
@@ -537,8 +625,9 @@ class SweepStore:
                 shutil.copy2(src, dst)
         return known_sha
 
-    def _write_manifest(self, run_ids: list[str], without_data: list[str],
-                        failed: list[str], known_sha: dict) -> None:
+    def _write_manifest(
+        self, run_ids: list[str], without_data: list[str], failed: list[str], known_sha: dict
+    ) -> None:
         old = (self.final or {}).get("files", {})
         files = {}
         for p in sorted(self.out.rglob("*")):
@@ -547,20 +636,28 @@ class SweepStore:
                 continue
             size = p.stat().st_size
             sha = known_sha.get(rel)
-            if sha is None and rel.startswith("samples/") and old.get(rel, {}).get(
-                    "bytes") == size:
+            if sha is None and rel.startswith("samples/") and old.get(rel, {}).get("bytes") == size:
                 sha = old[rel]["sha256"]
             files[rel] = {"sha256": sha or sha256_file(p), "bytes": size}
         sw = self.plan.sweep
         manifest = {
-            "schema_version": SCHEMA_VERSION, "r2rsim_version": __version__,
-            "python_version": platform.python_version(), "numpy_version": np.__version__,
-            "pyarrow_version": pa.__version__, "run_ids": run_ids,
-            "sweep": {"name": sw.name, "file": f"sweep/{self.plan.file.name}",
-                      "combine": sw.combine, "n_combinations": self.plan.n_combinations,
-                      "seeds": self.plan.seeds, "axes": self.plan.axes,
-                      "n_runs": len(self.plan.runs), "failed_without_data": without_data,
-                      "failed": failed},
+            "schema_version": SCHEMA_VERSION,
+            "r2rsim_version": __version__,
+            "python_version": platform.python_version(),
+            "numpy_version": np.__version__,
+            "pyarrow_version": pa.__version__,
+            "run_ids": run_ids,
+            "sweep": {
+                "name": sw.name,
+                "file": f"sweep/{self.plan.file.name}",
+                "combine": sw.combine,
+                "n_combinations": self.plan.n_combinations,
+                "seeds": self.plan.seeds,
+                "axes": self.plan.axes,
+                "n_runs": len(self.plan.runs),
+                "failed_without_data": without_data,
+                "failed": failed,
+            },
             "files": files,
         }
         tmp = self.out / f"{MANIFEST}.tmp-{os.getpid()}"
@@ -581,8 +678,10 @@ def _merge_channels(merged: pa.Table | None, table: pa.Table) -> pa.Table:
         return table if merged is None else merged
     a, b = merged.to_pydict(), table.to_pydict()
     if a["channel"] != b["channel"] or any(a[c] != b[c] for c in ("kind", "unit", "component")):
-        raise R2RError("the runs of the sweep have different channels (channels.parquet); "
-                       "one dataset holds runs of one set of channels")
+        raise R2RError(
+            "the runs of the sweep have different channels (channels.parquet); "
+            "one dataset holds runs of one set of channels"
+        )
     for i in range(len(a["channel"])):
         if a["rate_hz"][i] != b["rate_hz"][i]:
             a["rate_hz"][i] = None
@@ -603,8 +702,7 @@ _SWEEP_COLUMNS = ("sweep", "combination", "overrides_json", "config_sha256")
 def _sweep_columns(table: pa.Table, spec) -> pa.Table:
     """A run's row with the sweep's columns as the current plan has them: a reopened sweep
     may number its combinations anew (a value added to an axis) or rename an axis."""
-    keep = [c for c in table.column_names
-            if c not in _SWEEP_COLUMNS and not c.startswith("axis.")]
+    keep = [c for c in table.column_names if c not in _SWEEP_COLUMNS and not c.startswith("axis.")]
     table = table.select(keep)
     for col, arr in run_columns(spec).items():
         table = table.append_column(col, arr)
@@ -649,9 +747,12 @@ class _OldTables:
 
     def __init__(self, root: Path):
         # variability.parquet is newer than some datasets: none is no variability
-        self.tables = {n: read_parquet_file(root / f"{n}.parquet") if n != "variability" or (
-            root / f"{n}.parquet").is_file() else VARIABILITY_SCHEMA.empty_table()
-            for n in TABLES}
+        self.tables = {
+            n: read_parquet_file(root / f"{n}.parquet")
+            if n != "variability" or (root / f"{n}.parquet").is_file()
+            else VARIABILITY_SCHEMA.empty_table()
+            for n in TABLES
+        }
         self.index = {}
         for n, t in self.tables.items():
             ids = t.column("run_id").to_pylist()

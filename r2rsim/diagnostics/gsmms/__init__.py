@@ -9,5 +9,4 @@ Public API: the plug-ins :class:`GSMMS` (``gsmms``) and :class:`GlobalParity`
 from ._local import fit_relations, objective, oracle_relations, residuals
 from ._plugin import GSMMS, GlobalParity
 
-__all__ = ["GSMMS", "GlobalParity", "fit_relations", "objective", "oracle_relations",
-           "residuals"]
+__all__ = ["GSMMS", "GlobalParity", "fit_relations", "objective", "oracle_relations", "residuals"]

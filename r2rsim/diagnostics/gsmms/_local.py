@@ -49,9 +49,15 @@ def _node_scale(D: np.ndarray, w: np.ndarray) -> float:
     return np.sqrt(tr) if tr > 0 else 1.0
 
 
-def objective(omega: np.ndarray, Z: np.ndarray, w: np.ndarray, lambda1: float = 1.0,
-              lambda2: float = 0.0, G: np.ndarray | None = None,
-              fault_normalised: bool = False) -> float:
+def objective(
+    omega: np.ndarray,
+    Z: np.ndarray,
+    w: np.ndarray,
+    lambda1: float = 1.0,
+    lambda2: float = 0.0,
+    G: np.ndarray | None = None,
+    fault_normalised: bool = False,
+) -> float:
     """The penalised loss (4.21) of the relations ``omega`` (columns), summed over them, with
     each relation's optimal intercept (without the unit-norm penalty when the relations are
     fault-normalised: their scale is fixed by Ω·f = 1)."""
@@ -72,8 +78,13 @@ def _penalised_scale(eigval: float, lambda1: float) -> float:
     return float(np.sqrt(max(0.0, 1.0 - eigval / (2.0 * lambda1))))
 
 
-def oracle_relations(Z: np.ndarray, w: np.ndarray, n_relations: int = 1,
-                     lambda1: float = 1.0, G: np.ndarray | None = None) -> np.ndarray:
+def oracle_relations(
+    Z: np.ndarray,
+    w: np.ndarray,
+    n_relations: int = 1,
+    lambda1: float = 1.0,
+    G: np.ndarray | None = None,
+) -> np.ndarray:
     """The exact minimisers of (4.21): the ``n_relations`` smallest eigenvectors of the
     weighted covariance restricted to the null space of ``Gᵀ`` (a hard constraint), each
     scaled to the penalised optimum. Returns a (q, n_relations) array."""
@@ -81,8 +92,9 @@ def oracle_relations(Z: np.ndarray, w: np.ndarray, n_relations: int = 1,
     q = len(C)
     N = np.eye(q) if G is None else linalg.null_space(np.asarray(G, float).reshape(q, -1).T)
     if N.shape[1] < n_relations:
-        raise ValueError(f"the constraint leaves {N.shape[1]} dimensions for "
-                         f"{n_relations} relations")
+        raise ValueError(
+            f"the constraint leaves {N.shape[1]} dimensions for {n_relations} relations"
+        )
     vals, vecs = linalg.eigh(N.T @ C @ N)
     omega = N @ vecs[:, :n_relations]
     for k in range(n_relations):
@@ -92,8 +104,9 @@ def oracle_relations(Z: np.ndarray, w: np.ndarray, n_relations: int = 1,
     return omega
 
 
-def fault_normalised_oracle(Z: np.ndarray, w: np.ndarray, F: np.ndarray,
-                            G: np.ndarray | None = None) -> np.ndarray:
+def fault_normalised_oracle(
+    Z: np.ndarray, w: np.ndarray, F: np.ndarray, G: np.ndarray | None = None
+) -> np.ndarray:
     """The exact minimum-variance relations with unit response to each fault direction:
     Ω_j = C⁺f_j / (f_jᵀ C⁺ f_j) minimises Ωᵀ C Ω subject to f_j·Ω = 1. With ``G`` the
     relations also satisfy GᵀΩ = 0 (Ω = N·a over a basis N of that null space, the same
@@ -121,8 +134,10 @@ def fault_normalised_oracle(Z: np.ndarray, w: np.ndarray, F: np.ndarray,
     for f in F.T:
         g = N.T @ f
         if g @ g <= 1e-24 * max(f @ f, 1e-300):
-            raise ValueError("a fault direction lies in the span of the constraint G: no "
-                             "relation that cancels the state can see it")
+            raise ValueError(
+                "a fault direction lies in the span of the constraint G: no "
+                "relation that cancels the state can see it"
+            )
         h = V0 @ (V0.T @ g)
         if h @ h > 1e-12 * (g @ g):  # a zero-variance relation with h·g = h·h > 0 exists
             out.append(N @ h / (g @ h))
@@ -140,13 +155,24 @@ def _gradient(om, D, lambda1, lambda2, G):
     return g
 
 
-def sgd_relation(D: np.ndarray, w: np.ndarray, *, solver: str = "minibatch",
-                 batch_size: int = 128, n_epochs: float = 1.0, batch_iter: int = 2000,
-                 eta0: float = 1.0, min_steps: int = 3000,
-                 step: str = "inv_sqrt", lambda1: float = 1.0, lambda2: float = 0.0,
-                 G: np.ndarray | None = None, previous: np.ndarray | None = None,
-                 fault: np.ndarray | None = None,
-                 rng: np.random.Generator | None = None) -> np.ndarray:
+def sgd_relation(
+    D: np.ndarray,
+    w: np.ndarray,
+    *,
+    solver: str = "minibatch",
+    batch_size: int = 128,
+    n_epochs: float = 1.0,
+    batch_iter: int = 2000,
+    eta0: float = 1.0,
+    min_steps: int = 3000,
+    step: str = "inv_sqrt",
+    lambda1: float = 1.0,
+    lambda2: float = 0.0,
+    G: np.ndarray | None = None,
+    previous: np.ndarray | None = None,
+    fault: np.ndarray | None = None,
+    rng: np.random.Generator | None = None,
+) -> np.ndarray:
     """One relation of the centred rows ``D`` by a gradient method (see :data:`SOLVERS`).
 
     Mini-batches are drawn with probabilities ∝ ``w`` (importance sampling, so every step
@@ -192,17 +218,25 @@ def sgd_relation(D: np.ndarray, w: np.ndarray, *, solver: str = "minibatch",
         scale += lambda2 * float(np.sum(np.asarray(G) ** 2))
     for idx in range(1, n_iter + 1):
         eta = (eta0 / np.sqrt(idx) if step == "inv_sqrt" else eta0 / idx**2) / scale
-        batch = Dw if size is None else D[draws[(idx - 1) * size: idx * size]]
+        batch = Dw if size is None else D[draws[(idx - 1) * size : idx * size]]
         g = _gradient(om, batch, lambda1, lambda2, G)
         om = om - eta * (g if P is None else P @ g)
     return om if fault is not None else om * np.sign(om[np.argmax(np.abs(om))])
 
 
-def fit_relations(Z: np.ndarray, w: np.ndarray, n_relations: int = 1, *,
-                  solver: str = "minibatch", lambda1: float = 1.0, lambda2: float = 0.0,
-                  G: np.ndarray | None = None, F: np.ndarray | None = None,
-                  rng: np.random.Generator | None = None,
-                  **sgd) -> tuple[np.ndarray, np.ndarray]:
+def fit_relations(
+    Z: np.ndarray,
+    w: np.ndarray,
+    n_relations: int = 1,
+    *,
+    solver: str = "minibatch",
+    lambda1: float = 1.0,
+    lambda2: float = 0.0,
+    G: np.ndarray | None = None,
+    F: np.ndarray | None = None,
+    rng: np.random.Generator | None = None,
+    **sgd,
+) -> tuple[np.ndarray, np.ndarray]:
     """Fit a node's relations to the rows of Z with weights w: ``n_relations`` unit-norm
     ones, or, when fault directions ``F`` (q, k) are given, one fault-normalised relation per
     column of F (``n_relations`` is then ignored).
@@ -220,17 +254,28 @@ def fit_relations(Z: np.ndarray, w: np.ndarray, n_relations: int = 1, *,
     if F is not None:
         F = np.asarray(F, float).reshape(Z.shape[1], -1)
     if solver == "eigh":
-        omega = (oracle_relations(Z, w, n_relations, lambda1=lambda1, G=G) if F is None
-                 else fault_normalised_oracle(Z, w, F, G=G))
+        omega = (
+            oracle_relations(Z, w, n_relations, lambda1=lambda1, G=G)
+            if F is None
+            else fault_normalised_oracle(Z, w, F, G=G)
+        )
     else:
         D = Z - mu
         k_total = n_relations if F is None else F.shape[1]
         omega = np.zeros((Z.shape[1], k_total))
         for k in range(k_total):
             omega[:, k] = sgd_relation(
-                D, w, solver=solver, lambda1=lambda1, lambda2=lambda2, G=G,
+                D,
+                w,
+                solver=solver,
+                lambda1=lambda1,
+                lambda2=lambda2,
+                G=G,
                 previous=omega[:, :k] if F is None else None,
-                fault=None if F is None else F[:, k], rng=rng, **sgd)
+                fault=None if F is None else F[:, k],
+                rng=rng,
+                **sgd,
+            )
     return omega, -(mu @ omega)
 
 

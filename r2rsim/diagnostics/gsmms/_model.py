@@ -104,10 +104,21 @@ def fit_nodes(graph: MapGraph, S, Z, s: GrowthSettings, rng) -> tuple[NodeModels
             w = np.ones(len(Z))  # a node that wins nothing: any relation; it has no samples
         G = None if s.constraint is None else s.constraint(w)
         om, _ = _local.fit_relations(
-            Z, w, s.n_relations, solver=s.solver, lambda1=s.lambda1, lambda2=s.lambda2,
-            G=G, F=s.fault_directions, rng=rng,
-            **({} if s.solver == "eigh" else dict(batch_size=s.batch_size, step=s.step,
-                                                   eta0=s.eta0, n_epochs=s.n_epochs)))
+            Z,
+            w,
+            s.n_relations,
+            solver=s.solver,
+            lambda1=s.lambda1,
+            lambda2=s.lambda2,
+            G=G,
+            F=s.fault_directions,
+            rng=rng,
+            **(
+                {}
+                if s.solver == "eigh"
+                else dict(batch_size=s.batch_size, step=s.step, eta0=s.eta0, n_epochs=s.n_epochs)
+            ),
+        )
         if s.fault_directions is None:  # the loss of a unit-norm relation
             om = om / np.maximum(np.linalg.norm(om, axis=0), 1e-300)
         mu, _ = _local.weighted_moments(Z, w)
@@ -135,8 +146,16 @@ def _train(graph, S, Z, s, rng, zeta):
     # the ζ-scaled rate plus an equal share: a node that wins no sample (ζ = 0) must still
     # be able to move towards data, or it stays dead for ever
     rate = 0.5 * (zeta + 1.0 / graph.n_nodes)
-    train_codebook(graph, S, rate, k_max=s.k_max, batch_size=s.batch_size,
-                   sigma0=s.sigma0, sigma_final=s.sigma_final, rng=rng)
+    train_codebook(
+        graph,
+        S,
+        rate,
+        k_max=s.k_max,
+        batch_size=s.batch_size,
+        sigma0=s.sigma0,
+        sigma_final=s.sigma_final,
+        rng=rng,
+    )
     return fit_nodes(graph, S, Z, s, rng)
 
 
@@ -175,15 +194,27 @@ def grow(graph: MapGraph, S, Z, s: GrowthSettings, rng, history: list[GrowthReco
             return graph, models
         trial = graph.copy()
         if not _grow_once(trial, S, zeta):
-            history.append(GrowthRecord(graph.n_nodes, loss, zeta.tolist(),
-                                        "stop: no distinct data to grow into"))
+            history.append(
+                GrowthRecord(
+                    graph.n_nodes, loss, zeta.tolist(), "stop: no distinct data to grow into"
+                )
+            )
             return graph, models
         history.append(GrowthRecord(graph.n_nodes, loss, zeta.tolist(), "grow"))
         t_models, t_J = _train(trial, S, Z, s, rng, np.append(zeta, zeta.max()))
         t_loss = global_loss(trial, S, t_J)
-        if s.min_improvement is not None and loss > 0 and \
-                (loss - t_loss) / loss < s.min_improvement:
-            history.append(GrowthRecord(trial.n_nodes, t_loss, shares(t_J).tolist(),
-                                        "stop: improvement below min_improvement (undone)"))
+        if (
+            s.min_improvement is not None
+            and loss > 0
+            and (loss - t_loss) / loss < s.min_improvement
+        ):
+            history.append(
+                GrowthRecord(
+                    trial.n_nodes,
+                    t_loss,
+                    shares(t_J).tolist(),
+                    "stop: improvement below min_improvement (undone)",
+                )
+            )
             return graph, models
         graph, models, J, loss = trial, t_models, t_J, t_loss

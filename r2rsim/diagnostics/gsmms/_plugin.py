@@ -20,8 +20,14 @@ ALL_CHANNELS = "all"
 _CHOICES = {"solver": _local.SOLVERS, "step": _local.STEPS, "weighting": ("soft", "hard")}
 #: allowed ranges of the integer parameters: they bound a fit's memory and time (a mini-batch
 #: fit draws at least 3000 × batch_size samples; k_max updates per growth step)
-_INT_RANGES = {"batch_size": (1, 4096), "n_relations": (1, 64), "initial_nodes": (1, 1000),
-               "max_nodes": (1, 1000), "k_max": (1, 100_000), "max_samples": (2, 10_000_000)}
+_INT_RANGES = {
+    "batch_size": (1, 4096),
+    "n_relations": (1, 64),
+    "initial_nodes": (1, 1000),
+    "max_nodes": (1, 1000),
+    "k_max": (1, 100_000),
+    "max_samples": (2, 10_000_000),
+}
 #: upper limits of float parameters: η0 above 2 makes the normalised step diverge; n_epochs
 #: bounds the draws; a neighbourhood wider than the largest map means nothing
 _FLOAT_LIMITS = {"eta0": 2.0, "n_epochs": 100.0, "sigma0": 1000.0, "sigma_final": 1000.0}
@@ -120,17 +126,34 @@ class GSMMS(Diagnostic):
     name = "gsmms"
     requires = ()
 
-    def __init__(self, partition_features: str | list | tuple = ("sp.*",),
-                 model_features: str | list | tuple = ("meas.*",), derivatives: bool = False,
-                 smooth_s: float = 1.0, n_relations: int = 1,
-                 fault_channels: str | list | tuple | None = "all", solver: str = "minibatch",
-                 batch_size: int = 128, step: str = "inv_sqrt", eta0: float = 1.0,
-                 n_epochs: float = 1.0, lambda1: float = 1.0,
-                 physics: dict | None = None, lambda2: float = 1.0, initial_nodes: int = 2,
-                 max_nodes: int = 6, zeta_threshold: float = 0.6,
-                 min_improvement: float | None = 0.05, k_max: int = 200, sigma0: float = 1.0,
-                 sigma_final: float = 0.3, weighting: str = "hard", k_sigma: float = 2.0,
-                 max_samples: int = 200_000, random_state: int | None = None):
+    def __init__(
+        self,
+        partition_features: str | list | tuple = ("sp.*",),
+        model_features: str | list | tuple = ("meas.*",),
+        derivatives: bool = False,
+        smooth_s: float = 1.0,
+        n_relations: int = 1,
+        fault_channels: str | list | tuple | None = "all",
+        solver: str = "minibatch",
+        batch_size: int = 128,
+        step: str = "inv_sqrt",
+        eta0: float = 1.0,
+        n_epochs: float = 1.0,
+        lambda1: float = 1.0,
+        physics: dict | None = None,
+        lambda2: float = 1.0,
+        initial_nodes: int = 2,
+        max_nodes: int = 6,
+        zeta_threshold: float = 0.6,
+        min_improvement: float | None = 0.05,
+        k_max: int = 200,
+        sigma0: float = 1.0,
+        sigma_final: float = 0.3,
+        weighting: str = "hard",
+        k_sigma: float = 2.0,
+        max_samples: int = 200_000,
+        random_state: int | None = None,
+    ):
         self.partition_features = partition_features
         self.model_features = model_features
         self.derivatives = derivatives
@@ -161,37 +184,51 @@ class GSMMS(Diagnostic):
     def _settings(self) -> GrowthSettings:
         for key, allowed in _CHOICES.items():
             if getattr(self, key) not in allowed:
-                raise InputError(f"{self.name}: {key} must be one of {', '.join(allowed)}, "
-                                 f"got {getattr(self, key)!r}")
+                raise InputError(
+                    f"{self.name}: {key} must be one of {', '.join(allowed)}, "
+                    f"got {getattr(self, key)!r}"
+                )
         for key, (low, high) in _INT_RANGES.items():
             self._check_int(key, low, high)
         for key in ("lambda1", "k_sigma", "zeta_threshold"):
             if not 0 < self._number(key) < math.inf:
-                raise InputError(f"{self.name}: {key} must be a positive finite number, "
-                                 f"got {getattr(self, key)!r}")
+                raise InputError(
+                    f"{self.name}: {key} must be a positive finite number, "
+                    f"got {getattr(self, key)!r}"
+                )
         for key, high in _FLOAT_LIMITS.items():  # beyond these a fit diverges or never ends
             if not 0 < self._number(key) <= high:
-                raise InputError(f"{self.name}: {key} must be > 0 and at most {high:g}, "
-                                 f"got {getattr(self, key)!r}")
+                raise InputError(
+                    f"{self.name}: {key} must be > 0 and at most {high:g}, "
+                    f"got {getattr(self, key)!r}"
+                )
         if not 0 <= self._number("lambda2") < math.inf:
-            raise InputError(f"{self.name}: lambda2 must be a finite number >= 0, "
-                             f"got {self.lambda2!r}")
+            raise InputError(
+                f"{self.name}: lambda2 must be a finite number >= 0, got {self.lambda2!r}"
+            )
         if self.sigma_final > self.sigma0:  # the neighbourhood only narrows (eq. 4.9)
-            raise InputError(f"{self.name}: sigma_final ({self.sigma_final!r}) must not exceed "
-                             f"sigma0 ({self.sigma0!r}): the neighbourhood width decays")
+            raise InputError(
+                f"{self.name}: sigma_final ({self.sigma_final!r}) must not exceed "
+                f"sigma0 ({self.sigma0!r}): the neighbourhood width decays"
+            )
         if not self._number("zeta_threshold") < 1:
-            raise InputError(f"{self.name}: zeta_threshold is a share of the loss, in (0, 1), "
-                             f"got {self.zeta_threshold!r} (1 or more never grows the map)")
+            raise InputError(
+                f"{self.name}: zeta_threshold is a share of the loss, in (0, 1), "
+                f"got {self.zeta_threshold!r} (1 or more never grows the map)"
+            )
         if not isinstance(self.derivatives, bool):
-            raise InputError(f"{self.name}: derivatives must be true or false, got "
-                             f"{self.derivatives!r}")
+            raise InputError(
+                f"{self.name}: derivatives must be true or false, got {self.derivatives!r}"
+            )
         if not 0 <= self._number("smooth_s") < math.inf:
-            raise InputError(f"{self.name}: smooth_s must be a finite number >= 0 s, "
-                             f"got {self.smooth_s!r}")
-        if self.min_improvement is not None and \
-                not 0 <= self._number("min_improvement") < math.inf:
-            raise InputError(f"{self.name}: min_improvement must be a finite number >= 0 or "
-                             f"null, got {self.min_improvement!r}")
+            raise InputError(
+                f"{self.name}: smooth_s must be a finite number >= 0 s, got {self.smooth_s!r}"
+            )
+        if self.min_improvement is not None and not 0 <= self._number("min_improvement") < math.inf:
+            raise InputError(
+                f"{self.name}: min_improvement must be a finite number >= 0 or "
+                f"null, got {self.min_improvement!r}"
+            )
         self._check_seed()
         for key in ("partition_features", "model_features", "fault_channels"):
             v = getattr(self, key)
@@ -200,27 +237,40 @@ class GSMMS(Diagnostic):
             pats = [v] if isinstance(v, str) else v
             # fnmatch needs strings: [1, 2] failed in the fit with a TypeError
             if not (isinstance(pats, (list, tuple)) and all(isinstance(p, str) for p in pats)):
-                raise InputError(f"{self.name}: {key} must be a glob pattern or a list of "
-                                 f"them (strings), got {v!r}")
+                raise InputError(
+                    f"{self.name}: {key} must be a glob pattern or a list of "
+                    f"them (strings), got {v!r}"
+                )
         if self.fault_channels is not None and self.n_relations != 1:
-            raise InputError(f"{self.name}: n_relations = {self.n_relations} applies to the "
-                             f"unit-norm relations (fault_channels: null); with fault_channels "
-                             f"{self.fault_channels!r} there is one fault-normalised relation "
-                             f"per matching model channel")
+            raise InputError(
+                f"{self.name}: n_relations = {self.n_relations} applies to the "
+                f"unit-norm relations (fault_channels: null); with fault_channels "
+                f"{self.fault_channels!r} there is one fault-normalised relation "
+                f"per matching model channel"
+            )
         if self.initial_nodes > self.max_nodes:
-            raise InputError(f"{self.name}: initial_nodes ({self.initial_nodes}) exceeds "
-                             f"max_nodes ({self.max_nodes})")
+            raise InputError(
+                f"{self.name}: initial_nodes ({self.initial_nodes}) exceeds "
+                f"max_nodes ({self.max_nodes})"
+            )
         return GrowthSettings(
-            initial_nodes=int(self.initial_nodes), max_nodes=int(self.max_nodes),
+            initial_nodes=int(self.initial_nodes),
+            max_nodes=int(self.max_nodes),
             zeta_threshold=float(self.zeta_threshold),
-            min_improvement=None if self.min_improvement is None
-            else float(self.min_improvement),
-            k_max=int(self.k_max), sigma0=float(self.sigma0),
-            sigma_final=float(self.sigma_final), weighting=self.weighting,
-            n_relations=int(self.n_relations), solver=self.solver,
-            batch_size=int(self.batch_size), step=self.step, eta0=float(self.eta0),
-            n_epochs=float(self.n_epochs), lambda1=float(self.lambda1),
-            lambda2=float(self.lambda2))
+            min_improvement=None if self.min_improvement is None else float(self.min_improvement),
+            k_max=int(self.k_max),
+            sigma0=float(self.sigma0),
+            sigma_final=float(self.sigma_final),
+            weighting=self.weighting,
+            n_relations=int(self.n_relations),
+            solver=self.solver,
+            batch_size=int(self.batch_size),
+            step=self.step,
+            eta0=float(self.eta0),
+            n_epochs=float(self.n_epochs),
+            lambda1=float(self.lambda1),
+            lambda2=float(self.lambda2),
+        )
 
     def _check_relations(self, Z: np.ndarray, constraint) -> None:
         """n_relations fits in the space the model features leave (their number, less the
@@ -228,24 +278,31 @@ class GSMMS(Diagnostic):
         q = Z.shape[1]
         if callable(constraint):  # the physics gradient, per node: its shape is the same
             constraint = constraint(np.ones(len(Z)))
-        free = q - (np.linalg.matrix_rank(np.asarray(constraint, float).reshape(q, -1))
-                    if constraint is not None else 0)
+        free = q - (
+            np.linalg.matrix_rank(np.asarray(constraint, float).reshape(q, -1))
+            if constraint is not None
+            else 0
+        )
         if self.n_relations > free:
-            raise InputError(f"{self.name}: n_relations = {self.n_relations}, but the {q} "
-                             f"model features{' (with derivatives)' if self.derivatives else ''}"
-                             f" leave {free} dimension(s) for relations; lower n_relations or "
-                             f"match more model_features")
+            raise InputError(
+                f"{self.name}: n_relations = {self.n_relations}, but the {q} "
+                f"model features{' (with derivatives)' if self.derivatives else ''}"
+                f" leave {free} dimension(s) for relations; lower n_relations or "
+                f"match more model_features"
+            )
 
     def _match(self, frame: pd.DataFrame, patterns, what: str) -> list[str]:
         patterns = [patterns] if isinstance(patterns, str) else list(patterns)
         if not patterns:
             raise InputError(f"{self.name}: {what} is empty")
-        cols = [c for c in frame.columns if c != "t_s"
-                and any(fnmatch.fnmatch(c, p) for p in patterns)]
+        cols = [
+            c for c in frame.columns if c != "t_s" and any(fnmatch.fnmatch(c, p) for p in patterns)
+        ]
         missing = [p for p in patterns if not any(fnmatch.fnmatch(c, p) for c in frame.columns)]
         if missing:
-            raise InputError(f"{self.name}: the data has no column matching "
-                             f"{', '.join(missing)} ({what})")
+            raise InputError(
+                f"{self.name}: the data has no column matching {', '.join(missing)} ({what})"
+            )
         return cols
 
     def _fault_directions(self) -> np.ndarray | None:
@@ -253,14 +310,21 @@ class GSMMS(Diagnostic):
         model channel with ``fault_channels="all"``; None: unit-norm relations)."""
         if self.fault_channels is None:
             return None
-        pats = ["*"] if self.fault_channels == ALL_CHANNELS else \
-            [self.fault_channels] if isinstance(self.fault_channels, str) \
+        pats = (
+            ["*"]
+            if self.fault_channels == ALL_CHANNELS
+            else [self.fault_channels]
+            if isinstance(self.fault_channels, str)
             else list(self.fault_channels)
-        idx = [j for j, c in enumerate(self.model_columns_)
-               if any(fnmatch.fnmatch(c, p) for p in pats)]
+        )
+        idx = [
+            j for j, c in enumerate(self.model_columns_) if any(fnmatch.fnmatch(c, p) for p in pats)
+        ]
         if not idx:
-            raise InputError(f"{self.name}: fault_channels {pats} match none of the model "
-                             f"channels ({', '.join(self.model_columns_)})")
+            raise InputError(
+                f"{self.name}: fault_channels {pats} match none of the model "
+                f"channels ({', '.join(self.model_columns_)})"
+            )
         n_features = len(self.z_mean_)
         return np.eye(n_features)[:, idx]
 
@@ -273,29 +337,37 @@ class GSMMS(Diagnostic):
         from ..parity import ParitySpaceDetector
 
         if not isinstance(self.physics, dict):
-            raise InputError(f"{self.name}: physics must be a mapping of parity plug-in "
-                             f"parameters or null, got {self.physics!r}")
+            raise InputError(
+                f"{self.name}: physics must be a mapping of parity plug-in "
+                f"parameters or null, got {self.physics!r}"
+            )
         allowed = set(inspect.signature(ParitySpaceDetector).parameters)
         unknown = sorted(set(self.physics) - allowed)
         if unknown:
-            raise InputError(f"{self.name}: physics has no parameter {', '.join(unknown)} "
-                             f"(it takes the parity plug-in's: {', '.join(sorted(allowed))})")
+            raise InputError(
+                f"{self.name}: physics has no parameter {', '.join(unknown)} "
+                f"(it takes the parity plug-in's: {', '.join(sorted(allowed))})"
+            )
         det = ParitySpaceDetector(**self.physics).configure(frames)  # roles from the line
         col_a, col_b = det.channels[:2]
         sensors = {col_a: 0, col_b: 1}
         if sorted(self.model_columns_) != sorted(sensors):
-            raise InputError(f"{self.name}: with physics the model features must be the "
-                             f"reduced model's sensors {col_a} and {col_b}, "
-                             f"got {', '.join(self.model_columns_)}")
+            raise InputError(
+                f"{self.name}: with physics the model features must be the "
+                f"reduced model's sensors {col_a} and {col_b}, "
+                f"got {', '.join(self.model_columns_)}"
+            )
         for f in frames:
             det.required_columns(f)
         model, _, _ = det.reduced_model(frames)
-        orders = [0] * len(self.model_columns_) + ([1] * len(self.model_columns_)
-                                                  if self.derivatives else [])
+        orders = [0] * len(self.model_columns_) + (
+            [1] * len(self.model_columns_) if self.derivatives else []
+        )
         cols = list(self.model_columns_) * (2 if self.derivatives else 1)
         self.physics_ = det
-        self.physics_rows_ = np.array([model.rows.index((sensors[c], k))
-                                       for c, k in zip(cols, orders, strict=True)])
+        self.physics_rows_ = np.array(
+            [model.rows.index((sensors[c], k)) for c, k in zip(cols, orders, strict=True)]
+        )
 
     def _operating_points(self, frames) -> np.ndarray:
         """The reduced model's p = [x̂, u] of every sample of ``frames`` (n, 4); (n, 0)
@@ -314,17 +386,20 @@ class GSMMS(Diagnostic):
 
         def node_gradient(w: np.ndarray) -> np.ndarray:
             sel = finite & (w > 0)
-            p = np.average(P[sel], axis=0, weights=w[sel]) if sel.any() \
+            p = (
+                np.average(P[sel], axis=0, weights=w[sel])
+                if sel.any()
                 else np.mean(P[finite], axis=0)
+            )
             G = model.grad_x(p[:1], p[1:])[rows] / scale[:, None]
             norm = np.linalg.norm(G, axis=0)
             return G / np.where(norm > 0, norm, 1.0)
+
         return node_gradient
 
     def _features(self, f: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
         """Smoothed partition and model features (raw units) of one run."""
-        dt = float(np.median(np.diff(f["t_s"].to_numpy()))) if "t_s" in f and len(f) > 1 \
-            else 0.01
+        dt = float(np.median(np.diff(f["t_s"].to_numpy()))) if "t_s" in f and len(f) > 1 else 0.01
         win = max(1, int(round(self.smooth_s / dt))) if self.smooth_s > 0 else 1
         part = f[self.partition_columns_].astype(float)
         model = f[self.model_columns_].astype(float)
@@ -333,16 +408,16 @@ class GSMMS(Diagnostic):
             model = model.rolling(win, min_periods=1).mean()
         Z = model.to_numpy()
         if self.derivatives:
-            Z = np.hstack([Z, np.vstack([np.full((1, Z.shape[1]), np.nan),
-                                         np.diff(Z, axis=0) / dt])])
+            Z = np.hstack(
+                [Z, np.vstack([np.full((1, Z.shape[1]), np.nan), np.diff(Z, axis=0) / dt])]
+            )
         return part.to_numpy(), Z
 
     def _standardised(self, f: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
         S, Z = self._features(f)
         return (S - self.s_mean_) / self.s_scale_, (Z - self.z_mean_) / self.z_scale_
 
-    def _pooled(self, frames, points: bool = True
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _pooled(self, frames, points: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Standardised rows of all runs, without rows holding a NaN, evenly thinned to at
         most ``max_samples``, and (with ``points``) their operating points
         (:meth:`_operating_points`; else an (n, 0) array)."""
@@ -373,8 +448,9 @@ class GSMMS(Diagnostic):
         statistics; returns ``self``."""
         settings = self._settings()
         frames = self._frames(runs)
-        self.partition_columns_ = self._match(frames[0], self.partition_features,
-                                              "partition_features")
+        self.partition_columns_ = self._match(
+            frames[0], self.partition_features, "partition_features"
+        )
         self.model_columns_ = self._match(frames[0], self.model_features, "model_features")
         raw = [self._features(f) for f in frames]
         for name, i in (("s", 0), ("z", 1)):
@@ -406,11 +482,12 @@ class GSMMS(Diagnostic):
         settings = self._settings()
         settings.fault_directions = self._fault_directions()
         S_new, Z_new, P_new = self._pooled(self._frames(runs))
-        S, Z, P = (np.vstack([kept, new]) for kept, new in zip(self._kept, (S_new, Z_new, P_new),
-                                                               strict=True))
+        S, Z, P = (
+            np.vstack([kept, new])
+            for kept, new in zip(self._kept, (S_new, Z_new, P_new), strict=True)
+        )
         settings.constraint = self._constraint(P)
-        self._finish(*grow(self.graph_.copy(), S, Z, settings, self._rng, self.history_),
-                     S, Z, P)
+        self._finish(*grow(self.graph_.copy(), S, Z, settings, self._rng, self.history_), S, Z, P)
         return self
 
     def calibrate(self, runs, alpha: float | None = None, masks=None):
@@ -461,11 +538,14 @@ class GSMMS(Diagnostic):
         f = _frame(run)
         if self.physics_ is not None:  # the physics term's model: the scored run's line
             self.physics_._scored_frame(f)  # must match the fitted one (else refused)
-        missing = [c for c in (*self.partition_columns_, *self.model_columns_)
-                   if c not in f.columns]
+        missing = [
+            c for c in (*self.partition_columns_, *self.model_columns_) if c not in f.columns
+        ]
         if missing:  # another line's data, or a run without a channel the fit used
-            raise InputError(f"{self.name}: the data has no column {', '.join(missing[:3])}"
-                             f"{' ...' if len(missing) > 3 else ''} (fitted on it)")
+            raise InputError(
+                f"{self.name}: the data has no column {', '.join(missing[:3])}"
+                f"{' ...' if len(missing) > 3 else ''} (fitted on it)"
+            )
         S, Z = self._standardised(f)
         ok = np.all(np.isfinite(S), axis=1) & np.all(np.isfinite(Z), axis=1)
         k = self.node_mean_.shape[1]
@@ -493,24 +573,58 @@ class GlobalParity(GSMMS):
 
     name = "gsmms_global"
 
-    def __init__(self, partition_features: str | list | tuple = ("sp.*",),
-                 model_features: str | list | tuple = ("meas.*",), derivatives: bool = False,
-                 smooth_s: float = 1.0, n_relations: int = 1,
-                 fault_channels: str | list | tuple | None = "all", solver: str = "minibatch",
-                 batch_size: int = 128, step: str = "inv_sqrt", eta0: float = 1.0,
-                 n_epochs: float = 1.0, lambda1: float = 1.0,
-                 physics: dict | None = None, lambda2: float = 1.0, initial_nodes: int = 1,
-                 max_nodes: int = 1, zeta_threshold: float = 0.6,
-                 min_improvement: float | None = 0.05, k_max: int = 200, sigma0: float = 1.0,
-                 sigma_final: float = 0.3, weighting: str = "hard", k_sigma: float = 2.0,
-                 max_samples: int = 200_000, random_state: int | None = None):
+    def __init__(
+        self,
+        partition_features: str | list | tuple = ("sp.*",),
+        model_features: str | list | tuple = ("meas.*",),
+        derivatives: bool = False,
+        smooth_s: float = 1.0,
+        n_relations: int = 1,
+        fault_channels: str | list | tuple | None = "all",
+        solver: str = "minibatch",
+        batch_size: int = 128,
+        step: str = "inv_sqrt",
+        eta0: float = 1.0,
+        n_epochs: float = 1.0,
+        lambda1: float = 1.0,
+        physics: dict | None = None,
+        lambda2: float = 1.0,
+        initial_nodes: int = 1,
+        max_nodes: int = 1,
+        zeta_threshold: float = 0.6,
+        min_improvement: float | None = 0.05,
+        k_max: int = 200,
+        sigma0: float = 1.0,
+        sigma_final: float = 0.3,
+        weighting: str = "hard",
+        k_sigma: float = 2.0,
+        max_samples: int = 200_000,
+        random_state: int | None = None,
+    ):
         super().__init__(
-            partition_features=partition_features, model_features=model_features,
-            derivatives=derivatives, smooth_s=smooth_s, n_relations=n_relations,
-            fault_channels=fault_channels, solver=solver, batch_size=batch_size, step=step,
-            eta0=eta0, n_epochs=n_epochs,
-            lambda1=lambda1, physics=physics, lambda2=lambda2, initial_nodes=initial_nodes,
+            partition_features=partition_features,
+            model_features=model_features,
+            derivatives=derivatives,
+            smooth_s=smooth_s,
+            n_relations=n_relations,
+            fault_channels=fault_channels,
+            solver=solver,
+            batch_size=batch_size,
+            step=step,
+            eta0=eta0,
+            n_epochs=n_epochs,
+            lambda1=lambda1,
+            physics=physics,
+            lambda2=lambda2,
+            initial_nodes=initial_nodes,
             max_nodes=max_nodes,
-            zeta_threshold=zeta_threshold, min_improvement=min_improvement, k_max=k_max,
-            sigma0=sigma0, sigma_final=sigma_final, weighting=weighting, k_sigma=k_sigma,
-            max_samples=max_samples, random_state=random_state)
+            zeta_threshold=zeta_threshold,
+            min_improvement=min_improvement,
+            k_max=k_max,
+            sigma0=sigma0,
+            sigma_final=sigma_final,
+            weighting=weighting,
+            k_sigma=k_sigma,
+            max_samples=max_samples,
+            random_state=random_state,
+        )

@@ -71,9 +71,17 @@ def neighbourhood(hops: np.ndarray, sigma: float) -> np.ndarray:
     return np.exp(-(hops**2) / (2.0 * sigma**2))
 
 
-def train_codebook(graph: MapGraph, S: np.ndarray, zeta: np.ndarray, *, k_max: int,
-                   batch_size: int, sigma0: float, sigma_final: float,
-                   rng: np.random.Generator) -> None:
+def train_codebook(
+    graph: MapGraph,
+    S: np.ndarray,
+    zeta: np.ndarray,
+    *,
+    k_max: int,
+    batch_size: int,
+    sigma0: float,
+    sigma_final: float,
+    rng: np.random.Generator,
+) -> None:
     """``k_max`` codebook updates (eq. 4.7), each averaged over a mini-batch of rows of S:
     ε_m += ζ_m · mean_i h(k, dis(m, c_i)) (s_i − ε_m), with σ(k) decaying geometrically from
     ``sigma0`` to ``sigma_final`` hops and ζ_m the node's loss share (eq. 4.10), so badly

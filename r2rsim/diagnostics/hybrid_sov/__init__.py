@@ -6,15 +6,27 @@ from ._line import ROLES, LineStages, load_stages
 from ._model import DataDrivenModel, HybridModel
 from ._plugin import HybridSoV
 from ._regression import (
-                          LinearFit,
-                          StepwiseResult,
-                          fit_defect_classifier,
-                          fit_ols,
-                          fit_tobit,
-                          forward_stepwise,
-                          tobit_loglike,
+    LinearFit,
+    StepwiseResult,
+    fit_defect_classifier,
+    fit_ols,
+    fit_tobit,
+    forward_stepwise,
+    tobit_loglike,
 )
 
-__all__ = ["ROLES", "DataDrivenModel", "HybridModel", "HybridSoV", "LineStages",
-           "LinearFit", "StepwiseResult", "fit_defect_classifier", "fit_ols", "fit_tobit",
-           "forward_stepwise", "load_stages", "tobit_loglike"]
+__all__ = [
+    "ROLES",
+    "DataDrivenModel",
+    "HybridModel",
+    "HybridSoV",
+    "LineStages",
+    "LinearFit",
+    "StepwiseResult",
+    "fit_defect_classifier",
+    "fit_ols",
+    "fit_tobit",
+    "forward_stepwise",
+    "load_stages",
+    "tobit_loglike",
+]

@@ -53,8 +53,9 @@ def wavelet_denoise(x: np.ndarray, wavelet: str = "db4", level: int | None = Non
     try:
         import pywt
     except ImportError as exc:
-        raise InputError("denoise='wavelet' needs PyWavelets: pip install "
-                         "'r2rsim[wavelet]'") from exc
+        raise InputError(
+            "denoise='wavelet' needs PyWavelets: pip install 'r2rsim[wavelet]'"
+        ) from exc
     coeffs = pywt.wavedec(x, wavelet, level=level, mode="symmetric")
     sigma = np.median(np.abs(coeffs[-1])) / 0.6745
     thr = sigma * np.sqrt(2.0 * np.log(max(len(x), 2)))
@@ -80,8 +81,9 @@ def window_samples(window_s: float, dt: float) -> int:
     return max(5, int(round(window_s / dt)) | 1)
 
 
-def trailing_savgol(x: np.ndarray, n: int, dt: float, deriv: int = 0,
-                    pos: int | None = None) -> np.ndarray:
+def trailing_savgol(
+    x: np.ndarray, n: int, dt: float, deriv: int = 0, pos: int | None = None
+) -> np.ndarray:
     """Causal Savitzky-Golay filter: at every sample k, the least-squares quadratic fitted to
     the trailing window ``x[k-n+1 .. k]``, or its time derivative, evaluated at position
     ``pos`` of the window (0 its first sample, n - 1 its last; default the centre).
@@ -126,7 +128,7 @@ def trailing_median(x: np.ndarray, n: int) -> np.ndarray:
 def _delay(x: np.ndarray, lag: int) -> np.ndarray:
     """``x`` delayed by ``lag`` samples (the first sample held before the record)."""
     lag = min(lag, len(x))
-    return np.concatenate([np.full(lag, x[0]), x[:len(x) - lag]])
+    return np.concatenate([np.full(lag, x[0]), x[: len(x) - lag]])
 
 
 @dataclass
@@ -166,17 +168,28 @@ class Signals:
 
 def required_columns(st: LineStages) -> list[str]:
     """The visible columns (measured and drive data) the model reads."""
-    return [st.column(k) for k in ("diameter", "speed_unwind", "speed_idler",
-                                   "speed_driven", "tension", "angle", "pitch")] + [
-        st.torque_column(st.unwind), st.torque_column(st.driven.id)]
+    return [
+        st.column(k)
+        for k in (
+            "diameter",
+            "speed_unwind",
+            "speed_idler",
+            "speed_driven",
+            "tension",
+            "angle",
+            "pitch",
+        )
+    ] + [st.torque_column(st.unwind), st.torque_column(st.driven.id)]
 
 
 def check_frame(frame: pd.DataFrame, st: LineStages) -> None:
     """Refuse a frame without the columns the model reads or with fewer than 8 samples."""
     missing = [c for c in required_columns(st) + ["t_s"] if c not in frame.columns]
     if missing:
-        raise InputError(f"hybrid-sov: the data has no column {', '.join(missing)} "
-                         f"(torques need drive data: --drive-data)")
+        raise InputError(
+            f"hybrid-sov: the data has no column {', '.join(missing)} "
+            f"(torques need drive data: --drive-data)"
+        )
     if len(frame) < 8:
         raise InputError("hybrid-sov: a run needs at least 8 samples")
 
@@ -185,9 +198,15 @@ def check_frame(frame: pd.DataFrame, st: LineStages) -> None:
 _DERIVED = ("w1", "wi", "w4", "alpha")
 
 
-def signals(frame: pd.DataFrame, st: LineStages, denoise: str | None = "savgol",
-            window_s: float = 0.5, lower_limit: float = 0.0, causal: bool = True,
-            dt: float | None = None) -> Signals:
+def signals(
+    frame: pd.DataFrame,
+    st: LineStages,
+    denoise: str | None = "savgol",
+    window_s: float = 0.5,
+    lower_limit: float = 0.0,
+    causal: bool = True,
+    dt: float | None = None,
+) -> Signals:
     """Preprocess one run's visible frame (thesis §2.6).
 
     Offline (``causal=False``, the thesis's preprocessing): centred Savitzky-Golay smoothing
@@ -240,14 +259,21 @@ def signals(frame: pd.DataFrame, st: LineStages, denoise: str | None = "savgol",
     """
     check_frame(frame, st)
     if causal and denoise == "wavelet":
-        raise InputError("hybrid-sov: denoise='wavelet' de-noises each run as a whole, "
-                         "which reads later samples: it needs causal=False (offline)")
+        raise InputError(
+            "hybrid-sov: denoise='wavelet' de-noises each run as a whole, "
+            "which reads later samples: it needs causal=False (offline)"
+        )
     t = frame["t_s"].to_numpy(float)
     if dt is None:
         dt = float(np.median(np.diff(t)))
-    raw = {k: frame[c].to_numpy(float) for k, c in zip(
-        ("dia", "w1", "wi", "w4", "T2", "alpha", "Y", "tau1", "tau4"), required_columns(st),
-        strict=True)}
+    raw = {
+        k: frame[c].to_numpy(float)
+        for k, c in zip(
+            ("dia", "w1", "wi", "w4", "T2", "alpha", "Y", "tau1", "tau4"),
+            required_columns(st),
+            strict=True,
+        )
+    }
     valid = np.all([np.isfinite(v) for v in raw.values()], axis=0)
     r_idler = st.sensor_ids["speed_idler_radius"]
     flag = f"flag.{st.sensor_ids['tension']}.clipped"
@@ -260,14 +286,13 @@ def signals(frame: pd.DataFrame, st: LineStages, denoise: str | None = "savgol",
         d = {k: _smooth(x[k], dt, window_s, denoise, deriv=True) for k in _DERIVED}
         # the roll radius changes slowly but jumps at a roll change: a running median over
         # 1 s removes the reading's noise (and outliers) without smearing the jump
-        R = 0.5 * median_filter(x["dia"], size=max(1, int(round(1.0 / dt))) | 1,
-                                mode="nearest")
+        R = 0.5 * median_filter(x["dia"], size=max(1, int(round(1.0 / dt))) | 1, mode="nearest")
         T2, Y, lag = x["T2"], x["Y"], 0
     else:
         x = {k: _fill_causal(v) for k, v in raw.items()}
         w = 3 if denoise is None else window_samples(window_s, dt)
         lag = (w - 1) // 2
-        if denoise is None:      # np.gradient's central difference, one sample late
+        if denoise is None:  # np.gradient's central difference, one sample late
             sm = {k: _delay(v, 1) for k, v in x.items()}
             d = {k: (x[k] - _delay(x[k], 2)) / (2.0 * dt) for k in _DERIVED}
         else:
@@ -279,11 +304,27 @@ def signals(frame: pd.DataFrame, st: LineStages, denoise: str | None = "savgol",
         T2, Y = _delay(x["T2"], lag), _delay(x["Y"], lag)
         censored = _delay(censored, lag)
         valid = _delay(valid, lag) & (np.arange(len(t)) >= w - 1)
-    return Signals(t=t, R=R, w1=sm["w1"], dw1=d["w1"], v=sm["wi"] * r_idler,
-                   dv=d["wi"] * r_idler, w4=sm["w4"], dw4=d["w4"], tau1=sm["tau1"],
-                   tau4=sm["tau4"], alpha=sm["alpha"], dalpha=d["alpha"], T2=T2,
-                   T2s=sm["T2"], censored=censored, Y=Y, valid=valid, dt=dt,
-                   delay_s=lag * dt)
+    return Signals(
+        t=t,
+        R=R,
+        w1=sm["w1"],
+        dw1=d["w1"],
+        v=sm["wi"] * r_idler,
+        dv=d["wi"] * r_idler,
+        w4=sm["w4"],
+        dw4=d["w4"],
+        tau1=sm["tau1"],
+        tau4=sm["tau4"],
+        alpha=sm["alpha"],
+        dalpha=d["alpha"],
+        T2=T2,
+        T2s=sm["T2"],
+        censored=censored,
+        Y=Y,
+        valid=valid,
+        dt=dt,
+        delay_s=lag * dt,
+    )
 
 
 def roll_index(R: np.ndarray, jump: float = 1e-3) -> np.ndarray:
@@ -313,12 +354,11 @@ def stage1_terms(st: LineStages, s: Signals) -> dict[str, np.ndarray]:
     (eq. 2.22, zero here) and, as a candidate, the thesis's d(Jω)/dt term."""
     R = s.R
     return {
-        "tau1/R": -s.tau1 / R,                                   # brake torque (τ < 0)
-        "J1*dw1/R": st.roll_inertia(R) * s.dw1 / R,              # roll inertia, J(R)
-        "b1*w1/R": st.unwind_viscous * s.w1 / R,                 # bearing friction
+        "tau1/R": -s.tau1 / R,  # brake torque (τ < 0)
+        "J1*dw1/R": st.roll_inertia(R) * s.dw1 / R,  # roll inertia, J(R)
+        "b1*w1/R": st.unwind_viscous * s.w1 / R,  # bearing friction
         # -ρ·w·t·R²·ω² of thesis eq. 2.15 (from d(Jω)/dt; r2rsim integrates J·dω/dt)
-        "rho*w*t*R^2*w1^2": -st.web_density * st.web_width * st.web_thickness * R**2
-        * s.w1**2,
+        "rho*w*t*R^2*w1^2": -st.web_density * st.web_width * st.web_thickness * R**2 * s.w1**2,
         "R": R,
         "R^2": R**2,
     }
@@ -337,8 +377,16 @@ def raw_candidates(s: Signals, downstream: bool) -> dict[str, np.ndarray]:
     (for the pitch) also the stage-2 tension reading, the dancer and the driven roller."""
     raw = {"R": s.R, "w1": s.w1, "dw1": s.dw1, "tau1": s.tau1, "v": s.v, "dv": s.dv}
     if downstream:
-        raw.update({"T2": s.T2s, "alpha": s.alpha, "dalpha": s.dalpha, "w4": s.w4,
-                    "dw4": s.dw4, "tau4": s.tau4})
+        raw.update(
+            {
+                "T2": s.T2s,
+                "alpha": s.alpha,
+                "dalpha": s.dalpha,
+                "w4": s.w4,
+                "dw4": s.dw4,
+                "tau4": s.tau4,
+            }
+        )
     return raw
 
 

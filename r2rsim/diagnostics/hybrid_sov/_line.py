@@ -73,10 +73,15 @@ class LineStages:
 
     def column(self, key: str) -> str:
         """The visible column of a sensor role (e.g. ``"tension"``)."""
-        unit = {"diameter": "diameter_m", "speed_unwind": "speed_rad_s",
-                "speed_idler": "speed_rad_s", "speed_driven": "speed_rad_s",
-                "tension": "tension_N", "angle": f"position_{self.dancer_position_unit}",
-                "pitch": "pitch_m"}[key]
+        unit = {
+            "diameter": "diameter_m",
+            "speed_unwind": "speed_rad_s",
+            "speed_idler": "speed_rad_s",
+            "speed_driven": "speed_rad_s",
+            "tension": "tension_N",
+            "angle": f"position_{self.dancer_position_unit}",
+            "pitch": "pitch_m",
+        }[key]
         return f"meas.{self.sensor_ids[key]}.{unit}"
 
     def torque_column(self, element: str) -> str:
@@ -86,7 +91,8 @@ class LineStages:
     def roll_inertia(self, R: np.ndarray) -> np.ndarray:
         """J(R) = J_c + (π/2)·ρ·w·(R⁴ - R_c⁴), the unwind's inertia at radius R [kg·m²]."""
         return self.core_inertia + 0.5 * np.pi * self.web_density * self.web_width * (
-            R**4 - self.core_radius**4)
+            R**4 - self.core_radius**4
+        )
 
 
 def _roller(e) -> Roller:
@@ -115,26 +121,49 @@ _DANCERS = ("dancer", "pivot_dancer")
 _ELEMENT_ROLES = {
     "unwind": (("unwind",), "an unwind", "unwinds", 1, "stage 1 (the unwind's torque balance)"),
     "dancer": (_DANCERS, "a dancer", "dancers", 3, "stage 3 (the dancer stage)"),
-    "driven": (("driven",), "a driven roller", "driven rollers", 4,
-               "stage 4 (the driven roller's torque balance)"),
+    "driven": (
+        ("driven",),
+        "a driven roller",
+        "driven rollers",
+        4,
+        "stage 4 (the driven roller's torque balance)",
+    ),
 }
 
 #: sensor roles: (sensor type, "a ...", plural, the key in LineStages.sensor_ids, what the
 #: model needs the reading for)
 _SENSOR_ROLES = {
-    "diameter_sensor": ("roll_diameter", "a roll-diameter sensor", "roll-diameter sensors",
-                        "diameter", "the unwind radius R"),
-    "unwind_encoder": ("encoder", "an encoder", "encoders", "speed_unwind",
-                       "the unwind speed ω1"),
+    "diameter_sensor": (
+        "roll_diameter",
+        "a roll-diameter sensor",
+        "roll-diameter sensors",
+        "diameter",
+        "the unwind radius R",
+    ),
+    "unwind_encoder": ("encoder", "an encoder", "encoders", "speed_unwind", "the unwind speed ω1"),
     "idler_encoder": ("encoder", "an encoder", "encoders", "speed_idler", "the web speed v"),
-    "driven_encoder": ("encoder", "an encoder", "encoders", "speed_driven",
-                       "the driven roller's speed ω4"),
-    "load_cell": ("load_cell", "a load cell", "load cells", "tension",
-                  "the stage-2 tension T_s2"),
-    "dancer_sensor": ("dancer_position", "a dancer-position sensor",
-                      "dancer-position sensors", "angle", "the dancer position α"),
-    "pitch_sensor": ("pitch_length", "a pitch-length sensor", "pitch-length sensors", "pitch",
-                     "the pitch Y"),
+    "driven_encoder": (
+        "encoder",
+        "an encoder",
+        "encoders",
+        "speed_driven",
+        "the driven roller's speed ω4",
+    ),
+    "load_cell": ("load_cell", "a load cell", "load cells", "tension", "the stage-2 tension T_s2"),
+    "dancer_sensor": (
+        "dancer_position",
+        "a dancer-position sensor",
+        "dancer-position sensors",
+        "angle",
+        "the dancer position α",
+    ),
+    "pitch_sensor": (
+        "pitch_length",
+        "a pitch-length sensor",
+        "pitch-length sensors",
+        "pitch",
+        "the pitch Y",
+    ),
 }
 
 
@@ -150,21 +179,32 @@ def _find_element(line, role: str, given: str | None):
     if given is not None:
         return named(cands, given, "hybrid-sov", role, a, plural)
     if not cands:
-        raise InputError(f"hybrid-sov: {role}: the line has no {a.split(' ', 1)[1]}, needed "
-                         f"for {need}")
+        raise InputError(
+            f"hybrid-sov: {role}: the line has no {a.split(' ', 1)[1]}, needed for {need}"
+        )
     staged = [e for e in cands if e.stage == stage]
     if not staged:
-        raise InputError(f"hybrid-sov: {role}: no {a.split(' ', 1)[1]} of the line has stage: "
-                         f"{stage} ({plural}: {_ids(cands)}); mark one stage: {stage} or name "
-                         f"it with {role}=<id>")
+        raise InputError(
+            f"hybrid-sov: {role}: no {a.split(' ', 1)[1]} of the line has stage: "
+            f"{stage} ({plural}: {_ids(cands)}); mark one stage: {stage} or name "
+            f"it with {role}=<id>"
+        )
     if len(staged) > 1:
-        raise InputError(f"hybrid-sov: {role}: {len(staged)} {plural} have stage: {stage} "
-                         f"({_ids(staged)}); name one with {role}=<id>")
+        raise InputError(
+            f"hybrid-sov: {role}: {len(staged)} {plural} have stage: {stage} "
+            f"({_ids(staged)}); name one with {role}=<id>"
+        )
     return staged[0]
 
 
-def _find_sensor(line, role: str, given: str | None, places: list[str], where: str,
-                 loc=lambda s: getattr(s, "element", None)):
+def _find_sensor(
+    line,
+    role: str,
+    given: str | None,
+    places: list[str],
+    where: str,
+    loc=lambda s: getattr(s, "element", None),
+):
     """The sensor of a sensor role: of the role's type, at one of ``places`` (element or
     span ids; ``where`` says so in words); the one named ``given``, else the only one."""
     typ, a, plural, _key, need = _SENSOR_ROLES[role]
@@ -176,12 +216,16 @@ def _find_sensor(line, role: str, given: str | None, places: list[str], where: s
         return hit
     here = [s for s in cands if loc(s) in places]
     if not here:
-        raise InputError(f"hybrid-sov: {role}: the line has no {a.split(' ', 1)[1]} {where}, "
-                         f"needed for {need} ({plural}: {_ids(cands)})")
+        raise InputError(
+            f"hybrid-sov: {role}: the line has no {a.split(' ', 1)[1]} {where}, "
+            f"needed for {need} ({plural}: {_ids(cands)})"
+        )
     if len(here) > 1:
         listed = ", ".join(f"{s.id} on {loc(s)}" for s in here)
-        raise InputError(f"hybrid-sov: {role}: the line has {len(here)} {plural} {where}: "
-                         f"{listed}; name one with {role}=<id>")
+        raise InputError(
+            f"hybrid-sov: {role}: the line has {len(here)} {plural} {where}: "
+            f"{listed}; name one with {role}=<id>"
+        )
     return here[0]
 
 
@@ -191,10 +235,12 @@ def _idlers(line, index: dict, uw, dancer, drv) -> dict[int, list]:
     between the dancer and the driven roller (3), and those right after the driven roller
     (5). The dancer's roller is always one of stage 3 (it spins like an idler)."""
     els = line.elements
-    path = {2: [e for e in els[index[uw.id] + 1:index[dancer.id]] if e.type == "idler"],
-            3: [e for e in els[index[dancer.id] + 1:index[drv.id]] if e.type == "idler"],
-            5: []}
-    for e in els[index[drv.id] + 1:]:
+    path = {
+        2: [e for e in els[index[uw.id] + 1 : index[dancer.id]] if e.type == "idler"],
+        3: [e for e in els[index[dancer.id] + 1 : index[drv.id]] if e.type == "idler"],
+        5: [],
+    }
+    for e in els[index[drv.id] + 1 :]:
         if e.type != "idler":
             break
         path[5].append(e)
@@ -251,8 +297,9 @@ def load_stages(path, roles: dict | None = None) -> LineStages:
     roles = dict(roles or {})
     unknown = sorted(set(roles) - set(ROLES))
     if unknown:
-        raise InputError(f"hybrid-sov: unknown role {', '.join(unknown)} (roles: "
-                         f"{', '.join(ROLES)})")
+        raise InputError(
+            f"hybrid-sov: unknown role {', '.join(unknown)} (roles: {', '.join(ROLES)})"
+        )
     # a line file, or a loaded line (the run's, r2rsim.diagnostics.line.frame_line)
     line = path if hasattr(path, "elements") else load_line(Path(path))
     index = {e.id: i for i, e in enumerate(line.elements)}
@@ -260,14 +307,16 @@ def load_stages(path, roles: dict | None = None) -> LineStages:
     dancer = _find_element(line, "dancer", roles.get("dancer"))
     drv = _find_element(line, "driven", roles.get("driven"))
     if not index[uw.id] < index[dancer.id] < index[drv.id]:
-        raise InputError(f"hybrid-sov: dancer '{dancer.id}' is not between the unwind "
-                         f"'{uw.id}' and the driven roller '{drv.id}' along the web: the "
-                         f"model needs unwind (stage 1), dancer (stage 3) and driven roller "
-                         f"(stage 4) in this order")
+        raise InputError(
+            f"hybrid-sov: dancer '{dancer.id}' is not between the unwind "
+            f"'{uw.id}' and the driven roller '{drv.id}' along the web: the "
+            f"model needs unwind (stage 1), dancer (stage 3) and driven roller "
+            f"(stage 4) in this order"
+        )
     idlers = _idlers(line, index, uw, dancer, drv)
     stage2 = [r.id for r in idlers[2]]
     on2 = f"on a stage-2 idler ({', '.join(stage2) or 'there is none'})"
-    span = line.spans[index[drv.id]].id   # the span leaving the driven roller
+    span = line.spans[index[drv.id]].id  # the span leaving the driven roller
     found = {
         "diameter_sensor": ([uw.id], f"on the unwind '{uw.id}'"),
         "unwind_encoder": ([uw.id], f"on the unwind '{uw.id}'"),
@@ -278,20 +327,37 @@ def load_stages(path, roles: dict | None = None) -> LineStages:
     }
     sensors = {}
     for role, (places, where) in found.items():
-        sensors[_SENSOR_ROLES[role][3]] = _find_sensor(line, role, roles.get(role), places,
-                                                       where).id
-    pitch = _find_sensor(line, "pitch_sensor", roles.get("pitch_sensor"), [span],
-                         f"on the span leaving the driven roller '{drv.id}' ({span})",
-                         loc=lambda s: s.span)
+        sensors[_SENSOR_ROLES[role][3]] = _find_sensor(
+            line, role, roles.get(role), places, where
+        ).id
+    pitch = _find_sensor(
+        line,
+        "pitch_sensor",
+        roles.get("pitch_sensor"),
+        [span],
+        f"on the span leaving the driven roller '{drv.id}' ({span})",
+        loc=lambda s: s.span,
+    )
     sensors["pitch"] = pitch.id
     enc = next(s for s in line.sensors if s.id == sensors["speed_idler"])
     sensors["speed_idler_radius"] = next(r.radius for r in idlers[2] if r.id == enc.element)
     law = pitch.relaxed_pitch_law
     relaxed = float(law.q0) if law is not None else float(pitch.relaxed_pitch or 0.0)
     w = line.web
-    return LineStages(line.name, uw.id, float(uw.roll.core_radius),
-                      float(uw.roll.core_inertia), float(uw.friction.viscous),
-                      float(w.density), float(w.width), float(w.thickness),
-                      float(w.modulus * w.width * w.thickness), idlers, _roller(drv),
-                      dancer.id, sensors, relaxed,
-                      "rad" if dancer.type == "pivot_dancer" else "m")
+    return LineStages(
+        line.name,
+        uw.id,
+        float(uw.roll.core_radius),
+        float(uw.roll.core_inertia),
+        float(uw.friction.viscous),
+        float(w.density),
+        float(w.width),
+        float(w.thickness),
+        float(w.modulus * w.width * w.thickness),
+        idlers,
+        _roller(drv),
+        dancer.id,
+        sensors,
+        relaxed,
+        "rad" if dancer.type == "pivot_dancer" else "m",
+    )

@@ -104,9 +104,16 @@ class HybridModel:
         found from the radius): rolls differ in relaxed pitch. Predictions use the mean.
     """
 
-    def __init__(self, stages: LineStages, kind: str = "tobit", alpha_enter: float = 0.05,
-                 censor_at: float = 0.0, select_period_s: float = 0.5, max_iter: int = 20,
-                 roll_offsets: bool = True):
+    def __init__(
+        self,
+        stages: LineStages,
+        kind: str = "tobit",
+        alpha_enter: float = 0.05,
+        censor_at: float = 0.0,
+        select_period_s: float = 0.5,
+        max_iter: int = 20,
+        roll_offsets: bool = True,
+    ):
         self.stages = stages
         self.kind = kind
         self.alpha_enter = alpha_enter
@@ -123,9 +130,16 @@ class HybridModel:
 
     def _cols3(self, s: F.Signals) -> dict[str, np.ndarray]:
         r_d = next(r.radius for r in self.stages.idlers[3] if r.id == self.stages.dancer)
-        return {"T2": s.T2s, "idlers3": F.idler_sum(self.stages, 3, s), "alpha": s.alpha,
-                "dalpha": s.dalpha, "w_d": s.v / r_d, "dw_d": s.dv / r_d, "w1": s.w1,
-                "dw1": s.dw1}
+        return {
+            "T2": s.T2s,
+            "idlers3": F.idler_sum(self.stages, 3, s),
+            "alpha": s.alpha,
+            "dalpha": s.dalpha,
+            "w_d": s.v / r_d,
+            "dw_d": s.dv / r_d,
+            "w1": s.w1,
+            "dw1": s.dw1,
+        }
 
     # ---- fitting ------------------------------------------------------------------------
     def fit(self, sigs: list[F.Signals], truth: list[dict] | None = None) -> HybridModel:
@@ -155,10 +169,12 @@ class HybridModel:
         else:
             T3 = np.concatenate([np.asarray(t["T3"], float) for t in truth])
             T4 = np.concatenate([np.asarray(t["T4"], float) for t in truth])
-            st3 = self._stepwise(self.design3_(c3), T3, ["const", "T2"],
-                                 list(STAGE3_CANDIDATES), rows, valid)
-            l0, _, l0_pred = self._fit_l0(Y / (1.0 + T4 / self.stages.web_EA), R3, rows,
-                                          valid, roll)
+            st3 = self._stepwise(
+                self.design3_(c3), T3, ["const", "T2"], list(STAGE3_CANDIDATES), rows, valid
+            )
+            l0, _, l0_pred = self._fit_l0(
+                Y / (1.0 + T4 / self.stages.web_EA), R3, rows, valid, roll
+            )
             self.stage3_ = Stage3Fit(st3, l0, 0, "oracle", l0_pred)
         return self
 
@@ -169,9 +185,14 @@ class HybridModel:
         c12 = _stack([self._cols12(s) for s in sigs])
         self.design12_ = _Design(c12)
         y2 = np.concatenate([s.T2 for s in sigs])
-        self.stage12_ = self._stepwise(self.design12_(c12), y2, ["const", "tau1/R",
-                                                                 "J1*dw1/R"],
-                                       list(STAGE12_CANDIDATES), rows, valid)
+        self.stage12_ = self._stepwise(
+            self.design12_(c12),
+            y2,
+            ["const", "tau1/R", "J1*dw1/R"],
+            list(STAGE12_CANDIDATES),
+            rows,
+            valid,
+        )
         return self
 
     def predict_tension(self, s: F.Signals) -> np.ndarray:
@@ -183,8 +204,16 @@ class HybridModel:
         kind = kind or self.kind
         cols = {k: v[valid] for k, v in cols.items()}
         sel = np.flatnonzero(np.isin(np.flatnonzero(valid), rows))
-        return forward_stepwise(cols, y[valid], forced, candidates, kind, self.alpha_enter,
-                                self.censor_at, select_rows=sel)
+        return forward_stepwise(
+            cols,
+            y[valid],
+            forced,
+            candidates,
+            kind,
+            self.alpha_enter,
+            self.censor_at,
+            select_rows=sel,
+        )
 
     def _fit_l0(self, l0_obs, R3, rows, valid, roll=None):
         """Eq. 2.24 with forward selection of the R³ term (OLS, F-test). With ``roll`` (a
@@ -193,8 +222,15 @@ class HybridModel:
         carry those offsets. Returns the selection result, L0 per training sample and the
         prediction fit (q0 = the sample-weighted mean over rolls)."""
         if roll is None or len(np.unique(roll[valid])) < 2:
-            res = self._stepwise({"const": np.ones_like(R3), "R^3": R3}, l0_obs, ["const"],
-                                 ["R^3"], rows, valid, kind="ols")
+            res = self._stepwise(
+                {"const": np.ones_like(R3), "R^3": R3},
+                l0_obs,
+                ["const"],
+                ["R^3"],
+                rows,
+                valid,
+                kind="ols",
+            )
             X = _Design.matrix({"const": np.ones_like(R3), "R^3": R3}, res.fit.names)
             return res, res.fit.predict(X), res.fit
         ids = np.unique(roll[valid])
@@ -207,8 +243,9 @@ class HybridModel:
         q0 = float(np.dot([b[f"roll{k}"] for k in ids], share / share.sum()))
         names = ["const"] + (["R^3"] if "R^3" in b else [])
         beta = np.array([q0] + ([b["R^3"]] if "R^3" in b else []))
-        pred = LinearFit(names, beta, np.full(len(beta), np.nan), res.fit.sigma, res.fit.llf,
-                         res.fit.n, "ols")
+        pred = LinearFit(
+            names, beta, np.full(len(beta), np.nan), res.fit.sigma, res.fit.llf, res.fit.n, "ols"
+        )
         return res, l0_hat, pred
 
     def _alternate(self, cols3, x4, R3, Y, rows, valid, roll) -> Stage3Fit:
@@ -219,15 +256,18 @@ class HybridModel:
         1.1 N here): the physics start fixes that level."""
         EA = self.stages.web_EA
         T3_hat = self._unscaled(cols3, "T2", self.design3_) + self._unscaled(
-            cols3, "idlers3", self.design3_)
+            cols3, "idlers3", self.design3_
+        )
         l0_prev, iterations = None, 0
         while iterations < self.max_iter:
             iterations += 1
-            l0, l0_hat, l0_pred = self._fit_l0(Y / (1.0 + (T3_hat + x4) / EA), R3, rows,
-                                               valid, roll)
+            l0, l0_hat, l0_pred = self._fit_l0(
+                Y / (1.0 + (T3_hat + x4) / EA), R3, rows, valid, roll
+            )
             T3_obs = (Y / l0_hat - 1.0) * EA - x4
-            st3 = self._stepwise(cols3, T3_obs, ["const", "T2"], list(STAGE3_CANDIDATES),
-                                 rows, valid)
+            st3 = self._stepwise(
+                cols3, T3_obs, ["const", "T2"], list(STAGE3_CANDIDATES), rows, valid
+            )
             T3_hat = st3.fit.predict(_Design.matrix(cols3, st3.fit.names))
             if l0_prev is not None and np.max(np.abs(l0_hat - l0_prev)) < 1e-9:
                 break
@@ -242,7 +282,7 @@ class HybridModel:
     def predict(self, s: F.Signals) -> pd.DataFrame:
         """Virtual-sensor tensions ``T_s1..T_s5`` [N] and predicted pitch ``Y_s4`` [m]."""
         T2 = self.predict_tension(s)
-        T1 = T2 - F.idler_sum(self.stages, 2, s)     # back through the idlers (eq. 2.16)
+        T1 = T2 - F.idler_sum(self.stages, 2, s)  # back through the idlers (eq. 2.16)
         c3 = self.design3_(self._cols3(s))
         f3 = self.stage3_.stage3.fit
         T3 = f3.predict(_Design.matrix(c3, f3.names))
@@ -252,14 +292,14 @@ class HybridModel:
         fl = self.stage3_.l0_predict
         L0 = fl.predict(_Design.matrix({"const": np.ones_like(R3), "R^3": R3}, fl.names))
         Y = (T4 / self.stages.web_EA + 1.0) * L0
-        return pd.DataFrame({"T_s1": T1, "T_s2": T2, "T_s3": T3, "T_s4": T4, "T_s5": T5,
-                             "Y_s4": Y, "L0_s4": L0})
+        return pd.DataFrame(
+            {"T_s1": T1, "T_s2": T2, "T_s3": T3, "T_s4": T4, "T_s5": T5, "Y_s4": Y, "L0_s4": L0}
+        )
 
     def pitch_aic(self, sigs: list[F.Signals]) -> float:
         """AIC of the pitch prediction on these runs (Gaussian residuals; parameters of
         stage 3, L0 and sigma)."""
-        resid = np.concatenate([(s.Y - self.predict(s)["Y_s4"].to_numpy())[s.valid]
-                                for s in sigs])
+        resid = np.concatenate([(s.Y - self.predict(s)["Y_s4"].to_numpy())[s.valid] for s in sigs])
         k = len(self.stage3_.stage3.fit.beta) + len(self.stage3_.l0_predict.beta) + 1
         return 2.0 * k - 2.0 * _gauss_llf(resid)
 
@@ -269,8 +309,13 @@ class DataDrivenModel:
     the raw channels, their squares and pairwise products (no physics), by ``kind`` with
     forward stepwise selection. The pitch model is OLS (the pitch is never censored)."""
 
-    def __init__(self, kind: str = "tobit", alpha_enter: float = 0.05, censor_at: float = 0.0,
-                 select_period_s: float = 0.5):
+    def __init__(
+        self,
+        kind: str = "tobit",
+        alpha_enter: float = 0.05,
+        censor_at: float = 0.0,
+        select_period_s: float = 0.5,
+    ):
         self.kind = kind
         self.alpha_enter = alpha_enter
         self.censor_at = censor_at
@@ -288,10 +333,25 @@ class DataDrivenModel:
         Y = np.concatenate([s.Y for s in sigs])[valid]
         zt = {k: v[valid] for k, v in self.design_t_(ct).items()}
         zp = {k: v[valid] for k, v in self.design_p_(cp).items()}
-        self.tension_ = forward_stepwise(zt, y2, ["const"], [k for k in zt if k != "const"],
-                                         self.kind, self.alpha_enter, self.censor_at, sel)
-        self.pitch_ = forward_stepwise(zp, Y, ["const"], [k for k in zp if k != "const"],
-                                       "ols", self.alpha_enter, select_rows=sel)
+        self.tension_ = forward_stepwise(
+            zt,
+            y2,
+            ["const"],
+            [k for k in zt if k != "const"],
+            self.kind,
+            self.alpha_enter,
+            self.censor_at,
+            sel,
+        )
+        self.pitch_ = forward_stepwise(
+            zp,
+            Y,
+            ["const"],
+            [k for k in zp if k != "const"],
+            "ols",
+            self.alpha_enter,
+            select_rows=sel,
+        )
         return self
 
     def predict(self, s: F.Signals) -> pd.DataFrame:
@@ -299,11 +359,14 @@ class DataDrivenModel:
         zt = self.design_t_(F.second_order(F.raw_candidates(s, False)))
         zp = self.design_p_(F.second_order(F.raw_candidates(s, True)))
         ft, fp = self.tension_.fit, self.pitch_.fit
-        return pd.DataFrame({"T_s2": ft.predict(_Design.matrix(zt, ft.names)),
-                             "Y_s4": fp.predict(_Design.matrix(zp, fp.names))})
+        return pd.DataFrame(
+            {
+                "T_s2": ft.predict(_Design.matrix(zt, ft.names)),
+                "Y_s4": fp.predict(_Design.matrix(zp, fp.names)),
+            }
+        )
 
     def pitch_aic(self, sigs: list[F.Signals]) -> float:
         """AIC of the pitch prediction on these runs (as :meth:`HybridModel.pitch_aic`)."""
-        resid = np.concatenate([(s.Y - self.predict(s)["Y_s4"].to_numpy())[s.valid]
-                                for s in sigs])
+        resid = np.concatenate([(s.Y - self.predict(s)["Y_s4"].to_numpy())[s.valid] for s in sigs])
         return 2.0 * (len(self.pitch_.fit.beta) + 1) - 2.0 * _gauss_llf(resid)

@@ -113,15 +113,28 @@ class HybridSoV(Diagnostic):
     name = "hybrid-sov"
     requires = ("meas.*", "act.*")
 
-    def __init__(self, line: str | None = None, censor_at: float = 0.0,
-                 selection: str = "LR", alpha_enter: float = 0.05,
-                 denoise: str | None = "savgol", window_s: float = 0.5,
-                 alpha: float = 0.001, random_state: int | None = None,
-                 causal: bool = True, unwind: str | None = None, dancer: str | None = None,
-                 driven: str | None = None, diameter_sensor: str | None = None,
-                 unwind_encoder: str | None = None, idler_encoder: str | None = None,
-                 driven_encoder: str | None = None, load_cell: str | None = None,
-                 dancer_sensor: str | None = None, pitch_sensor: str | None = None):
+    def __init__(
+        self,
+        line: str | None = None,
+        censor_at: float = 0.0,
+        selection: str = "LR",
+        alpha_enter: float = 0.05,
+        denoise: str | None = "savgol",
+        window_s: float = 0.5,
+        alpha: float = 0.001,
+        random_state: int | None = None,
+        causal: bool = True,
+        unwind: str | None = None,
+        dancer: str | None = None,
+        driven: str | None = None,
+        diameter_sensor: str | None = None,
+        unwind_encoder: str | None = None,
+        idler_encoder: str | None = None,
+        driven_encoder: str | None = None,
+        load_cell: str | None = None,
+        dancer_sensor: str | None = None,
+        pitch_sensor: str | None = None,
+    ):
         self.line = line
         self.censor_at = censor_at
         self.selection = selection
@@ -153,51 +166,67 @@ class HybridSoV(Diagnostic):
         if self.line is None:
             pass  # the run's own line (frame_line), checked in fit
         elif not isinstance(self.line, (str, Path)):
-            raise InputError(f"hybrid-sov: line must be the path of a line file, "
-                             f"got {self.line!r}")
+            raise InputError(f"hybrid-sov: line must be the path of a line file, got {self.line!r}")
         elif not Path(self.line).exists():
             raise InputError(f"hybrid-sov: line file {self.line!s} does not exist")
         elif not Path(self.line).is_file():  # a directory, /dev/zero: there, not a file
             raise InputError(f"hybrid-sov: line file {self.line!s} is not a regular file")
         if self.selection not in ("LR", "F"):
-            raise InputError(f"hybrid-sov: selection must be 'LR' (Tobit) or 'F' (OLS), "
-                             f"got {self.selection!r}")
+            raise InputError(
+                f"hybrid-sov: selection must be 'LR' (Tobit) or 'F' (OLS), got {self.selection!r}"
+            )
         if self.denoise not in F.DENOISE:
-            raise InputError(f"hybrid-sov: denoise must be 'savgol', 'wavelet' or None, got "
-                             f"{self.denoise!r}")
+            raise InputError(
+                f"hybrid-sov: denoise must be 'savgol', 'wavelet' or None, got {self.denoise!r}"
+            )
         if not isinstance(self.causal, (bool, np.bool_)):
-            raise InputError(f"hybrid-sov: causal must be true or false, got "
-                             f"{self.causal!r}")
+            raise InputError(f"hybrid-sov: causal must be true or false, got {self.causal!r}")
         if self.causal and self.denoise == "wavelet":
-            raise InputError("hybrid-sov: denoise='wavelet' de-noises each run as a whole, "
-                             "which reads later samples: it needs causal=False (offline)")
+            raise InputError(
+                "hybrid-sov: denoise='wavelet' de-noises each run as a whole, "
+                "which reads later samples: it needs causal=False (offline)"
+            )
         self._check_alpha()
         if not 0 < self._number("alpha_enter") < 1:
-            raise InputError(f"hybrid-sov: alpha_enter must be a number in (0, 1), "
-                             f"got {self.alpha_enter!r}")
+            raise InputError(
+                f"hybrid-sov: alpha_enter must be a number in (0, 1), got {self.alpha_enter!r}"
+            )
         # a window over a minute smears every roll change; a limit beyond ±1 MN overflows
         # the Tobit likelihood and censors nothing or everything
         if not 0 < self._number("window_s") <= 60.0:
-            raise InputError(f"hybrid-sov: window_s must be a finite number > 0 s and at "
-                             f"most 60 s, got {self.window_s!r}")
+            raise InputError(
+                f"hybrid-sov: window_s must be a finite number > 0 s and at "
+                f"most 60 s, got {self.window_s!r}"
+            )
         if not abs(self._number("censor_at")) <= 1e6:
-            raise InputError(f"hybrid-sov: censor_at must be a finite number of newtons "
-                             f"within ±1e6 N, got {self.censor_at!r}")
+            raise InputError(
+                f"hybrid-sov: censor_at must be a finite number of newtons "
+                f"within ±1e6 N, got {self.censor_at!r}"
+            )
         self._check_seed()  # unused by the method, but a value must be one
         for role in ROLES:
             value = getattr(self, role)
             if value is not None and not isinstance(value, str):
                 kind = "an element" if role in ("unwind", "dancer", "driven") else "a sensor"
-                raise InputError(f"hybrid-sov: {role} must be null or the id of {kind} of "
-                                 f"the line, got {value!r}")
+                raise InputError(
+                    f"hybrid-sov: {role} must be null or the id of {kind} of "
+                    f"the line, got {value!r}"
+                )
 
     def _roles(self) -> dict:
         """The role parameters given (role -> id; None: found from the line)."""
         return {role: getattr(self, role) for role in ROLES}
 
     def _signals(self, frame):
-        return F.signals(frame, self.stages_, self.denoise, self.window_s, self.censor_at,
-                         causal=bool(self.causal), dt=self.dt_ if self.causal else None)
+        return F.signals(
+            frame,
+            self.stages_,
+            self.denoise,
+            self.window_s,
+            self.censor_at,
+            causal=bool(self.causal),
+            dt=self.dt_ if self.causal else None,
+        )
 
     def _sample_period(self, frames) -> float:
         """The training runs' common sample period [s] (the causal filter's coefficients
@@ -205,9 +234,11 @@ class HybridSoV(Diagnostic):
         periods = [float(np.median(np.diff(f["t_s"].to_numpy(float)))) for f in frames]
         for i, p in enumerate(periods, start=1):
             if not abs(p - periods[0]) <= 1e-3 * periods[0]:
-                raise InputError(f"hybrid-sov: training run {i} is sampled every {p:.6g} s "
-                                 f"and run 1 every {periods[0]:.6g} s: the causal filter "
-                                 f"needs one sample period (or causal=False)")
+                raise InputError(
+                    f"hybrid-sov: training run {i} is sampled every {p:.6g} s "
+                    f"and run 1 every {periods[0]:.6g} s: the causal filter "
+                    f"needs one sample period (or causal=False)"
+                )
         return periods[0]
 
     def _check_period(self, frame) -> None:
@@ -216,10 +247,12 @@ class HybridSoV(Diagnostic):
         statistic at a sample depends on no later time stamp."""
         p = float(np.median(np.diff(frame["t_s"].to_numpy(float))))
         if not abs(p - self.dt_) <= 1e-3 * self.dt_:
-            raise InputError(f"hybrid-sov: the run is sampled every {p:.6g} s, the model "
-                             f"was fitted on runs sampled every {self.dt_:.6g} s (the "
-                             f"causal filter is fixed by it; causal=False filters each run "
-                             f"at its own period)")
+            raise InputError(
+                f"hybrid-sov: the run is sampled every {p:.6g} s, the model "
+                f"was fitted on runs sampled every {self.dt_:.6g} s (the "
+                f"causal filter is fixed by it; causal=False filters each run "
+                f"at its own period)"
+            )
 
     def _line(self, frame):
         """The line the model is built from: ``line=`` when given, else the run's own."""
@@ -227,9 +260,11 @@ class HybridSoV(Diagnostic):
             return self.line
         line = frame_line(frame)
         if line is None:
-            raise InputError("hybrid-sov: the data carries no line (a frame made by hand, or "
-                             "a dataset without its scenario/ copy): give line=<path of the "
-                             "line file>")
+            raise InputError(
+                "hybrid-sov: the data carries no line (a frame made by hand, or "
+                "a dataset without its scenario/ copy): give line=<path of the "
+                "line file>"
+            )
         return line
 
     def _check_line(self, frame) -> None:
@@ -244,12 +279,15 @@ class HybridSoV(Diagnostic):
                 continue
             a, b = getattr(now, field.name), getattr(self.stages_, field.name)
             if a != b:
+
                 def shown(v):
                     return f"{v:.6g}" if isinstance(v, float) else repr(v)
 
-                raise InputError(f"hybrid-sov: the scored run's line differs from the one "
-                                 f"the model was fitted on in {field.name} ({shown(a)} here, "
-                                 f"{shown(b)} in the model): fit on data of this line")
+                raise InputError(
+                    f"hybrid-sov: the scored run's line differs from the one "
+                    f"the model was fitted on in {field.name} ({shown(a)} here, "
+                    f"{shown(b)} in the model): fit on data of this line"
+                )
 
     def fit(self, runs):
         frames = self._frames(runs)
@@ -261,24 +299,32 @@ class HybridSoV(Diagnostic):
             F.check_frame(f, self.stages_)
         self.dt_ = self._sample_period(frames) if self.causal else None
         for i, f in enumerate(frames, start=1):  # a dead sensor would train on zeros
-            dead = [c for c in self.columns_
-                    if c in f.columns and not np.isfinite(f[c].to_numpy(float)).any()]
+            dead = [
+                c
+                for c in self.columns_
+                if c in f.columns and not np.isfinite(f[c].to_numpy(float)).any()
+            ]
             if dead:
-                raise InputError(f"hybrid-sov: training run {i} has no finite sample of "
-                                 f"{', '.join(dead)} (a dead sensor cannot train the model)")
+                raise InputError(
+                    f"hybrid-sov: training run {i} has no finite sample of "
+                    f"{', '.join(dead)} (a dead sensor cannot train the model)"
+                )
         sigs = [self._signals(f) for f in frames]
         self.delay_s_ = sigs[0].delay_s
         self._check_censoring(sigs)
         kind = "tobit" if self.selection == "LR" else "ols"
         try:
-            self.model_ = HybridModel(self.stages_, kind, self.alpha_enter,
-                                      self.censor_at).fit(sigs)
+            self.model_ = HybridModel(self.stages_, kind, self.alpha_enter, self.censor_at).fit(
+                sigs
+            )
         except InputError as exc:  # the regressions' own words, with the plug-in's name
             if exc.message.startswith("hybrid-sov"):
                 raise
-            raise InputError(f"hybrid-sov: {exc.message} (the regressions are fitted on "
-                             f"samples thinned in time: give longer or more training "
-                             f"runs)") from None
+            raise InputError(
+                f"hybrid-sov: {exc.message} (the regressions are fitted on "
+                f"samples thinned in time: give longer or more training "
+                f"runs)"
+            ) from None
         resid = np.vstack([self._residuals(s)[0] for s in sigs])
         ok = np.all(np.isfinite(resid), axis=1)
         self.resid_mean_ = resid[ok].mean(axis=0)
@@ -295,10 +341,12 @@ class HybridSoV(Diagnostic):
         warnings and a meaningless model."""
         t2 = np.concatenate([s.T2[s.valid] for s in sigs])
         if t2.size and not (t2 > self.censor_at).any():
-            raise InputError(f"hybrid-sov: censor_at={self.censor_at:g} N censors every "
-                             f"stage-2 load-cell reading of the training runs (the largest "
-                             f"is {t2.max():.6g} N): set it to the load cell's lower range "
-                             f"limit, below the readings of a running line")
+            raise InputError(
+                f"hybrid-sov: censor_at={self.censor_at:g} N censors every "
+                f"stage-2 load-cell reading of the training runs (the largest "
+                f"is {t2.max():.6g} N): set it to the load cell's lower range "
+                f"limit, below the readings of a running line"
+            )
 
     def _residuals(self, s: F.Signals):
         pred = self.model_.predict(s)

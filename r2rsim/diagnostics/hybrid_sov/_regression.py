@@ -71,8 +71,9 @@ def _check_xy(X, y):
     if X.ndim != 2 or y.ndim != 1 or len(X) != len(y):
         raise InputError(f"regression needs X (n, p) and y (n,), got {X.shape} and {y.shape}")
     if len(y) <= X.shape[1] + 1:
-        raise InputError(f"regression needs more observations ({len(y)}) than parameters "
-                         f"({X.shape[1] + 1})")
+        raise InputError(
+            f"regression needs more observations ({len(y)}) than parameters ({X.shape[1] + 1})"
+        )
     if not (np.all(np.isfinite(X)) and np.all(np.isfinite(y))):
         raise InputError("regression data hold NaN or infinite values")
     return X, y
@@ -97,9 +98,15 @@ def fit_ols(X, y, names=None) -> LinearFit:
     cov = s2 * np.linalg.pinv(X.T @ X)
     sigma_ml = np.sqrt(rss / n)
     llf = -0.5 * n * (_LOG_2PI + 2 * np.log(sigma_ml) + 1.0)
-    return LinearFit(list(names or [f"x{i}" for i in range(p)]), beta,
-                     np.sqrt(np.clip(np.diag(cov), 0, None)), float(np.sqrt(s2)), float(llf),
-                     n, "ols")
+    return LinearFit(
+        list(names or [f"x{i}" for i in range(p)]),
+        beta,
+        np.sqrt(np.clip(np.diag(cov), 0, None)),
+        float(np.sqrt(s2)),
+        float(llf),
+        n,
+        "ols",
+    )
 
 
 class _Tobit:
@@ -114,14 +121,15 @@ class _Tobit:
         beta, s = theta[:-1], theta[-1]
         sigma = np.exp(s)
         mu = self.X @ beta
-        e = (self.y - mu) / sigma            # uncensored standardised residual
-        z = (self.c - mu) / sigma            # censored standardised limit
+        e = (self.y - mu) / sigma  # uncensored standardised residual
+        z = (self.c - mu) / sigma  # censored standardised limit
         return sigma, e, z
 
     def loglikeobs(self, theta):
         sigma, e, z = self._parts(theta)
-        return np.where(self.cens, special.log_ndtr(z),
-                        -0.5 * _LOG_2PI - np.log(sigma) - 0.5 * e**2)
+        return np.where(
+            self.cens, special.log_ndtr(z), -0.5 * _LOG_2PI - np.log(sigma) - 0.5 * e**2
+        )
 
     def loglike(self, theta):
         return float(np.sum(self.loglikeobs(theta)))
@@ -133,7 +141,7 @@ class _Tobit:
     def score(self, theta):
         sigma, e, z = self._parts(theta)
         lam = self._lam(z)
-        g_mu = np.where(self.cens, -lam, e) / sigma           # d l_i / d(x_i beta) * ...
+        g_mu = np.where(self.cens, -lam, e) / sigma  # d l_i / d(x_i beta) * ...
         g_s = np.where(self.cens, -lam * z, e**2 - 1.0)
         return np.append(self.X.T @ g_mu, g_s.sum())
 
@@ -213,21 +221,36 @@ def fit_tobit(X, y, censor_at: float = 0.0, names=None, maxiter: int = 100) -> L
     # a trust-region Newton method (scipy's trust-exact through statsmodels) with the
     # analytic score and Hessian: plain Newton can overshoot to sigma -> 0 under heavy
     # censoring
-    res = model.fit(start_params=start, method="minimize", min_method="trust-exact",
-                    maxiter=maxiter, gtol=1e-10, disp=0, warn_convergence=False)
+    res = model.fit(
+        start_params=start,
+        method="minimize",
+        min_method="trust-exact",
+        maxiter=maxiter,
+        gtol=1e-10,
+        disp=0,
+        warn_convergence=False,
+    )
     theta = np.asarray(res.params, float)
     # converged when the Newton decrement g'H^-1 g is negligible (robust to nearly
     # collinear regressors, along which the parameters may still creep)
     g = model.score(theta)
     decrement = float(-g @ np.linalg.lstsq(model.hessian(theta), g, rcond=None)[0])
     if not (res.mle_retvals.get("converged", False) or decrement < 1e-8):
-        raise RuntimeError(f"Tobit Newton iterations did not converge in {maxiter} steps "
-                           f"(Newton decrement {decrement:.3g})")
+        raise RuntimeError(
+            f"Tobit Newton iterations did not converge in {maxiter} steps "
+            f"(Newton decrement {decrement:.3g})"
+        )
     cov = np.linalg.pinv(-model.hessian(theta))
-    return LinearFit(list(names or [f"x{i}" for i in range(X.shape[1])]), theta[:-1],
-                     np.sqrt(np.clip(np.diag(cov)[:-1], 0, None)),
-                     float(np.exp(theta[-1])), float(model.loglike(theta)), len(y), "tobit",
-                     float(censor_at))
+    return LinearFit(
+        list(names or [f"x{i}" for i in range(X.shape[1])]),
+        theta[:-1],
+        np.sqrt(np.clip(np.diag(cov)[:-1], 0, None)),
+        float(np.exp(theta[-1])),
+        float(model.loglike(theta)),
+        len(y),
+        "tobit",
+        float(censor_at),
+    )
 
 
 def fit(X, y, kind: str, censor_at: float = 0.0, names=None) -> LinearFit:
@@ -272,9 +295,16 @@ def _entry_test(base: LinearFit, new: LinearFit, test: str) -> tuple[float, floa
     return float(lr), float(stats.chi2.sf(lr, 1))
 
 
-def forward_stepwise(columns: dict[str, np.ndarray], y, forced: list[str],
-                     candidates: list[str], kind: str = "ols", alpha_enter: float = 0.05,
-                     censor_at: float = 0.0, select_rows=None) -> StepwiseResult:
+def forward_stepwise(
+    columns: dict[str, np.ndarray],
+    y,
+    forced: list[str],
+    candidates: list[str],
+    kind: str = "ols",
+    alpha_enter: float = 0.05,
+    censor_at: float = 0.0,
+    select_rows=None,
+) -> StepwiseResult:
     """Forward stepwise selection (thesis §2.5.2, steps 1-3).
 
     Starting from the ``forced`` regressors, add at each step the candidate with the
@@ -318,8 +348,9 @@ def forward_stepwise(columns: dict[str, np.ndarray], y, forced: list[str],
             trials.append((*_entry_test(base, trial, test), c, trial))
         stat, p, c, trial = min(trials, key=lambda t: (t[1], -t[0]))
         entered = p < alpha_enter
-        path.append({"candidate": c, "statistic": stat, "p_value": p, "entered": entered,
-                     "test": test})
+        path.append(
+            {"candidate": c, "statistic": stat, "p_value": p, "entered": entered, "test": test}
+        )
         if not entered:
             break
         chosen.append(c)
@@ -353,6 +384,7 @@ def fit_defect_classifier(X, labels, random_state=None):
     labels = np.asarray(labels)
     if len(np.unique(labels)) < 2:
         raise InputError("the defect classifier needs at least two classes in the data")
-    clf = make_pipeline(StandardScaler(),
-                        LogisticRegression(max_iter=1000, random_state=random_state))
+    clf = make_pipeline(
+        StandardScaler(), LogisticRegression(max_iter=1000, random_state=random_state)
+    )
     return clf.fit(np.asarray(X, float), labels)

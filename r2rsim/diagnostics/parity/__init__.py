@@ -8,7 +8,18 @@ from ._model import NonlinearModel, registration_model
 from ._plugin import ParitySpaceDetector, registration_parameters
 from ._signal import savgol_derivatives, savgol_window_samples
 
-__all__ = ["PRESETS", "ROLES", "Design", "NonlinearModel", "ParitySpaceDetector",
-           "design_relation", "find_roles", "line_numbers", "registration_model",
-           "registration_parameters", "savgol_derivatives", "savgol_window_samples",
-           "sensitivity"]
+__all__ = [
+    "PRESETS",
+    "ROLES",
+    "Design",
+    "NonlinearModel",
+    "ParitySpaceDetector",
+    "design_relation",
+    "find_roles",
+    "line_numbers",
+    "registration_model",
+    "registration_parameters",
+    "savgol_derivatives",
+    "savgol_window_samples",
+    "sensitivity",
+]

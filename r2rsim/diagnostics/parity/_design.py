@@ -86,8 +86,16 @@ def _start(S, N, F, kind):
     return sol[:n]
 
 
-def design_relation(S, N, F=None, kind: str = "fault_normalised", solver: str = "slsqp",
-                    start=None, polish: bool = True, signs=None) -> Design:
+def design_relation(
+    S,
+    N,
+    F=None,
+    kind: str = "fault_normalised",
+    solver: str = "slsqp",
+    start=None,
+    polish: bool = True,
+    signs=None,
+) -> Design:
     """Min-max coefficients of one parity relation.
 
     Parameters
@@ -143,10 +151,14 @@ def _solve(S, N, F, kind, solver, start, polish) -> Design:
         eq_fun = lambda z: np.concatenate([N.T @ z[:n], F.T @ z[:n] - 1.0])  # noqa: E731
     ineq = lambda z: np.array([z[n] - z[:n] @ s @ z[:n] for s in S])  # noqa: E731
     if solver == "slsqp":
-        res = minimize(lambda z: z[n], z0, jac=lambda z: np.eye(n + 1)[n], method="SLSQP",
-                       constraints=[{"type": "eq", "fun": eq_fun},
-                                    {"type": "ineq", "fun": ineq}],
-                       options={"ftol": 1e-15, "maxiter": 500})
+        res = minimize(
+            lambda z: z[n],
+            z0,
+            jac=lambda z: np.eye(n + 1)[n],
+            method="SLSQP",
+            constraints=[{"type": "eq", "fun": eq_fun}, {"type": "ineq", "fun": ineq}],
+            options={"ftol": 1e-15, "maxiter": 500},
+        )
     elif solver == "trust-constr":
         # exact derivatives: quasi-Newton updates of linear parts warn and lose accuracy
         def ineq_jac(z):
@@ -159,9 +171,11 @@ def _solve(S, N, F, kind, solver, start, polish) -> Design:
 
         cons = [NonlinearConstraint(ineq, 0.0, np.inf, jac=ineq_jac, hess=ineq_hess)]
         if kind == "unit_norm":
+
             def eq_jac(z):
-                return np.vstack([np.hstack([N.T, np.zeros((N.shape[1], 1))]),
-                                  np.append(2 * z[:n], 0.0)])
+                return np.vstack(
+                    [np.hstack([N.T, np.zeros((N.shape[1], 1))]), np.append(2 * z[:n], 0.0)]
+                )
 
             def eq_hess(z, v):
                 H = np.zeros((n + 1, n + 1))
@@ -170,14 +184,18 @@ def _solve(S, N, F, kind, solver, start, polish) -> Design:
 
             cons.append(NonlinearConstraint(eq_fun, 0.0, 0.0, jac=eq_jac, hess=eq_hess))
         else:
-            A = np.hstack([np.hstack([N, F]).T,
-                           np.zeros((N.shape[1] + F.shape[1], 1))])
+            A = np.hstack([np.hstack([N, F]).T, np.zeros((N.shape[1] + F.shape[1], 1))])
             b = np.concatenate([np.zeros(N.shape[1]), np.ones(F.shape[1])])
             cons.append(LinearConstraint(A, b, b))
-        res = minimize(lambda z: z[n], z0, jac=lambda z: np.eye(n + 1)[n],
-                       hess=lambda z: np.zeros((n + 1, n + 1)), method="trust-constr",
-                       constraints=cons,
-                       options={"gtol": 1e-13, "xtol": 1e-15, "maxiter": 5000})
+        res = minimize(
+            lambda z: z[n],
+            z0,
+            jac=lambda z: np.eye(n + 1)[n],
+            hess=lambda z: np.zeros((n + 1, n + 1)),
+            method="trust-constr",
+            constraints=cons,
+            options={"gtol": 1e-13, "xtol": 1e-15, "maxiter": 5000},
+        )
     else:
         raise InputError(f"solver must be 'slsqp' or 'trust-constr', got {solver!r}")
     w = res.x[:n]
@@ -198,8 +216,12 @@ def _multipliers(w, S, N, F, kind, tol: float = 1e-7) -> Design:
     while True:
         Fn = F if kind == "fault_normalised" else w[:, None]
         cols = [2 * S[a] @ w for a in active]
-        A = np.vstack([np.column_stack([*cols, N, (2 if kind == "unit_norm" else 1) * Fn]),
-                       np.concatenate([np.ones(len(active)), np.zeros(N.shape[1] + Fn.shape[1])])])
+        A = np.vstack(
+            [
+                np.column_stack([*cols, N, (2 if kind == "unit_norm" else 1) * Fn]),
+                np.concatenate([np.ones(len(active)), np.zeros(N.shape[1] + Fn.shape[1])]),
+            ]
+        )
         rhs = np.zeros(A.shape[0])
         rhs[-1] = 1.0
         lam = np.linalg.lstsq(A, rhs, rcond=None)[0]
@@ -207,8 +229,8 @@ def _multipliers(w, S, N, F, kind, tol: float = 1e-7) -> Design:
         if len(active) > 1 and mu.min() < 0:
             active = np.delete(active, np.argmin(mu))
             continue
-        nu = lam[len(active): len(active) + N.shape[1]]
-        eta = lam[len(active) + N.shape[1]:]
+        nu = lam[len(active) : len(active) + N.shape[1]]
+        eta = lam[len(active) + N.shape[1] :]
         return Design(w, float(J), active, mu, nu, eta)
 
 
@@ -220,13 +242,15 @@ def _kkt(d: Design, S, N, F, kind):
     SA = S[d.active]
     M = 2 * np.tensordot(d.mu, SA, axes=1)  # 2 Σ μ_a S_a
     norm_col = F if kind == "fault_normalised" else 2 * w[:, None]
-    G = np.concatenate([
-        M @ w + N @ d.nu + norm_col @ d.eta,
-        [1.0 - d.mu.sum()],
-        [w @ s @ w - t for s in SA],
-        N.T @ w,
-        F.T @ w - 1.0 if kind == "fault_normalised" else [w @ w - 1.0],
-    ])
+    G = np.concatenate(
+        [
+            M @ w + N @ d.nu + norm_col @ d.eta,
+            [1.0 - d.mu.sum()],
+            [w @ s @ w - t for s in SA],
+            N.T @ w,
+            F.T @ w - 1.0 if kind == "fault_normalised" else [w @ w - 1.0],
+        ]
+    )
     size = n + 1 + a + q + r
     J = np.zeros((size, size))
     iw, it, imu = slice(0, n), n, slice(n + 1, n + 1 + a)
@@ -245,8 +269,14 @@ def _kkt(d: Design, S, N, F, kind):
 
 def _unpack(d: Design, z) -> Design:
     n, a, q = len(d.omega), len(d.active), len(d.nu)
-    return Design(z[:n], float(z[n]), d.active, z[n + 1:n + 1 + a],
-                  z[n + 1 + a:n + 1 + a + q], z[n + 1 + a + q:])
+    return Design(
+        z[:n],
+        float(z[n]),
+        d.active,
+        z[n + 1 : n + 1 + a],
+        z[n + 1 + a : n + 1 + a + q],
+        z[n + 1 + a + q :],
+    )
 
 
 def _pack(d: Design) -> np.ndarray:
@@ -295,7 +325,7 @@ def sensitivity(d: Design, S, N, F, dN, kind: str = "fault_normalised"):
         # ∂G/∂p_k: N enters the stationarity (N ν) and the null-space rows (Nᵀ ω)
         Gp = np.zeros(Jw.shape[0])
         Gp[:n] = dNk @ d.nu
-        Gp[n + 1 + a:n + 1 + a + N.shape[1]] = dNk.T @ d.omega
+        Gp[n + 1 + a : n + 1 + a + N.shape[1]] = dNk.T @ d.omega
         dz = -np.linalg.solve(Jw, Gp)
         dom.append(dz[:n])
         dJ.append(dz[n])

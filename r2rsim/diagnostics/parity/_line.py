@@ -23,9 +23,15 @@ ROLES = {
 #: ``preset=`` values: role ids filled in for the roles not given
 PRESETS = {
     "thesis_registration": {
-        "span": "registration", "drive": "reg_drive", "downstream": "reg_idler",
-        "pitch_sensor": "sensor_B", "load_cell": "sensor_A", "upstream_load_cell": "lc_unwind",
-        "drive_encoder": "u_drive", "downstream_encoder": "u_out"},
+        "span": "registration",
+        "drive": "reg_drive",
+        "downstream": "reg_idler",
+        "pitch_sensor": "sensor_B",
+        "load_cell": "sensor_A",
+        "upstream_load_cell": "lc_unwind",
+        "drive_encoder": "u_drive",
+        "downstream_encoder": "u_out",
+    },
 }
 
 #: column parameter -> (role, unit suffix of its column)
@@ -38,8 +44,7 @@ COLUMNS = {
 }
 
 #: the numbers of the reduced model a line gives (relaxed pitch: a nominal value)
-NUMBERS = ("web_EA_N", "span_length_m", "relaxed_pitch_m", "drive_radius_m",
-           "downstream_radius_m")
+NUMBERS = ("web_EA_N", "span_length_m", "relaxed_pitch_m", "drive_radius_m", "downstream_radius_m")
 
 #: sensor roles: (sensor type, "a ...", plural)
 _SENSOR_KIND = {
@@ -77,12 +82,16 @@ def _sensor(line, role: str, given: str | None, place: str | None, where: str, n
         return named(cands, given, "parity", role, a, plural)
     here = [s for s in cands if place is None or loc(s) == place]
     if not here:
-        raise InputError(f"parity: {role}: the line has no {a.split(' ', 1)[1]}{where}, "
-                         f"needed for {need} ({plural}: {_placed(cands, loc)}); name one "
-                         f"with {role}=<id>")
+        raise InputError(
+            f"parity: {role}: the line has no {a.split(' ', 1)[1]}{where}, "
+            f"needed for {need} ({plural}: {_placed(cands, loc)}); name one "
+            f"with {role}=<id>"
+        )
     if len(here) > 1:
-        raise InputError(f"parity: {role}: the line has {len(here)} {plural}{where} "
-                         f"({_placed(here, loc)}); name one with {role}=<id>")
+        raise InputError(
+            f"parity: {role}: the line has {len(here)} {plural}{where} "
+            f"({_placed(here, loc)}); name one with {role}=<id>"
+        )
     return here[0]
 
 
@@ -111,8 +120,14 @@ def find_roles(line, given: dict | None = None) -> dict[str, str]:
     if "span" in given:
         named(line.spans, given["span"], "parity", "span", "a span", "spans")
     span = given.get("span")
-    pitch = _sensor(line, "pitch_sensor", given.get("pitch_sensor"), span,
-                    f" on span '{span}'" if span else "", "the pitch y_B")
+    pitch = _sensor(
+        line,
+        "pitch_sensor",
+        given.get("pitch_sensor"),
+        span,
+        f" on span '{span}'" if span else "",
+        "the pitch y_B",
+    )
     roles["pitch_sensor"] = pitch.id
     roles["span"] = span = span or pitch.span
     j = spans[span]
@@ -122,23 +137,30 @@ def find_roles(line, given: dict | None = None) -> dict[str, str]:
             continue
         e = els[k]
         if getattr(e, "radius", None) is None:
-            raise InputError(f"parity: {role}: the element {side} of span '{span}' is "
-                             f"'{e.id}' ({e.type}), which has no radius; name the roller "
-                             f"with {role}=<id> (rollers: {_ids(_rollers(line))})")
+            raise InputError(
+                f"parity: {role}: the element {side} of span '{span}' is "
+                f"'{e.id}' ({e.type}), which has no radius; name the roller "
+                f"with {role}=<id> (rollers: {_ids(_rollers(line))})"
+            )
         roles[role] = e.id
     drive, down = roles["drive"], roles["downstream"]
     up = els[index[drive] - 1].id if index[drive] > 0 else None
     for role, place, where, need in (
-            ("load_cell", down, f" on the downstream roller '{down}'", "the span tension y_A"),
-            ("upstream_load_cell", up,
-             f" on the element upstream of the driven roller '{drive}' ({up or 'none'})",
-             "the upstream tension T_up"),
-            ("drive_encoder", drive, f" on the driven roller '{drive}'", "the input ω_d"),
-            ("downstream_encoder", down, f" on the downstream roller '{down}'",
-             "the input ω_o")):
+        ("load_cell", down, f" on the downstream roller '{down}'", "the span tension y_A"),
+        (
+            "upstream_load_cell",
+            up,
+            f" on the element upstream of the driven roller '{drive}' ({up or 'none'})",
+            "the upstream tension T_up",
+        ),
+        ("drive_encoder", drive, f" on the driven roller '{drive}'", "the input ω_d"),
+        ("downstream_encoder", down, f" on the downstream roller '{down}'", "the input ω_o"),
+    ):
         if place is None and role not in given:
-            raise InputError(f"parity: {role}: the driven roller '{drive}' is the line's first "
-                             f"element; name the upstream load cell with {role}=<id>")
+            raise InputError(
+                f"parity: {role}: the driven roller '{drive}' is the line's first "
+                f"element; name the upstream load cell with {role}=<id>"
+            )
         roles[role] = _sensor(line, role, given.get(role), place, where, need).id
     return {r: roles[r] for r in ROLES}
 
@@ -154,15 +176,20 @@ def line_numbers(line, roles: dict[str, str]) -> dict[str, float]:
     b = next(s for s in line.sensors if s.id == roles["pitch_sensor"])
     L0 = b.relaxed_pitch if b.relaxed_pitch is not None else b.relaxed_pitch_law.q0
     w = line.web
-    return {"web_EA_N": float(w.modulus * w.thickness * w.width),
-            "span_length_m": float(span.length), "relaxed_pitch_m": float(L0),
-            "drive_radius_m": float(els[roles["drive"]].radius),
-            "downstream_radius_m": float(els[roles["downstream"]].radius)}
+    return {
+        "web_EA_N": float(w.modulus * w.thickness * w.width),
+        "span_length_m": float(span.length),
+        "relaxed_pitch_m": float(L0),
+        "drive_radius_m": float(els[roles["drive"]].radius),
+        "downstream_radius_m": float(els[roles["downstream"]].radius),
+    }
 
 
 def role_columns(roles: dict) -> dict[str, str | None]:
     """The column of each channel parameter built from its role's sensor id (None when the
     role is unknown): ``meas.<id>.tension_N``, ``meas.<id>.pitch_m``,
     ``meas.<id>.speed_rad_s``."""
-    return {key: (f"meas.{roles[role]}.{unit}" if roles.get(role) else None)
-            for key, (role, unit) in COLUMNS.items()}
+    return {
+        key: (f"meas.{roles[role]}.{unit}" if roles.get(role) else None)
+        for key, (role, unit) in COLUMNS.items()
+    }

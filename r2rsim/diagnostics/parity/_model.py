@@ -36,9 +36,15 @@ class NonlinearModel:
     of eq. 3.7 takes O_NL as O with every input derivative set to zero.
     """
 
-    def __init__(self, f: Callable, h: Callable, n_states: int, n_inputs: int,
-                 orders: Sequence[int] | None = None,
-                 sensor_names: Sequence[str] | None = None):
+    def __init__(
+        self,
+        f: Callable,
+        h: Callable,
+        n_states: int,
+        n_inputs: int,
+        orders: Sequence[int] | None = None,
+        sensor_names: Sequence[str] | None = None,
+    ):
         self.n_states, self.n_inputs = int(n_states), int(n_inputs)
         self.x = sp.symbols(f"x0:{self.n_states}", real=True)
         self.u = sp.symbols(f"u0:{self.n_inputs}", real=True)
@@ -48,8 +54,9 @@ class NonlinearModel:
             raise InputError(f"f returns {len(f_expr)} expressions for {self.n_states} states")
         self.f_expr, self.h_expr = f_expr, h_expr
         n_sensors = len(h_expr)
-        self.orders = tuple(int(m) for m in (orders if orders is not None
-                                             else [self.n_states] * n_sensors))
+        self.orders = tuple(
+            int(m) for m in (orders if orders is not None else [self.n_states] * n_sensors)
+        )
         if len(self.orders) != n_sensors or min(self.orders) < 0:
             raise InputError(f"orders must give one m_j >= 0 per sensor ({n_sensors})")
         self.sensor_names = tuple(sensor_names or [f"y{j}" for j in range(n_sensors)])
@@ -63,12 +70,16 @@ class NonlinearModel:
     # ---- symbolic --------------------------------------------------------------------------
     def lie(self, expr):
         """d/dt of ``expr`` along ẋ = f: (∂/∂x) f + Σ (∂/∂u^(k)) u^(k+1)."""
-        out = sum((sp.diff(expr, xi) * fi for xi, fi in zip(self.x, self.f_expr, strict=False)),
-                  sp.Integer(0))
+        out = sum(
+            (sp.diff(expr, xi) * fi for xi, fi in zip(self.x, self.f_expr, strict=False)),
+            sp.Integer(0),
+        )
         jets = [self.u, *self.du]
         for k in range(len(jets) - 1):
-            out += sum((sp.diff(expr, a) * b for a, b in zip(jets[k], jets[k + 1], strict=False)),
-                       sp.Integer(0))
+            out += sum(
+                (sp.diff(expr, a) * b for a, b in zip(jets[k], jets[k + 1], strict=False)),
+                sp.Integer(0),
+            )
         return out
 
     def _lie_stack(self):
@@ -85,8 +96,11 @@ class NonlinearModel:
         self.O_expr = self.stack
         self.O_nl_expr = self.stack.subs(zero)
         self.EU_expr = sp.simplify(self.O_expr - self.O_nl_expr)
-        self.E_expr = self.O_expr.jacobian(self.du[0]).subs(zero) if self.du else \
-            sp.zeros(len(self.stack), self.n_inputs)
+        self.E_expr = (
+            self.O_expr.jacobian(self.du[0]).subs(zero)
+            if self.du
+            else sp.zeros(len(self.stack), self.n_inputs)
+        )
         self.grad_x_expr = self.O_nl_expr.jacobian(self.x)
         p = [*self.x, *self.u]
         # ∂(∇_x O_NL)/∂p, one n x N matrix per p_k (KKT sensitivity, eqs. 3.18-3.22)
@@ -120,8 +134,12 @@ class NonlinearModel:
         du = list(du) if du is not None else [np.zeros(self.n_inputs)] * len(self.du)
         x, u = _cols(x), _cols(u)
         T = np.broadcast_shapes(*(np.shape(a) for a in (*x, *u)))
-        return np.stack([np.broadcast_to(np.asarray(v, float), T)
-                         for v in self._EU(x, u, *[_cols(d) for d in du])])
+        return np.stack(
+            [
+                np.broadcast_to(np.asarray(v, float), T)
+                for v in self._EU(x, u, *[_cols(d) for d in du])
+            ]
+        )
 
     def input_matrix(self, x, u) -> np.ndarray:
         """E(x, u) = ∂O/∂u̇ (n x n_inputs) at one point (eq. 3.13); E·u̇ is the input part
@@ -184,8 +202,9 @@ def _stack(values) -> np.ndarray:
     return np.stack([np.broadcast_to(a, shape) for a in arrs])
 
 
-def registration_model(EA: float, span_length: float, relaxed_pitch: float,
-                       drive_radius: float, out_radius: float) -> NonlinearModel:
+def registration_model(
+    EA: float, span_length: float, relaxed_pitch: float, drive_radius: float, out_radius: float
+) -> NonlinearModel:
     """The reduced registration-span model of thesis §3.5 (eq. 3.24) on r2rsim's span law.
 
     x = T, the registration-span tension [N]; u = [ω_d, ω_o, T_up]: the driven roller's
@@ -198,6 +217,7 @@ def registration_model(EA: float, span_length: float, relaxed_pitch: float,
     Sensors: y_A = x (load cell A), y_B = (x/EA + 1)·L0 (pitch length, Hooke's law with the
     relaxed pitch L0). Orders m_A = m_B = 1, so n = 4 and there are n − N = 3 relations.
     """
+
     def f(x, u):
         v1, v2 = drive_radius * u[0], out_radius * u[1]
         return [(EA + x[0]) / span_length * (v2 - v1 * (EA + x[0]) / (EA + u[2]))]

@@ -28,8 +28,9 @@ def _cached_model(EA, L, L0, Rd, Ro) -> NonlinearModel:
     return registration_model(EA, L, L0, Rd, Ro)
 
 
-def registration_parameters(line, *, span: str, drive: str, downstream: str,
-                            pitch_sensor: str) -> dict[str, float]:
+def registration_parameters(
+    line, *, span: str, drive: str, downstream: str, pitch_sensor: str
+) -> dict[str, float]:
     """EA [N], span length [m], relaxed pitch [m] and the two roller radii [m] of the
     reduced registration model, read from a line file (or a loaded ``Line``) through the
     ids of its span, driven and downstream rollers and pitch-length sensor (no default: see
@@ -41,18 +42,22 @@ def registration_parameters(line, *, span: str, drive: str, downstream: str,
     from ...schema.loader import load_line
 
     ln = load_line(line) if not hasattr(line, "elements") else line
-    roles = {"span": span, "drive": drive, "downstream": downstream,
-             "pitch_sensor": pitch_sensor}
+    roles = {"span": span, "drive": drive, "downstream": downstream, "pitch_sensor": pitch_sensor}
     for key, value in roles.items():
         if not isinstance(value, str):
             raise InputError(f"parity: {key} must be an id of the line, got {value!r}")
     spans = {s.id: s for s in ln.spans}
     if span not in spans:
-        raise InputError(f"parity: span '{span}' is not a span of the line "
-                         f"(spans: {', '.join(map(str, spans))})")
+        raise InputError(
+            f"parity: span '{span}' is not a span of the line (spans: {', '.join(map(str, spans))})"
+        )
     # the sensor roles do not matter for the numbers: any of each kind will do
-    for role, typ in (("load_cell", "load_cell"), ("upstream_load_cell", "load_cell"),
-                      ("drive_encoder", "encoder"), ("downstream_encoder", "encoder")):
+    for role, typ in (
+        ("load_cell", "load_cell"),
+        ("upstream_load_cell", "load_cell"),
+        ("drive_encoder", "encoder"),
+        ("downstream_encoder", "encoder"),
+    ):
         roles[role] = next((x.id for x in ln.sensors if x.type == typ), None)
         if roles[role] is None:
             raise InputError(f"parity: the line has no {typ.replace('_', ' ')}")
@@ -67,8 +72,11 @@ def registration_parameters(line, *, span: str, drive: str, downstream: str,
 #: span it accepts (1 mm) to the longest without a warning (100 m); radii from a 1 mm rod to a
 #: 10 m roll.
 _PHYSICAL_RANGES = {
-    "web_EA_N": (P.MODULUS_RANGE[0] * P.THICKNESS_RANGE[0] * P.WIDTH_RANGE[0],
-                 P.MODULUS_RANGE[1] * P.THICKNESS_RANGE[1] * P.WIDTH_RANGE[1], "N"),
+    "web_EA_N": (
+        P.MODULUS_RANGE[0] * P.THICKNESS_RANGE[0] * P.WIDTH_RANGE[0],
+        P.MODULUS_RANGE[1] * P.THICKNESS_RANGE[1] * P.WIDTH_RANGE[1],
+        "N",
+    ),
     "span_length_m": (P.SPAN_MIN, P.SPAN_RANGE[1], "m"),
     "relaxed_pitch_m": (P.SPAN_MIN, P.SPAN_RANGE[1], "m"),
     "drive_radius_m": (1e-3, 10.0, "m"),
@@ -203,23 +211,39 @@ downstream_encoder : str, optional
     name = "parity"
     requires = ("meas.*",)
 
-    def __init__(self, line: str | None = None, preset: str | None = None,
-                 span: str | None = None, drive: str | None = None,
-                 downstream: str | None = None, pitch_sensor: str | None = None,
-                 load_cell: str | None = None, upstream_load_cell: str | None = None,
-                 drive_encoder: str | None = None, downstream_encoder: str | None = None,
-                 web_EA_N: float | None = None, span_length_m: float | None = None,
-                 relaxed_pitch_m: float | None = None, drive_radius_m: float | None = None,
-                 downstream_radius_m: float | None = None,
-                 sensor_a: str | None = None, sensor_b: str | None = None,
-                 drive_speed: str | None = None, downstream_speed: str | None = None,
-                 upstream_tension: str | None = None,
-                 design: str = "fault_normalised", mode: str = "model",
-                 savgol_window_s: float = 3.0, savgol_order: int = 2, causal: bool = True,
-                 time_base: str = "travel",
-                 modulus_spread: float = 0.02, pitch_spread_m: float = 5e-6,
-                 signature_z: float = 3.0,
-                 alpha: float = 0.01):
+    def __init__(
+        self,
+        line: str | None = None,
+        preset: str | None = None,
+        span: str | None = None,
+        drive: str | None = None,
+        downstream: str | None = None,
+        pitch_sensor: str | None = None,
+        load_cell: str | None = None,
+        upstream_load_cell: str | None = None,
+        drive_encoder: str | None = None,
+        downstream_encoder: str | None = None,
+        web_EA_N: float | None = None,
+        span_length_m: float | None = None,
+        relaxed_pitch_m: float | None = None,
+        drive_radius_m: float | None = None,
+        downstream_radius_m: float | None = None,
+        sensor_a: str | None = None,
+        sensor_b: str | None = None,
+        drive_speed: str | None = None,
+        downstream_speed: str | None = None,
+        upstream_tension: str | None = None,
+        design: str = "fault_normalised",
+        mode: str = "model",
+        savgol_window_s: float = 3.0,
+        savgol_order: int = 2,
+        causal: bool = True,
+        time_base: str = "travel",
+        modulus_spread: float = 0.02,
+        pitch_spread_m: float = 5e-6,
+        signature_z: float = 3.0,
+        alpha: float = 0.01,
+    ):
         self.line = line
         self.preset = preset
         self.span = span
@@ -261,50 +285,69 @@ downstream_encoder : str, optional
 
     def _validate(self):
         if self.design not in KINDS:
-            raise InputError(f"parity: design must be one of {', '.join(KINDS)}, "
-                             f"got {self.design!r}")
+            raise InputError(
+                f"parity: design must be one of {', '.join(KINDS)}, got {self.design!r}"
+            )
         if self.time_base not in TIME_BASES:
-            raise InputError(f"parity: time_base must be one of {', '.join(TIME_BASES)}, "
-                             f"got {self.time_base!r}")
+            raise InputError(
+                f"parity: time_base must be one of {', '.join(TIME_BASES)}, got {self.time_base!r}"
+            )
         if self.mode not in MODES:
             raise InputError(f"parity: mode must be one of {', '.join(MODES)}, got {self.mode!r}")
         if self.line is not None and not isinstance(self.line, (str, Path)):
-            raise InputError(f"parity: line must be the path of a line file, "
-                             f"got {self.line!r}")
+            raise InputError(f"parity: line must be the path of a line file, got {self.line!r}")
         if self.preset is not None and self.preset not in PRESETS:
-            raise InputError(f"parity: preset must be one of {', '.join(PRESETS)} or null, "
-                             f"got {self.preset!r}")
+            raise InputError(
+                f"parity: preset must be one of {', '.join(PRESETS)} or null, got {self.preset!r}"
+            )
         for key in ROLES:
             if getattr(self, key) is not None and not isinstance(getattr(self, key), str):
-                raise InputError(f"parity: {key} must be an id of the line (a string) or "
-                                 f"null, got {getattr(self, key)!r}")
+                raise InputError(
+                    f"parity: {key} must be an id of the line (a string) or "
+                    f"null, got {getattr(self, key)!r}"
+                )
         for key in COLUMNS:
             if getattr(self, key) is not None and not isinstance(getattr(self, key), str):
-                raise InputError(f"parity: {key} must be a column name (a string) or null, "
-                                 f"got {getattr(self, key)!r}")
+                raise InputError(
+                    f"parity: {key} must be a column name (a string) or null, "
+                    f"got {getattr(self, key)!r}"
+                )
         if not isinstance(self.causal, bool):
             raise InputError(f"parity: causal must be true or false, got {self.causal!r}")
-        for key in ("web_EA_N", "span_length_m", "drive_radius_m", "downstream_radius_m",
-                    "savgol_window_s", "signature_z"):
+        for key in (
+            "web_EA_N",
+            "span_length_m",
+            "drive_radius_m",
+            "downstream_radius_m",
+            "savgol_window_s",
+            "signature_z",
+        ):
             if getattr(self, key) is None and key in NUMBERS:
                 continue  # read from the run's line
             if not (np.isfinite(v := self._number(key)) and v > 0):
-                raise InputError(f"parity: {key} must be a positive number, "
-                                 f"got {getattr(self, key)!r}")
+                raise InputError(
+                    f"parity: {key} must be a positive number, got {getattr(self, key)!r}"
+                )
         for key, (low, high, unit) in _PHYSICAL_RANGES.items():
             if getattr(self, key) is None:
                 continue  # read from the line (the relaxed pitch: calibrated)
             if not low <= self._number(key) <= high:
-                raise InputError(f"parity: {key} must be from {low:g} to {high:g} {unit} "
-                                 f"or null, got {getattr(self, key)!r}")
+                raise InputError(
+                    f"parity: {key} must be from {low:g} to {high:g} {unit} "
+                    f"or null, got {getattr(self, key)!r}"
+                )
         # upper limits: beyond them the design corners or the windows mean nothing, and
         # a fit would overflow or allocate without bound
-        for key, low, high, unit in (("modulus_spread", 0.0, 0.5, ""),
-                                     ("pitch_spread_m", 0.0, 1e-3, " m"),
-                                     ("savgol_window_s", 0.0, 600.0, " s")):
+        for key, low, high, unit in (
+            ("modulus_spread", 0.0, 0.5, ""),
+            ("pitch_spread_m", 0.0, 1e-3, " m"),
+            ("savgol_window_s", 0.0, 600.0, " s"),
+        ):
             if not low <= self._number(key) <= high:
-                raise InputError(f"parity: {key} must be from {low:g} to {high:g}{unit}, "
-                                 f"got {getattr(self, key)!r}")
+                raise InputError(
+                    f"parity: {key} must be from {low:g} to {high:g}{unit}, "
+                    f"got {getattr(self, key)!r}"
+                )
         self._check_int("savgol_order", 2, 10)
         self._check_alpha()
 
@@ -320,6 +363,7 @@ downstream_encoder : str, optional
         if self.line is None:
             return None
         from ...schema.loader import load_line
+
         try:
             return load_line(Path(self.line))
         except InputError as exc:
@@ -347,8 +391,14 @@ downstream_encoder : str, optional
             roles = find_roles(lines[0], given)
             numbers = line_numbers(lines[0], roles)
             for ln in lines[1:]:
-                self._line_check(ln, roles, numbers, "a training run's line",
-                                 "fit on runs of one line", explicit_ok=True)
+                self._line_check(
+                    ln,
+                    roles,
+                    numbers,
+                    "a training run's line",
+                    "fit on runs of one line",
+                    explicit_ok=True,
+                )
         self.roles_ = roles
         self.line_numbers_ = numbers
         self.physical_, self.sources_ = {}, {}
@@ -363,8 +413,9 @@ downstream_encoder : str, optional
             else:
                 missing.append(key)
         built = role_columns(roles)
-        self.columns_ = {k: getattr(self, k) if getattr(self, k) is not None else built[k]
-                         for k in COLUMNS}
+        self.columns_ = {
+            k: getattr(self, k) if getattr(self, k) is not None else built[k] for k in COLUMNS
+        }
         missing += [k for k, v in self.columns_.items() if v is None]
         if missing:
             raise InputError(
@@ -372,37 +423,45 @@ downstream_encoder : str, optional
                 f"{', '.join(missing)}: give line=<line file>, or preset=thesis_registration "
                 f"with web_EA_N, span_length_m, drive_radius_m and downstream_radius_m, or "
                 f"those numbers with the columns sensor_a, sensor_b, drive_speed, "
-                f"downstream_speed and upstream_tension")
+                f"downstream_speed and upstream_tension"
+            )
         return self
 
-    def _line_check(self, line, roles, numbers, what: str, advice: str,
-                    explicit_ok: bool = False) -> dict:
+    def _line_check(
+        self, line, roles, numbers, what: str, advice: str, explicit_ok: bool = False
+    ) -> dict:
         """The numbers of ``line`` through ``roles``, compared with ``numbers``: a missing
         role or a different E·A, L or radius is refused (warned instead for a number given
         as a parameter), a different relaxed pitch warned. Returns the line's numbers."""
         try:
             mine = line_numbers(line, roles)
         except InputError as exc:
-            raise InputError(f"parity: {what} does not have the fitted roles: "
-                             f"{exc.message.removeprefix('parity: ')}: {advice}") from None
-        where = {"span_length_m": f"span '{roles['span']}'",
-                 "drive_radius_m": f"drive '{roles['drive']}'",
-                 "downstream_radius_m": f"downstream '{roles['downstream']}'",
-                 "relaxed_pitch_m": f"pitch_sensor '{roles['pitch_sensor']}'",
-                 "web_EA_N": "the web's modulus x thickness x width"}
+            raise InputError(
+                f"parity: {what} does not have the fitted roles: "
+                f"{exc.message.removeprefix('parity: ')}: {advice}"
+            ) from None
+        where = {
+            "span_length_m": f"span '{roles['span']}'",
+            "drive_radius_m": f"drive '{roles['drive']}'",
+            "downstream_radius_m": f"downstream '{roles['downstream']}'",
+            "relaxed_pitch_m": f"pitch_sensor '{roles['pitch_sensor']}'",
+            "web_EA_N": "the web's modulus x thickness x width",
+        }
         for key in NUMBERS:
             a, b = mine[key], numbers[key]
             if abs(a - b) <= 1e-9 * max(abs(a), abs(b)):
                 continue
             unit = _PHYSICAL_RANGES[key][2]
-            msg = (f"parity: {what} has {key} {a:g} {unit} where the model was fitted with "
-                   f"{b:g} {unit} ({where[key]})")
+            msg = (
+                f"parity: {what} has {key} {a:g} {unit} where the model was fitted with "
+                f"{b:g} {unit} ({where[key]})"
+            )
             if key == "relaxed_pitch_m":
-                warnings.warn(f"{msg}: the relaxed pitch is calibrated on the training runs",
-                              stacklevel=3)
+                warnings.warn(
+                    f"{msg}: the relaxed pitch is calibrated on the training runs", stacklevel=3
+                )
             elif getattr(self, key) is not None and not explicit_ok:
-                warnings.warn(f"{msg}; {key} was given as a parameter, which is used",
-                              stacklevel=3)
+                warnings.warn(f"{msg}; {key} was given as a parameter, which is used", stacklevel=3)
             elif getattr(self, key) is None:
                 raise InputError(f"{msg}: {advice}")
         return mine
@@ -415,39 +474,57 @@ downstream_encoder : str, optional
         f = self._frames(run)[0]
         line = frame_line(f)
         if line is not None and getattr(self, "line_numbers_", None) is not None:
-            self._line_check(line, self.roles_, self.line_numbers_, "the scored run's line",
-                             "fit on data of this line")
+            self._line_check(
+                line,
+                self.roles_,
+                self.line_numbers_,
+                "the scored run's line",
+                "fit on data of this line",
+            )
         return f
 
     def required_columns(self, frame: pd.DataFrame) -> list[str]:
         super().required_columns(frame)
         # before a fit: the columns of the roles in this frame's line
-        cols = self.channels if getattr(self, "columns_", None) else \
-            copy.copy(self).configure([frame]).channels
+        cols = (
+            self.channels
+            if getattr(self, "columns_", None)
+            else copy.copy(self).configure([frame]).channels
+        )
         missing = [c for c in cols if c not in frame.columns]
         if missing:
-            raise InputError(f"parity: the data has no column matching {', '.join(missing)} "
-                             f"(set sensor_a, sensor_b, drive_speed, downstream_speed, "
-                             f"upstream_tension)")
+            raise InputError(
+                f"parity: the data has no column matching {', '.join(missing)} "
+                f"(set sensor_a, sensor_b, drive_speed, downstream_speed, "
+                f"upstream_tension)"
+            )
         X = frame[cols].to_numpy(float)
         dead = [c for j, c in enumerate(cols) if not np.isfinite(X[:, j]).any()]
         if dead:
-            raise InputError(f"parity: {', '.join(dead)} has no finite sample in this run (a "
-                             f"dead sensor: the relations need every channel)")
+            raise InputError(
+                f"parity: {', '.join(dead)} has no finite sample in this run (a "
+                f"dead sensor: the relations need every channel)"
+            )
         return list(cols)
 
     def _check_alive(self, X: np.ndarray) -> None:
         """Every channel (a column of X) has a finite sample: the relations need them all."""
         dead = [c for j, c in enumerate(self.channels) if not np.isfinite(X[:, j]).any()]
         if dead:
-            raise InputError(f"parity: {', '.join(dead)} has no finite sample in this run (a "
-                             f"dead sensor: the relations need every channel)")
+            raise InputError(
+                f"parity: {', '.join(dead)} has no finite sample in this run (a "
+                f"dead sensor: the relations need every channel)"
+            )
 
     def _model(self, EA=None, L0=None) -> NonlinearModel:
         ph = self.physical_
-        return _cached_model(float(EA or ph["web_EA_N"]), float(ph["span_length_m"]),
-                             float(L0 or ph["relaxed_pitch_m"]), float(ph["drive_radius_m"]),
-                             float(ph["downstream_radius_m"]))
+        return _cached_model(
+            float(EA or ph["web_EA_N"]),
+            float(ph["span_length_m"]),
+            float(L0 or ph["relaxed_pitch_m"]),
+            float(ph["drive_radius_m"]),
+            float(ph["downstream_radius_m"]),
+        )
 
     def reduced_model(self, frames) -> tuple[NonlinearModel, float, float]:
         """The reduced registration model with its EA [N] and L0 [m]; :meth:`configure`s the
@@ -459,8 +536,9 @@ downstream_encoder : str, optional
         EA = float(self.physical_["web_EA_N"])
         if self.physical_["relaxed_pitch_m"] is None:
             a, b = self.columns_["sensor_a"], self.columns_["sensor_b"]
-            ratio = np.concatenate([f[b].to_numpy(float) / (1 + f[a].to_numpy(float) / EA)
-                                    for f in frames])
+            ratio = np.concatenate(
+                [f[b].to_numpy(float) / (1 + f[a].to_numpy(float) / EA) for f in frames]
+            )
             self.physical_["relaxed_pitch_m"] = float(np.nanmedian(ratio))
         self.model_ = self._model()
         return self.model_, EA, float(self.physical_["relaxed_pitch_m"])
@@ -493,15 +571,22 @@ downstream_encoder : str, optional
         try:
             D, delay = savgol_derivatives(X, dt, w, self.savgol_order, 1, self.causal)
         except InputError as exc:  # a run shorter than the window
-            raise InputError(f"parity: {exc.message} (savgol_window_s = "
-                             f"{self.savgol_window_s!r} s)") from None
+            raise InputError(
+                f"parity: {exc.message} (savgol_window_s = {self.savgol_window_s!r} s)"
+            ) from None
         (yA, yB, wd, wo, tu), (dA, dB, dwd, dwo, dtu) = D[0].T, D[1].T
         # a drop-out in the raw sample k marks sample k (not the instant it describes in causal
         # mode): the interpolation bridging it reads the next reading, which is not there yet
         # at k; NaN estimates (the causal filter's first window - 1 samples) have no residual
         bad = ~np.all(np.isfinite(X), axis=1) | ~np.isfinite(D).all(axis=(0, 2))
-        return {"t": t, "Y": np.vstack([yA, dA, yB, dB]), "u": np.vstack([wd, wo, tu]),
-                "du": np.vstack([dwd, dwo, dtu]), "bad": bad, "delay": delay}
+        return {
+            "t": t,
+            "Y": np.vstack([yA, dA, yB, dB]),
+            "u": np.vstack([wd, wo, tu]),
+            "du": np.vstack([dwd, dwo, dtu]),
+            "bad": bad,
+            "delay": delay,
+        }
 
     def _xhat(self, s: dict, EA: float, L0: float) -> np.ndarray:
         """The state from both static rows (their mean): any estimate near x will do, since
@@ -525,8 +610,9 @@ downstream_encoder : str, optional
         # rows in newton-equivalents (sensor B through ∂h_B/∂x = L0/EA)
         self.scale_ = np.array([1.0, 1.0, L0 / EA, L0 / EA])
         self.row_order_ = np.array([k for _, k in model.rows])
-        P = np.hstack([np.vstack([self._xhat(s, EA, L0)[None], s["u"]])[:, ~s["bad"]]
-                       for s in sigs])
+        P = np.hstack(
+            [np.vstack([self._xhat(s, EA, L0)[None], s["u"]])[:, ~s["bad"]] for s in sigs]
+        )
         self.design_point_ = P.mean(axis=1)
         self.design_speed_m_s_ = float(self._speed(self.design_point_[2]))
         self.delay_s_ = float(sigs[0]["delay"])
@@ -546,13 +632,17 @@ downstream_encoder : str, optional
     def _scenario_matrices(self, sigs, EA, L0) -> np.ndarray:
         """Mean-square model errors (scaled) per design scenario: EA·(1 ± spread) ×
         L0 ± spread, and the nominal model."""
-        corners = [(EA, L0)] + [(EA * (1 + a * self.modulus_spread), L0 + b * self.pitch_spread_m)
-                                for a in (-1, 1) for b in (-1, 1)]
+        corners = [(EA, L0)] + [
+            (EA * (1 + a * self.modulus_spread), L0 + b * self.pitch_spread_m)
+            for a in (-1, 1)
+            for b in (-1, 1)
+        ]
         S = []
         for ea, l0 in corners:
             m = self._model(ea, l0)
-            E = np.hstack([(self._errors(s, m, ea, l0) / self._rowscale(s))[:, ~s["bad"]]
-                           for s in sigs])
+            E = np.hstack(
+                [(self._errors(s, m, ea, l0) / self._rowscale(s))[:, ~s["bad"]] for s in sigs]
+            )
             S.append(E @ E.T / E.shape[1])
         return np.array(S)
 
@@ -595,8 +685,9 @@ downstream_encoder : str, optional
         model = self.model_
         N, _ = self._N(p)
         single = model.sensor_relations(p[:1], p[1:], scale=self._rowscale_at(p))[::-1]
-        d = design_relation(self.S_, N, self._faults(), self.design,
-                            signs=getattr(self, "fault_signs_", None))
+        d = design_relation(
+            self.S_, N, self._faults(), self.design, signs=getattr(self, "fault_signs_", None)
+        )
         if not hasattr(self, "fault_signs_"):
             self.fault_signs_ = d.signs  # the design point's; :meth:`sensitivity` keeps them
         return np.vstack([d.omega, *single])
@@ -605,10 +696,15 @@ downstream_encoder : str, optional
         """Which relation uses which sensor (True: a fault on that sensor moves it)."""
         sensor_of_row = self.model_.sensor_of_row()
         W = np.abs(self.omega_)
-        tab = np.array([[W[k, sensor_of_row == j].max() > 1e-9 * W[k].max()
-                         for k in range(len(W))] for j in range(2)])
-        return pd.DataFrame(tab, index=self.channels[:2],
-                            columns=[f"r{k + 1}" for k in range(len(W))])
+        tab = np.array(
+            [
+                [W[k, sensor_of_row == j].max() > 1e-9 * W[k].max() for k in range(len(W))]
+                for j in range(2)
+            ]
+        )
+        return pd.DataFrame(
+            tab, index=self.channels[:2], columns=[f"r{k + 1}" for k in range(len(W))]
+        )
 
     # ---- residuals -----------------------------------------------------------------------------
     def _residuals(self, s, center: bool = True) -> np.ndarray:
@@ -652,8 +748,7 @@ downstream_encoder : str, optional
         out = pd.DataFrame(R.T, index=f.index, columns=[f"r{k + 1}" for k in range(len(R))])
         with np.errstate(invalid="ignore"):
             z = np.abs(R) / self.sigma_[:, None]
-        stat = np.where(np.all(np.isfinite(z), axis=0), np.max(np.nan_to_num(z), axis=0),
-                        np.nan)
+        stat = np.where(np.all(np.isfinite(z), axis=0), np.max(np.nan_to_num(z), axis=0), np.nan)
         out.insert(0, "statistic", stat)
         return out
 
@@ -666,8 +761,7 @@ downstream_encoder : str, optional
         mirror image (thesis Fig. 3-4). NaN where the statistic is NaN.
         """
         cols = list(self.signature_.columns)
-        z = np.minimum(np.abs(scores[cols].to_numpy(float)) / self.sigma_,
-                       3 * self.signature_z)
+        z = np.minimum(np.abs(scores[cols].to_numpy(float)) / self.sigma_, 3 * self.signature_z)
         sig = self.signature_.to_numpy(float)
         evidence = z @ sig.T - z @ (1 - sig).T  # (T, sensors)
         order = np.argsort(-evidence, axis=1)
@@ -696,18 +790,23 @@ downstream_encoder : str, optional
             ``domega<i>/d<p>``.
         """
         self._check_fitted()
-        if isinstance(step_s, bool) or not isinstance(step_s, (int, float, np.number)) \
-                or not 1e-3 <= step_s <= 1e6:
-            raise InputError(f"parity: step_s must be a number from 0.001 to 1e+06 s, "
-                             f"got {step_s!r}")
+        if (
+            isinstance(step_s, bool)
+            or not isinstance(step_s, (int, float, np.number))
+            or not 1e-3 <= step_s <= 1e6
+        ):
+            raise InputError(
+                f"parity: step_s must be a number from 0.001 to 1e+06 s, got {step_s!r}"
+            )
         s = self._signals(self._scored_frame(run))
         tk, pk = self._knots(s, step_s)
         names = ["x", "omega_d", "omega_o", "T_up"]
         rows, start = [], self.omega_[0]
         for t, p in zip(tk, pk, strict=False):
             N, dN = self._N(p)
-            d = design_relation(self.S_, N, self._faults(), self.design, start=start,
-                                signs=self.fault_signs_)
+            d = design_relation(
+                self.S_, N, self._faults(), self.design, start=start, signs=self.fault_signs_
+            )
             start = d.omega
             dJ, dom, _ = sensitivity(d, self.S_, N, self._faults(), dN, self.design)
             row = {"t_s": t, **{f"p.{n}": v for n, v in zip(names, p, strict=False)}, "J": d.J}
@@ -716,4 +815,3 @@ downstream_encoder : str, optional
                 row.update({f"domega{i + 1}/d{n}": dom[k, i] for k, n in enumerate(names)})
             rows.append(row)
         return pd.DataFrame(rows)
-

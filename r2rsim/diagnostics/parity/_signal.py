@@ -18,8 +18,9 @@ def savgol_window_samples(window_s: float, dt: float, order: int) -> int:
     return max(w, order + 2 + (order + 2 + 1) % 2)
 
 
-def savgol_derivatives(X, dt: float, window: int, order: int, max_deriv: int = 1,
-                       causal: bool = False):
+def savgol_derivatives(
+    X, dt: float, window: int, order: int, max_deriv: int = 1, causal: bool = False
+):
     """Smoothed channels and their time derivatives.
 
     Parameters
@@ -87,8 +88,8 @@ def savgol_derivatives(X, dt: float, window: int, order: int, max_deriv: int = 1
         # its first `half` values come from a polynomial fitted to the whole first window,
         # which would let samples up to window - 1 into the estimates at samples half..window-2
         full = savgol_filter(X, window, order, deriv=d, delta=dt, axis=0, mode="interp")
-        out[d, half:] = full[:T - half]
-        out[d, :window - 1] = np.nan
+        out[d, half:] = full[: T - half]
+        out[d, : window - 1] = np.nan
         out[d][missing] = np.nan
     return out, half * dt
 
