@@ -1,5 +1,8 @@
 """Integrate a compiled line: segments between programme breakpoints, chunks of dense output,
-events detected on the sample grid and located exactly with CVODE root-finding.
+events detected on the solver's steps and located exactly with root-finding.
+
+The integrators themselves are behind :class:`r2rsim.solve.backends.SolverBackend` (one
+module each in :mod:`r2rsim.solve.backends`); this module is the event loop that drives them.
 
 Why events this way: scikit-sundae calls a Python event function after every step, which
 doubles the cost of a BDF2 run (solver.md §4.5). Instead the event functions are evaluated by
@@ -11,8 +14,6 @@ than the sample period) is not seen; the record rate sets the event resolution.
 
 from __future__ import annotations
 
-import contextlib
-import io
 import math
 import time as _time
 import warnings
@@ -26,13 +27,11 @@ from ..compile.layout import EV_BREAK, EV_CAPSTAN, EV_EMPTY, EV_SLACK
 from ..errors import InputError
 from ..limits import run_size_problem
 from ..schema.scenario import SolverOptions
+from .backends import Root, SolverBackend, backend_class, make_backend
 from .compilewatch import compile_seconds
 from .discrete import MODE_EVENTS, DiscreteLogic, Event
 
 TERMINAL = {EV_BREAK, EV_EMPTY}
-NONFINITE = "the state is not finite (nan or inf)"
-#: status of a compiled integration that raised an ArithmeticError (not a radau status)
-_ARITHMETIC = -1
 PHYSICAL = {EV_SLACK, EV_BREAK, EV_CAPSTAN, EV_EMPTY}
 
 
@@ -42,11 +41,7 @@ SolverSettings = SolverOptions
 
 def describe_settings(s: SolverOptions) -> str:
     """One line naming the integrator and its settings (for logs and runs.parquet)."""
-    if s.backend == "cvode":
-        return f"CVODE BDF max_order={s.max_order} band analytic-jac rtol={s.rtol:g}"
-    if s.backend == "radau5":
-        return f"r2rsim Radau IIA order 5 (compiled) band analytic-jac rtol={s.rtol:g}"
-    return f"scipy Radau sparse analytic-jac rtol={s.rtol:g}"
+    return backend_class(s.backend).describe(s)
 
 
 @dataclass
@@ -102,333 +97,6 @@ class SimulationResult:
 
 
 ChunkCallback = Callable[[np.ndarray, np.ndarray, np.ndarray], None]
-
-
-class _CVODEBackend:
-    @staticmethod
-    def locates_events(hot: bool) -> bool:
-        """Whether solve() itself stops at events: with root finding on (hot chunks)."""
-        return hot
-
-    def __init__(self, cl: CompiledLine, s: SolverSettings):
-        from sksundae.cvode import CVODE
-
-        self.cl = cl
-        rhs, jac = cl.make_rhs(), cl.make_jac()
-        self.rhs = rhs
-        common = dict(
-            method="BDF",
-            rtol=s.rtol,
-            atol=cl.atol * s.atol_scale,
-            linsolver="band",
-            lband=max(cl.lband, 0),
-            uband=max(cl.uband, 0),
-            jacfn=jac,
-            max_order=s.max_order,
-            max_num_steps=200000,
-        )
-        self.solver = CVODE(rhs, **common)
-
-        from ..compile import kernels
-
-        yd = np.zeros(cl.n_states)
-        I, P, W, GI, GC, GV, J1 = cl.I, cl.P, cl._W, cl._GI, cl._GC, cl._GV, cl._J1
-
-        def eventsfn(t, y, g):  # called at every step: no allocation
-            kernels.event_values(t, y, g, I, P, W, GI, GC, GV, yd, J1)
-
-        if len(cl.event_kinds):
-            eventsfn.terminal = [True] * len(cl.event_kinds)
-            eventsfn.direction = [0] * len(cl.event_kinds)
-            self.locator = CVODE(rhs, eventsfn=eventsfn, num_events=len(cl.event_kinds), **common)
-        self.nfev = 0
-        self.njev = 0
-        self.steps = 0
-        self.messages: list[str] = []
-
-    def _quiet(self, solve, *args):
-        """Call a scikit-sundae solve with SUNDIALS' messages kept off the terminal.
-
-        scikit-sundae prints every SUNDIALS warning and error with ``print`` (e.g. "root
-        functions identically 0" when a located event starts on its root, which r2rsim
-        handles). They are kept, the first few, in ``stats["solver_messages"]``; a failure
-        reaches the user as the run's termination reason."""
-        buf = io.StringIO()
-        with contextlib.redirect_stdout(buf):
-            res = solve(*args)
-        text = buf.getvalue().strip()
-        if text and len(self.messages) < 20:
-            self.messages.extend(m.strip() for m in text.split("\n\n") if m.strip())
-        return res
-
-    def solve(self, tspan, y0, find_events=False, resume=False):
-        """States at the times ``tspan``: CVODE returns every internal step (one-step mode,
-        one return per step instead of one per sample), and the samples are interpolated
-        with cubic Hermite polynomials from the step states and their exact derivatives.
-
-        With ``find_events`` CVODE's root finding stops the integration at the first event
-        (about 5 µs more per step); the last return value is then ``(t, y, directions)``
-        of that root (direction -1: the event function fell through 0), else None."""
-        from ..compile import kernels
-
-        cl = self.cl
-        hot = find_events and len(cl.event_kinds) > 0
-        res = self._quiet(
-            (self.locator if hot else self.solver).solve, np.array([tspan[0], tspan[-1]]), y0
-        )
-        self.nfev += int(res.nfev)
-        self.njev += int(res.njev)
-        ts = np.ascontiguousarray(res.t)
-        ys = np.ascontiguousarray(res.y)
-        self.steps += len(ts) - 1
-        root = None
-        if hot and res.status == 2:
-            root = (
-                float(res.t_events[-1]),
-                np.array(res.y_events[-1]),
-                np.asarray(res.i_events)[-1],
-            )
-        elif not res.success:
-            root = res.message
-        fs = np.empty_like(ys)
-        kernels.rhs_rows(ts, ys, fs, cl.I, cl.P, cl._W, cl._GI, cl._GC, cl._GV, cl._J1, cl._aux0)
-        if root is not None:
-            keep = tspan <= ts[-1]
-            out = np.empty((int(keep.sum()), cl.n_states))
-            kernels.hermite(ts, ys, fs, tspan[keep], out)
-            if isinstance(root, str):
-                return tspan[keep], out, root, ts, ys, None
-            return tspan[keep], out, None, ts, ys, root
-        out = np.empty((len(tspan), cl.n_states))
-        kernels.hermite(ts, ys, fs, np.ascontiguousarray(tspan), out)
-        return tspan, out, None, ts, ys, None
-
-    def locate(self, t0, y0, t1):
-        """Integrate [t0, t1] with root-finding; return (t, y, event indices) or None."""
-        tspan = np.array([t0, 0.5 * (t0 + t1), t1])
-        res = self._quiet(self.locator.solve, tspan, y0)
-        self.nfev += int(res.nfev)
-        if res.status == 2 and res.t_events is not None and len(res.t_events):
-            row = np.asarray(res.i_events)[-1]
-            return float(res.t_events[-1]), np.asarray(res.y_events[-1]), np.nonzero(row)[0]
-        return None
-
-
-class _RadauBackend:
-    @staticmethod
-    def locates_events(hot: bool) -> bool:
-        """Never: the caller checks the samples (scipy does not expose its steps)."""
-        return False
-
-    def __init__(self, cl: CompiledLine, s: SolverSettings):
-        import scipy.sparse as sps
-
-        self.cl = cl
-        self.s = s
-        n = cl.n_states
-        rows, cols = cl.pattern
-        JJ = np.zeros((n, n))
-        from ..compile import kernels
-
-        vals = np.zeros(len(rows))
-        yd = np.zeros(n)
-
-        rhs = cl.make_rhs()
-
-        def fun(t, y):
-            out = np.empty(n)
-            rhs(t, np.ascontiguousarray(y), out)
-            return out
-
-        def jac(t, y):
-            kernels.jac_values(
-                t, np.ascontiguousarray(y), JJ, cl.I, cl.P, cl._W, cl._GI, cl._GC, cl._GV, yd, vals
-            )
-            return sps.csc_matrix((vals.copy(), (rows, cols)), shape=(n, n))
-
-        self.fun, self.jac = fun, jac
-        self.nfev = 0
-        self.njev = 0
-        self.steps = 0
-
-    def _ivp(self, tspan, y0, events=None):
-        from scipy.integrate import solve_ivp
-
-        return solve_ivp(
-            self.fun,
-            (tspan[0], tspan[-1]),
-            y0,
-            method="Radau",
-            t_eval=tspan,
-            jac=self.jac,
-            rtol=self.s.rtol,
-            atol=self.cl.atol * self.s.atol_scale,
-            events=events,
-            dense_output=events is not None,
-        )
-
-    def solve(self, tspan, y0, find_events=False, resume=False):
-        if not np.all(np.isfinite(y0)):  # solve_ivp raises on it: a failure like any other
-            Y = np.asarray(y0, float)[None, :]
-            return tspan[:1], Y, NONFINITE, tspan[:1], Y, None
-        res = self._ivp(tspan, y0)
-        self.nfev += int(res.nfev)
-        self.njev += int(res.njev)
-        self.steps += len(res.t)  # samples, not steps: scipy does not report them
-        msg = None if res.success else res.message
-        tt, Y = np.asarray(res.t), np.ascontiguousarray(np.asarray(res.y).T)
-        return tt, Y, msg, tt, Y, None  # steps not exposed: events found on the samples
-
-    def locate(self, t0, y0, t1):
-        cl = self.cl
-        m = len(cl.event_kinds)
-        evs = []
-        for i in range(m):
-
-            def ev(t, y, i=i):
-                return cl.events(t, y)[0][i]
-
-            ev.terminal = True
-            ev.direction = 0
-            evs.append(ev)
-        res = self._ivp(np.array([t0, t1]), y0, events=evs)
-        self.nfev += int(res.nfev)
-        if res.status == 1:
-            for i, te in enumerate(res.t_events):
-                if len(te):
-                    t, y = self._past_root(res.sol, i, t0, y0, float(te[0]), t1)
-                    return t, y, np.array([i])
-        return None
-
-    def _past_root(self, sol, i, t0, y0, te, t1):
-        """The first time at or after scipy's root where event i has changed sign (as CVODE
-        and radau5 return it): scipy's root may lie up to 4 eps |t| on the near side, and a
-        mode change applied there would act on a state that has not crossed."""
-        g0 = self.cl.events(t0, y0)[0][i]
-        step = 4.0 * np.finfo(float).eps * max(1.0, abs(te))
-        t = te
-        for _ in range(60):
-            y = sol(t)
-            g = self.cl.events(t, y)[0][i]
-            if g == 0.0 or (g < 0.0) != (g0 < 0.0) or t >= t1:
-                return t, y
-            t = min(t1, t + step)
-            step *= 2.0
-        return t, sol(t)
-
-
-class _Radau5Backend:
-    """r2rsim's compiled Radau IIA (:mod:`r2rsim.solve.radau`): the integration, the dense
-    output at the samples and the location of events all run in one numba kernel."""
-
-    @staticmethod
-    def locates_events(hot: bool) -> bool:
-        """Always: at every step, in the kernel."""
-        return True
-
-    def __init__(self, cl: CompiledLine, s: SolverSettings):
-        from . import radau
-
-        self.cl = cl
-        self.radau = radau
-        n = cl.n_states
-        self.rtol = s.rtol
-        self.atol = np.ascontiguousarray(cl.atol * s.atol_scale, float)
-        rows, cols = cl.pattern
-        self.rows = np.ascontiguousarray(rows, np.int64)
-        self.cols = np.ascontiguousarray(cols, np.int64)
-        # the Jacobian kernel writes the pattern entries of a dense (n, n) array
-        self.line = (
-            cl.I,
-            cl.P,
-            cl._W,
-            cl._GI,
-            cl._GC,
-            cl._GV,
-            cl._aux0,
-            np.zeros((n, n)),
-            np.zeros(n),
-            cl._J1,
-        )
-        m = len(cl.event_kinds)
-        self.g = np.zeros(m)
-        self.y_root = np.zeros(n)
-        self.dirs = np.zeros(m, np.int64)
-        self.vals = np.zeros(len(self.rows))  # Jacobian on the pattern, kept between calls
-        self.h_next = 0.0
-        self.nfev = 0
-        self.njev = 0
-        self.nlu = 0
-        self.steps = 0
-        self.arithmetic_error = ""
-
-    def _integrate(self, tspan, y0, resume=False):
-        r = self.radau
-        cl = self.cl
-        tq = np.ascontiguousarray(tspan, float)
-        out = np.empty((len(tq), cl.n_states))
-        warm = resume and self.h_next > 0.0
-        try:
-            status, t_reached, n_out, nfev, njev, nlu, nsteps, self.h_next = r.integrate(
-                float(tq[0]),
-                float(tq[-1]),
-                np.ascontiguousarray(y0, float),
-                tq,
-                out,
-                self.rtol,
-                self.atol,
-                200000,
-                self.line,
-                self.rows,
-                self.cols,
-                max(cl.lband, 0),
-                max(cl.uband, 0),
-                r.CONSTS,
-                self.g,
-                self.y_root,
-                self.dirs,
-                self.vals,
-                self.h_next if warm else 0.0,
-                warm,
-            )
-        except ArithmeticError as exc:
-            # a division by zero in the compiled code (numba raises as Python does): values
-            # so large that the arithmetic broke down. The chunk's samples are lost with it;
-            # the run ends as a solver failure at the chunk's start.
-            self.h_next = 0.0
-            self.arithmetic_error = (
-                f"{type(exc).__name__} in the compiled integrator "
-                f"({exc}): the states left the range of floating point"
-            )
-            return _ARITHMETIC, float(tq[0]), tq[:0], out[:0]
-        self.nfev += nfev
-        self.njev += njev
-        self.nlu += nlu
-        self.steps += nsteps
-        return status, t_reached, tq[:n_out], out[:n_out]
-
-    def solve(self, tspan, y0, find_events=False, resume=False):
-        """Samples at ``tspan``. Events are always located (at every step, in the kernel):
-        the last return value is ``(t, y, directions)`` of the first one, else None.
-
-        ``resume``: the previous call ended here and nothing changed since (a memory chunk
-        boundary), so its proposed step size and its Jacobian are reused."""
-        status, t_reached, tt, Y = self._integrate(tspan, y0, resume)
-        if status == self.radau.ROOT:
-            root = (t_reached, self.y_root.copy(), self.dirs.copy())
-            return tt, Y, None, tt, Y, root
-        if status == _ARITHMETIC:
-            return tt, Y, self.arithmetic_error, tt, Y, None
-        if status != self.radau.DONE:
-            return tt, Y, self.radau.MESSAGES[status], tt, Y, None
-        return tt, Y, None, tt, Y, None
-
-    def locate(self, t0, y0, t1):
-        """Integrate [t0, t1] locating events; return (t, y, event indices) or None."""
-        status, t_reached, _, _ = self._integrate(np.array([t0, t1]), y0)
-        if status == self.radau.ROOT:
-            return t_reached, self.y_root.copy(), np.nonzero(self.dirs)[0]
-        return None
 
 
 def _message(cl: CompiledLine, kind: int, comp: str, on: bool, aux: np.ndarray) -> tuple:
@@ -509,9 +177,7 @@ def simulate(
         y0 = nominal_state(cl)
         initial_state_mode = "nominal"
     y0 = np.array(y0, dtype=float)
-    backend = {"cvode": _CVODEBackend, "radau": _RadauBackend, "radau5": _Radau5Backend}[s.backend](
-        cl, s
-    )
+    backend = make_backend(cl, s)
     dt = 1.0 / record_rate
     n_samples = int(math.floor(duration * record_rate + 1e-9)) + 1
     sample_t = np.arange(n_samples) * dt
@@ -598,10 +264,10 @@ def _run(
         "njev": backend.njev,
         "restarts": loop.restarts,
         "wall_s": wall,
-        "steps": backend.steps if s.backend != "radau" else None,
+        "steps": backend.steps if backend.reports_steps else None,
         "solver": describe_settings(s),
         "n_samples": int(loop.k_next),
-        "solver_messages": list(getattr(backend, "messages", []))[:20],
+        "solver_messages": list(backend.messages)[:20],
     }
     return SimulationResult(
         cl,
@@ -622,15 +288,18 @@ def _run(
 class _EventLoop:
     """Integration from discrete change to discrete change: chunks of samples between the
     programme's breakpoints and the discrete logic's times, events found on the solver's
-    steps (or by CVODE's root finding when "hot") and fired, samples emitted in order.
+    steps (or by the backend's root finding when "hot") and fired, samples emitted in order.
 
     Event detection is normally on the solver's steps after each chunk (cheap, but the part
     of the chunk after an event is integrated again). After a discrete change or an event
     more events tend to follow (a splice joint crossing nodes, a dancer at its stops), so the
-    next chunks use CVODE's root finding, which stops at the event ("hot").
+    next chunks use the backend's root finding, which stops at the event ("hot"; CVODE's,
+    see :meth:`SolverBackend.locates_events`; radau5 always locates events in its kernel).
     """
 
-    def __init__(self, cl, logic, duration, s, backend, sample_t, emit, progress, wall0):
+    def __init__(
+        self, cl, logic, duration, s, backend: SolverBackend, sample_t, emit, progress, wall0
+    ):
         self.cl, self.logic, self.duration, self.s = cl, logic, duration, s
         self.backend, self.sample_t, self.emit, self.progress = backend, sample_t, emit, progress
         self.wall0 = wall0
@@ -714,31 +383,32 @@ class _EventLoop:
         )
         k_hi = min(k_end, self.k_next + self.rows_per_chunk)
         tspan = _chunk_times(t, self.sample_t, self.k_next, k_hi, k_end, t_seg_end)
-        tt, Y, err, ts, ys, root = self.backend.solve(
-            tspan, self.y, find_events=self.hot, resume=self.resume
-        )
+        chunk = self.backend.advance(tspan, self.y, find_events=self.hot, resume=self.resume)
         self.resume = False
         self.restarts += 1
+        err = chunk.failure
         if err is None:
             err = _over_budget(
                 self.s,
                 self.backend.steps,
                 self.step_budget,
                 self.wall0,
-                ts,
+                chunk.t_steps,
                 compile_seconds() - self.compile0,
             )
         if err is not None:
-            self.k_next = _emit_samples(self.emit, self.sample_t, self.k_next, tt, Y, k_end)
+            self.k_next = _emit_samples(
+                self.emit, self.sample_t, self.k_next, chunk.t, chunk.y, k_end
+            )
             self.terminated, self.reason = True, f"solver_failure: {err}"
-            self.t_term = float(ts[-1]) if len(ts) else t
+            self.t_term = float(chunk.t_steps[-1]) if len(chunk.t_steps) else t
             return None
-        if root is not None:  # hot: CVODE stopped at a root
-            return self._at_root(root, tt, Y)
-        return self._on_steps(tt, Y, ts, ys, k_hi, k_end)
+        if chunk.root is not None:  # the backend stopped at a root
+            return self._at_root(chunk.root, chunk.t, chunk.y)
+        return self._on_steps(chunk.t, chunk.y, chunk.t_steps, chunk.y_steps, k_hi, k_end)
 
-    def _at_root(self, root, tt, Y):
-        """CVODE stopped at a root: the events whose condition turns, or None (and the
+    def _at_root(self, root: Root, tt, Y):
+        """The backend stopped at a root: the events whose condition turns, or None (and the
         samples before it emitted) when the function touched 0 and turned back."""
         t_ev, y_ev, dirs = root
         # a falling event function makes the condition (g < 0) true
@@ -774,7 +444,7 @@ class _EventLoop:
         hit_row, cond = hit
         r0 = hit_row - 1
         found = backend.locate(float(ts[r0]), ys[r0].copy(), float(ts[hit_row]))
-        if found is None:  # no root seen by CVODE (g grazing 0): take the step
+        if found is None:  # no root seen by the backend (g grazing 0): take the step
             t_ev, y_ev = float(ts[hit_row]), ys[hit_row].copy()
             which = np.nonzero(cond[hit_row] != self.flags)[0]
         else:  # only the events found at this root flip; others seen from here on
