@@ -16,7 +16,7 @@ from pydantic import BeforeValidator, Discriminator, Field, Tag, model_validator
 
 from ..errors import InputError
 from ..units import QuantityError, parse_quantity
-from .line import Id, Strict, dancer_reading_dimension, pair
+from .line import DANCERS, Id, Strict, dancer_reading_dimension, pair
 from .quantities import Frequency, NumberOrText, Time, number_or_text
 
 
@@ -434,7 +434,7 @@ def target_problem(ftype: str, target: str, line) -> str | None:
     kind = CATALOGUE[ftype].target
     sensors = {s.id for s in line.sensors}
     els = {e.id: (k, e) for k, e in enumerate(line.elements)}
-    movers = [e.id for e in line.elements if e.type in ("dancer", "pivot_dancer")] + [
+    movers = [e.id for e in line.elements if e.type in DANCERS] + [
         sp.id for sp in line.spans if sp.festoon is not None
     ]
     if kind == "sensor":

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import InputError
+from ...schema.line import DANCERS
 from ..line import named
 
 
@@ -114,13 +115,11 @@ ROLES = {
     "pitch_sensor": "the pitch-length sensor on the span leaving the driven roller (Y)",
 }
 
-#: the dancer element types (translating, pivoted) of the line schema
-_DANCERS = ("dancer", "pivot_dancer")
 
 #: element roles: (element types, "a ...", plural, stage, what the model needs it for)
 _ELEMENT_ROLES = {
     "unwind": (("unwind",), "an unwind", "unwinds", 1, "stage 1 (the unwind's torque balance)"),
-    "dancer": (_DANCERS, "a dancer", "dancers", 3, "stage 3 (the dancer stage)"),
+    "dancer": (DANCERS, "a dancer", "dancers", 3, "stage 3 (the dancer stage)"),
     "driven": (
         ("driven",),
         "a driven roller",
