@@ -460,16 +460,18 @@ def run_bench(
     spec = load_spec(spec_path)
     # a missing baseline, or one --update must not write, is found before anything is
     # simulated (an existing one is checked by load_spec)
-    baseline = spec_path.parent / spec.compare.baseline if spec.compare else None
-    if baseline is not None and update:
-        baseline = _update_target(spec_path, spec.compare.baseline)
-    elif baseline is not None and not baseline.is_file():
-        raise InputError(
-            f"baseline file '{spec.compare.baseline}' not found (create it with "
-            f"`r2rsim bench {spec_path} --update`)",
-            file=str(spec_path),
-            path="compare.baseline",
-        )
+    baseline: Path | None = None
+    if spec.compare is not None:
+        baseline = spec_path.parent / spec.compare.baseline
+        if update:
+            baseline = _update_target(spec_path, spec.compare.baseline)
+        elif not baseline.is_file():
+            raise InputError(
+                f"baseline file '{spec.compare.baseline}' not found (create it with "
+                f"`r2rsim bench {spec_path} --update`)",
+                file=str(spec_path),
+                path="compare.baseline",
+            )
     tmp = None
     if workdir is None:
         tmp = tempfile.TemporaryDirectory(prefix="r2rsim-bench-")
@@ -519,7 +521,7 @@ def run_bench(
     results = results[
         ["study", "label", *[c for c in results.columns if c not in ("study", "label")]]
     ]
-    if spec.compare is None:
+    if spec.compare is None or baseline is None:  # the one is set with the other
         return BenchResult(results, evaluations, [], [], 0, None)
     if update:
         keep = results[results["metric"].isin(list(spec.compare.metrics))]

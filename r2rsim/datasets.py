@@ -31,8 +31,12 @@ import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .errors import InputError
+
+if TYPE_CHECKING:
+    from .evaluate.splits import Split
 
 __all__ = [
     "BenchmarkData",
@@ -80,7 +84,7 @@ class BenchmarkData:
     """
 
     name: str
-    split: object
+    split: Split
     paths: list[Path] = field(default_factory=list)
     description: str = ""
 

@@ -39,6 +39,10 @@ class InputError(_Located, R2RError):
         The YAML path of the offending value, e.g. ``elements[2].radius``.
     """
 
+    #: every problem as (YAML path, message), when a file has several (``r2rsim validate``
+    #: lists them all); set by whoever raises such an error, absent otherwise
+    problems: list[tuple[str, str]]
+
 
 class PlausibilityWarning(_Located, UserWarning):
     """A valid but physically unusual input (a web thicker than any in physics.md §2.1, a

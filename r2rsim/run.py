@@ -9,9 +9,7 @@ This is the Python API behind ``r2rsim run``::
 from __future__ import annotations
 
 import hashlib
-import json
 import math
-import platform
 import re
 import time
 from dataclasses import dataclass, field
@@ -21,20 +19,19 @@ import numpy as np
 import pyarrow as pa
 import yaml
 
-from ._version import __version__
 from .compile import Programme, compile_line
 from .compile.disturbances import realise_disturbances, realise_pitch_variations
 from .compile.faults import realise_faults
 from .compile.variability import joint_slots_needed, realise_variability
-from .dataset import DatasetWriter, true_state_columns
+from .dataset import DatasetWriter, tables, true_state_columns
 from .dataset.labels import derive_labels
 from .dataset.validate import validate_dataset
-from .dataset.writer import EVENTS_SCHEMA, FAULTS_SCHEMA, VARIABILITY_SCHEMA, check_output
+from .dataset.writer import check_output
 from .errors import InputError, R2RError
 from .limits import MAX_SEED, run_size_problem
 from .measure import MeasurementModel
-from .measure.sensors import channel_names, unit_of_suffix
-from .schema import load_scenario
+from .measure.sensors import channel_names
+from .schema import Line, Scenario, load_scenario
 from .schema.loader import read_yaml
 from .solve import Event, nominal_state, simulate, steady_state
 from .solve.compilewatch import compile_seconds
@@ -196,8 +193,8 @@ class RunPlan:
         What runs.parquet calls the line when it has no name (the line file's stem).
     """
 
-    scenario: object
-    line: object
+    scenario: Scenario
+    line: Line
     name: str
     source: str
     scenario_sha256: str
@@ -400,12 +397,7 @@ def execute(
     prep = _prepare(plan)
     cl, faults, sensor_chan = prep.cl, prep.faults, prep.sensor_chan
     run_id = run_id or f"{name}__s{scenario.seed}"
-    meta = {
-        "r2rsim.schema_version": "0.1",
-        "r2rsim.version": __version__,
-        "r2rsim.scenario_sha256": plan.scenario_sha256,
-        "r2rsim.root_seed": str(scenario.seed),
-    }
+    meta = tables.file_metadata(plan.scenario_sha256, scenario.seed)
     rate = scenario.record_rate
     fault_rows = [f.record(run_id, int(math.ceil(f.onset * rate - 1e-9))) for f in faults]
     modes = [(st.at, st.mode) for st in scenario.programme if st.mode is not None]
@@ -450,26 +442,19 @@ def execute(
         res.stats["compile_s"] = compile_seconds() - compile0
         sim_end = res.termination_time if res.terminated else scenario.duration
 
-        writer.write_table("channels", _channels_table(cl, sink, sensor_chan, rate))
         writer.write_table(
-            "faults",
-            pa.Table.from_pylist(fault_rows, schema=FAULTS_SCHEMA)
-            if fault_rows
-            else FAULTS_SCHEMA.empty_table(),
+            "channels",
+            tables.channels_table(cl, sink.meas.channels, sink.cols, sensor_chan, rate),
         )
+        writer.write_table("faults", tables.faults_table(fault_rows))
         events = _run_events(res, faults, sim_end)
-        writer.write_table("events", _events_table(run_id, events))
+        writer.write_table("events", tables.events_table(run_id, events))
         variability_rows = prep.variability_rows + (
             prep.rolls.rows if prep.rolls is not None else []
         )
-        writer.write_table(
-            "variability",
-            pa.Table.from_pylist(
-                [{"run_id": run_id, **r} for r in variability_rows], schema=VARIABILITY_SCHEMA
-            ),
-        )
+        writer.write_table("variability", tables.variability_table(run_id, variability_rows))
         runs = _runs_table(
-            plan, prep, run_id, res, faults, modes, writer.n_rows, sim_end, nonfinite_t, wall
+            plan, prep, run_id, res, modes, writer.n_rows, sim_end, nonfinite_t, wall
         )
         for col, arr in (run_columns or {}).items():
             runs = runs.append_column(col, arr)
@@ -557,10 +542,9 @@ def channels_table(plan: RunPlan) -> pa.Table:
     ss_process, ss_meas, _ = np.random.SeedSequence(plan.scenario.seed).spawn(3)
     cl = _compiled(plan, ss_process)[1]
     rate = plan.scenario.record_rate
-    sink = _ChunkSink.__new__(_ChunkSink)  # what _channels_table reads of one: meas, cols
-    sink.meas, sink.cols = MeasurementModel(cl, rate, ss_meas), true_state_columns(cl)
     sensor_chan = {s.id: channel_names(cl, s)[0][len("meas.") :] for s in cl.sensors}
-    return _channels_table(cl, sink, sensor_chan, rate)
+    measured = MeasurementModel(cl, rate, ss_meas).channels
+    return tables.channels_table(cl, measured, true_state_columns(cl), sensor_chan, rate)
 
 
 def _prepare(plan: RunPlan) -> _Prepared:
@@ -676,86 +660,6 @@ class _ChunkSink:
         }
 
 
-#: the label columns of every dataset, with their descriptions (channels.parquet)
-_LABEL_CHANNELS = [
-    ("label.is_faulty", "any fault present"),
-    ("label.n_active", "number of faults present"),
-    ("label.fault_ids", "ids of the faults present"),
-    (
-        "label.primary_type",
-        "type of the present fault with the largest magnitude_rel, else 'normal'",
-    ),
-    ("label.severity", "profile p(t) of the primary fault, 0-1"),
-    ("label.phase", "warmup / normal / faulty / terminated"),
-    ("label.mode", "operating mode named by the programme"),
-    ("label.score_mask", "false during warm-up"),
-]
-
-
-def _channels_table(cl, sink: _ChunkSink, sensor_chan: dict, rate: float) -> pa.Table:
-    """channels.parquet: the dictionary of every samples column, in the order they are
-    written."""
-    rows = [
-        ("run_id", "index", "", "", "run id (the hive partition key of samples/)", None),
-        ("k", "index", "", "", "sample index from 0", None),
-        ("t_s", "index", "s", "", "simulation time", None),
-    ]
-    for mc in sink.meas.channels:  # in the order MeasurementModel.measure writes them
-        s = mc["sensor"]
-        unit = unit_of_suffix(channel_names(cl, s)[2])
-        where = getattr(s, "element", None) or s.span
-        rows.append(
-            (
-                mc["name"],
-                "measured",
-                unit,
-                where,
-                f"{s.type} '{s.id}' on {where}: measured (noise, sampling)",
-                mc["rate"],
-            )
-        )
-        rows.append(
-            (
-                mc["true"],
-                "true",
-                unit,
-                where,
-                f"noise- and fault-free shadow of {mc['name']} (never give to algorithms)",
-                rate,
-            )
-        )
-        if s.range is not None:
-            rows.append(
-                (
-                    f"flag.{s.id}.clipped",
-                    "flag",
-                    "",
-                    s.id,
-                    f"{mc['name']} was clipped to its range {list(s.range)} (censored)",
-                    mc["rate"],
-                )
-            )
-    rows += [
-        (c["column"], c["kind"], c["unit"], c["component"], c["description"], rate)
-        for c in sink.cols
-    ]
-    rows += [(col, "label", "", "", text, None) for col, text in _LABEL_CHANNELS]
-    rows += [
-        (f"label.ch.{c}", "label", "", sid, f"a sensor fault acts on meas.{c}", None)
-        for sid, c in sensor_chan.items()
-    ]
-    return pa.table(
-        {
-            "channel": [r[0] for r in rows],
-            "kind": [r[1] for r in rows],
-            "unit": [r[2] for r in rows],
-            "component": [r[3] for r in rows],
-            "description": [r[4] for r in rows],
-            "rate_hz": pa.array([r[5] if r[5] is not None else rate for r in rows], pa.float64()),
-        }
-    )
-
-
 def _run_events(res, faults, sim_end: float) -> list[Event]:
     """The solver's events and every fault's start and end within the simulated time, in
     time order."""
@@ -776,85 +680,43 @@ def _run_events(res, faults, sim_end: float) -> list[Event]:
     return events
 
 
-def _events_table(run_id: str, events: list[Event]) -> pa.Table:
-    return pa.table(
-        {
-            "run_id": [run_id] * len(events),
-            "t_s": [e.t for e in events],
-            "kind": [e.kind for e in events],
-            "component": [e.component for e in events],
-            "state": [e.state for e in events],
-            "message": [e.message for e in events],
-            "values_json": [json.dumps(e.values) for e in events],
-        },
-        schema=EVENTS_SCHEMA,
-    )
-
-
 def _runs_table(
     plan: RunPlan,
     prep: _Prepared,
     run_id: str,
     res,
-    faults,
     modes,
     n_rows: int,
     sim_end: float,
     nonfinite_t: float | None,
     wall: float,
 ) -> pa.Table:
-    """The run's row of runs.parquet."""
+    """The run's row of runs.parquet (:func:`r2rsim.dataset.tables.runs_table`)."""
     scenario = plan.scenario
-    seeds = {
-        "process": int(prep.ss_process.generate_state(1, np.uint64)[0]),
-        "measurement": int(prep.ss_meas.generate_state(1, np.uint64)[0]),
-        "fault_sampling": int(prep.ss_faults.generate_state(1, np.uint64)[0]),
-    }
-    return pa.table(
-        {
-            "run_id": [run_id],
-            "scenario_id": [plan.name],
-            "scenario_sha256": [plan.scenario_sha256],
-            "seed": pa.array([scenario.seed], pa.uint64()),
-            "seed_streams": pa.array(
-                [seeds],
-                pa.struct(
-                    [
-                        ("process", pa.uint64()),
-                        ("measurement", pa.uint64()),
-                        ("fault_sampling", pa.uint64()),
-                    ]
-                ),
-            ),
-            "split": pa.array([scenario.split_of(scenario.seed)], pa.string()),
-            "line_config": [prep.line.name or plan.line_config],
-            "operating_mode": pa.array(
-                ["+".join(dict.fromkeys(m for _, m in modes)) or None], pa.string()
-            ),
-            "modes_json": [json.dumps(modes)],
-            "disturbances_json": [json.dumps([d.model_dump() for d in scenario.disturbances])],
-            "sample_period_s": [1.0 / scenario.record_rate],
-            "duration_s": [scenario.duration],
-            "n_samples": pa.array([n_rows], pa.int64()),
-            "warmup_s": [scenario.warmup],
-            "has_fault": [bool(faults)],
-            "n_faults": pa.array([len(faults)], pa.int16()),
-            "terminated": [res.terminated],
-            "termination_reason": pa.array([res.termination_reason], pa.string()),
-            "termination_t_s": pa.array([res.termination_time], pa.float64()),
-            "simulated_s": [float(sim_end)],
-            "nonfinite_from_t_s": pa.array([nonfinite_t], pa.float64()),
-            "ended_as_expected": [
-                ended_as_expected(
-                    res.terminated, res.termination_reason, scenario.expect.termination, nonfinite_t
-                )
-            ],
-            "initial_state": [prep.init_mode],
-            "solver": [res.stats["solver"]],
-            "rhs_evaluations": pa.array([res.stats["nfev"]], pa.int64()),
-            "r2rsim_version": [__version__],
-            "python_version": [platform.python_version()],
-            "numpy_version": [np.__version__],
-            "wallclock_s": [wall],
-        }
+    return tables.runs_table(
+        run_id=run_id,
+        scenario=scenario,
+        scenario_id=plan.name,
+        scenario_sha256=plan.scenario_sha256,
+        line_config=prep.line.name or plan.line_config,
+        seed_streams={
+            "process": prep.ss_process,
+            "measurement": prep.ss_meas,
+            "fault_sampling": prep.ss_faults,
+        },
+        modes=modes,
+        n_samples=n_rows,
+        n_faults=len(prep.faults),
+        terminated=res.terminated,
+        termination_reason=res.termination_reason,
+        termination_t=res.termination_time,
+        simulated_s=sim_end,
+        nonfinite_t=nonfinite_t,
+        ended_as_expected=ended_as_expected(
+            res.terminated, res.termination_reason, scenario.expect.termination, nonfinite_t
+        ),
+        initial_state=prep.init_mode,
+        solver=res.stats["solver"],
+        rhs_evaluations=res.stats["nfev"],
+        wallclock_s=wall,
     )

@@ -19,6 +19,7 @@ import json
 import os
 import re
 import shutil
+import sys
 from pathlib import Path, PurePosixPath
 
 from ..errors import InputError, R2RError
@@ -292,7 +293,7 @@ def dataset_problems(root: str | Path, *, hashes: bool = True) -> list[str]:
     root = Path(root)
     manifest, why = read_manifest(root)
     if manifest is None:
-        return [why]
+        return [str(why)]  # read_manifest gives the reason with every None
     problems: list[str] = []
     listed: dict[str, dict] = {}
     for rel, info in manifest["files"].items():
@@ -327,18 +328,18 @@ def dataset_problems(root: str | Path, *, hashes: bool = True) -> list[str]:
         if not any(rel.startswith(d + "/") for rel in present):
             problems.append(f"{d}/: a directory with no file listed in manifest.json")
     for rel, info in listed.items():
-        p = present.get(rel)
-        if p is None:
+        found = present.get(rel)
+        if found is None:
             if not (root / rel).is_symlink():
                 problems.append(f"{rel}: listed in manifest.json but missing")
             continue
-        size = p.stat().st_size
+        size = found.stat().st_size
         if size != info.get("bytes"):
             problems.append(
                 f"{rel}: checksum differs from manifest.json (so does its size: "
                 f"{size} bytes, not {info.get('bytes')})"
             )
-        elif hashes and sha256_file(p) != info.get("sha256"):
+        elif hashes and sha256_file(found) != info.get("sha256"):
             problems.append(f"{rel}: checksum differs from manifest.json")
     return problems
 
@@ -383,6 +384,8 @@ def pid_alive(pid: int) -> bool:
 def _pid_alive_windows(pid: int) -> bool:
     """Windows: open the process for a query and read its exit code (STILL_ACTIVE while it
     runs). A process that cannot be opened because access is denied exists."""
+    if sys.platform != "win32":  # pid_alive asks only there (and mypy checks it as such)
+        return True
     import ctypes
     from ctypes import wintypes
 

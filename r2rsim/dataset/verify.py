@@ -24,6 +24,7 @@ from __future__ import annotations
 import hashlib
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
+from typing import Any
 
 from ..errors import InputError
 from .paths import SWEEP_MARKER, read_json
@@ -110,7 +111,8 @@ class Verifier:
                 f"complete r2rsim dataset ({NO_VERIFY})"
             )
         try:
-            files = read_json(mf)["files"]
+            manifest: Any = read_json(mf)  # whatever the file holds: checked by using it
+            files = manifest["files"]
             items = [
                 (str(rel), str(info["sha256"]), info.get("bytes")) for rel, info in files.items()
             ]

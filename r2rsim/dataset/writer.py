@@ -294,7 +294,7 @@ class DatasetWriter:
         self.run_id = run_id
         self.metadata = {k: str(v) for k, v in metadata.items()}
         self.tmp = self.output.parent / f".{self.output.name}.tmp-{os.getpid()}"
-        self._writer = None
+        self._writer: pq.ParquetWriter | None = None
         self._schema = None
         self._converters: list = []
         self._pending: list[pa.Table] = []  # chunks of the row group being collected
@@ -377,6 +377,7 @@ class DatasetWriter:
     def _flush_row_group(self) -> None:
         """Write the collected chunks as one row group."""
         if self._pending:
+            assert self._writer is not None  # opened by the first chunk
             table = pa.concat_tables(self._pending).unify_dictionaries()
             self._writer.write_table(table, row_group_size=table.num_rows)
         self._pending, self._pending_bytes = [], 0

@@ -184,7 +184,7 @@ def check_plugin(
 class _CheckRun:
     """One plug-in, its data and the checks in the order they build on each other."""
 
-    def __init__(self, cls, name, params, train, test, drive_data):
+    def __init__(self, cls, name, params, train, test, drive_data) -> None:
         self.cls, self.name, self.params = cls, name, params
         self.train, self.test, self.drive_data = train, test, drive_data
         self.frames = [attach_line(r.visible(drive_data), r) for r in train]

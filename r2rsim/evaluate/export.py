@@ -272,7 +272,7 @@ def _label(run: Run, label: str) -> np.ndarray:
     t = run.samples["t_s"].to_numpy(dtype=float)
     faults, present = fault_presence(_fault_rows(run), t)
     keep = [i for i, f in enumerate(faults) if f.type == label or f.kind.fault_class == label]
-    return present[keep].any(axis=0) if keep else np.zeros(len(t), dtype=bool)
+    return np.asarray(present[keep].any(axis=0)) if keep else np.zeros(len(t), dtype=bool)
 
 
 @dataclass
@@ -344,8 +344,8 @@ def _timeeval(
     lines = [",".join(TIMEEVAL_INDEX_COLUMNS)]
     for rid in selected:
         s = series[rid]
-        train = trainer.get(rid)
-        semi = train is not None and train != rid
+        train = trainer.get(rid) or rid  # semi-supervised: trained on another run
+        semi = train != rid
         lengths = _anomalies(s.label)
         n = len(s.label)
         mean, sd = _stats(s, channels)

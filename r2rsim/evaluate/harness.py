@@ -44,7 +44,9 @@ from .metrics import (
     DETECTION_WINDOW_S,
     RunData,
     average_precision,
+    bootstrap_indices,
     calibrate_threshold,
+    ci_percentiles,
     detect_run,
     detectability,
     false_alarm_events,
@@ -52,9 +54,13 @@ from .metrics import (
     isolation_counts,
     localization_counts,
     null_outcomes,
+    percentile_interval,
+    pooled_rate,
+    pooled_scores,
     restrict_to_mode,
     roc_auc,
     run_hit,
+    scored_groups,
     steady_counts,
     steady_detection,
     vus_pr,
@@ -383,28 +389,23 @@ def _extra_counts(r: RunData, rule: _Rule) -> dict[str, float]:
     return out
 
 
-def _ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(den > 0, num / np.where(den > 0, den, 1), np.nan)
-
-
 #: metric name -> function of a (replicates x runs) view of the per-run counts
 _FROM_COUNTS = {
-    "far_ff": lambda c: _ratio(c["ff_a"].sum(-1), c["ff_n"].sum(-1)),
-    "far_pre": lambda c: _ratio(c["pre_a"].sum(-1), c["pre_n"].sum(-1)),
-    "fa_per_h": lambda c: _ratio(c["fa_ev"].sum(-1), c["ok_h"].sum(-1)),
-    "dr": lambda c: _ratio(c["dr_hit"].sum(-1), c["dr_tot"].sum(-1)),
-    "pd": lambda c: _ratio(c["det"].sum(-1), c["elig"].sum(-1)),
+    "far_ff": lambda c: pooled_rate(c["ff_a"], c["ff_n"]),
+    "far_pre": lambda c: pooled_rate(c["pre_a"], c["pre_n"]),
+    "fa_per_h": lambda c: pooled_rate(c["fa_ev"], c["ok_h"]),
+    "dr": lambda c: pooled_rate(c["dr_hit"], c["dr_tot"]),
+    "pd": lambda c: pooled_rate(c["det"], c["elig"]),
     "dd_median_s": lambda c: _nanstat(np.nanmedian, c["delay"]),
     "dd_mean_s": lambda c: _nanstat(np.nanmean, c["delay"]),
     "dd_p90_s": lambda c: _nanstat(lambda x, axis: np.nanpercentile(x, 90, axis=axis), c["delay"]),
     "dd_censored_mean_s": lambda c: _nanstat(np.nanmean, c["cens"]),
-    "ia": lambda c: _ratio(c["ia_hit"].sum(-1), c["ia_tot"].sum(-1)),
-    "dr_steady": lambda c: _ratio(c["st_hit"].sum(-1), c["st_tot"].sum(-1)),
-    "pd_steady": lambda c: _ratio(c["st_det"].sum(-1), c["st_elig"].sum(-1)),
+    "ia": lambda c: pooled_rate(c["ia_hit"], c["ia_tot"]),
+    "dr_steady": lambda c: pooled_rate(c["st_hit"], c["st_tot"]),
+    "pd_steady": lambda c: pooled_rate(c["st_det"], c["st_elig"]),
     "dd_steady_median_s": lambda c: _nanstat(np.nanmedian, c["st_delay"]),
-    "hit1": lambda c: _ratio(c["hit_r"].sum(-1), c["hit_n"].sum(-1)),
-    "hit1_samples": lambda c: _ratio(c["loc_hit"].sum(-1), c["loc_tot"].sum(-1)),
+    "hit1": lambda c: pooled_rate(c["hit_r"], c["hit_n"]),
+    "hit1_samples": lambda c: pooled_rate(c["loc_hit"], c["loc_tot"]),
 }
 
 
@@ -417,21 +418,18 @@ def _nanstat(fn, x: np.ndarray) -> np.ndarray:
 def _bootstrap(
     counts: pd.DataFrame, n_boot: int, seed: int, level: float = 0.95
 ) -> dict[str, tuple[float, float, float]]:
-    """Point estimate and percentile CI of every count-based metric, resampling runs."""
+    """Point estimate and percentile CI of every count-based metric, resampling runs
+    (:func:`~r2rsim.evaluate.metrics.bootstrap_indices`, the resampling of
+    :func:`~r2rsim.evaluate.metrics.bootstrap_ci`, vectorised over the replicates)."""
     cols = {k: counts[k].to_numpy(float) for k in counts.columns}
-    idx = np.random.default_rng(seed).integers(0, len(counts), size=(n_boot, len(counts)))
+    idx = bootstrap_indices(len(counts), n_boot, seed)
     resampled = {k: v[idx] for k, v in cols.items()}
+    percentiles = ci_percentiles(level)
     out = {}
     for name, fn in _FROM_COUNTS.items():
-        est = float(fn(cols))
         boot = fn(resampled) if n_boot else np.empty(0)
-        boot = boot[np.isfinite(boot)]
-        lo, hi = (
-            np.percentile(boot, [50 * (1 - level), 50 * (1 + level)])
-            if boot.size
-            else (math.nan, math.nan)
-        )
-        out[name] = (est, float(lo), float(hi))
+        lo, hi, _ = percentile_interval(boot, percentiles)
+        out[name] = (float(fn(cols)), lo, hi)
     return out
 
 
@@ -523,7 +521,7 @@ class Evaluation:
         own = {
             "val": f"own threshold recalibrated on val at alpha={st.get('alpha')}",
             "fit": "own threshold from fit",
-        }.get(st.get("own_threshold"), "own threshold")
+        }.get(str(st.get("own_threshold")), "own threshold")
         head = (
             f"{self.method} {json.dumps(self.params, sort_keys=True, default=str)}  "
             f"[{st.get('split', '')}; m={st.get('m')}, h={st.get('h')} s, "
@@ -650,22 +648,7 @@ def _mode_strata(
 
 def _modes(rd: list[RunData]) -> list[str]:
     """The regimes (``label.mode`` values but "") of the scored samples of the runs."""
-    return sorted({m for r in rd for m in np.unique(r.mode[r.scored])} - {""})
-
-
-def _pooled(runs: list[RunData]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Scores, truth and a group label per scored sample: a new group at each run and at
-    each gap in a run's scored samples (ranges and VUS buffers do not cross them)."""
-    s, y, g = [], [], []
-    n_groups = 0
-    for r in runs:
-        k = np.flatnonzero(r.scored)
-        seg = np.cumsum(np.r_[True, np.diff(k) != 1]) if k.size else k
-        s.append(r.score[k])
-        y.append(r.faulty[k])
-        g.append(seg + n_groups)
-        n_groups += int(seg[-1]) if k.size else 0
-    return np.concatenate(s), np.concatenate(y), np.concatenate(g)
+    return sorted({m for r in rd if r.mode is not None for m in np.unique(r.mode[r.scored])} - {""})
 
 
 def evaluate(
@@ -782,9 +765,10 @@ def evaluate(
             for r in rs
         )
     )
+    params_sha = _sha(plugin.params)
     base = {
         "method": plugin.name,
-        "params_sha256": _sha(plugin.params),
+        "params_sha256": params_sha,
         "dataset_sha256": dataset_sha,
         "split": split,
         "causal": plugin.causal,
@@ -804,7 +788,7 @@ def evaluate(
     return Evaluation(
         plugin.name,
         plugin.params,
-        _predictions(test, scored, rd_cal, plugin.name, base["params_sha256"]),
+        _predictions(test, scored, rd_cal, plugin.name, params_sha),
         table.frame(),
         theta,
         {
@@ -1041,6 +1025,12 @@ def _run_data(
     return rd, rd_cal
 
 
+#: the percentiles of pd_null's 95 % interval. They are written out rather than
+#: ci_percentiles(0.95) = (2.500000000000002, 97.5), which the other intervals use, so that
+#: its bounds stay the numbers they have always been, to the last bit.
+_NULL_PERCENTILES = (2.5, 97.5)
+
+
 class _NullRates:
     """pd_null of one set of alarms (the plug-in's, or at theta): the detection rule applied
     to the fault-free test runs at the pretend windows of a stratum's faulty runs, with the
@@ -1070,16 +1060,16 @@ class _NullRates:
         if not healthy or not windows:
             return math.nan, math.nan, math.nan
         c = self.counts(healthy, windows)
-        est = float(_ratio(c[:, 0].sum(), c[:, 1].sum()))
+        est = float(pooled_rate(c[:, 0], c[:, 1]))
         if not self.n_boot:
             return est, math.nan, math.nan
-        idx = np.random.default_rng(self.seed).integers(0, len(c), (self.n_boot, len(c)))
-        boot = _ratio(c[idx, 0].sum(-1), c[idx, 1].sum(-1))
-        boot = boot[np.isfinite(boot)]
-        if not boot.size:
-            return est, math.nan, math.nan
-        lo, hi = np.percentile(boot, [2.5, 97.5])
-        return est, float(lo), float(hi)
+        idx = bootstrap_indices(len(c), self.n_boot, self.seed)
+        lo, hi, _ = percentile_interval(pooled_rate(c[idx, 0], c[idx, 1]), _NULL_PERCENTILES)
+        return est, lo, hi
+
+
+#: a set of runs with their per-run counts and null rates (:meth:`_MetricTable._view`)
+_View = tuple[list[RunData], pd.DataFrame, _NullRates]
 
 
 def _windows(counts: pd.DataFrame, steady: bool = False) -> list[tuple[float, float]]:
@@ -1171,7 +1161,15 @@ class _MetricTable:
                 self.stratum(cond, ftype, math.nan, idx, v, v_cal, regime=True)
 
     def stratum(
-        self, cond, ftype, mag, idx, view, view_cal, healthy=None, regime: bool = False
+        self,
+        cond,
+        ftype,
+        mag,
+        idx,
+        view: _View,
+        view_cal: _View | None,
+        healthy=None,
+        regime: bool = False,
     ) -> None:
         """Add the rows of one stratum. ``view``/``view_cal``: (runs, their counts, their
         null rates) at the plug-in's alarms and at theta; ``healthy``: the fault-free runs
@@ -1203,16 +1201,13 @@ class _MetricTable:
                 *nulls.rate(healthy, _windows(counts, steady=True)),
                 n=len(healthy),
             )
-        y = np.concatenate([r.faulty[r.scored] for r in runs])
+        s, y = pooled_scores(runs)
         if y.any() and not y.all():
-            s = np.concatenate([r.score[r.scored] for r in runs])
             self.add(cond, ftype, mag, "roc_auc", roc_auc(s, y), n=n)
             self.add(cond, ftype, mag, "pr_auc", average_precision(s, y), n=n)
             if self.max_buffer is not None:
-                ps, py, pg = _pooled(runs)
-                self.add(
-                    cond, ftype, mag, "vus_pr", vus_pr(ps, py, self.max_buffer, groups=pg), n=n
-                )
+                g = scored_groups(runs)
+                self.add(cond, ftype, mag, "vus_pr", vus_pr(s, y, self.max_buffer, groups=g), n=n)
         if view_cal is None:
             return
         _, prc, nulls_cal = view_cal

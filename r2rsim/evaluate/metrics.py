@@ -21,7 +21,7 @@ Conventions shared by all metrics
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -43,6 +43,8 @@ __all__ = [
     "apply_threshold",
     "average_precision",
     "bootstrap_ci",
+    "bootstrap_indices",
+    "ci_percentiles",
     "calibrate_threshold",
     "confirmed",
     "DETECTION_WINDOW_S",
@@ -62,11 +64,14 @@ __all__ = [
     "null_detection",
     "null_detection_rate",
     "null_outcomes",
+    "percentile_interval",
+    "pooled_rate",
     "pooled_scores",
     "range_pr_auc",
     "restrict_to_mode",
     "roc_auc",
     "run_hit",
+    "scored_groups",
     "steady_counts",
     "steady_detection",
     "steady_detection_rate",
@@ -220,7 +225,7 @@ class RunData:
             )
 
     def _aligned(self, name: str, dtype: type, shape: tuple | None = None) -> NDArray:
-        a = np.asarray(getattr(self, name), dtype=dtype)
+        a: NDArray = np.asarray(getattr(self, name), dtype=dtype)
         want = self.t.shape if shape is None else shape
         if a.shape != want:
             raise ValueError(
@@ -307,6 +312,14 @@ class RunData:
         return end
 
 
+def _fault_slice(run: RunData) -> slice:
+    """The samples [tau, eps] of a faulty run."""
+    tau, eps = run.onset, run.end
+    if tau is None or eps is None:
+        raise ValueError("a faulty run is needed (no faulty sample found)")
+    return slice(tau, eps + 1)
+
+
 def restrict_to_mode(run: RunData, mode: str) -> RunData:
     """The run seen through one operating regime: only its samples in ``mode`` stay scored.
 
@@ -369,18 +382,28 @@ class FarResult:
     n_masked: int
 
 
-def _ratio(num: float, den: float) -> float:
-    return num / den if den > 0 else math.nan
+def _ratio(num: ArrayLike, den: ArrayLike) -> NDArray[np.float64]:
+    """``num / den`` element-wise; nan where ``den`` is not positive (a rate of nothing)."""
+    num, den = np.asarray(num), np.asarray(den)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 0, num / np.where(den > 0, den, 1), np.nan)
 
 
-def _pooled(counts) -> float:
-    """Summed hits over summed totals of (hits, total) pairs, pooled over runs (nan if
-    the totals are 0)."""
-    hits = total = 0
-    for h, n in counts:
-        hits += h
-        total += n
-    return _ratio(hits, total)
+def pooled_rate(hits: ArrayLike, totals: ArrayLike) -> NDArray[np.float64]:
+    """The rate of counts pooled over runs: summed hits over summed totals along the last
+    axis (runs), nan where the totals are 0.
+
+    The one pooling of every count-based rate: the metrics here pool a list of runs (1-d
+    counts, a 0-d result); the harness pools the rows of a bootstrap replicate matrix
+    (replicates x runs) in one call.
+    """
+    return _ratio(np.sum(hits, axis=-1), np.sum(totals, axis=-1))
+
+
+def _pooled(counts: Iterable[tuple[int, int]]) -> float:
+    """:func:`pooled_rate` of (hits, total) pairs, one per run."""
+    pairs = np.array(list(counts), dtype=float).reshape(-1, 2)
+    return float(pooled_rate(pairs[:, 0], pairs[:, 1]))
 
 
 def far(runs: Sequence[RunData]) -> FarResult:
@@ -412,9 +435,9 @@ def far(runs: Sequence[RunData]) -> FarResult:
             a_pre += int(a[:tau].sum())
             n_pre += int(pre.sum())
     return FarResult(
-        far_ff=_ratio(a_ff, n_ff),
-        far_pre=_ratio(a_pre, n_pre),
-        far=_ratio(a_all, n_all),
+        far_ff=float(_ratio(a_ff, n_ff)),
+        far_pre=float(_ratio(a_pre, n_pre)),
+        far=float(_ratio(a_all, n_all)),
         alarms_ff=a_ff,
         n_ff=n_ff,
         alarms_pre=a_pre,
@@ -474,7 +497,7 @@ def false_alarm_events(runs: Sequence[RunData]) -> FalseAlarmEvents:
         if n_ok:
             seconds += n_ok * r.period
     hours = seconds / 3600.0
-    rate = _ratio(n_events, hours)
+    rate = float(_ratio(n_events, hours))
     if math.isnan(rate):
         mtbfa = math.nan
     else:
@@ -506,7 +529,7 @@ def detection_rate(runs: Sequence[RunData]) -> float:
 def window_counts(run: RunData) -> tuple[int, int]:
     """Alarmed scored samples and scored samples in a faulty run's window [tau, eps] (the
     numerator and denominator of M3 for one run)."""
-    sl = slice(run.onset, run.end + 1)
+    sl = _fault_slice(run)
     return int(run.effective_alarm[sl].sum()), int(run.scored[sl].sum())
 
 
@@ -678,7 +701,7 @@ def detect_run(
         Whether and where the run was detected, the delay and the censoring horizon.
     """
     tau, end = run.onset, run.window_end(h, w)
-    if tau is None:
+    if tau is None or end is None:
         raise ValueError("detect_run needs a faulty run (no faulty sample found)")
     horizon = float(run.t[end] - run.t[tau])
     eligible = bool(run.scored[tau : end + 1].any())
@@ -719,7 +742,7 @@ def detection_probability(
         Detected faulty runs / faulty runs (nan if there is none).
     """
     dets = _detections(runs, m, h, w)
-    return _ratio(sum(d.detected for d in dets), len(dets))
+    return float(_ratio(sum(d.detected for d in dets), len(dets)))
 
 
 def detection_windows(
@@ -730,7 +753,7 @@ def detection_windows(
     out = []
     for r in _faulty_runs(runs):
         tau, end = r.onset, r.window_end(h, w)
-        if r.scored[tau : end + 1].any():
+        if tau is not None and end is not None and r.scored[tau : end + 1].any():
             out.append((float(r.t[tau]), float(r.t[end] - r.t[tau])))
     return out
 
@@ -954,14 +977,29 @@ def pooled_scores(runs: Sequence[RunData]) -> tuple[NDArray[np.float64], NDArray
     score : numpy.ndarray of float
     y : numpy.ndarray of bool
     """
-    if any(r.score is None for r in runs):
+    scores = [r.score for r in runs if r.score is not None]
+    if len(scores) < len(runs):
         raise ValueError("pooled_scores needs runs with scores")
     if not runs:
         return np.empty(0), np.empty(0, dtype=bool)
     return (
-        np.concatenate([r.score[r.scored] for r in runs]),
+        np.concatenate([s[r.scored] for s, r in zip(scores, runs, strict=True)]),
         np.concatenate([r.faulty[r.scored] for r in runs]),
     )
+
+
+def scored_groups(runs: Sequence[RunData]) -> NDArray[np.int64]:
+    """A group label per sample of :func:`pooled_scores`: a new group at each run and at
+    each gap in a run's scored samples (the ranges of :func:`range_pr_auc` and the buffers
+    of :func:`vus_pr` do not cross them)."""
+    g = []
+    n_groups = 0
+    for r in runs:
+        k = np.flatnonzero(r.scored)
+        seg = np.cumsum(np.r_[True, np.diff(k) != 1]) if k.size else k
+        g.append(seg + n_groups)
+        n_groups += int(seg[-1]) if k.size else 0
+    return np.concatenate(g) if g else np.empty(0, dtype=np.int64)
 
 
 def _check_score_y(score: ArrayLike, y: ArrayLike) -> tuple[NDArray, NDArray]:
@@ -1112,10 +1150,15 @@ def range_pr_auc(
         range it equals :func:`average_precision`.
     """
     prep = _range_inputs(score, y, buffer, groups, "buffer")
-    return math.nan if prep is None else _range_auc(*prep[:2], int(buffer), *prep[2:])
+    if prep is None:
+        return math.nan
+    s, yy, first, last, order = prep
+    return _range_auc(s, yy, int(buffer), first, last, order)
 
 
-def _range_inputs(score, y, buffer, groups, name: str):
+def _range_inputs(
+    score: ArrayLike, y: ArrayLike, buffer: float, groups: ArrayLike | None, name: str
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray] | None:
     """Checked ``(score, y, first, last, order)`` for the range-based AUCs, or None when
     no sample is anomalous."""
     s, yy = _check_score_y(score, y)
@@ -1190,7 +1233,10 @@ def vus_pr(
     prep = _range_inputs(score, y, max_buffer, groups, "max_buffer")
     if prep is None:
         return math.nan
-    return float(np.mean([_range_auc(*prep[:2], b, *prep[2:]) for b in range(int(max_buffer) + 1)]))
+    s, yy, first, last, order = prep
+    return float(
+        np.mean([_range_auc(s, yy, b, first, last, order) for b in range(int(max_buffer) + 1)])
+    )
 
 
 # --------------------------------------------------------------------------- M9
@@ -1229,7 +1275,7 @@ def isolation_counts(run: RunData) -> tuple[int, int]:
     (the numerator and denominator of M9 for one run)."""
     if run.diagnosis is None or run.true_type is None:
         raise ValueError("isolation_accuracy needs diagnosis and true_type on every faulty run")
-    sl = slice(run.onset, run.end + 1)
+    sl = _fault_slice(run)
     # forward-fill the truth from the last faulty sample across intermittent gaps
     idx = np.where(run.faulty[sl], np.arange(sl.start, sl.stop), -1)
     truth = run.true_type[np.maximum.accumulate(idx)]
@@ -1249,10 +1295,6 @@ def _top_hit(ranking: NDArray[np.int64], truth: NDArray[np.bool_], n: int) -> ND
         ok = c >= 0
         hit |= ok & truth[rows, np.where(ok, c, 0)]
     return hit
-
-
-def _has_channels(run: RunData) -> bool:
-    return run.channel_truth is not None and run.ranking is not None
 
 
 def run_hit(
@@ -1275,13 +1317,13 @@ def run_hit(
         (hit, counted): counted is 1 for a faulty run that has a faulty measured channel
         (``channel_truth`` true somewhere) and is detected; else (0, 0).
     """
-    if not run.is_faulty or not _has_channels(run):
+    if not run.is_faulty or run.channel_truth is None or run.ranking is None:
         return 0, 0
-    truth = run.channel_truth.any(axis=0)
+    truth = np.asarray(run.channel_truth.any(axis=0))
     if not truth.any():
         return 0, 0
     d = detect_run(run, m, h, w)
-    if not d.detected:
+    if d.k_star is None:  # not detected
         return 0, 0
     hit = _top_hit(run.ranking[[d.k_star]], truth[None, :], n)
     return int(hit[0]), 1
@@ -1329,9 +1371,9 @@ def localization_counts(run: RunData, n: int = 1) -> tuple[int, int]:
     tuple of int
         (hits, total); (0, 0) for a fault-free run or a run without channel data.
     """
-    if not run.is_faulty or not _has_channels(run):
+    if not run.is_faulty or run.channel_truth is None or run.ranking is None:
         return 0, 0
-    sl = slice(run.onset, run.end + 1)
+    sl = _fault_slice(run)
     truth = run.channel_truth[sl]
     sel = run.effective_alarm[sl] & truth.any(axis=1)
     hit = _top_hit(run.ranking[sl], truth, n)
@@ -1510,7 +1552,6 @@ def bootstrap_ci(
         raise ValueError(f"level must be in (0, 1), got {level!r}")
     if n_boot < 1:
         raise ValueError("n_boot must be >= 1")
-    rng = np.random.default_rng(seed)
     if callable(stat):
         if runs is None:
             raise ValueError("a callable statistic needs the runs to resample")
@@ -1533,18 +1574,34 @@ def bootstrap_ci(
         estimate = float(values.mean()) if n else math.nan
     if n == 0:
         raise ValueError("nothing to resample")
-    idx = rng.integers(0, n, size=(n_boot, n))
-    boot = np.array([evaluate(row) for row in idx])
-    finite = boot[np.isfinite(boot)]
-    if finite.size:
-        low, high = np.percentile(finite, [50 * (1 - level), 50 * (1 + level)])
-    else:
-        low = high = math.nan
+    boot = np.array([evaluate(row) for row in bootstrap_indices(n, n_boot, seed)])
+    low, high, n_valid = percentile_interval(boot, ci_percentiles(level))
     return ConfidenceInterval(
-        estimate=estimate,
-        low=float(low),
-        high=float(high),
-        level=level,
-        n_boot=int(n_boot),
-        n_valid=int(finite.size),
+        estimate=estimate, low=low, high=high, level=level, n_boot=int(n_boot), n_valid=n_valid
     )
+
+
+def bootstrap_indices(n: int, n_boot: int, seed: int) -> NDArray[np.int64]:
+    """The runs of each bootstrap replicate: ``(n_boot, n)`` indices into ``n`` runs, drawn
+    with replacement by ``numpy.random.default_rng(seed)`` (§5.5: resample runs, never
+    samples). The one resampling of :func:`bootstrap_ci` and of the harness's intervals."""
+    return np.random.default_rng(seed).integers(0, n, size=(n_boot, n))
+
+
+def ci_percentiles(level: float) -> tuple[float, float]:
+    """The percentiles [%] that bound a two-sided interval at confidence ``level``."""
+    return 50 * (1 - level), 50 * (1 + level)
+
+
+def percentile_interval(
+    boot: ArrayLike, percentiles: tuple[float, float]
+) -> tuple[float, float, int]:
+    """The percentile interval of the finite bootstrap replicates ``boot``: ``(low, high,
+    n_finite)``; ``(nan, nan, 0)`` when no replicate is finite (a resample may e.g. hold no
+    faulty run)."""
+    b = np.asarray(boot, dtype=float)
+    finite = b[np.isfinite(b)]
+    if not finite.size:
+        return math.nan, math.nan, 0
+    low, high = np.percentile(finite, percentiles)
+    return float(low), float(high), int(finite.size)

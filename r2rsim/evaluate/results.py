@@ -83,7 +83,8 @@ def _is_own(path: Path, kind: str) -> bool:
         except (OSError, ValueError):
             return False
         return isinstance(data, dict) and isinstance(data.get("test"), list)
-    return FILES[kind][path.name] <= _columns(path)
+    columns = FILES[kind][path.name]
+    return columns is not None and columns <= _columns(path)
 
 
 def check_results_output(output: str | Path, kind: str, overwrite: bool = False) -> None:
@@ -123,7 +124,10 @@ def check_results_output(output: str | Path, kind: str, overwrite: bool = False)
 
 
 def write_results(
-    output: str | Path, kind: str, files: dict[str, Callable[[Path], None]], overwrite: bool = False
+    output: str | Path,
+    kind: str,
+    files: dict[str, Callable[[Path], object]],
+    overwrite: bool = False,
 ) -> Path:
     """Write a results directory: check it (:func:`check_results_output`), write every file
     into a temporary directory next to it, then move them in, replacing the earlier results

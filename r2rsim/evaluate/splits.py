@@ -272,7 +272,8 @@ def split_by_seed(
     for group in _by_condition(runs, pool).values():
         for role, chosen in _apportion_runs(runs, group, fractions).items():
             roles[role] += chosen
-    return Split(*([runs[i] for i in sorted(roles[role])] for role in ROLES), name="seed")
+    by_role = {role: [runs[i] for i in sorted(roles[role])] for role in ROLES}
+    return Split(by_role["train"], by_role["val"], by_role["test"], name="seed")
 
 
 def no_training_run(runs: Sequence[Run]) -> str:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import difflib
 import fnmatch
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -208,17 +209,20 @@ def open_run(
         raise InputError(
             f"dataset {root}: run {run_id} has no samples (samples/run_id={run_id}/part-*.parquet)"
         )
-    metas, data = [], [] if whole else None
+    metas: list[pq.FileMetaData] = []
+    data: list[bytes] = []  # with whole
     for f in files:
         rel = f.relative_to(root).as_posix()
         with _reading(root, f, verifier):
+            blob = None
             if whole:
                 if verifier is not None:
                     verifier.listed(rel, run_id)
-                data.append(f.read_bytes())
+                blob = f.read_bytes()
+                data.append(blob)
             if verifier is not None:
-                verifier.start(rel, run_id, data[-1] if whole else None)
-            metas.append(pq.read_metadata(pa.BufferReader(data[-1]) if whole else f))
+                verifier.start(rel, run_id, blob)
+            metas.append(pq.read_metadata(pa.BufferReader(blob) if blob is not None else f))
             _stats(metas[-1], "t_s")  # the time column is there
     numeric = [
         f.name
@@ -230,7 +234,9 @@ def open_run(
             or pa.types.is_boolean(f.type)
         )
     ]
-    run = RunData(root, run_id, files, metas, numeric, np.nan, np.nan, verifier, data)
+    run = RunData(
+        root, run_id, files, metas, numeric, np.nan, np.nan, verifier, data if whole else None
+    )
     # + 0.0: Parquet statistics store a float minimum of 0 as -0 (the format's rule)
     run.t_start, run.t_end = (v + 0.0 for v in _column_range(run, "t_s"))
     return run
@@ -354,7 +360,7 @@ def iter_window(run: RunData, columns: list[str], t0: float, t1: float):
     """Yield ``(t, {column: values})`` per row group of the samples with t0 <= t_s <= t1,
     reading only these columns and only the row groups that overlap the window (a row
     group is about 16 MB of all columns, so a chunk is a few MB)."""
-    sources = run.data or [None] * len(run.files)
+    sources: Sequence[bytes | None] = run.data or [None] * len(run.files)
     for path, meta, data in zip(run.files, run.metas, sources, strict=True):
         f = pq.ParquetFile(path if data is None else pa.BufferReader(data), metadata=meta)
         for g in _row_groups_in(meta, t0, t1):
@@ -400,7 +406,7 @@ def check_run_labels(run: RunData) -> None:
         *(c for c in QUICK_LABELS if c in names),
         *sorted(c for c in names if c.startswith("label.ch.")),
     ]
-    sources = run.data or [None] * len(run.files)
+    sources: Sequence[bytes | None] = run.data or [None] * len(run.files)
     tables = []
     for path, meta, data in zip(run.files, run.metas, sources, strict=True):
         with _reading(run.root, path, v):
@@ -449,10 +455,11 @@ def read_envelopes(
     parts: dict[str, list] = {c: [] for c in columns}
     for t, values in iter_window(run, columns, t0, t1):
         whole = t.size <= 2 * n_buckets
-        starts = None if whole else _bucket_starts(t, n_buckets, (t0, t1))  # shared
+        # shared by the columns; whole: a bucket per sample
+        starts = np.arange(t.size) if whole else _bucket_starts(t, n_buckets, (t0, t1))
         for c, y in values.items():
             if c in means:
-                parts[c].append(_bucket_means(t, y, np.arange(t.size) if whole else starts))
+                parts[c].append(_bucket_means(t, y, starts))
             elif whole:
                 parts[c].append((t, y))
             else:

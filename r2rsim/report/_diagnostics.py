@@ -14,6 +14,7 @@ import io
 import math
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TypeAlias
 
 import numpy as np
 import pandas as pd
@@ -34,7 +35,7 @@ BY = ("condition", "fault", "magnitude")
 #: the P_D level of MDM90
 MDM_LEVEL = 0.9
 
-Results = str | Path | pd.DataFrame | Sequence[str | Path | pd.DataFrame]
+Results: TypeAlias = str | Path | pd.DataFrame | Sequence[str | Path | pd.DataFrame]
 
 
 # --------------------------------------------------------------------------- reading

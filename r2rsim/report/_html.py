@@ -10,6 +10,7 @@ import io
 import os
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
@@ -160,7 +161,8 @@ def _recorded_datasets(src: Path) -> tuple[list[str] | None, str | None]:
     if not f.is_file():
         return None, None
     try:
-        paths = read_json(f, DATASETS_FILE_MAX_BYTES)["test"]
+        recorded: Any = read_json(f, DATASETS_FILE_MAX_BYTES)  # checked below
+        paths = recorded["test"]
         if not (isinstance(paths, list) and all(isinstance(p, str) for p in paths)):
             raise TypeError("'test' is not a list of paths")
     except (ValueError, KeyError, TypeError) as exc:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import difflib
 import json
 import re
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -182,7 +183,8 @@ def axis_unit(root, column: str, v=None) -> str:
     from ..dataset.paths import read_json
 
     try:
-        sweep = read_json(root / "manifest.json").get("sweep") or {}
+        manifest: Any = read_json(root / "manifest.json")  # checked by using it
+        sweep = manifest.get("sweep") or {}
         axis = next(a for a in sweep.get("axes", []) if a.get("column") == column)
     except (OSError, ValueError, StopIteration, AttributeError, TypeError):
         return UNKNOWN_UNIT

@@ -100,7 +100,7 @@ class SweepSummary:
     wall_s: float = 0.0
     #: the dataset is finalised: every run has an outcome (``ok`` says whether none failed)
     complete: bool = False
-    failures: list[tuple[str, str]] = field(default_factory=list)
+    failures: list[tuple[str, str | None]] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     executor: str = ""
 
@@ -220,7 +220,7 @@ def run_sweep(
     outcomes = store.outcomes(retry_failed)
     todo = [s for s in plan.runs if s.run_id not in outcomes]
     planned = planned_seconds(todo) if chosen else None
-    if chosen:
+    if planned is not None:  # chosen
         workers = choose_workers(planned, len(todo), workers)
     summary = SweepSummary(
         out, len(plan.runs), warnings=plan.warnings, executor=_describe(workers, scheduler, planned)

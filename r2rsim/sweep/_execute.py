@@ -18,8 +18,12 @@ import time
 import traceback
 import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..errors import InputError, PlausibilityWarning, R2RError
+
+if TYPE_CHECKING:
+    from ._plan import RunSpec
 
 #: a run is given up (recorded as failed) when the worker process running it died this often
 MAX_ATTEMPTS = 3
@@ -51,7 +55,7 @@ def environment_error(exc: BaseException | None) -> OSError | None:
     seen: set[int] = set()
     while exc is not None and id(exc) not in seen:
         seen.add(id(exc))
-        if isinstance(exc, OSError) and exc.errno in ENVIRONMENT_ERRNOS:
+        if isinstance(exc, OSError) and exc.errno is not None and exc.errno in ENVIRONMENT_ERRNOS:
             return OSError(exc.errno, os.strerror(exc.errno), exc.filename)
         exc = exc.__cause__ or exc.__context__
     return None
@@ -427,7 +431,7 @@ def _dask_loop(client, as_completed, specs, work, on_result, window: int) -> Non
     scheduler stops the sweep (it waited for ever; the runs in flight were recorded as
     failed), and the finished runs are kept."""
     queue = list(reversed(specs))
-    pending = {}
+    pending: dict[str, RunSpec] = {}  # future key -> its run
     ac = as_completed()
     lost = R2RError(
         "the Dask scheduler went away; the finished runs are kept: run the same "

@@ -18,6 +18,7 @@ from .. import limits
 from .._version import __version__
 from ..errors import InputError, PlausibilityWarning, R2RError
 from ..schema import paths as _paths
+from ..schema.line import Line
 from ..schema.loader import _validate, build_scenario, line_path_of, load_line, read_yaml
 from ..schema.sweep import Axis, Sweep
 from ..units import QuantityError, parse_any
@@ -154,6 +155,7 @@ def _axis_values(axis: Axis, file: str, where: str) -> list:
     if axis.values is not None:
         return list(axis.values)
     r = axis.range
+    assert r is not None  # the schema: an axis has values, a range or a distribution
     parts = [_si(r.start, file, f"{where}.range.start"), _si(r.stop, file, f"{where}.range.stop")]
     if r.step is not None:
         parts.append(_si(r.step, file, f"{where}.range.step"))
@@ -234,6 +236,7 @@ def combinations(sweep: Sweep, file: str) -> list[tuple]:
                 vals = _axis_values(a, file, f"axes[{i}]")
                 draw.append(lambda rng, vals=vals: vals[int(rng.integers(len(vals)))])
         count = sweep.n
+        assert count is not None  # the schema: combine: random needs n
         _check_count(count * n_seeds, file)
         return [tuple(d(rng) for d in draw) for _ in range(count)]
     values = [_axis_values(a, file, f"axes[{i}]") for i, a in enumerate(sweep.axes)]
@@ -375,7 +378,7 @@ class _Checker:
         self.problems: list[str] = []
         self.invalid: set[int] = set()  # combinations with a problem (one may have several)
         self.warnings: dict[str, int] = {}
-        self.lines: dict[str, object] = {}  # validated lines by their data's digest
+        self.lines: dict[str, Line] = {}  # validated lines by their data's digest
         self.columns_of: dict[str, tuple] = {}  # data structure -> sample columns
         self.first: tuple | None = None  # (sample columns, combination) of the first
         self.ids: dict[str, int] = {}
@@ -656,7 +659,7 @@ def _axis_row(sweep: Sweep, combo: _Combination, scenario, line) -> dict:
     """The axis values of a combination as stored: read back from the validated models (in
     SI), None for an axis that did not apply."""
     dumped = {"scenario": scenario.model_dump(), "line": line.model_dump()}
-    row = {}
+    row: dict[str, object] = {}
     for i, axis in enumerate(sweep.axes):
         if not combo.applies(i) or combo.values[i] is None:
             row[axis.column] = None

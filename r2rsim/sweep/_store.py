@@ -23,6 +23,7 @@ import platform
 import re
 import shutil
 from pathlib import Path
+from typing import IO
 
 import numpy as np
 import pyarrow as pa
@@ -90,7 +91,7 @@ def finished(path: Path, config_sha256: str) -> dict | None:
     return row if row.get("config_sha256") == config_sha256 else None
 
 
-def write_failure(work: Path, spec, reason: str, detail: str | None = None) -> None:
+def write_failure(work: str | Path, spec, reason: str, detail: str | None = None) -> None:
     """Record that a run failed without data: ``<work>/<run_id>.failed.json``, written
     atomically (a resumed sweep reads it, and keeps the run failed unless --retry-failed).
     A record that is there already (the worker's own, with its traceback) is kept."""
@@ -143,7 +144,7 @@ class SweepStore:
         self.marker = self.out / MARKER
         self.mode = "new"
         self.final: dict | None = None  # the manifest of a finished dataset being reopened
-        self._lock = None
+        self._lock: IO[bytes] | None = None
 
     # ------------------------------------------------------------------ before writing
     def inspect(self) -> None:
@@ -250,7 +251,7 @@ class SweepStore:
         return found
 
     def _final_outcomes(self, plan_ids, found, foreign, changed) -> None:
-        files = self.final.get("files", {})
+        files = (self.final or {}).get("files", {})
         runs = read_parquet_file(self.out / "runs.parquet").to_pylist()
         for row in runs:
             rid = row["run_id"]
@@ -506,7 +507,8 @@ class SweepStore:
             "events": EVENTS_SCHEMA,
             "variability": VARIABILITY_SCHEMA,
         }
-        channels, old_channels, seen_channels = None, False, set()
+        channels, old_channels = None, False
+        seen_channels: set[str] = set()  # the sha256 of each channels table merged
         run_ids, failure_rows = [], []
         try:
             for spec in self.plan.runs:
@@ -525,7 +527,7 @@ class SweepStore:
                 for name in TABLES:
                     table = (
                         read_parquet_file(self.work / spec.run_id / f"{name}.parquet")
-                        if o.where == "work"
+                        if o.where == "work" or old is None
                         else old.rows(name, spec.run_id)
                     )
                     if name == "runs":  # as this plan numbers and names them
