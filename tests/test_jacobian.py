@@ -251,10 +251,10 @@ def test_dancer_festoon_and_loop_jacobian_against_finite_differences(tmp_path, m
         if kind == "mover":
             y[i] += 0.02 * rng.standard_normal()
     if case == "latched":
-        from r2rsim.compile.layout import H_OFF_MP, MP_MODE, NMP
+        from r2rsim.compile.layout import N_MOVER_P, H, MoverP
 
-        cl.P[cl.I[H_OFF_MP] + 0 * NMP + MP_MODE] = -1.0
-        cl.P[cl.I[H_OFF_MP] + 2 * NMP + MP_MODE] = 2.0
+        cl.P[cl.I[H.OFF_MP] + 0 * N_MOVER_P + MoverP.MODE] = -1.0
+        cl.P[cl.I[H.OFF_MP] + 2 * N_MOVER_P + MoverP.MODE] = 2.0
     _assert_jacobian_matches_fd(cl, 0.3, y, floor=1e-6)
 
 

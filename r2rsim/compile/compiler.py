@@ -3,7 +3,7 @@
 States are laid out along the web path: for each element its own states (roll length and
 unstretched length, angular speed, drive torque, controller integrators, sensor filters),
 then the strain of the span that leaves it. Only neighbours interact, so the Jacobian is
-banded; the exact pattern is obtained from the kernel itself (``MODE_TOUCH``).
+banded; the exact pattern is obtained from the kernel itself (``Mode.TOUCH``).
 """
 
 from __future__ import annotations
@@ -26,22 +26,65 @@ from ..schema.line import (
 )
 from . import kernels
 from .disturbances import realise_pitch_variations
-from .layout import *  # noqa: F403 - the record field names
+from .layout import (
+    AUX_CTRL,
+    AUX_JOINT,
+    AUX_MOVER,
+    AUX_NODE,
+    AUX_SENS,
+    AUX_SPAN,
+    HEADER,
+    N_CTRL_I,
+    N_CTRL_P,
+    N_EVENT_I,
+    N_FAULT_P,
+    N_JOINT_P,
+    N_MOVER_I,
+    N_MOVER_P,
+    N_NODE_I,
+    N_NODE_P,
+    N_SENSOR_I,
+    N_SENSOR_P,
+    N_SPAN_I,
+    N_SPAN_P,
+    N_TABLE_I,
+    CtrlI,
+    CtrlKind,
+    CtrlP,
+    DriveKind,
+    EventKind,
+    H,
+    Mode,
+    MoverI,
+    MoverKind,
+    MoverP,
+    NodeI,
+    NodeKind,
+    NodeP,
+    SensorI,
+    SensorKind,
+    SensorP,
+    Shape,
+    SpanI,
+    SpanP,
+    TableI,
+    TableKind,
+)
 
 MAXD = 16  # gradient slots per intermediate quantity
 
 #: event kind -> name used in the event log
 EVENT_NAMES = {
-    EV_SLACK: "slack",
-    EV_BREAK: "web_break",
-    EV_CAPSTAN: "slip_risk",
-    EV_EMPTY: "roll_empty",
-    EV_STOP_LO: "dancer_stop_low",
-    EV_STOP_HI: "dancer_stop_high",
-    EV_JOINT_PASS: "splice_joint",
-    EV_JOINT_BREAK: "splice_break",
-    EV_SPLICE_RADIUS: "splice_trigger",
-    EV_REFILL: "splice_refilled",
+    EventKind.SLACK: "slack",
+    EventKind.BREAK: "web_break",
+    EventKind.CAPSTAN: "slip_risk",
+    EventKind.EMPTY: "roll_empty",
+    EventKind.STOP_LO: "dancer_stop_low",
+    EventKind.STOP_HI: "dancer_stop_high",
+    EventKind.JOINT_PASS: "splice_joint",
+    EventKind.JOINT_BREAK: "splice_break",
+    EventKind.SPLICE_RADIUS: "splice_trigger",
+    EventKind.REFILL: "splice_refilled",
 }
 N_JOINT_SLOTS = 2  # splice joints on the line at once (a joint leaves at the rewind)
 
@@ -220,7 +263,7 @@ class CompiledLine:
     uband: int = 0
 
     def __post_init__(self):
-        nq = int(self.I[H_NQ])
+        nq = int(self.I[H.NQ])
         drag_cache, end = kernels.scratch_layout(self.I)
         self._W = np.zeros(
             max(
@@ -239,6 +282,76 @@ class CompiledLine:
         self._aux0 = np.zeros(0)
         self._yd = np.zeros(self.n_states)
 
+    # ---- the record families: zero-copy views of I and P ----------------------------------
+    def _records(self, arr: np.ndarray, off: H, count: H, size: int) -> np.ndarray:
+        o, n = int(self.I[off]), int(self.I[count])
+        return arr[o : o + n * size].reshape(n, size)  # a view: writes reach the kernel
+
+    @property
+    def node_i(self) -> np.ndarray:
+        """Node records of I, (nodes, :class:`NodeI`): ``cl.node_i[k, NodeI.W]``."""
+        return self._records(self.I, H.OFF_NI, H.NN, N_NODE_I)
+
+    @property
+    def node_p(self) -> np.ndarray:
+        """Node records of P, (nodes, :class:`NodeP`): ``cl.node_p[k, NodeP.TEFF]``."""
+        return self._records(self.P, H.OFF_NP, H.NN, N_NODE_P)
+
+    @property
+    def span_i(self) -> np.ndarray:
+        return self._records(self.I, H.OFF_SI, H.NS, N_SPAN_I)
+
+    @property
+    def span_p(self) -> np.ndarray:
+        return self._records(self.P, H.OFF_SP, H.NS, N_SPAN_P)
+
+    @property
+    def sensor_i(self) -> np.ndarray:
+        return self._records(self.I, H.OFF_SEI, H.NSE, N_SENSOR_I)
+
+    @property
+    def sensor_p(self) -> np.ndarray:
+        return self._records(self.P, H.OFF_SEP, H.NSE, N_SENSOR_P)
+
+    @property
+    def ctrl_i(self) -> np.ndarray:
+        return self._records(self.I, H.OFF_CI, H.NC, N_CTRL_I)
+
+    @property
+    def ctrl_p(self) -> np.ndarray:
+        return self._records(self.P, H.OFF_CP, H.NC, N_CTRL_P)
+
+    @property
+    def mover_i(self) -> np.ndarray:
+        return self._records(self.I, H.OFF_MI, H.NM, N_MOVER_I)
+
+    @property
+    def mover_p(self) -> np.ndarray:
+        return self._records(self.P, H.OFF_MP, H.NM, N_MOVER_P)
+
+    @property
+    def joint_p(self) -> np.ndarray:
+        """Splice-joint slots of P, (slots, :class:`JointP`)."""
+        return self._records(self.P, H.OFF_JP, H.NJ, N_JOINT_P)
+
+    @property
+    def fault_p(self) -> np.ndarray:
+        """Fault parameter slots of P, (slots, :class:`FaultP`)."""
+        return self._records(self.P, H.OFF_FS, H.NFS, N_FAULT_P)
+
+    @property
+    def event_i(self) -> np.ndarray:
+        """Event records of I, (events, :class:`EventI`)."""
+        return self._records(self.I, H.OFF_EV, H.NEV, N_EVENT_I)
+
+    def node_param(self, k: int, name: str) -> float:
+        """Parameter ``name`` (a :class:`NodeP` field, e.g. ``"TEFF"``) of node ``k``."""
+        return float(self.node_p[k, NodeP[name]])
+
+    def set_node_param(self, k: int, name: str, value: float) -> None:
+        """Set parameter ``name`` (a :class:`NodeP` field) of node ``k``."""
+        self.node_p[k, NodeP[name]] = value
+
     # ---- the callbacks ------------------------------------------------------------------
     def make_rhs(self):
         """Return ``rhs(t, y, yp)`` filling yp in place (the form scikit-sundae calls)."""
@@ -255,7 +368,7 @@ class CompiledLine:
         )
 
         def rhs(t, y, yp):
-            ev(t, y, yp, J1, MODE_RHS, I, P, W, GI, GC, GV, a0)
+            ev(t, y, yp, J1, int(Mode.RHS), I, P, W, GI, GC, GV, a0)
 
         return rhs
 
@@ -274,7 +387,7 @@ class CompiledLine:
         ydw = np.zeros(self.n_states)
 
         def jac(t, y, yp, JJ):
-            ev(t, y, ydw, JJ, MODE_JAC, I, P, W, GI, GC, GV, a0)
+            ev(t, y, ydw, JJ, int(Mode.JAC), I, P, W, GI, GC, GV, a0)
 
         return jac
 
@@ -286,7 +399,7 @@ class CompiledLine:
             np.ascontiguousarray(y, float),
             yd,
             self._J1,
-            MODE_RHS,
+            int(Mode.RHS),
             self.I,
             self.P,
             self._W,
@@ -306,7 +419,7 @@ class CompiledLine:
             np.ascontiguousarray(y, float),
             np.zeros(n),
             JJ,
-            MODE_JAC,
+            int(Mode.JAC),
             self.I,
             self.P,
             self._W,
@@ -365,7 +478,7 @@ class CompiledLine:
 
     def set_segment_start(self, t0: float) -> None:
         """Tell the kernel which piece of the programme is active (see ``kernels.setpoint``)."""
-        self.P[self.I[H_OFF_RT]] = t0
+        self.P[self.I[H.OFF_RT]] = t0
 
     def index(self, name: str) -> int:
         """Index of a state by name, e.g. ``span2.strain``."""
@@ -514,15 +627,15 @@ class _Packer:
         self.kinds: list[str] = []
         self.atol: list[float] = []
 
-        self.node_I = np.full((self.nN, NI), -1, np.int64)
-        self.node_P = np.zeros((self.nN, NP))
-        self.span_I = np.full((self.nS, NSI), -1, np.int64)
-        self.span_P = np.zeros((self.nS, NSP))
-        self.sens_I = np.full((max(self.nSe, 0), NSEI), -1, np.int64)
-        self.sens_P = np.zeros((max(self.nSe, 0), NSEP))
-        self.ctrl_I = np.full((max(self.nC, 0), NCI), -1, np.int64)
-        self.ctrl_P = np.zeros((max(self.nC, 0), NCP))
-        self.ctrl_P[:, CP_GATE] = 1.0  # loops are on (a splice gates the dancer loop off)
+        self.node_I = np.full((self.nN, N_NODE_I), -1, np.int64)
+        self.node_P = np.zeros((self.nN, N_NODE_P))
+        self.span_I = np.full((self.nS, N_SPAN_I), -1, np.int64)
+        self.span_P = np.zeros((self.nS, N_SPAN_P))
+        self.sens_I = np.full((max(self.nSe, 0), N_SENSOR_I), -1, np.int64)
+        self.sens_P = np.zeros((max(self.nSe, 0), N_SENSOR_P))
+        self.ctrl_I = np.full((max(self.nC, 0), N_CTRL_I), -1, np.int64)
+        self.ctrl_P = np.zeros((max(self.nC, 0), N_CTRL_P))
+        self.ctrl_P[:, CtrlP.GATE] = 1.0  # loops are on (a splice gates the dancer loop off)
 
         self.speed_of = {c.element: j for j, c in enumerate(self.ctrls) if c.type == "speed_pi"}
         self.tens_of = {c.element: j for j, c in enumerate(self.ctrls) if c.type == "tension_pi"}
@@ -534,8 +647,8 @@ class _Packer:
         ]
         self.nM = len(self.mover_ids)
         self.mover_idx = {m: i for i, m in enumerate(self.mover_ids)}
-        self.mov_I = np.full((self.nM, NMI), -1, np.int64)
-        self.mov_P = np.zeros((self.nM, NMP))
+        self.mov_I = np.full((self.nM, N_MOVER_I), -1, np.int64)
+        self.mov_P = np.zeros((self.nM, N_MOVER_P))
         self.mover_q0 = [0.0] * self.nM
         self.splice_nodes = [
             k for k, e in enumerate(els) if getattr(e, "splicer", None) is not None
@@ -563,54 +676,58 @@ class _Packer:
         which sit next to it (keeps the band narrow)."""
         m = self.mover_idx[mid]
         self.mov_P[m] = mp
-        self.mov_P[m, MP_LOADF] = self.mov_P[m, MP_FRICF] = 1.0
+        self.mov_P[m, MoverP.LOADF] = self.mov_P[m, MoverP.FRICF] = 1.0
         self.mover_q0[m] = q0
         mi = self.mov_I[m]
-        mi[MI_NODE] = k_node
-        mi[MI_SPAN_U], mi[MI_SPAN_D] = span_u, span_d
+        mi[MoverI.NODE] = k_node
+        mi[MoverI.SPAN_U], mi[MoverI.SPAN_D] = span_u, span_d
         tol = 1e-7 if unit == "m" else 1e-6
-        mi[MI_Q] = self.add(f"{mid}.position", unit, "mover", tol)
-        mi[MI_QD] = self.add(f"{mid}.velocity", f"{unit}/s", "mover", 10 * tol)
-        mi[MI_KIND] = kind
+        mi[MoverI.Q] = self.add(f"{mid}.position", unit, "mover", tol)
+        mi[MoverI.QD] = self.add(f"{mid}.velocity", f"{unit}/s", "mover", 10 * tol)
+        mi[MoverI.KIND] = kind
         for j, c in enumerate(self.ctrls):
             if c.type == "dancer_pi" and c.dancer == mid:
                 self._dancer_loop(j, c, m, k_node, span_u, q0)
         for j, sn in enumerate(self.sensors):
             if sn.type == "dancer_position" and sn.element == mid:
-                self.sens_I[j, SEI_TYPE] = SE_DANCER
-                self.sens_I[j, SEI_NODE] = m
-                self.sens_P[j, SEP_GAIN], self.sens_P[j, SEP_OFF], self.sens_P[j, SEP_TAU] = (
+                self.sens_I[j, SensorI.TYPE] = SensorKind.DANCER
+                self.sens_I[j, SensorI.NODE] = m
+                (
+                    self.sens_P[j, SensorP.GAIN],
+                    self.sens_P[j, SensorP.OFF],
+                    self.sens_P[j, SensorP.TAU],
+                ) = (
                     sn.gain,
                     sn.offset,
                     sn.filter,
                 )
                 if sn.filter > 0:
-                    self.sens_I[j, SEI_F] = self.add(
+                    self.sens_I[j, SensorI.F] = self.add(
                         f"{sn.id}.filtered", unit, "sensor_filter", tol
                     )
 
     def _dancer_loop(self, j, c, m, k_node, span_u, q0):
         ci, cp = self.ctrl_I[j], self.ctrl_P[j]
-        ci[CI_TYPE] = C_DANCER
-        ci[CI_NODE] = self.node_idx[c.element]
-        ci[CI_MOVER] = m
-        ci[CI_SENSOR] = self.sens_idx[c.sensor] if c.sensor else -1
-        cp[CP_KP], cp[CP_KI] = c.kp, c.ki
-        cp[CP_KAW] = (
+        ci[CtrlI.TYPE] = CtrlKind.DANCER
+        ci[CtrlI.NODE] = self.node_idx[c.element]
+        ci[CtrlI.MOVER] = m
+        ci[CtrlI.SENSOR] = self.sens_idx[c.sensor] if c.sensor else -1
+        cp[CtrlP.KP], cp[CtrlP.KI] = c.kp, c.ki
+        cp[CtrlP.KAW] = (
             c.anti_windup_gain
             if c.anti_windup_gain is not None
             else (c.ki / c.kp if c.kp > 0 else 1.0)
         )
-        cp[CP_LIM] = c.output_limit if c.output_limit is not None else math.inf
-        cp[CP_SETP] = c.setpoint if c.setpoint is not None else q0
-        cp[CP_GATE] = 1.0
+        cp[CtrlP.LIM] = c.output_limit if c.output_limit is not None else math.inf
+        cp[CtrlP.SETP] = c.setpoint if c.setpoint is not None else q0
+        cp[CtrlP.GATE] = 1.0
         # storage grows with q where sum(dL/dq) > 0; a short dancer speeds an
         # upstream element up or slows a downstream one
-        grow = _storage_slope(self.mov_P[m], self.mov_I[m, MI_KIND], q0)
-        upstream = ci[CI_NODE] <= (k_node - 1 if k_node >= 0 else span_u)
-        cp[CP_SIGN] = math.copysign(1.0, grow) * (1.0 if upstream else -1.0)
+        grow = _storage_slope(self.mov_P[m], self.mov_I[m, MoverI.KIND], q0)
+        upstream = ci[CtrlI.NODE] <= (k_node - 1 if k_node >= 0 else span_u)
+        cp[CtrlP.SIGN] = math.copysign(1.0, grow) * (1.0 if upstream else -1.0)
         if c.ki > 0:
-            ci[CI_X] = self.add(f"{c.id}.integral", "", "controller", 1e-8 / c.ki)
+            ci[CtrlI.X] = self.add(f"{c.id}.integral", "", "controller", 1e-8 / c.ki)
 
     # ---- element by element ------------------------------------------------------------------
     def element(self, k, e):
@@ -618,77 +735,79 @@ class _Packer:
         for a dancer, its mover."""
         f = e.friction
         ni, npr = self.node_I[k], self.node_P[k]
-        npr[NP_VGAIN] = 1.0
-        npr[NP_TEFF] = npr[NP_FRICF] = 1.0
-        npr[NP_WRAP] = e.wrap_angle if e.wrap_angle is not None else math.pi
+        npr[NodeP.VGAIN] = 1.0
+        npr[NodeP.TEFF] = npr[NodeP.FRICF] = 1.0
+        npr[NodeP.WRAP] = e.wrap_angle if e.wrap_angle is not None else math.pi
         for d in self.disturbances:
             if d.type == "out_of_round" and d.element == e.id:
-                npr[NP_ECC] = d.eccentricity
-        ni[NI_KIND] = {"unwind": NK_UNWIND, "rewind": NK_REWIND}.get(e.type, NK_ROLLER)
-        drive = getattr(e, "drive", None)
-        ni[NI_DRIVE] = (
-            DRV_NONE
-            if drive is None
-            else (DRV_IDEAL if drive.type == "ideal_speed" else DRV_TORQUE)
+                npr[NodeP.ECC] = d.eccentricity
+        ni[NodeI.KIND] = {"unwind": NodeKind.UNWIND, "rewind": NodeKind.REWIND}.get(
+            e.type, NodeKind.ROLLER
         )
-        ni[NI_SPAN_UP] = k - 1 if k > 0 else -1
-        ni[NI_SPAN_DN] = k if k < self.nN - 1 else -1
-        ni[NI_SPEEDC] = self.speed_of.get(e.id, -1)
-        ni[NI_TENSC] = self.tens_of.get(e.id, -1)
-        ni[NI_DRAWCH] = self.channel.get(f"draw:{e.id}", -1)
-        ni[NI_TQCH] = self.channel.get(f"torque:{e.id}", -1)
-        npr[NP_B], npr[NP_TC], npr[NP_WEPS] = f.viscous, f.coulomb, f.smoothing_speed
-        npr[NP_TMAX] = math.inf
+        drive = getattr(e, "drive", None)
+        ni[NodeI.DRIVE] = (
+            DriveKind.NONE
+            if drive is None
+            else (DriveKind.IDEAL if drive.type == "ideal_speed" else DriveKind.TORQUE)
+        )
+        ni[NodeI.SPAN_UP] = k - 1 if k > 0 else -1
+        ni[NodeI.SPAN_DN] = k if k < self.nN - 1 else -1
+        ni[NodeI.SPEEDC] = self.speed_of.get(e.id, -1)
+        ni[NodeI.TENSC] = self.tens_of.get(e.id, -1)
+        ni[NodeI.DRAWCH] = self.channel.get(f"draw:{e.id}", -1)
+        ni[NodeI.TQCH] = self.channel.get(f"torque:{e.id}", -1)
+        npr[NodeP.B], npr[NodeP.TC], npr[NodeP.WEPS] = f.viscous, f.coulomb, f.smoothing_speed
+        npr[NodeP.TMAX] = math.inf
         if drive is not None:
-            npr[NP_TLAG] = drive.torque_lag
-            npr[NP_TMAX] = drive.torque_max if drive.torque_max is not None else math.inf
-            npr[NP_DRAW] = drive.draw
+            npr[NodeP.TLAG] = drive.torque_lag
+            npr[NodeP.TMAX] = drive.torque_max if drive.torque_max is not None else math.inf
+            npr[NodeP.DRAW] = drive.draw
             if drive.torque_ripple is not None:
-                npr[NP_RIPA] = drive.torque_ripple.amplitude
-                npr[NP_RIPW] = 2.0 * math.pi * drive.torque_ripple.frequency
+                npr[NodeP.RIPA] = drive.torque_ripple.amplitude
+                npr[NodeP.RIPW] = 2.0 * math.pi * drive.torque_ripple.frequency
         if e.wrap_angle is not None and e.friction_coefficient is not None:
-            npr[NP_EMB] = math.exp(e.friction_coefficient * e.wrap_angle)
+            npr[NodeP.EMB] = math.exp(e.friction_coefficient * e.wrap_angle)
         if e.type in ("unwind", "rewind"):
             self._roll(k, e)
         elif e.type == "nip":
             pr = e.pressure_roller
             ratio = e.radius / pr.radius
-            npr[NP_R] = e.radius
-            npr[NP_J] = e.inertia + pr.inertia * ratio**2
-            npr[NP_B] = f.viscous + pr.friction.viscous * ratio**2
-            npr[NP_TC] = f.coulomb + pr.friction.coulomb * ratio
+            npr[NodeP.R] = e.radius
+            npr[NodeP.J] = e.inertia + pr.inertia * ratio**2
+            npr[NodeP.B] = f.viscous + pr.friction.viscous * ratio**2
+            npr[NodeP.TC] = f.coulomb + pr.friction.coulomb * ratio
         else:
-            npr[NP_R], npr[NP_J] = e.radius, e.inertia
-        if ni[NI_DRIVE] != DRV_IDEAL:
-            ni[NI_W] = self.add(f"{e.id}.speed", "rad/s", "speed", 1e-6)
+            npr[NodeP.R], npr[NodeP.J] = e.radius, e.inertia
+        if ni[NodeI.DRIVE] != DriveKind.IDEAL:
+            ni[NodeI.W] = self.add(f"{e.id}.speed", "rad/s", "speed", 1e-6)
         if e.id in self.eccentric:
-            ni[NI_TH] = self.add(f"{e.id}.angle", "rad", "angle", 1e-6)
-        if ni[NI_DRIVE] == DRV_TORQUE and drive.torque_lag > 0:
-            ni[NI_TAU] = self.add(f"{e.id}.drive_torque", "N*m", "torque", 1e-4)
+            ni[NodeI.TH] = self.add(f"{e.id}.angle", "rad", "angle", 1e-6)
+        if ni[NodeI.DRIVE] == DriveKind.TORQUE and drive.torque_lag > 0:
+            ni[NodeI.TAU] = self.add(f"{e.id}.drive_torque", "N*m", "torque", 1e-4)
         if e.type in DANCERS:
             mp, kind, q0, unit = _dancer_record(self.line, k)
             self.add_mover(e.id, kind, k, k - 1, k, mp, q0, unit)
-            ni[NI_MOVER] = self.mover_idx[e.id]
+            ni[NodeI.MOVER] = self.mover_idx[e.id]
 
     def _roll(self, k, e):
         """An unwind's or rewind's roll: geometry, wound density and strain, its states."""
         web, npr, ni, r = self.web, self.node_P[k], self.node_I[k], e.roll
         cw = r.build_per_wrap if r.build_per_wrap is not None else web.thickness
-        npr[NP_R0], npr[NP_RC], npr[NP_JC], npr[NP_CW] = (
+        npr[NodeP.R0], npr[NodeP.RC], npr[NodeP.JC], npr[NodeP.CW] = (
             r.outer_radius,
             r.core_radius,
             r.core_inertia,
             cw,
         )
         # wound density from mass conservation: rho_r·c_w = rho·t_w (physics.md 1.4)
-        npr[NP_RHOW] = web.density * web.thickness / cw * web.width
-        npr[NP_EPSW], npr[NP_EPSW1], npr[NP_EPSW2] = r.wound_in_coefficients()
-        npr[NP_R] = r.outer_radius
+        npr[NodeP.RHOW] = web.density * web.thickness / cw * web.width
+        npr[NodeP.EPSW], npr[NodeP.EPSW1], npr[NodeP.EPSW2] = r.wound_in_coefficients()
+        npr[NodeP.R] = r.outer_radius
         sp_ = getattr(e, "splicer", None)
         if sp_ is not None and sp_.trigger_radius is not None:
-            npr[NP_RTRIG] = sp_.trigger_radius
-        ni[NI_S] = self.add(f"{e.id}.length", "m", "roll_length", 1e-6)
-        ni[NI_U] = self.add(f"{e.id}.unstretched_length", "m", "material", 1e-6)
+            npr[NodeP.RTRIG] = sp_.trigger_radius
+        ni[NodeI.S] = self.add(f"{e.id}.length", "m", "roll_length", 1e-6)
+        ni[NodeI.U] = self.add(f"{e.id}.unstretched_length", "m", "material", 1e-6)
 
     def element_controllers(self, k, e):
         """The speed and tension loops acting on element k (dancer loops sit with their
@@ -697,41 +816,45 @@ class _Packer:
             if c.element != e.id or c.type == "dancer_pi":
                 continue
             ci, cp = self.ctrl_I[j], self.ctrl_P[j]
-            ci[CI_NODE] = k
-            cp[CP_KP], cp[CP_KI] = c.kp, c.ki
-            cp[CP_KAW] = (
+            ci[CtrlI.NODE] = k
+            cp[CtrlP.KP], cp[CtrlP.KI] = c.kp, c.ki
+            cp[CtrlP.KAW] = (
                 c.anti_windup_gain
                 if c.anti_windup_gain is not None
                 else (c.ki / c.kp if c.kp > 0 else 1.0)
             )
-            cp[CP_LIM] = math.inf
+            cp[CtrlP.LIM] = math.inf
             if c.type == "speed_pi":
-                ci[CI_TYPE] = C_SPEED
-                ci[CI_SENSOR] = self.sens_idx[c.encoder] if c.encoder else -1
-                cp[CP_DRAW] = c.draw
-                cp[CP_FF] = 1.0 if c.torque_feedforward else 0.0
+                ci[CtrlI.TYPE] = CtrlKind.SPEED
+                ci[CtrlI.SENSOR] = self.sens_idx[c.encoder] if c.encoder else -1
+                cp[CtrlP.DRAW] = c.draw
+                cp[CtrlP.FF] = 1.0 if c.torque_feedforward else 0.0
                 out_tol = 1e-4  # N m
             else:
                 out_tol = self._tension_loop(k, e, c, ci, cp)
             if c.ki > 0:
-                ci[CI_X] = self.add(f"{c.id}.integral", "", "controller", out_tol / c.ki)
+                ci[CtrlI.X] = self.add(f"{c.id}.integral", "", "controller", out_tol / c.ki)
 
     def _tension_loop(self, k, e, c, ci, cp) -> float:
         """A tension loop's record; returns the tolerance of its output."""
         roll = e.type in ("unwind", "rewind")
-        ci[CI_TYPE] = C_TENSION_TORQUE if (roll and e.drive.type == "torque") else C_TENSION_TRIM
-        ci[CI_SENSOR] = self.sens_idx[c.sensor]
-        ci[CI_RSENSOR] = self.sens_idx[c.radius_sensor] if c.radius_sensor else -1
-        ci[CI_CH] = self.channel[c.id]
-        cp[CP_LIM] = c.output_limit if c.output_limit is not None else math.inf
+        ci[CtrlI.TYPE] = (
+            CtrlKind.TENSION_TORQUE
+            if (roll and e.drive.type == "torque")
+            else CtrlKind.TENSION_TRIM
+        )
+        ci[CtrlI.SENSOR] = self.sens_idx[c.sensor]
+        ci[CtrlI.RSENSOR] = self.sens_idx[c.radius_sensor] if c.radius_sensor else -1
+        ci[CtrlI.CH] = self.channel[c.id]
+        cp[CtrlP.LIM] = c.output_limit if c.output_limit is not None else math.inf
         ff = c.feedforward
-        cp[CP_FF] = 1.0 if ff.tension else 0.0
+        cp[CtrlP.FF] = 1.0 if ff.tension else 0.0
         if ff.inertia.value is not None:
-            cp[CP_JABS] = ff.inertia.value
+            cp[CtrlP.JABS] = ff.inertia.value
         else:
-            cp[CP_JFAC] = ff.inertia.factor
-        cp[CP_RR] = 1.0 if ff.radius_rate else 0.0
-        cp[CP_FRF] = 1.0 if ff.friction else 0.0
+            cp[CtrlP.JFAC] = ff.inertia.factor
+        cp[CtrlP.RR] = 1.0 if ff.radius_rate else 0.0
+        cp[CtrlP.FRF] = 1.0 if ff.friction else 0.0
         # a trim raises the tension of a span upstream of the node, lowers one downstream
         sm = self.sensors[self.sens_idx[c.sensor]]
         meas = (
@@ -739,8 +862,8 @@ class _Packer:
             if sm.type == "pitch_length"
             else self.node_idx[sm.element]
         )
-        cp[CP_SIGN] = 1.0 if meas <= k else -1.0
-        return 1e-4 if ci[CI_TYPE] == C_TENSION_TORQUE else 1e-8
+        cp[CtrlP.SIGN] = 1.0 if meas <= k else -1.0
+        return 1e-4 if ci[CtrlI.TYPE] == CtrlKind.TENSION_TORQUE else 1e-8
 
     def element_sensors(self, k, e):
         """The load cells, encoders and diameter sensors on element k."""
@@ -748,69 +871,71 @@ class _Packer:
             if getattr(s, "element", None) != e.id or s.type == "dancer_position":
                 continue
             si, sp = self.sens_I[j], self.sens_P[j]
-            si[SEI_NODE] = k
-            sp[SEP_GAIN], sp[SEP_OFF], sp[SEP_TAU] = s.gain, s.offset, s.filter
+            si[SensorI.NODE] = k
+            sp[SensorP.GAIN], sp[SensorP.OFF], sp[SensorP.TAU] = s.gain, s.offset, s.filter
             if s.type == "load_cell":
-                si[SEI_TYPE] = SE_LOADCELL
+                si[SensorI.TYPE] = SensorKind.LOADCELL
                 cin, cout = load_cell_weights(self.line, k, s)  # > 0 in sum: checked at load
-                sp[SEP_CIN], sp[SEP_COUT] = cin, cout
-                sp[SEP_WIN], sp[SEP_WOUT] = cin / (cin + cout), cout / (cin + cout)
+                sp[SensorP.CIN], sp[SensorP.COUT] = cin, cout
+                sp[SensorP.WIN], sp[SensorP.WOUT] = cin / (cin + cout), cout / (cin + cout)
                 unit, tol = "N", 1e-4
             elif s.type == "encoder":
-                si[SEI_TYPE] = SE_ENCODER
+                si[SensorI.TYPE] = SensorKind.ENCODER
                 unit, tol = "rad/s", 1e-6
             else:
-                si[SEI_TYPE] = SE_DIAMETER
+                si[SensorI.TYPE] = SensorKind.DIAMETER
                 unit, tol = "m", 1e-8
             if s.filter > 0:
-                si[SEI_F] = self.add(f"{s.id}.filtered", unit, "sensor_filter", tol)
+                si[SensorI.F] = self.add(f"{s.id}.filtered", unit, "sensor_filter", tol)
 
     def span(self, k):
         """Span k (after element k): its festoon, pitch sensors and strain state."""
         line = self.line
         sp_k = line.spans[k]
         si_ = self.span_I[k]
-        si_[SI_UP], si_[SI_DN] = k, k + 1
+        si_[SpanI.UP], si_[SpanI.DN] = k, k + 1
         fe = sp_k.festoon
         if fe is not None:
-            mp = np.zeros(NMP)
-            mp[MP_MASS] = fe.carriage_mass
-            mp[MP_QMIN], mp[MP_QMAX] = fe.stroke
-            mp[MP_C], mp[MP_FC], mp[MP_EPS] = fe.damping, fe.coulomb, fe.smoothing_speed
-            mp[MP_F0] = fe.carriage_mass * fe.gravity
-            mp[MP_FAIR] = fe.force
-            mp[MP_NSTR] = 2.0 * fe.moving_rollers
-            self.add_mover(sp_k.id, MV_FESTOON, -1, k, -1, mp, fe.initial_position, "m")
-            si_[SI_MOVER] = self.mover_idx[sp_k.id]
-        self.span_P[k, SP_L] = sp_k.length or 0.0
+            mp = np.zeros(N_MOVER_P)
+            mp[MoverP.MASS] = fe.carriage_mass
+            mp[MoverP.QMIN], mp[MoverP.QMAX] = fe.stroke
+            mp[MoverP.C], mp[MoverP.FC], mp[MoverP.EPS] = fe.damping, fe.coulomb, fe.smoothing_speed
+            mp[MoverP.F0] = fe.carriage_mass * fe.gravity
+            mp[MoverP.FAIR] = fe.force
+            mp[MoverP.NSTR] = 2.0 * fe.moving_rollers
+            self.add_mover(sp_k.id, MoverKind.FESTOON, -1, k, -1, mp, fe.initial_position, "m")
+            si_[SpanI.MOVER] = self.mover_idx[sp_k.id]
+        self.span_P[k, SpanP.L] = sp_k.length or 0.0
         for j, sn in enumerate(self.sensors):
             if sn.type == "pitch_length" and sn.span == sp_k.id:
                 self._pitch_sensor(j, sn, k)
-        self.span_P[k, SP_EA] = self.EA
-        self.span_P[k, SP_TBRK] = self.web.break_tension
+        self.span_P[k, SpanP.EA] = self.EA
+        self.span_P[k, SpanP.TBRK] = self.web.break_tension
         # strain tolerance ~1e-4 N of tension (physics.md 1.2, solver.md 6)
-        si_[SI_E] = self.add(f"{sp_k.id}.strain", "", "strain", 1e-4 / self.EA)
+        si_[SpanI.E] = self.add(f"{sp_k.id}.strain", "", "strain", 1e-4 / self.EA)
         for j, sn in self.pitch_filters:
             if sn.filter > 0:
-                self.sens_I[j, SEI_F] = self.add(f"{sn.id}.filtered", "m", "sensor_filter", 1e-9)
+                self.sens_I[j, SensorI.F] = self.add(
+                    f"{sn.id}.filtered", "m", "sensor_filter", 1e-9
+                )
         self.pitch_filters.clear()
 
     def _pitch_sensor(self, j, sn, k):
         si, sp = self.sens_I[j], self.sens_P[j]
-        si[SEI_TYPE], si[SEI_NODE] = SE_PITCH, k
-        sp[SEP_GAIN], sp[SEP_OFF], sp[SEP_TAU] = sn.gain, sn.offset, sn.filter
+        si[SensorI.TYPE], si[SensorI.NODE] = SensorKind.PITCH, k
+        sp[SensorP.GAIN], sp[SensorP.OFF], sp[SensorP.TAU] = sn.gain, sn.offset, sn.filter
         # the loop's Hooke calibration: the declared web, not a drawn roll's
-        sp[SEP_COUT] = self.EA if self.nominal_web is None else self.nominal_web.EA
+        sp[SensorP.COUT] = self.EA if self.nominal_web is None else self.nominal_web.EA
         law = sn.relaxed_pitch_law
         dl0 = (self.pitch_offsets or {}).get(sn.id)
-        sp[SEP_DL0] = dl0 or 0.0
+        sp[SensorP.DL0] = dl0 or 0.0
         if law is None and sn.pitch_variation is None and dl0 is None:
-            sp[SEP_CIN] = sn.relaxed_pitch
+            sp[SensorP.CIN] = sn.relaxed_pitch
         else:  # L0 = q0 + q1·R³ (+ variation) of an unwind's radius
-            sp[SEP_CIN] = sn.relaxed_pitch if law is None else law.q0
-            sp[SEP_Q1] = 0.0 if law is None else law.q1
-            si[SEI_RNODE] = self.node_idx[pitch_unwind(self.line, sn)]
-            si[SEI_VN] = 0
+            sp[SensorP.CIN] = sn.relaxed_pitch if law is None else law.q0
+            sp[SensorP.Q1] = 0.0 if law is None else law.q1
+            si[SensorI.RNODE] = self.node_idx[pitch_unwind(self.line, sn)]
+            si[SensorI.VN] = 0
             if sn.pitch_variation is not None:
                 self.pitch_var_terms.append((j, sn))
         self.pitch_filters.append((j, sn))
@@ -828,25 +953,25 @@ class _Packer:
             ev_comp.append(component)
 
         for i, sp in enumerate(self.line.spans):
-            ev(EV_SLACK, i, sp.id)
+            ev(EventKind.SLACK, i, sp.id)
             if math.isfinite(self.web.break_tension):
-                ev(EV_BREAK, i, sp.id)
+                ev(EventKind.BREAK, i, sp.id)
         for k, e in enumerate(self.els):
-            if 0 < k < self.nN - 1 and self.node_P[k, NP_EMB] > 0:
-                ev(EV_CAPSTAN, k, e.id)
+            if 0 < k < self.nN - 1 and self.node_P[k, NodeP.EMB] > 0:
+                ev(EventKind.CAPSTAN, k, e.id)
             if e.type == "unwind":
-                ev(EV_EMPTY, k, e.id)
+                ev(EventKind.EMPTY, k, e.id)
             if k in self.splice_nodes:
-                ev(EV_SPLICE_RADIUS, k, e.id)
+                ev(EventKind.SPLICE_RADIUS, k, e.id)
         for m, mid in enumerate(self.mover_ids):
-            for kind in (EV_STOP_LO, EV_STOP_HI):
+            for kind in (EventKind.STOP_LO, EventKind.STOP_HI):
                 ev(kind, m, mid)
         for js in range(self.nJ):
-            for kind in (EV_JOINT_PASS, EV_JOINT_BREAK):
+            for kind in (EventKind.JOINT_PASS, EventKind.JOINT_BREAK):
                 ev(kind, js, f"splice_joint{js + 1}")
         for j, c in enumerate(self.ctrls):
             if c.type == "dancer_pi" and self.node_idx[c.element] in self.splice_nodes:
-                ev(EV_REFILL, j, c.element)
+                ev(EventKind.REFILL, j, c.element)
         return ev_I, [k for k, _ in ev_I], ev_comp
 
     def outputs(self) -> tuple[list[str], list[str]]:
@@ -867,7 +992,9 @@ class _Packer:
                 f"{e.id}.tension_ratio",
             ]
             units += ["m/s", "rad/s", "m", "kg*m^2", "kg", "N*m", "N*m", "1"]
-        mover_unit = {mid: self.units[self.mov_I[m, MI_Q]] for m, mid in enumerate(self.mover_ids)}
+        mover_unit = {
+            mid: self.units[self.mov_I[m, MoverI.Q]] for m, mid in enumerate(self.mover_ids)
+        }
         for s in self.sensors:
             u = {
                 "load_cell": "N",
@@ -894,7 +1021,7 @@ class _Packer:
                 names += [f"{c.id}.error_{u}", f"{c.id}.output_m_s", f"{c.id}.integral"]
                 units += [u, "m/s", f"{u}*s"]
             else:
-                out_u = "N" if self.ctrl_I[j, CI_TYPE] == C_TENSION_TORQUE else "m_s"
+                out_u = "N" if self.ctrl_I[j, CtrlI.TYPE] == CtrlKind.TENSION_TORQUE else "m_s"
                 names += [f"{c.id}.error_N", f"{c.id}.output_{out_u}", f"{c.id}.integral"]
                 units += ["N", out_u.replace("_", "/"), "N*s"]
         for mid in self.mover_ids:
@@ -943,15 +1070,15 @@ class _Packer:
     def _disturbance_tables(self):
         """The bearing-drag and wound-in-strain disturbances: records and values."""
         tables = [d for d in self.disturbances if d.type in ("bearing_drag", "wound_in_strain")]
-        tab_I = np.zeros((len(tables), NTI), np.int64)
+        tab_I = np.zeros((len(tables), N_TABLE_I), np.int64)
         tab_P = []
         for m, d in enumerate(tables):
-            kind = {"bearing_drag": TB_DRAG, "wound_in_strain": TB_WOUND}[d.type]
+            kind = {"bearing_drag": TableKind.DRAG, "wound_in_strain": TableKind.WOUND}[d.type]
             if d.shape == "sines":
-                tab_I[m] = (kind, self.node_idx[d.element], len(d.amplitudes), 0, SH_SINES)
+                tab_I[m] = (kind, self.node_idx[d.element], len(d.amplitudes), 0, Shape.SINES)
                 tab_P.append(np.concatenate([d.amplitudes, d.omegas, d.phases]))
             else:
-                tab_I[m] = (kind, self.node_idx[d.element], len(d.values), 0, SH_TABLE)
+                tab_I[m] = (kind, self.node_idx[d.element], len(d.values), 0, Shape.TABLE)
                 tab_P.append(np.concatenate([[d.x0, d.dx], d.values]))
         return tab_I, tab_P
 
@@ -963,7 +1090,7 @@ class _Packer:
             terms = pitch_variations.get(sn.id)
             if terms is None:
                 terms = realise_pitch_variations(self.line, np.random.SeedSequence(0))[sn.id]
-            self.sens_I[j, SEI_VN] = len(terms)
+            self.sens_I[j, SensorI.VN] = len(terms)
             out.append(np.ascontiguousarray(terms, float).ravel())
         return out
 
@@ -977,7 +1104,7 @@ class _Packer:
             self.sens_I.ravel(),
             self.ctrl_I.ravel(),
             sch_n,
-            np.array(ev_I, np.int64).reshape(-1, NEVI).ravel(),
+            np.array(ev_I, np.int64).reshape(-1, N_EVENT_I).ravel(),
             self.mov_I.ravel(),
             tab_I.ravel(),
         ]
@@ -996,9 +1123,9 @@ class _Packer:
             sch_v.ravel(),
             np.zeros(4),
             self.mov_P.ravel(),
-            np.zeros(nJ * NJP),
+            np.zeros(nJ * N_JOINT_P),
             np.array([self.EA]),
-            np.zeros(nFS * NFS),
+            np.zeros(nFS * N_FAULT_P),
             *tab_P,
             *var_P,
         ]
@@ -1008,49 +1135,60 @@ class _Packer:
             ppos += b.size
         P = np.concatenate(blocks_P)
         header = np.zeros(HEADER, np.int64)
-        header[H_NN], header[H_NS], header[H_NSE], header[H_NC], header[H_NY] = (
+        header[H.NN], header[H.NS], header[H.NSE], header[H.NC], header[H.NY] = (
             self.nN,
             self.nS,
             self.nSe,
             self.nC,
             len(self.names),
         )
-        header[H_OFF_NI], header[H_OFF_SI], header[H_OFF_SEI], header[H_OFF_CI] = offs_I[:4]
-        header[H_OFF_SCHN], header[H_OFF_EV] = offs_I[4], offs_I[5]
-        header[H_OFF_NP], header[H_OFF_SP], header[H_OFF_SEP], header[H_OFF_CP] = offs_P[:4]
-        header[H_OFF_SCHT], header[H_OFF_SCHV], header[H_OFF_RT] = offs_P[4:7]
-        header[H_NM], header[H_OFF_MI], header[H_OFF_MP] = self.nM, offs_I[6], offs_P[7]
-        header[H_NJ], header[H_OFF_JP], header[H_EA] = nJ, offs_P[8], offs_P[9]
-        header[H_NFS], header[H_OFF_FS] = nFS, offs_P[10]
-        header[H_NTB], header[H_OFF_TB] = len(tab_P), offs_I[7]
+        header[H.OFF_NI], header[H.OFF_SI], header[H.OFF_SEI], header[H.OFF_CI] = offs_I[:4]
+        header[H.OFF_SCHN], header[H.OFF_EV] = offs_I[4], offs_I[5]
+        header[H.OFF_NP], header[H.OFF_SP], header[H.OFF_SEP], header[H.OFF_CP] = offs_P[:4]
+        header[H.OFF_SCHT], header[H.OFF_SCHV], header[H.OFF_RT] = offs_P[4:7]
+        header[H.NM], header[H.OFF_MI], header[H.OFF_MP] = self.nM, offs_I[6], offs_P[7]
+        header[H.NJ], header[H.OFF_JP], header[H.EA] = nJ, offs_P[8], offs_P[9]
+        header[H.NFS], header[H.OFF_FS] = nFS, offs_P[10]
+        header[H.NTB], header[H.OFF_TB] = len(tab_P), offs_I[7]
         for m in range(len(tab_P)):  # each table's values follow the fault slots in P
-            tab_I[m, TI_OFFP] = offs_P[11 + m]
+            tab_I[m, TableI.OFFP] = offs_P[11 + m]
         blocks_I[7] = tab_I.ravel()
         for m, (j, _) in enumerate(self.pitch_var_terms):  # the variations follow the tables
-            self.sens_I[j, SEI_VOFF] = offs_P[11 + len(tab_P) + m]
+            self.sens_I[j, SensorI.VOFF] = offs_P[11 + len(tab_P) + m]
         blocks_I[2] = self.sens_I.ravel()
-        header[H_MODEL] = 1 if self.line.span_model == "linear" else 0
-        header[H_NCH], header[H_MAXPTS] = nch, maxpts
-        header[H_NQ], header[H_MAXD] = 3 * self.nS + 7 * self.nN + 2 * self.nSe + 2 * self.nC, MAXD
-        header[H_NAUX] = n_aux
-        header[H_NEV] = len(ev_I)
+        header[H.MODEL] = 1 if self.line.span_model == "linear" else 0
+        header[H.NCH], header[H.MAXPTS] = nch, maxpts
+        header[H.NQ], header[H.MAXD] = 3 * self.nS + 7 * self.nN + 2 * self.nSe + 2 * self.nC, MAXD
+        header[H.NAUX] = n_aux
+        header[H.NEV] = len(ev_I)
         return np.concatenate([header] + blocks_I), P
 
 
 def _attach_pattern(cl: CompiledLine) -> None:
-    """Mark the Jacobian pattern with the kernel (MODE_TOUCH) and store it in I."""
+    """Mark the Jacobian pattern with the kernel (Mode.TOUCH) and store it in I."""
     n = cl.n_states
     touch = np.zeros((n, n))
     y = np.zeros(n)
     kernels.evaluate(
-        0.0, y, np.zeros(n), touch, MODE_TOUCH, cl.I, cl.P, cl._W, cl._GI, cl._GC, cl._GV, cl._aux0
+        0.0,
+        y,
+        np.zeros(n),
+        touch,
+        int(Mode.TOUCH),
+        cl.I,
+        cl.P,
+        cl._W,
+        cl._GI,
+        cl._GC,
+        cl._GV,
+        cl._aux0,
     )
     rows, cols = np.nonzero(touch)
     cl.pattern = (rows.astype(np.int64), cols.astype(np.int64))
     cl.lband = int(max(0, (rows - cols).max(initial=0)))
     cl.uband = int(max(0, (cols - rows).max(initial=0)))
-    cl.I[H_NPAT] = len(rows)
-    cl.I[H_OFF_PAT] = len(cl.I)
+    cl.I[H.NPAT] = len(rows)
+    cl.I[H.OFF_PAT] = len(cl.I)
     cl.I = np.concatenate([cl.I, cl.pattern[0], cl.pattern[1]])
 
 
@@ -1058,49 +1196,49 @@ def _dancer_record(line: Line, k: int):
     """Mover parameters of the dancer at element k: (record, initial q, unit of q)."""
     e = line.elements[k]
     a, b = line.elements[k - 1], line.elements[k + 1]
-    mp = np.zeros(NMP)
-    mp[MP_DU], mp[MP_DD] = dancer_offsets(line, k)
-    mp[MP_AX], mp[MP_AY] = a.position
-    mp[MP_BX], mp[MP_BY] = b.position
-    mp[MP_EPS] = e.smoothing_speed
-    mp[MP_C], mp[MP_FC] = e.damping, e.coulomb
+    mp = np.zeros(N_MOVER_P)
+    mp[MoverP.DU], mp[MoverP.DD] = dancer_offsets(line, k)
+    mp[MoverP.AX], mp[MoverP.AY] = a.position
+    mp[MoverP.BX], mp[MoverP.BY] = b.position
+    mp[MoverP.EPS] = e.smoothing_speed
+    mp[MoverP.C], mp[MoverP.FC] = e.damping, e.coulomb
     gx, gy = e.gravity
     if e.type == "dancer":
         nx, ny = e.direction
         nrm = math.hypot(nx, ny)
         nx, ny = nx / nrm, ny / nrm
-        mp[MP_CX], mp[MP_CY] = e.position
-        mp[MP_NX], mp[MP_NY] = nx, ny
-        mp[MP_MASS] = e.mass
-        mp[MP_QMIN], mp[MP_QMAX] = e.travel_range
-        mp[MP_F0] = e.mass * (gx * nx + gy * ny)
-        mp[MP_FAIR] = e.load_force
-        mp[MP_K], mp[MP_Q0] = e.spring_stiffness, e.spring_free_travel
-        kind, q0, unit = MV_LINEAR, e.initial_travel, "m"
+        mp[MoverP.CX], mp[MoverP.CY] = e.position
+        mp[MoverP.NX], mp[MoverP.NY] = nx, ny
+        mp[MoverP.MASS] = e.mass
+        mp[MoverP.QMIN], mp[MoverP.QMAX] = e.travel_range
+        mp[MoverP.F0] = e.mass * (gx * nx + gy * ny)
+        mp[MoverP.FAIR] = e.load_force
+        mp[MoverP.K], mp[MoverP.Q0] = e.spring_stiffness, e.spring_free_travel
+        kind, q0, unit = MoverKind.LINEAR, e.initial_travel, "m"
     else:
         arm = e.arm_length
-        mp[MP_CX], mp[MP_CY] = e.pivot
-        mp[MP_NX] = arm
-        mp[MP_MASS] = e.arm_inertia + e.roller_mass * arm**2
-        mp[MP_QMIN], mp[MP_QMAX] = e.angle_range
-        mp[MP_F0] = e.torque
+        mp[MoverP.CX], mp[MoverP.CY] = e.pivot
+        mp[MoverP.NX] = arm
+        mp[MoverP.MASS] = e.arm_inertia + e.roller_mass * arm**2
+        mp[MoverP.QMIN], mp[MoverP.QMAX] = e.angle_range
+        mp[MoverP.F0] = e.torque
         lever = e.roller_mass * arm + e.arm_mass * (
             e.arm_com if e.arm_com is not None else 0.5 * arm
         )
-        mp[MP_G1], mp[MP_G2] = lever * gy, -lever * gx
+        mp[MoverP.G1], mp[MoverP.G2] = lever * gy, -lever * gx
         if e.torsion_spring is not None:
-            mp[MP_K], mp[MP_Q0] = e.torsion_spring.stiffness, e.torsion_spring.free_angle
+            mp[MoverP.K], mp[MoverP.Q0] = e.torsion_spring.stiffness, e.torsion_spring.free_angle
         if e.cylinder is not None:
-            mp[MP_CYLF] = e.cylinder.force
-            mp[MP_CYLX], mp[MP_CYLY] = e.cylinder.fixed_point
-            mp[MP_CYLA] = e.cylinder.arm_point
-        kind, q0, unit = MV_PIVOT, e.arm_angle, "rad"
+            mp[MoverP.CYLF] = e.cylinder.force
+            mp[MoverP.CYLX], mp[MoverP.CYLY] = e.cylinder.fixed_point
+            mp[MoverP.CYLA] = e.cylinder.arm_point
+        kind, q0, unit = MoverKind.PIVOT, e.arm_angle, "rad"
     # reference directions of the two spans at the initial position: there L = free length
     # (the roller clears its neighbours over its whole range: checked at load)
-    mp[MP_TUX], mp[MP_TUY], mp[MP_TDX], mp[MP_TDY] = 1.0, 0.0, 1.0, 0.0
+    mp[MoverP.TUX], mp[MoverP.TUY], mp[MoverP.TDX], mp[MoverP.TDY] = 1.0, 0.0, 1.0, 0.0
     tu, td = _tangents(mp, dancer_centre(e, q0))
-    mp[MP_TUX], mp[MP_TUY] = tu
-    mp[MP_TDX], mp[MP_TDY] = td
+    mp[MoverP.TUX], mp[MoverP.TUY] = tu
+    mp[MoverP.TDX], mp[MoverP.TDY] = td
     return mp, kind, q0, unit
 
 
@@ -1110,8 +1248,8 @@ def _tangents(mp, centre):
     cx, cy = centre
     out = []
     for ax, ay, bx, by, delta in (
-        (mp[MP_AX], mp[MP_AY], cx, cy, mp[MP_DU]),
-        (cx, cy, mp[MP_BX], mp[MP_BY], mp[MP_DD]),
+        (mp[MoverP.AX], mp[MoverP.AY], cx, cy, mp[MoverP.DU]),
+        (cx, cy, mp[MoverP.BX], mp[MoverP.BY], mp[MoverP.DD]),
     ):
         dx, dy = bx - ax, by - ay
         d2 = dx * dx + dy * dy
@@ -1122,7 +1260,7 @@ def _tangents(mp, centre):
 
 def _storage_slope(mp, kind, q):
     """d(stored length)/dq of a mover at q (sum over its spans)."""
-    if kind == MV_FESTOON:
-        return mp[MP_NSTR]
-    _, dlu, _, dld = kernels.mover_lengths(mp, 0, kind, q)
+    if kind == MoverKind.FESTOON:
+        return mp[MoverP.NSTR]
+    _, dlu, _, dld = kernels.mover_lengths(mp.reshape(1, -1), 0, kind, q)  # one record
     return dlu + dld

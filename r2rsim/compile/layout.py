@@ -2,226 +2,390 @@
 
 The kernel reads everything from two flat arrays: ``I`` (int64: counts, offsets, state
 indices, topology) and ``P`` (float64: every parameter, the set-point tables and a small
-runtime block). Records of one kind (node, span, sensor, controller) have a fixed number of
-fields; the constants below name them. Kept in one module so the compiler and the kernel
-cannot disagree.
+runtime block). Records of one family (node, span, sensor, controller, ...) have a fixed
+number of fields; each family declares its fields once, as an :class:`~enum.IntEnum` below,
+and its record size is the enum's length (``N_NODE_P = len(NodeP)``). numba compiles an
+IntEnum member used as an index to the same machine code as an integer literal (checked on
+numba 0.68 when the enums replaced the hand-numbered constants), so the kernel indexes its
+record views by name: ``node_p[k, NodeP.R]``. Kept in one module so the compiler and the
+kernel cannot disagree.
 """
+
+from enum import IntEnum
 
 import numpy as np
 
+
 # ---- header of I (offsets of the record blocks and counts) ----
-H_NN, H_NS, H_NSE, H_NC, H_NY = 0, 1, 2, 3, 4  # nodes, spans, sensors, controllers, states
-H_OFF_NI, H_OFF_SI, H_OFF_SEI, H_OFF_CI = 5, 6, 7, 8  # record blocks in I
-H_OFF_NP, H_OFF_SP, H_OFF_SEP, H_OFF_CP = 9, 10, 11, 12  # record blocks in P
-H_MODEL = 13  # 0 exact span model, 1 linear
-H_NCH = 14  # number of set-point channels (0 = line speed)
-H_OFF_SCHN = 15  # I block: number of points per channel
-H_OFF_SCHT, H_OFF_SCHV = 16, 17  # P blocks: times, values (H_MAXPTS per channel)
-H_MAXPTS = 18
-H_OFF_RT = 19  # P block: runtime values (segment start time)
-H_NPAT, H_OFF_PAT = 20, 21  # Jacobian pattern (rows then cols) in I
-H_NQ, H_MAXD = 22, 23  # gradient scratch: number of quantities, slots per quantity
-H_NAUX = 25  # length of one row of algebraic outputs
-H_NEV = 26  # number of event functions
-H_OFF_EV = 27  # I block: event records
-H_NM, H_OFF_MI, H_OFF_MP = 28, 29, 30  # movers (dancers, festoon carriages)
-H_NJ, H_OFF_JP = 31, 32  # splice-joint slots (P block)
-H_EA = 33  # index in P of the web's EA
-H_NFS, H_OFF_FS = 34, 35  # fault parameter slots (P block)
-H_NTB, H_OFF_TB = 36, 37  # process-disturbance tables (I records; values in P)
+class H(IntEnum):
+    NN = 0  # nodes
+    NS = 1  # spans
+    NSE = 2  # sensors
+    NC = 3  # controllers
+    NY = 4  # states
+    OFF_NI = 5  # record blocks in I
+    OFF_SI = 6
+    OFF_SEI = 7
+    OFF_CI = 8
+    OFF_NP = 9  # record blocks in P
+    OFF_SP = 10
+    OFF_SEP = 11
+    OFF_CP = 12
+    MODEL = 13  # 0 exact span model, 1 linear
+    NCH = 14  # number of set-point channels (0 = line speed)
+    OFF_SCHN = 15  # I block: number of points per channel
+    OFF_SCHT = 16  # P blocks: times, values (MAXPTS per channel)
+    OFF_SCHV = 17
+    MAXPTS = 18
+    OFF_RT = 19  # P block: runtime values (segment start time)
+    NPAT = 20  # Jacobian pattern (rows then cols) in I
+    OFF_PAT = 21
+    NQ = 22  # gradient scratch: number of quantities, slots per quantity
+    MAXD = 23
+    NAUX = 25  # length of one row of algebraic outputs
+    NEV = 26  # number of event functions
+    OFF_EV = 27  # I block: event records
+    NM = 28  # movers (dancers, festoon carriages)
+    OFF_MI = 29
+    OFF_MP = 30
+    NJ = 31  # splice-joint slots (P block)
+    OFF_JP = 32
+    EA = 33  # index in P of the web's EA
+    NFS = 34  # fault parameter slots (P block)
+    OFF_FS = 35
+    NTB = 36  # process-disturbance tables (I records; values in P)
+    OFF_TB = 37
+
+
+#: length of the header (slots 24, 38 and 39 are unused)
 HEADER = 40
 
+
 # ---- node records ----
-NK_UNWIND, NK_REWIND, NK_ROLLER = 0, 1, 2
-DRV_NONE, DRV_TORQUE, DRV_IDEAL = 0, 1, 2
-NI_KIND, NI_DRIVE, NI_W, NI_S, NI_U, NI_TAU = 0, 1, 2, 3, 4, 5
-NI_SPAN_UP, NI_SPAN_DN, NI_SPEEDC, NI_TENSC, NI_MOVER = 6, 7, 8, 9, 10
-NI_TH = 11  # roller angle state (only for an eccentric roller), else -1
-# set-point channels of a node (-1: none): a programmed draw (replaces the speed PI's CP_DRAW
-# or the ideal-speed drive's NP_DRAW) and an open-loop torque command (added to tau_cmd)
-NI_DRAWCH, NI_TQCH = 12, 13
-NI = 14
-(
-    NP_R,
-    NP_J,
-    NP_B,
-    NP_TC,
-    NP_WEPS,
-    NP_R0,
-    NP_RC,
-    NP_JC,
-    NP_CW,
-    NP_RHOW,
-    NP_EPSW,
-    NP_TLAG,
-    NP_TMAX,
-    NP_DRAW,
-    NP_EMB,
-    NP_RIPA,
-    NP_RIPW,
-    NP_EPSW1,
-    NP_EPSW2,
-    NP_VGAIN,
-    NP_VOFF,
-    NP_VSLOPE,
-    NP_VT0,
-    NP_RTRIG,
-    NP_TEFF,
-    NP_TBIAS,
-    NP_TSTUCK,
-    NP_TSV,
-    NP_FRICF,
-    NP_REFF,
-    NP_ECC,
-    NP_WRAP,
-) = range(32)
-NP = 32
+class NodeKind(IntEnum):
+    UNWIND = 0
+    REWIND = 1
+    ROLLER = 2
+
+
+class DriveKind(IntEnum):
+    NONE = 0
+    TORQUE = 1
+    IDEAL = 2
+
+
+class NodeI(IntEnum):
+    KIND = 0
+    DRIVE = 1
+    W = 2
+    S = 3
+    U = 4
+    TAU = 5
+    SPAN_UP = 6
+    SPAN_DN = 7
+    SPEEDC = 8
+    TENSC = 9
+    MOVER = 10
+    TH = 11  # roller angle state (only for an eccentric roller), else -1
+    # set-point channels of a node (-1: none): a programmed draw (replaces the speed PI's
+    # CtrlP.DRAW or the ideal-speed drive's NodeP.DRAW) and an open-loop torque command
+    # (added to tau_cmd)
+    DRAWCH = 12
+    TQCH = 13
+
+
+class NodeP(IntEnum):
+    R = 0
+    J = 1
+    B = 2
+    TC = 3
+    WEPS = 4
+    R0 = 5
+    RC = 6
+    JC = 7
+    CW = 8
+    RHOW = 9
+    EPSW = 10
+    TLAG = 11
+    TMAX = 12
+    DRAW = 13
+    EMB = 14
+    RIPA = 15
+    RIPW = 16
+    EPSW1 = 17
+    EPSW2 = 18
+    VGAIN = 19
+    VOFF = 20
+    VSLOPE = 21
+    VT0 = 22
+    RTRIG = 23
+    TEFF = 24
+    TBIAS = 25
+    TSTUCK = 26
+    TSV = 27
+    FRICF = 28
+    REFF = 29
+    ECC = 30
+    WRAP = 31
+
+
 # faults on a node (defaults: TEFF 1, FRICF 1, the rest 0):
 #   applied torque = TSV while TSTUCK, else clip(TEFF·command + TBIAS, ±TMAX)
 #   bearing friction ×FRICF; surface speed and torque arm R·(1 + REFF) (draw error);
-#   eccentricity ECC [m] of a roller wrapped by WRAP [rad] (its angle is state NI_TH)
+#   eccentricity ECC [m] of a roller wrapped by WRAP [rad] (its angle is state NodeI.TH)
 # reference surface speed of a speed-controlled node (splice phases override it):
 #   v_ref = V·(1 + draw)·VGAIN + VOFF + VSLOPE·(t - VT0) + trim
 
+
 # ---- span records ----
-SI_E, SI_UP, SI_DN, SI_MOVER = 0, 1, 2, 3
-NSI = 4
-SP_L, SP_EA, SP_TBRK = 0, 1, 2
-NSP = 3
+class SpanI(IntEnum):
+    E = 0
+    UP = 1
+    DN = 2
+    MOVER = 3
+
+
+class SpanP(IntEnum):
+    L = 0
+    EA = 1
+    TBRK = 2
+
 
 # ---- sensor records ----
-SE_LOADCELL, SE_ENCODER, SE_DIAMETER, SE_DANCER, SE_PITCH = 1, 2, 3, 4, 5
-# SE_PITCH: SEI_NODE is the span; SEP_CIN holds L0 (q0 of a law), SEP_COUT the calibration
-# E·S. With a relaxed-pitch law or variation (else -1/0): SEI_RNODE is the unwind node,
-# L0 = SEP_CIN + SEP_Q1·R³ + sum_m a_m·cos(kappa_m·u + phi_m), u the unwind's unwound length,
-# the SEI_VN triples (a, kappa, phi) at P[SEI_VOFF:]
-SEI_TYPE, SEI_NODE, SEI_F, SEI_RNODE, SEI_VN, SEI_VOFF = 0, 1, 2, 3, 4, 5
-NSEI = 6
+class SensorKind(IntEnum):
+    LOADCELL = 1
+    ENCODER = 2
+    DIAMETER = 3
+    DANCER = 4
+    PITCH = 5
+
+
+# SensorKind.PITCH: SensorI.NODE is the span; SensorP.CIN holds L0 (q0 of a law),
+# SensorP.COUT the calibration E·S. With a relaxed-pitch law or variation (else -1/0):
+# SensorI.RNODE is the unwind node, L0 = CIN + Q1·R³ + sum_m a_m·cos(kappa_m·u + phi_m),
+# u the unwind's unwound length, the SensorI.VN triples (a, kappa, phi) at P[SensorI.VOFF:]
+class SensorI(IntEnum):
+    TYPE = 0
+    NODE = 1
+    F = 2
+    RNODE = 3
+    VN = 4
+    VOFF = 5
+
+
 # sensor faults acting in the loop (set by the solver's fault actions): with dt = t - FT0,
 #   reading = (1 + GA + GB·dt + GC·exp(-dt/GTAU))·raw + BA + BB·dt + BC·exp(-dt/BTAU),
 # or the held value SV while STUCK; FON = 0 skips all of it
-# SEP_DL0 (pitch): relaxed-pitch offset of the web at the sensor while no material joint
+# DL0 (pitch): relaxed-pitch offset of the web at the sensor while no material joint
 # (below) covers it, i.e. that of the roll on the unwind at t = 0
-(
-    SEP_WIN,
-    SEP_WOUT,
-    SEP_GAIN,
-    SEP_OFF,
-    SEP_TAU,
-    SEP_CIN,
-    SEP_COUT,
-    SEP_FON,
-    SEP_FT0,
-    SEP_BA,
-    SEP_BB,
-    SEP_BC,
-    SEP_BTAU,
-    SEP_GA,
-    SEP_GB,
-    SEP_GC,
-    SEP_GTAU,
-    SEP_STUCK,
-    SEP_SV,
-    SEP_Q1,
-    SEP_DL0,
-) = range(21)
-NSEP = 21
+class SensorP(IntEnum):
+    WIN = 0
+    WOUT = 1
+    GAIN = 2
+    OFF = 3
+    TAU = 4
+    CIN = 5
+    COUT = 6
+    FON = 7
+    FT0 = 8
+    BA = 9
+    BB = 10
+    BC = 11
+    BTAU = 12
+    GA = 13
+    GB = 14
+    GC = 15
+    GTAU = 16
+    STUCK = 17
+    SV = 18
+    Q1 = 19
+    DL0 = 20
+
 
 # ---- controller records ----
-C_SPEED, C_TENSION_TORQUE, C_TENSION_TRIM, C_DANCER = 1, 2, 3, 4
-CI_TYPE, CI_NODE, CI_X, CI_SENSOR, CI_RSENSOR, CI_CH, CI_MOVER = 0, 1, 2, 3, 4, 5, 6
-NCI = 7
-CP_KP, CP_KI, CP_KAW, CP_LIM, CP_DRAW, CP_FF, CP_SIGN, CP_SETP, CP_GATE = range(9)
-# torque-mode feed-forward terms of a tension PI on a roll (CP_FF: the tension term):
+class CtrlKind(IntEnum):
+    SPEED = 1
+    TENSION_TORQUE = 2
+    TENSION_TRIM = 3
+    DANCER = 4
+
+
+class CtrlI(IntEnum):
+    TYPE = 0
+    NODE = 1
+    X = 2
+    SENSOR = 3
+    RSENSOR = 4
+    CH = 5
+    MOVER = 6
+
+
+# torque-mode feed-forward terms of a tension PI on a roll (FF: the tension term):
 #   J_est = JFAC·J(R_hat) + JABS; RR, FRF: 1/0 radius-rate and friction terms
-CP_JFAC, CP_JABS, CP_RR, CP_FRF = 9, 10, 11, 12
-NCP = 13
+class CtrlP(IntEnum):
+    KP = 0
+    KI = 1
+    KAW = 2
+    LIM = 3
+    DRAW = 4
+    FF = 5
+    SIGN = 6
+    SETP = 7
+    GATE = 8
+    JFAC = 9
+    JABS = 10
+    RR = 11
+    FRF = 12
+
 
 # ---- mover records (dancer carriage/arm, festoon carriage): generalised coordinate q ----
-MV_LINEAR, MV_PIVOT, MV_FESTOON = 1, 2, 3
-MI_KIND, MI_Q, MI_QD, MI_SPAN_U, MI_SPAN_D, MI_NODE = range(6)
-NMI = 6
-(
-    MP_MASS,
-    MP_QMIN,
-    MP_QMAX,
-    MP_C,
-    MP_FC,
-    MP_EPS,
-    MP_F0,
-    MP_K,
-    MP_Q0,
-    MP_G1,
-    MP_G2,
-    MP_MODE,
-    MP_CX,
-    MP_CY,
-    MP_NX,
-    MP_NY,
-    MP_AX,
-    MP_AY,
-    MP_BX,
-    MP_BY,
-    MP_DU,
-    MP_DD,
-    MP_TUX,
-    MP_TUY,
-    MP_TDX,
-    MP_TDY,
-    MP_LU0,
-    MP_LD0,
-    MP_NSTR,
-    MP_CYLF,
-    MP_CYLX,
-    MP_CYLY,
-    MP_CYLA,
-    MP_SEIZED_Q,
-    MP_FAIR,
-    MP_LOADF,
-    MP_FRICF,
-) = range(37)
-NMP = 37
-# MP_FAIR: actuator force of a linear dancer or festoon (MP_F0 then holds gravity only);
-# MP_LOADF scales the actuator (air cylinder, torque motor): loss of loading;
-# MP_FRICF scales the carriage/arm friction
-# MP_MODE: 0 free, -1 latched at the lower stop, +1 at the upper stop, 2 seized
+class MoverKind(IntEnum):
+    LINEAR = 1
+    PIVOT = 2
+    FESTOON = 3
+
+
+class MoverI(IntEnum):
+    KIND = 0
+    Q = 1
+    QD = 2
+    SPAN_U = 3
+    SPAN_D = 4
+    NODE = 5
+
+
+# FAIR: actuator force of a linear dancer or festoon (F0 then holds gravity only);
+# LOADF scales the actuator (air cylinder, torque motor): loss of loading;
+# FRICF scales the carriage/arm friction
+# MODE: 0 free, -1 latched at the lower stop, +1 at the upper stop, 2 seized
+class MoverP(IntEnum):
+    MASS = 0
+    QMIN = 1
+    QMAX = 2
+    C = 3
+    FC = 4
+    EPS = 5
+    F0 = 6
+    K = 7
+    Q0 = 8
+    G1 = 9
+    G2 = 10
+    MODE = 11
+    CX = 12
+    CY = 13
+    NX = 14
+    NY = 15
+    AX = 16
+    AY = 17
+    BX = 18
+    BY = 19
+    DU = 20
+    DD = 21
+    TUX = 22
+    TUY = 23
+    TDX = 24
+    TDY = 25
+    LU0 = 26
+    LD0 = 27
+    NSTR = 28
+    CYLF = 29
+    CYLX = 30
+    CYLY = 31
+    CYLA = 32
+    SEIZED_Q = 33
+    FAIR = 34
+    LOADF = 35
+    FRICF = 36
+
 
 # ---- splice-joint slots (P only) ----
-# JP_SPAN: span holding the joint's lead (front); JP_TSPAN: span holding its trail (-1 while
-# the trail is still on the roll). JP_MAT: 1 for a material joint (the web of another roll,
-# or a modulus change: JP_RATIO is its E·A over the first roll's and JP_DL0 its relaxed-pitch
-# offset), 0 for a splice overlap
-(JP_ACTIVE, JP_U0, JP_LEN, JP_RATIO, JP_TBRK, JP_SPAN, JP_NODE, JP_TSPAN, JP_MAT, JP_DL0) = range(
-    10
-)
-NJP = 10
+# SPAN: span holding the joint's lead (front); TSPAN: span holding its trail (-1 while the
+# trail is still on the roll). MAT: 1 for a material joint (the web of another roll, or a
+# modulus change: RATIO is its E·A over the first roll's and DL0 its relaxed-pitch offset),
+# 0 for a splice overlap
+class JointP(IntEnum):
+    ACTIVE = 0
+    U0 = 1
+    LEN = 2
+    RATIO = 3
+    TBRK = 4
+    SPAN = 5
+    NODE = 6
+    TSPAN = 7
+    MAT = 8
+    DL0 = 9
 
-# ---- fault parameter slots (P only): while FS_ON, the kernel sets, at every evaluation,
-#   P[FS_IDX] = FS_BASE + FS_A + FS_B·dt + FS_C·exp(-dt/FS_TAU),  dt = t - FS_T0
+
+# ---- fault parameter slots (P only): while ON, the kernel sets, at every evaluation,
+#   P[IDX] = BASE + A + B·dt + C·exp(-dt/TAU),  dt = t - T0
 # (a ramp or exponential fault profile on a parameter); the solver's fault actions set the
 # coefficients at each breakpoint and write constant values directly
-(FS_IDX, FS_BASE, FS_ON, FS_T0, FS_A, FS_B, FS_C, FS_TAU) = range(8)
-NFS = 8
+class FaultP(IntEnum):
+    IDX = 0
+    BASE = 1
+    ON = 2
+    T0 = 3
+    A = 4
+    B = 5
+    C = 6
+    TAU = 7
+
 
 # ---- process disturbances: I record (kind, node, n, offset in P, shape).
-# SH_TABLE: P holds [x0, dx, v0 .. v(n-1)], interpolated linearly (held outside the grid);
-# SH_SINES: P holds n amplitudes, n angular frequencies, n phases: sum a·sin(w·x + phase)
-TB_DRAG, TB_WOUND = 1, 2  # drag torque on node vs time; wound-in strain of an unwind vs u
-TI_KIND, TI_NODE, TI_N, TI_OFFP, TI_SHAPE = range(5)
-NTI = 5
-SH_TABLE, SH_SINES = 0, 1
+# Shape.TABLE: P holds [x0, dx, v0 .. v(n-1)], interpolated linearly (held outside the grid);
+# Shape.SINES: P holds n amplitudes, n angular frequencies, n phases: sum a·sin(w·x + phase)
+class TableKind(IntEnum):
+    DRAG = 1  # drag torque on node vs time
+    WOUND = 2  # wound-in strain of an unwind vs u
 
-# ---- event records (I block, 3 ints each: kind, index, sign convention) ----
-EV_SLACK, EV_BREAK, EV_CAPSTAN, EV_EMPTY = 1, 2, 3, 4
-EV_STOP_LO, EV_STOP_HI, EV_JOINT_PASS, EV_JOINT_BREAK, EV_SPLICE_RADIUS, EV_REFILL = (
-    5,
-    6,
-    7,
-    8,
-    9,
-    10,
-)
-NEVI = 2
+
+class TableI(IntEnum):
+    KIND = 0
+    NODE = 1
+    N = 2
+    OFFP = 3
+    SHAPE = 4
+
+
+class Shape(IntEnum):
+    TABLE = 0
+    SINES = 1
+
+
+# ---- event records (I block: kind, index) ----
+class EventKind(IntEnum):
+    SLACK = 1
+    BREAK = 2
+    CAPSTAN = 3
+    EMPTY = 4
+    STOP_LO = 5
+    STOP_HI = 6
+    JOINT_PASS = 7
+    JOINT_BREAK = 8
+    SPLICE_RADIUS = 9
+    REFILL = 10
+
+
+class EventI(IntEnum):
+    KIND = 0
+    INDEX = 1
+
+
+# ---- record sizes: the length of each family's enum ----
+N_NODE_I = len(NodeI)
+N_NODE_P = len(NodeP)
+N_SPAN_I = len(SpanI)
+N_SPAN_P = len(SpanP)
+N_SENSOR_I = len(SensorI)
+N_SENSOR_P = len(SensorP)
+N_CTRL_I = len(CtrlI)
+N_CTRL_P = len(CtrlP)
+N_MOVER_I = len(MoverI)
+N_MOVER_P = len(MoverP)
+N_JOINT_P = len(JointP)
+N_FAULT_P = len(FaultP)
+N_TABLE_I = len(TableI)
+N_EVENT_I = len(EventI)
 
 # ---- algebraic outputs, per record ----
 AUX_SPAN = 3  # tension, geometric strain, length
@@ -232,10 +396,25 @@ AUX_MOVER = 5  # position, velocity, web force, net force, mode
 AUX_JOINT = 2  # leading-edge position (unstretched, from the unwind), span index
 # set-points after the records: line speed, line acceleration, one per channel >= 1
 
+
 # ---- evaluation modes ----
-MODE_RHS, MODE_JAC, MODE_TOUCH = 0, 1, 2
-#: the modes as a constant array, for compiled callers: ``evaluate(..., RUNTIME_MODE[MODE_RHS],
-#: ...)`` passes an int64, while ``MODE_RHS`` itself would be typed as the literal 0, and numba
-#: would compile the kernel once per literal mode and once more for the int64 of Python's calls
-#: (each compile of the kernel is ~20 s of CPU on a cold start)
-RUNTIME_MODE = np.array([MODE_RHS, MODE_JAC, MODE_TOUCH], dtype=np.int64)
+class Mode(IntEnum):
+    RHS = 0
+    JAC = 1
+    TOUCH = 2
+
+
+#: the modes as a constant array, for compiled callers: ``evaluate(..., RUNTIME_MODE[Mode.RHS],
+#: ...)`` passes an int64, while ``Mode.RHS`` itself would be typed as an enum member, and numba
+#: would compile the kernel once for it and once more for the int64 of Python's calls (each
+#: compile of the kernel is ~20 s of CPU on a cold start)
+RUNTIME_MODE = np.array([m.value for m in Mode], dtype=np.int64)
+
+# the event kinds under their former names, for r2rsim/solve/simulate.py until its body
+# uses EventKind (its owner's change; nothing else may use these)
+EV_SLACK, EV_BREAK, EV_CAPSTAN, EV_EMPTY = (
+    EventKind.SLACK,
+    EventKind.BREAK,
+    EventKind.CAPSTAN,
+    EventKind.EMPTY,
+)

@@ -25,119 +25,36 @@ import numpy as np
 from ..compile.compiler import EVENT_NAMES, CompiledLine
 from ..compile.faults import loop_sensor_ids
 from ..compile.layout import (
-    C_DANCER,
-    C_SPEED,
-    C_TENSION_TORQUE,
-    C_TENSION_TRIM,
-    CI_NODE,
-    CI_TYPE,
-    CI_X,
-    CP_GATE,
-    EV_JOINT_BREAK,
-    EV_JOINT_PASS,
-    EV_REFILL,
-    EV_SPLICE_RADIUS,
-    EV_STOP_HI,
-    EV_STOP_LO,
-    FS_A,
-    FS_B,
-    FS_BASE,
-    FS_C,
-    FS_IDX,
-    FS_ON,
-    FS_T0,
-    FS_TAU,
-    H_MAXPTS,
-    H_NFS,
-    H_OFF_CI,
-    H_OFF_CP,
-    H_OFF_EV,
-    H_OFF_FS,
-    H_OFF_JP,
-    H_OFF_MI,
-    H_OFF_MP,
-    H_OFF_NI,
-    H_OFF_NP,
-    H_OFF_SCHN,
-    H_OFF_SCHT,
-    H_OFF_SCHV,
-    H_OFF_SEI,
-    H_OFF_SEP,
-    JP_ACTIVE,
-    JP_DL0,
-    JP_LEN,
-    JP_MAT,
-    JP_NODE,
-    JP_RATIO,
-    JP_SPAN,
-    JP_TBRK,
-    JP_TSPAN,
-    JP_U0,
-    MI_Q,
-    MI_QD,
-    MP_FRICF,
-    MP_LOADF,
-    MP_MODE,
-    MP_QMAX,
-    MP_QMIN,
-    NCI,
-    NCP,
-    NEVI,
-    NFS,
-    NI,
-    NI_S,
-    NI_U,
-    NI_W,
-    NJP,
-    NMI,
-    NMP,
-    NP,
-    NP_CW,
-    NP_ECC,
-    NP_EPSW,
-    NP_EPSW1,
-    NP_EPSW2,
-    NP_FRICF,
-    NP_JC,
-    NP_R,
-    NP_R0,
-    NP_RC,
-    NP_REFF,
-    NP_RHOW,
-    NP_TBIAS,
-    NP_TEFF,
-    NP_TMAX,
-    NP_TSTUCK,
-    NP_TSV,
-    NP_VGAIN,
-    NP_VOFF,
-    NP_VSLOPE,
-    NP_VT0,
-    NSEI,
-    NSEP,
-    SE_DIAMETER,
-    SEI_F,
-    SEI_NODE,
-    SEI_TYPE,
-    SEP_BA,
-    SEP_BB,
-    SEP_BC,
-    SEP_BTAU,
-    SEP_FON,
-    SEP_FT0,
-    SEP_GA,
-    SEP_GB,
-    SEP_GC,
-    SEP_GTAU,
-    SEP_STUCK,
-    SEP_SV,
+    N_MOVER_P,
+    N_NODE_P,
+    CtrlI,
+    CtrlKind,
+    CtrlP,
+    EventI,
+    EventKind,
+    FaultP,
+    H,
+    JointP,
+    MoverI,
+    MoverP,
+    NodeI,
+    NodeP,
+    SensorI,
+    SensorKind,
+    SensorP,
 )
 
 #: joint length of new material that runs until the next roll change
 OPEN_JOINT = 1e9  # m: longer than any roll
 
 #: events whose handling changes the model (their flags are recomputed after a change)
-MODE_EVENTS = {EV_STOP_LO, EV_STOP_HI, EV_JOINT_PASS, EV_SPLICE_RADIUS, EV_REFILL}
+MODE_EVENTS = {
+    EventKind.STOP_LO,
+    EventKind.STOP_HI,
+    EventKind.JOINT_PASS,
+    EventKind.SPLICE_RADIUS,
+    EventKind.REFILL,
+}
 
 
 @dataclass(order=True)
@@ -240,7 +157,7 @@ class DiscreteLogic:
                     "(compile_line(line, programme, faults)) for the angle state"
                 )
             if idx not in self._slot:
-                if len(self._slot) >= cl.I[H_NFS]:
+                if len(self._slot) >= cl.I[H.NFS]:
                     raise ValueError(
                         f"fault '{f.id}': no parameter slot left; compile the "
                         "line with its faults (compile_line(..., faults=...))"
@@ -279,16 +196,14 @@ class DiscreteLogic:
 
     # ---- parameter access -------------------------------------------------------------------
     def _np(self, k, f):
-        return self.cl.I[H_OFF_NP] + k * NP + f
+        return self.cl.I[H.OFF_NP] + k * N_NODE_P + f
 
     def _ni(self, k, f):
-        return int(self.cl.I[self.cl.I[H_OFF_NI] + k * NI + f])
+        return int(self.cl.node_i[k, f])
 
     def _ctrls_on(self, k, types):
-        I = self.cl.I
         for c in range(len(self.cl.controllers)):
-            b = I[H_OFF_CI] + c * NCI
-            if I[b + CI_NODE] == k and I[b + CI_TYPE] in types:
+            if self.cl.ctrl_i[c, CtrlI.NODE] == k and self.cl.ctrl_i[c, CtrlI.TYPE] in types:
                 yield c
 
     # ---- scheduled actions ------------------------------------------------------------------
@@ -321,11 +236,11 @@ class DiscreteLogic:
             return y
         self.splicing[k] = "fill"
         P = self.cl.P
-        P[self._np(k, NP_VGAIN)] = 1.0 + sp.fill_overspeed
+        P[self._np(k, NodeP.VGAIN)] = 1.0 + sp.fill_overspeed
         for c in self._dancer_loops(k):
-            ix = int(self.cl.I[self.cl.I[H_OFF_CI] + c * NCI + CI_X])
+            ix = int(self.cl.ctrl_i[c, CtrlI.X])
             self._saved_integral[c] = float(y[ix]) if ix >= 0 else 0.0
-            P[self.cl.I[H_OFF_CP] + c * NCP + CP_GATE] = 0.0
+            self.cl.ctrl_p[c, CtrlP.GATE] = 0.0
         log.append(self._phase(t, k, "fill", f"fill: unwind at +{sp.fill_overspeed:.0%} speed"))
         self._push(t + sp.fill_time, "brake", k)
         return y
@@ -372,7 +287,7 @@ class DiscreteLogic:
         sp = self.line.elements[k].splicer
         self._set_ref(k, gain=1.0 + sp.fill_overspeed, off=0.0, slope=0.0, t0=t)
         for c in self._dancer_loops(k):
-            self.cl.P[self.cl.I[H_OFF_CP] + c * NCP + CP_GATE] = -1.0  # armed: refill event
+            self.cl.ctrl_p[c, CtrlP.GATE] = -1.0  # armed: refill event
         self.splicing[k] = "refill"
         log.append(self._phase(t, k, "refill", "refill the dancer/festoon"))
         self._push(t + sp.refill_timeout, "complete", k, {"timeout": True})
@@ -386,10 +301,9 @@ class DiscreteLogic:
 
     def _complete(self, t, y, k, log, timeout=False):
         self._set_ref(k, gain=1.0, off=0.0, slope=0.0, t0=t)
-        I, P = self.cl.I, self.cl.P
         for c in self._dancer_loops(k):
-            P[I[H_OFF_CP] + c * NCP + CP_GATE] = 1.0
-            ix = int(I[I[H_OFF_CI] + c * NCI + CI_X])
+            self.cl.ctrl_p[c, CtrlP.GATE] = 1.0
+            ix = int(self.cl.ctrl_i[c, CtrlI.X])
             if ix >= 0:
                 y[ix] = self._saved_integral.get(c, 0.0)
         del self.splicing[k]
@@ -404,9 +318,9 @@ class DiscreteLogic:
         decel = a.data["decel"]
         v = self._line_speed(t, -1)
         I, P = self.cl.I, self.cl.P
-        mx = int(I[H_MAXPTS])
-        n = int(I[I[H_OFF_SCHN]])
-        bt, bv = int(I[H_OFF_SCHT]), int(I[H_OFF_SCHV])
+        mx = int(I[H.MAXPTS])
+        n = int(I[I[H.OFF_SCHN]])
+        bt, bv = int(I[H.OFF_SCHT]), int(I[H.OFF_SCHV])
         keep = [m for m in range(n) if P[bt + m] <= t]
         times = [float(P[bt + m]) for m in keep] + [t, t + v / decel]
         vals = [float(P[bv + m]) for m in keep] + [v, 0.0]
@@ -415,13 +329,13 @@ class DiscreteLogic:
         P[bt : bt + mx] = math.inf
         P[bt : bt + len(times)] = times
         P[bv : bv + len(vals)] = vals
-        I[I[H_OFF_SCHN]] = len(times)
+        I[I[H.OFF_SCHN]] = len(times)
         self.cl.programme.times[0], self.cl.programme.values[0] = times, vals
         self._breakpoints = [*self._breakpoints, t, t + v / decel]
         for k in list(self.splicing):  # an e-stop aborts a splice sequence
             self._set_ref(k, gain=1.0, off=0.0, slope=0.0, t0=t)
             for c in self._dancer_loops(k):
-                P[I[H_OFF_CP] + c * NCP + CP_GATE] = 1.0
+                self.cl.ctrl_p[c, CtrlP.GATE] = 1.0
             del self.splicing[k]
         log.append(
             Event(
@@ -444,11 +358,10 @@ class DiscreteLogic:
         return self._seize(t, y, a.target, log, "")
 
     def _seize(self, t, y, m, log, why):
-        """Mover m seizes where it is: q' = 0 and held (MP_MODE 2)."""
-        I, P = self.cl.I, self.cl.P
-        P[I[H_OFF_MP] + m * NMP + MP_MODE] = 2.0
-        y[I[I[H_OFF_MI] + m * NMI + MI_QD]] = 0.0
-        q = float(y[I[I[H_OFF_MI] + m * NMI + MI_Q]])
+        """Mover m seizes where it is: q' = 0 and held (MoverP.MODE 2)."""
+        self.cl.mover_p[m, MoverP.MODE] = 2.0
+        y[self.cl.mover_i[m, MoverI.QD]] = 0.0
+        q = float(y[self.cl.mover_i[m, MoverI.Q]])
         mid = self.cl.mover_ids[m]
         log.append(
             Event(
@@ -465,8 +378,6 @@ class DiscreteLogic:
     def _do_sensor_fault(self, t, y, a, log):
         """Re-express every in-loop fault on sensor j as coefficients from time t on."""
         j = a.target
-        I, P = self.cl.I, self.cl.P
-        b = I[H_OFF_SEP] + j * NSEP
         bias = [0.0, 0.0, 0.0, 1.0]
         gain = [0.0, 0.0, 0.0, 1.0]
         stuck = False
@@ -481,14 +392,25 @@ class DiscreteLogic:
             if cc != 0.0:
                 acc[2] += cc
                 acc[3] = tau
-        was_stuck = P[b + SEP_STUCK] != 0.0
+        rec = self.cl.sensor_p[j]  # a view of sensor j's record: writes reach the kernel
+        was_stuck = rec[SensorP.STUCK] != 0.0
         if stuck and not was_stuck:  # hold the reading the controllers see now
-            P[b + SEP_SV] = self._seen(t, y, j)
-        P[b + SEP_STUCK] = 1.0 if stuck else 0.0
-        P[b + SEP_FT0] = t
-        P[b + SEP_BA], P[b + SEP_BB], P[b + SEP_BC], P[b + SEP_BTAU] = bias
-        P[b + SEP_GA], P[b + SEP_GB], P[b + SEP_GC], P[b + SEP_GTAU] = gain
-        P[b + SEP_FON] = 1.0 if (stuck or any(bias[:3]) or any(gain[:3])) else 0.0
+            rec[SensorP.SV] = self._seen(t, y, j)
+        rec[SensorP.STUCK] = 1.0 if stuck else 0.0
+        rec[SensorP.FT0] = t
+        (
+            rec[SensorP.BA],
+            rec[SensorP.BB],
+            rec[SensorP.BC],
+            rec[SensorP.BTAU],
+        ) = bias
+        (
+            rec[SensorP.GA],
+            rec[SensorP.GB],
+            rec[SensorP.GC],
+            rec[SensorP.GTAU],
+        ) = gain
+        rec[SensorP.FON] = 1.0 if (stuck or any(bias[:3]) or any(gain[:3])) else 0.0
         return y
 
     # ---- faults that change the model ----------------------------------------------------
@@ -500,18 +422,18 @@ class DiscreteLogic:
         if f.kind.target == "dancer":
             m = cl.mover_ids.index(f.target)
             field_, K = {
-                "dancer.loss_of_loading": (MP_LOADF, -1.0),
-                "dancer.friction_increase": (MP_FRICF, 1.0),
+                "dancer.loss_of_loading": (MoverP.LOADF, -1.0),
+                "dancer.friction_increase": (MoverP.FRICF, 1.0),
             }.get(f.type, (None, 0))
-            return None if field_ is None else (I[H_OFF_MP] + m * NMP + field_, K)
+            return None if field_ is None else (I[H.OFF_MP] + m * N_MOVER_P + field_, K)
         k = cl.node_ids.index(f.target)
         field_, K = {
-            "actuator.bias": (NP_TBIAS, 1.0),
-            "actuator.loss_of_effectiveness": (NP_TEFF, -1.0),
-            "actuator.saturation": (NP_TMAX, 1.0),
-            "process.bearing_friction": (NP_FRICF, 1.0),
-            "process.draw_error": (NP_REFF, 1.0),
-            "process.eccentricity": (NP_ECC, 1.0),
+            "actuator.bias": (NodeP.TBIAS, 1.0),
+            "actuator.loss_of_effectiveness": (NodeP.TEFF, -1.0),
+            "actuator.saturation": (NodeP.TMAX, 1.0),
+            "process.bearing_friction": (NodeP.FRICF, 1.0),
+            "process.draw_error": (NodeP.REFF, 1.0),
+            "process.eccentricity": (NodeP.ECC, 1.0),
         }.get(f.type, (None, 0))
         return None if field_ is None else (self._np(k, field_), K)
 
@@ -519,7 +441,7 @@ class DiscreteLogic:
         """Re-express every fault on one parameter from time t on: P = base + A + B·dt +
         C·exp(-dt/tau); a slot lets the kernel follow a ramp or exponential."""
         idx = a.target
-        P, I = self.cl.P, self.cl.I
+        P = self.cl.P
         base = self._base[idx]
         acc = [0.0, 0.0, 0.0, 1.0]
         value = None
@@ -540,10 +462,19 @@ class DiscreteLogic:
                 acc[3] = tau
         lengths = self._span_lengths(t, y) if ecc_node is not None else None
         P[idx] = value if value is not None else base + acc[0]
-        bs = I[H_OFF_FS] + self._slot[idx] * NFS
-        P[bs + FS_IDX], P[bs + FS_BASE], P[bs + FS_T0] = idx, base, t
-        P[bs + FS_A], P[bs + FS_B], P[bs + FS_C], P[bs + FS_TAU] = acc
-        P[bs + FS_ON] = 1.0 if (acc[1] != 0.0 or acc[2] != 0.0) and value is None else 0.0
+        rec = self.cl.fault_p[self._slot[idx]]  # a view of the slot's record
+        (
+            rec[FaultP.IDX],
+            rec[FaultP.BASE],
+            rec[FaultP.T0],
+        ) = idx, base, t
+        (
+            rec[FaultP.A],
+            rec[FaultP.B],
+            rec[FaultP.C],
+            rec[FaultP.TAU],
+        ) = acc
+        rec[FaultP.ON] = 1.0 if (acc[1] != 0.0 or acc[2] != 0.0) and value is None else 0.0
         if lengths is not None:
             # the roller's centre jumps by the new eccentricity: each span keeps its
             # unstretched length (mass), so its strain follows its new length
@@ -564,24 +495,24 @@ class DiscreteLogic:
         k = self.cl.node_ids.index(f.target)
         on = f.p(np.array([t]))[0] > 0.0
         P = self.cl.P
-        if on and P[self._np(k, NP_TSTUCK)] == 0.0:
+        if on and P[self._np(k, NodeP.TSTUCK)] == 0.0:
             aux = self.cl.outputs(np.array([t]), y[None, :])[0]
-            P[self._np(k, NP_TSV)] = aux[self.cl.aux_index(f"{f.target}.torque_N_m")]
-        P[self._np(k, NP_TSTUCK)] = 1.0 if on else 0.0
+            P[self._np(k, NodeP.TSV)] = aux[self.cl.aux_index(f"{f.target}.torque_N_m")]
+        P[self._np(k, NodeP.TSTUCK)] = 1.0 if on else 0.0
         return y
 
     def _do_arm_stuck(self, t, y, a, log):
         """dancer.arm_stuck: the arm or carriage seizes where it is (or is freed)."""
         f = a.data["fault"]
         m = self.cl.mover_ids.index(f.target)
-        I, P = self.cl.I, self.cl.P
-        bm = I[H_OFF_MP] + m * NMP
         if f.p(np.array([t]))[0] > 0.0:
             return self._seize(t, y, m, log, f" ({f.id})")
-        if P[bm + MP_MODE] == 2.0:
+        if self.cl.mover_p[m, MoverP.MODE] == 2.0:
             mid = self.cl.mover_ids[m]
-            q = float(y[I[I[H_OFF_MI] + m * NMI + MI_Q]])
-            P[bm + MP_MODE] = 0.0  # free again; its end stops are re-detected as events
+            q = float(y[self.cl.mover_i[m, MoverI.Q]])
+            self.cl.mover_p[m, MoverP.MODE] = (
+                0.0  # free again; its end stops are re-detected as events
+            )
             log.append(
                 Event(
                     t, "dancer_seized", mid, "end", f"{mid} is free again ({f.id})", {"position": q}
@@ -599,7 +530,7 @@ class DiscreteLogic:
         ratio, dl0 = self._material.get(k, (1.0, None))
         self._open_material(
             k,
-            y[self._ni(k, NI_U)],
+            y[self._ni(k, NodeI.U)],
             ratio * (1.0 + f.magnitude),
             f"fault '{f.id}': no splice-joint slot for the new material; "
             "compile the line with its faults (compile_line(..., faults=...))",
@@ -625,18 +556,16 @@ class DiscreteLogic:
         if slot is None:
             raise ValueError(no_slot)
         self._material[k] = (ea_ratio, dl0)
-        P = self.cl.P
-        bj = self.cl.I[H_OFF_JP] + slot * NJP
-        P[bj + JP_ACTIVE] = 1.0
-        P[bj + JP_MAT] = 1.0
-        P[bj + JP_DL0] = self._first_dl0(k) if dl0 is None else dl0
-        P[bj + JP_U0] = u_now
-        P[bj + JP_LEN] = OPEN_JOINT
-        P[bj + JP_RATIO] = ea_ratio
-        P[bj + JP_TBRK] = 1e30  # no joint to break: the web's own break applies
-        P[bj + JP_SPAN] = float(k)
-        P[bj + JP_TSPAN] = float(k) - 1.0
-        P[bj + JP_NODE] = float(k)
+        self.cl.joint_p[slot, JointP.ACTIVE] = 1.0
+        self.cl.joint_p[slot, JointP.MAT] = 1.0
+        self.cl.joint_p[slot, JointP.DL0] = self._first_dl0(k) if dl0 is None else dl0
+        self.cl.joint_p[slot, JointP.U0] = u_now
+        self.cl.joint_p[slot, JointP.LEN] = OPEN_JOINT
+        self.cl.joint_p[slot, JointP.RATIO] = ea_ratio
+        self.cl.joint_p[slot, JointP.TBRK] = 1e30  # no joint to break: the web's own break applies
+        self.cl.joint_p[slot, JointP.SPAN] = float(k)
+        self.cl.joint_p[slot, JointP.TSPAN] = float(k) - 1.0
+        self.cl.joint_p[slot, JointP.NODE] = float(k)
 
     def _first_dl0(self, k: int) -> float:
         """Relaxed-pitch offset of the first roll of the unwind at node k (0: not drawn)."""
@@ -645,9 +574,8 @@ class DiscreteLogic:
         return self.rolls.pitch_offset0.get(self.cl.node_ids[k], 0.0)
 
     def _free_joint_slot(self) -> int | None:
-        P, I = self.cl.P, self.cl.I
         for js in range(self.cl.n_joint_slots):
-            if P[I[H_OFF_JP] + js * NJP + JP_ACTIVE] == 0.0:
+            if self.cl.joint_p[js, JointP.ACTIVE] == 0.0:
                 return js
         return None
 
@@ -664,24 +592,24 @@ class DiscreteLogic:
         kind = self.cl.event_kinds[m]
         comp = self.cl.event_components[m]
         log: list[Event] = []
-        if kind in (EV_STOP_LO, EV_STOP_HI):
-            self._on_stop(m, kind == EV_STOP_LO, on, t, y, comp, log)
-        elif kind == EV_JOINT_PASS and on:
+        if kind in (EventKind.STOP_LO, EventKind.STOP_HI):
+            self._on_stop(m, kind == EventKind.STOP_LO, on, t, y, comp, log)
+        elif kind == EventKind.JOINT_PASS and on:
             self._on_joint_pass(m, t, y, comp, log)
-        elif kind == EV_JOINT_BREAK and on:
+        elif kind == EventKind.JOINT_BREAK and on:
             self._on_joint_break(m, t, y, log)
-        elif kind == EV_SPLICE_RADIUS and on:
+        elif kind == EventKind.SPLICE_RADIUS and on:
             k = self._event_index(m)
             if k not in self.splicing:
                 self._push(t, "splice", k)
                 y, log = self.apply_due(t, y)
-        elif kind == EV_REFILL and on:
+        elif kind == EventKind.REFILL and on:
             c = self._event_index(m)
-            k = int(self.cl.I[self.cl.I[H_OFF_CI] + c * NCI + CI_NODE])
+            k = int(self.cl.ctrl_i[c, CtrlI.NODE])
             if self.splicing.get(k) == "refill":
                 y = self._complete(t, y, k, log)
         else:
-            return y, log, kind in MODE_EVENTS or kind == EV_JOINT_BREAK
+            return y, log, kind in MODE_EVENTS or kind == EventKind.JOINT_BREAK
         return y, log, True
 
     def _on_stop(
@@ -689,16 +617,14 @@ class DiscreteLogic:
     ) -> None:
         """A dancer or festoon carriage reaches (on) or leaves (off) an end stop: it latches
         there at rest, then moves freely again."""
-        I, P = self.cl.I, self.cl.P
         mv = self._event_index(m)
-        bm = I[H_OFF_MP] + mv * NMP
-        iq = I[I[H_OFF_MI] + mv * NMI + MI_Q]
-        iqd = I[I[H_OFF_MI] + mv * NMI + MI_QD]
-        kind = EV_STOP_LO if lo else EV_STOP_HI
-        if on and P[bm + MP_MODE] == 0.0:
+        iq = self.cl.mover_i[mv, MoverI.Q]
+        iqd = self.cl.mover_i[mv, MoverI.QD]
+        kind = EventKind.STOP_LO if lo else EventKind.STOP_HI
+        if on and self.cl.mover_p[mv, MoverP.MODE] == 0.0:
             v = float(y[iqd])
-            P[bm + MP_MODE] = -1.0 if lo else 1.0
-            y[iq] = P[bm + (MP_QMIN if lo else MP_QMAX)]
+            self.cl.mover_p[mv, MoverP.MODE] = -1.0 if lo else 1.0
+            y[iq] = self.cl.mover_p[mv, MoverP.QMIN if lo else MoverP.QMAX]
             y[iqd] = 0.0
             log.append(
                 Event(
@@ -710,8 +636,8 @@ class DiscreteLogic:
                     {"velocity": v},
                 )
             )
-        elif not on and P[bm + MP_MODE] in (-1.0, 1.0):
-            P[bm + MP_MODE] = 0.0
+        elif not on and self.cl.mover_p[mv, MoverP.MODE] in (-1.0, 1.0):
+            self.cl.mover_p[mv, MoverP.MODE] = 0.0
             log.append(
                 Event(
                     t,
@@ -725,12 +651,11 @@ class DiscreteLogic:
     def _on_joint_pass(self, m: int, t: float, y: np.ndarray, comp: str, log: list) -> None:
         """A splice joint's lead or trail crosses a node: it enters the next span, or has
         left the line."""
-        P = self.cl.P
-        bj = self.cl.I[H_OFF_JP] + self._event_index(m) * NJP
+        js = self._event_index(m)
         nS = len(self.cl.span_ids)
-        if self._joint_lead_crossed(bj, t, y):
-            P[bj + JP_SPAN] += 1.0
-            sp = int(P[bj + JP_SPAN])
+        if self._joint_lead_crossed(js, t, y):
+            self.cl.joint_p[js, JointP.SPAN] += 1.0
+            sp = int(self.cl.joint_p[js, JointP.SPAN])
             if sp < nS:
                 log.append(
                     Event(
@@ -742,9 +667,9 @@ class DiscreteLogic:
                     )
                 )
         else:  # the trail crossed a node: the joint has left a span
-            P[bj + JP_TSPAN] += 1.0
-            if int(P[bj + JP_TSPAN]) >= nS:
-                P[bj + JP_ACTIVE] = 0.0
+            self.cl.joint_p[js, JointP.TSPAN] += 1.0
+            if int(self.cl.joint_p[js, JointP.TSPAN]) >= nS:
+                self.cl.joint_p[js, JointP.ACTIVE] = 0.0
                 log.append(
                     Event(
                         t,
@@ -758,7 +683,7 @@ class DiscreteLogic:
     def _on_joint_break(self, m: int, t: float, y: np.ndarray, log: list) -> None:
         """A weak splice joint breaks: the run ends with a web break."""
         js = self._event_index(m)
-        sp = int(self.cl.P[self.cl.I[H_OFF_JP] + js * NJP + JP_SPAN])
+        sp = int(self.cl.joint_p[js, JointP.SPAN])
         span = self.cl.span_ids[sp]
         T = float(self.cl.outputs(t, y[None, :])[0][self.cl.aux_index(f"{span}.tension_N")])
         log.append(
@@ -775,20 +700,20 @@ class DiscreteLogic:
 
     # ---- helpers ----------------------------------------------------------------------------
     def _event_index(self, m):
-        return int(self.cl.I[self.cl.I[H_OFF_EV] + m * NEVI + 1])
+        return int(self.cl.event_i[m, EventI.INDEX])
 
     def _dancer_loops(self, k):
-        return list(self._ctrls_on(k, (C_DANCER,)))
+        return list(self._ctrls_on(k, (CtrlKind.DANCER,)))
 
     def _phase(self, t, k, state, msg):
         return Event(t, "splice", self.cl.node_ids[k], state, msg)
 
     def _set_ref(self, k, gain, off, slope, t0):
         P = self.cl.P
-        P[self._np(k, NP_VGAIN)] = gain
-        P[self._np(k, NP_VOFF)] = off
-        P[self._np(k, NP_VSLOPE)] = slope
-        P[self._np(k, NP_VT0)] = t0
+        P[self._np(k, NodeP.VGAIN)] = gain
+        P[self._np(k, NodeP.VOFF)] = off
+        P[self._np(k, NodeP.VSLOPE)] = slope
+        P[self._np(k, NodeP.VT0)] = t0
 
     def _line_speed(self, t, k):
         from ..compile.kernels import setpoint
@@ -807,15 +732,16 @@ class DiscreteLogic:
         if name in self.cl.programme.names:  # a programmed draw
             draw = self.cl.programme.value(name, t)
         return (
-            self._line_speed(t, k) * (1.0 + draw) * P[self._np(k, NP_VGAIN)]
-            + P[self._np(k, NP_VOFF)]
-            + P[self._np(k, NP_VSLOPE)] * (t - P[self._np(k, NP_VT0)])
+            self._line_speed(t, k) * (1.0 + draw) * P[self._np(k, NodeP.VGAIN)]
+            + P[self._np(k, NodeP.VOFF)]
+            + P[self._np(k, NodeP.VSLOPE)] * (t - P[self._np(k, NodeP.VT0)])
         )
 
-    def _joint_lead_crossed(self, bj: int, t: float, y: np.ndarray) -> bool:
+    def _joint_lead_crossed(self, js: int, t: float, y: np.ndarray) -> bool:
         """At a joint-pass event: True if the joint's lead reached a node, False if its
         trail did (whichever of the two is closer to its node)."""
-        cl, P = self.cl, self.cl.P
+        cl = self.cl
+        rec = cl.joint_p[js]  # the joint slot's record
         aux = cl.outputs(np.array([t]), y[None, :])[0]
         ell = np.array(
             [
@@ -825,9 +751,9 @@ class DiscreteLogic:
             ]
         )
         c = np.concatenate([[0.0], np.cumsum(ell)])  # node positions from the splice node
-        lead = y[self._ni(int(P[bj + JP_NODE]), NI_U)] - P[bj + JP_U0]
-        trail = lead - P[bj + JP_LEN]
-        sp, st = int(P[bj + JP_SPAN]), int(P[bj + JP_TSPAN])
+        lead = y[self._ni(int(rec[JointP.NODE]), NodeI.U)] - rec[JointP.U0]
+        trail = lead - rec[JointP.LEN]
+        sp, st = int(rec[JointP.SPAN]), int(rec[JointP.TSPAN])
         g_lead = abs(c[sp + 1] - lead) if sp < len(ell) else np.inf
         return g_lead <= abs(c[st + 1] - trail)
 
@@ -842,15 +768,15 @@ class DiscreteLogic:
             drawn = {r["parameter"]: r["value"] for r in self.rolls.rows[n_rows:]}
         R_old = float(self.cl.outputs(t, y[None, :])[0][self.cl.aux_index(f"{e.id}.radius_m")])
         self._load_roll(k, new)
-        y[self._ni(k, NI_S)] = 0.0
-        iw = self._ni(k, NI_W)
+        y[self._ni(k, NodeI.S)] = 0.0
+        iw = self._ni(k, NodeI.W)
         if iw >= 0:  # the new roll is brought up to the running web's surface speed
             v_web = R_old * float(y[iw])
             y[iw] = v_web * (1.0 + sp.speed_match_error) / new.outer_radius if flying else 0.0
         elif flying:  # an imposed-speed unwind keeps the new roll's speed error
-            self.cl.P[self._np(k, NP_VGAIN)] = 1.0 + sp.speed_match_error
+            self.cl.P[self._np(k, NodeP.VGAIN)] = 1.0 + sp.speed_match_error
         self._restart_loops(k, y, R_old, new)
-        u_now = y[self._ni(k, NI_U)]
+        u_now = y[self._ni(k, NodeI.U)]
         self._close_material_joints(k, u_now)
         slot = self._splice_joint(k, sp, u_now)
         self._material.pop(k, None)  # the new roll's web is the line's again, unless:
@@ -889,13 +815,13 @@ class DiscreteLogic:
         """The new roll's geometry, inertia, wound density and wound-in strain."""
         P, web = self.cl.P, self.line.web
         cw = new.build_per_wrap if new.build_per_wrap is not None else web.thickness
-        P[self._np(k, NP_R0)] = new.outer_radius
-        P[self._np(k, NP_R)] = new.outer_radius
-        P[self._np(k, NP_RC)] = new.core_radius
-        P[self._np(k, NP_JC)] = new.core_inertia
-        P[self._np(k, NP_CW)] = cw
-        P[self._np(k, NP_RHOW)] = web.density * web.thickness / cw * web.width
-        (P[self._np(k, NP_EPSW)], P[self._np(k, NP_EPSW1)], P[self._np(k, NP_EPSW2)]) = (
+        P[self._np(k, NodeP.R0)] = new.outer_radius
+        P[self._np(k, NodeP.R)] = new.outer_radius
+        P[self._np(k, NodeP.RC)] = new.core_radius
+        P[self._np(k, NodeP.JC)] = new.core_inertia
+        P[self._np(k, NodeP.CW)] = cw
+        P[self._np(k, NodeP.RHOW)] = web.density * web.thickness / cw * web.width
+        (P[self._np(k, NodeP.EPSW)], P[self._np(k, NodeP.EPSW1)], P[self._np(k, NodeP.EPSW2)]) = (
             new.wound_in_coefficients()
         )
 
@@ -904,62 +830,62 @@ class DiscreteLogic:
         speed loop's integrator, which holds the tension torque -T·R, is scaled to the new
         radius so the drive takes the web's pull from the first instant; the radius
         estimate (diameter-sensor filter) takes the new roll's measured diameter."""
-        I = self.cl.I
-        for c in self._ctrls_on(k, (C_TENSION_TORQUE, C_TENSION_TRIM)):
-            ix = int(I[I[H_OFF_CI] + c * NCI + CI_X])
+        for c in self._ctrls_on(k, (CtrlKind.TENSION_TORQUE, CtrlKind.TENSION_TRIM)):
+            ix = int(self.cl.ctrl_i[c, CtrlI.X])
             if ix >= 0:
                 y[ix] = 0.0
-        for c in self._ctrls_on(k, (C_SPEED,)):
-            ix = int(I[I[H_OFF_CI] + c * NCI + CI_X])
+        for c in self._ctrls_on(k, (CtrlKind.SPEED,)):
+            ix = int(self.cl.ctrl_i[c, CtrlI.X])
             if ix >= 0:
                 y[ix] *= new.outer_radius / R_old
         for j, s in enumerate(self.cl.sensors):
-            b = I[H_OFF_SEI] + j * NSEI
-            if I[b + SEI_TYPE] == SE_DIAMETER and I[b + SEI_NODE] == k and I[b + SEI_F] >= 0:
-                y[I[b + SEI_F]] = s.gain * 2.0 * new.outer_radius + s.offset
+            if (
+                self.cl.sensor_i[j, SensorI.TYPE] == SensorKind.DIAMETER
+                and self.cl.sensor_i[j, SensorI.NODE] == k
+                and self.cl.sensor_i[j, SensorI.F] >= 0
+            ):
+                y[self.cl.sensor_i[j, SensorI.F]] = s.gain * 2.0 * new.outer_radius + s.offset
 
     def _close_material_joints(self, k, u_now):
         """New material paid out since a modulus change ends here: close its joint."""
-        I, P = self.cl.I, self.cl.P
         for js in range(self.cl.n_joint_slots):
-            bj = I[H_OFF_JP] + js * NJP
-            if P[bj + JP_ACTIVE] != 0.0 and P[bj + JP_NODE] == k and P[bj + JP_LEN] == OPEN_JOINT:
-                P[bj + JP_LEN] = u_now - P[bj + JP_U0]
-                P[bj + JP_TSPAN] = float(k)  # its trail leaves the roll now
+            if (
+                self.cl.joint_p[js, JointP.ACTIVE] != 0.0
+                and self.cl.joint_p[js, JointP.NODE] == k
+                and self.cl.joint_p[js, JointP.LEN] == OPEN_JOINT
+            ):
+                self.cl.joint_p[js, JointP.LEN] = u_now - self.cl.joint_p[js, JointP.U0]
+                self.cl.joint_p[js, JointP.TSPAN] = float(k)  # its trail leaves the roll now
 
     def _splice_joint(self, k, sp, u_now):
         """The splice joint, in a free slot (its index, or None when none is free)."""
         slot = self._free_joint_slot()
         if slot is None:
             return None
-        P = self.cl.P
-        bj = self.cl.I[H_OFF_JP] + slot * NJP
-        P[bj + JP_ACTIVE] = 1.0
-        P[bj + JP_MAT] = 0.0
-        P[bj + JP_DL0] = 0.0
-        P[bj + JP_U0] = u_now
-        P[bj + JP_LEN] = sp.joint.length
-        P[bj + JP_RATIO] = sp.joint.stiffness_ratio
-        P[bj + JP_TBRK] = (
+        self.cl.joint_p[slot, JointP.ACTIVE] = 1.0
+        self.cl.joint_p[slot, JointP.MAT] = 0.0
+        self.cl.joint_p[slot, JointP.DL0] = 0.0
+        self.cl.joint_p[slot, JointP.U0] = u_now
+        self.cl.joint_p[slot, JointP.LEN] = sp.joint.length
+        self.cl.joint_p[slot, JointP.RATIO] = sp.joint.stiffness_ratio
+        self.cl.joint_p[slot, JointP.TBRK] = (
             sp.joint.break_tension
             if sp.joint.break_tension is not None
             else self.line.web.break_tension
         )
         if k in self._weak_splice:
-            P[bj + JP_TBRK] = self._weak_splice.pop(k)
-        P[bj + JP_SPAN] = float(k)
-        P[bj + JP_TSPAN] = float(k) - 1.0
-        P[bj + JP_NODE] = float(k)
+            self.cl.joint_p[slot, JointP.TBRK] = self._weak_splice.pop(k)
+        self.cl.joint_p[slot, JointP.SPAN] = float(k)
+        self.cl.joint_p[slot, JointP.TSPAN] = float(k) - 1.0
+        self.cl.joint_p[slot, JointP.NODE] = float(k)
         return slot
 
     def _joint_born_broken(self, t, y, k, slot, log):
         """A joint weaker than the tension it is made under breaks at once (its break
         event can only see a crossing, not a joint born past its limit)."""
-        P = self.cl.P
-        bj = self.cl.I[H_OFF_JP] + slot * NJP
         span = self.cl.span_ids[k]
         T = float(self.cl.outputs(t, y[None, :])[0][self.cl.aux_index(f"{span}.tension_N")])
-        if T >= P[bj + JP_TBRK]:
+        if T >= self.cl.joint_p[slot, JointP.TBRK]:
             log.append(
                 Event(
                     t,
@@ -967,7 +893,7 @@ class DiscreteLogic:
                     span,
                     "start",
                     f"web break at the new splice joint in {span}"
-                    f" at {T:.1f} N (joint strength {P[bj + JP_TBRK]:.1f} N)",
+                    f" at {T:.1f} N (joint strength {self.cl.joint_p[slot, JointP.TBRK]:.1f} N)",
                     {"tension_N": T, "at_splice_joint": True},
                 )
             )

@@ -8,17 +8,7 @@ import warnings
 import numpy as np
 
 from ..compile.compiler import CompiledLine
-from ..compile.layout import (
-    C_SPEED,
-    C_TENSION_TORQUE,
-    CI_TYPE,
-    CI_X,
-    CP_KI,
-    H_OFF_CI,
-    H_OFF_CP,
-    NCI,
-    NCP,
-)
+from ..compile.layout import CtrlI, CtrlKind, CtrlP
 from ..errors import InputError
 
 
@@ -103,17 +93,16 @@ def _integrators(cl: CompiledLine, y: np.ndarray, needed_torque: dict) -> None:
     """Loop integrators such that the PI outputs produce the needed torque at zero error."""
     line = cl.line
     aux = cl.outputs(0.0, y[None, :])[0]
-    I, P = cl.I, cl.P
+    ctrl_i, ctrl_p = cl.ctrl_i, cl.ctrl_p
     for c_idx, c in enumerate(line.controllers):
-        b = I[H_OFF_CI] + c_idx * NCI
-        ix = I[b + CI_X]
+        ix = ctrl_i[c_idx, CtrlI.X]
         if ix < 0:
             continue
-        ki = P[I[H_OFF_CP] + c_idx * NCP + CP_KI]
+        ki = ctrl_p[c_idx, CtrlP.KI]
         eid = c.element
-        if I[b + CI_TYPE] == C_SPEED:
+        if ctrl_i[c_idx, CtrlI.TYPE] == CtrlKind.SPEED:
             y[ix] = needed_torque.get(eid, 0.0) / ki
-        elif I[b + CI_TYPE] == C_TENSION_TORQUE:
+        elif ctrl_i[c_idx, CtrlI.TYPE] == CtrlKind.TENSION_TORQUE:
             # torque = cmd_ff + sgn·R·u at u = 0; solve for u
             tau_ff = aux[cl.aux_index(f"{eid}.torque_command_N_m")]
             R = aux[cl.aux_index(f"{eid}.radius_m")]

@@ -17,17 +17,15 @@ the dense-output matrix interpolates the collocation polynomial.
 
 from __future__ import annotations
 
-import hashlib
 import math
 from decimal import Decimal, localcontext
-from pathlib import Path
 
 import numpy as np
 from numba import njit
 
-from ..compile import kernels, layout
 from ..compile.kernels import evaluate, event_values, jac_values
-from ..compile.layout import MODE_RHS, RUNTIME_MODE
+from ..compile.layout import RUNTIME_MODE, Mode
+from ..compile.stamp import kernel_stamp
 
 # ---- the method --------------------------------------------------------------------------
 _S6 = math.sqrt(6.0)
@@ -274,7 +272,8 @@ def _any_crossed(active, g0, g):
 
 
 def _kernel_stamp() -> int:
-    """A hash of the sources the integrator compiles in (the line kernel and its layout).
+    """A hash of the sources the integrator compiles in (the line kernel, its layout and any
+    other module of ``r2rsim/compile`` with njit code: :func:`r2rsim.compile.stamp.kernel_stamp`).
 
     numba caches a compiled function under its own file's time stamp and its own bytecode:
     an edit of ``compile/kernels.py`` alone would leave the cached integrator running the old
@@ -282,10 +281,7 @@ def _kernel_stamp() -> int:
     that call the kernel are built in closures over this hash and compile again when the
     kernel changes.
     """
-    h = hashlib.sha256()
-    for mod in (kernels, layout):
-        h.update(Path(mod.__file__).read_bytes())
-    return int(h.hexdigest()[:15], 16)
+    return kernel_stamp()
 
 
 def _build_initial_step(stamp):
@@ -305,7 +301,7 @@ def _build_initial_step(stamp):
         h0 = min(h0, interval)
         for i in range(n):
             y1[i] = y[i] + h0 * f[i]
-        evaluate(t + h0, y1, f1, J1, RUNTIME_MODE[MODE_RHS], I, Pl, W, GI, GC, GV, aux0)
+        evaluate(t + h0, y1, f1, J1, RUNTIME_MODE[Mode.RHS], I, Pl, W, GI, GC, GV, aux0)
         for i in range(n):
             df[i] = f1[i] - f[i]
         d2 = _rms(df, scale) / h0
@@ -425,7 +421,7 @@ def _build_integrate(stamp):
         newton_tol = max(10.0 * EPS / rtol, min(0.03, math.sqrt(rtol)))
 
         t = t0
-        rhs_mode = RUNTIME_MODE[MODE_RHS]  # an int64, not a literal: one compile of evaluate
+        rhs_mode = RUNTIME_MODE[Mode.RHS]  # an int64, not a literal: one compile of evaluate
         evaluate(t, y, f, J1, rhs_mode, I, Pl, W, GI, GC, GV, aux0)
         nfev += 1
         k_out = 0
