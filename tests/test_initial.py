@@ -9,7 +9,14 @@ import pytest
 
 import r2rsim
 from r2rsim.cli import main
-from r2rsim.solve.initial import condition_1, lu_factor, lu_solve, norm2, taut_guess
+from r2rsim.solve.initial import (
+    _mover_tensions,
+    condition_1,
+    lu_factor,
+    lu_solve,
+    norm2,
+    taut_guess,
+)
 
 from conftest import write
 
@@ -222,3 +229,40 @@ def test_the_steady_states_linear_algebra_against_lapack(n):
     # a zero pivot column: singular, no factors
     a[:, 0] = 0.0
     assert lu_factor(a) is None
+
+
+def test_pivot_dancer_rest_tension_closed_form(repo):
+    # battery_foil_line: a pivot dancer (arm 0.3 m along +x at 0 rad) whose roller (r 40 mm,
+    # at (0, -0.3) m) hangs between two idlers (r 40 mm, at (-/+0.1, 0) m), web crossing
+    # from each idler to the dancer; loaded by an air cylinder and the arm's and roller's
+    # weight. Moment balance about the pivot at the initial arm angle, both spans at T:
+    #   T·(arm·cos(a) + arm·cos(a)) + M_cylinder + M_gravity = 0,
+    # a the spans' tilt from vertical (centre line tilt minus the crossed tangent's angle)
+    line = r2rsim.load_line(repo / "lines" / "battery_foil_line.yaml")
+    cl = r2rsim.compile_line(line, r2rsim.Programme.constant(line, line_speed=0.5))
+    arm, r = 0.3, 0.04
+    d = np.hypot(0.1, 0.3)
+    tilt = np.arctan2(0.1, 0.3) - np.arcsin(2 * r / d)
+    lever = 2 * arm * np.cos(tilt)
+    # cylinder: arm point (-0.15, -0.3), fixed point (-0.15, 0.2): it pushes straight down
+    # on a 0.15 m lever; gravity: (0.5 kg · 0.3 m + 1.0 kg · 0.15 m) · g on the level arm
+    m_cyl = -220.4 * 0.15
+    m_grav = -(0.5 * 0.3 + 1.0 * 0.15) * 9.81
+    T = -(m_cyl + m_grav) / lever
+    assert T == pytest.approx(60.14, abs=0.01)  # the line file's comment
+    assert _mover_tensions(cl) == [pytest.approx(T, rel=1e-9)]
+    # a nominal state at 0 N is made taut at the median of the tension set-point (60 N)
+    # and the dancer's rest tension, and the steady state is found from it
+    zero = r2rsim.nominal_state(cl, 0.0)
+    taut = taut_guess(cl, zero)
+    for sid in cl.span_ids:
+        assert taut[cl.index(f"{sid}.strain")] * line.web.EA == pytest.approx(
+            np.median([60.0, T]), rel=1e-12
+        )
+    found = r2rsim.steady_state(cl, zero)
+    assert found is not None
+    aux = cl.outputs(0.0, found[None, :])[0]
+    q = found[cl.index("dancer.position")]
+    load, dL = cl.mover_balance(0, q)
+    for sid in cl.span_ids[1:3]:  # the dancer's spans hold its load at the steady angle
+        assert aux[cl.aux_index(f"{sid}.tension_N")] == pytest.approx(load / dL, rel=1e-3)

@@ -52,8 +52,11 @@ from .layout import (
     CtrlKind,
     CtrlP,
     DriveKind,
+    EventI,
     EventKind,
+    FaultP,
     H,
+    JointP,
     Mode,
     MoverI,
     MoverKind,
@@ -73,6 +76,55 @@ from .layout import (
 
 MAXD = 16  # gradient slots per intermediate quantity
 
+
+def _names(enum) -> dict[str, int]:
+    return {name: int(member) for name, member in enum.__members__.items()}
+
+
+#: record families by name: "I"/"P" -> (header slot of the block offset, of the count,
+#: record size, field name -> offset), built once from the layout's enums
+_FAMILIES = {
+    "node": {
+        "I": (H.OFF_NI, H.NN, N_NODE_I, _names(NodeI)),
+        "P": (H.OFF_NP, H.NN, N_NODE_P, _names(NodeP)),
+    },
+    "span": {
+        "I": (H.OFF_SI, H.NS, N_SPAN_I, _names(SpanI)),
+        "P": (H.OFF_SP, H.NS, N_SPAN_P, _names(SpanP)),
+    },
+    "sensor": {
+        "I": (H.OFF_SEI, H.NSE, N_SENSOR_I, _names(SensorI)),
+        "P": (H.OFF_SEP, H.NSE, N_SENSOR_P, _names(SensorP)),
+    },
+    "ctrl": {
+        "I": (H.OFF_CI, H.NC, N_CTRL_I, _names(CtrlI)),
+        "P": (H.OFF_CP, H.NC, N_CTRL_P, _names(CtrlP)),
+    },
+    "mover": {
+        "I": (H.OFF_MI, H.NM, N_MOVER_I, _names(MoverI)),
+        "P": (H.OFF_MP, H.NM, N_MOVER_P, _names(MoverP)),
+    },
+    "joint": {"P": (H.OFF_JP, H.NJ, N_JOINT_P, _names(JointP))},
+    "fault": {"P": (H.OFF_FS, H.NFS, N_FAULT_P, _names(FaultP))},
+    "event": {"I": (H.OFF_EV, H.NEV, N_EVENT_I, _names(EventI))},
+}
+
+
+def _kind_names(enum) -> dict[int, str]:
+    return {int(member): name for name, member in enum.__members__.items()}
+
+
+#: family -> (default kind field, kind field -> (value -> kind name))
+_KIND_FIELDS = {
+    "node": ("KIND", {"KIND": _kind_names(NodeKind), "DRIVE": _kind_names(DriveKind)}),
+    "sensor": ("TYPE", {"TYPE": _kind_names(SensorKind)}),
+    "ctrl": ("TYPE", {"TYPE": _kind_names(CtrlKind)}),
+    "mover": ("KIND", {"KIND": _kind_names(MoverKind)}),
+    "event": ("KIND", {"KIND": _kind_names(EventKind)}),
+}
+
+_HEADER_FIELDS = _names(H)
+
 #: event kind -> name used in the event log
 EVENT_NAMES = {
     EventKind.SLACK: "slack",
@@ -86,6 +138,8 @@ EVENT_NAMES = {
     EventKind.SPLICE_RADIUS: "splice_trigger",
     EventKind.REFILL: "splice_refilled",
 }
+#: event kind name -> name used in the event log (``EVENT_LABELS[cl.kind("event", m)]``)
+EVENT_LABELS = {kind.name: label for kind, label in EVENT_NAMES.items()}
 N_JOINT_SLOTS = 2  # splice joints on the line at once (a joint leaves at the rewind)
 
 
@@ -344,13 +398,107 @@ class CompiledLine:
         """Event records of I, (events, :class:`EventI`)."""
         return self._records(self.I, H.OFF_EV, H.NEV, N_EVENT_I)
 
+    # ---- fields by name: the solver's access (it never imports the layout) ---------------
+    # Families: "node", "span", "sensor", "ctrl", "mover" (int and float records), "joint",
+    # "fault" (float only), "event" (int only). Field names are those of the layout's enums
+    # (``"TEFF"`` is ``NodeP.TEFF``); a name not in the family raises KeyError naming the
+    # family and its fields. Kinds are compared by name: ``cl.kind("node", k) == "UNWIND"``.
+    # These are Python-side calls for discrete events, not the kernel's path.
+
+    def param_index(self, family: str, i: int, name: str) -> int:
+        """Absolute index in P of float field ``name`` of record ``i`` of ``family``
+        (``cl.P[cl.param_index("node", k, "TEFF")]``; what a fault slot stores)."""
+        return self._flat_index(family, "P", i, name)
+
+    def field_index(self, family: str, i: int, name: str) -> int:
+        """Absolute index in I of int field ``name`` of record ``i`` of ``family``."""
+        return self._flat_index(family, "I", i, name)
+
+    def param(self, family: str, i: int, name: str) -> float:
+        """Float field ``name`` of record ``i`` of ``family``: ``cl.param("node", k, "TEFF")``."""
+        return float(self.P[self._flat_index(family, "P", i, name)])
+
+    def set_param(self, family: str, i: int, name: str, value: float) -> None:
+        """Set float field ``name`` of record ``i``: ``cl.set_param("ctrl", j, "SETP", v)``;
+        the kernel sees it at its next evaluation."""
+        self.P[self._flat_index(family, "P", i, name)] = value
+
+    def field(self, family: str, i: int, name: str) -> int:
+        """Int field ``name`` of record ``i`` of ``family`` (a state index, a node, ...):
+        ``cl.field("mover", m, "Q")``."""
+        return int(self.I[self._flat_index(family, "I", i, name)])
+
+    def kind(self, family: str, i: int, name: str | None = None) -> str:
+        """The kind of record ``i`` by name: ``"UNWIND"``, ``"ROLLER"`` ... for ``"node"``,
+        ``"SPEED"`` ... for ``"ctrl"``, ``"PIVOT"`` ... for ``"mover"``, ``"DIAMETER"`` ...
+        for ``"sensor"``, ``"BREAK"`` ... for ``"event"``; ``cl.kind("node", k, "DRIVE")``
+        is the drive's kind (``"NONE"``, ``"TORQUE"``, ``"IDEAL"``). Compare with strings."""
+        try:
+            default, names = _KIND_FIELDS[family]
+        except KeyError:
+            raise KeyError(
+                f"no kinds for record family {family!r}; known: {', '.join(_KIND_FIELDS)}"
+            ) from None
+        name = name or default
+        try:
+            kinds = names[name]
+        except KeyError:
+            raise KeyError(
+                f"{family} field {name!r} is not a kind; kind fields: {', '.join(names)}"
+            ) from None
+        return kinds[self.field(family, i, name)]
+
+    def header(self, name: str) -> int:
+        """Header slot ``name`` of I (a count or block offset, e.g. ``"NFS"``)."""
+        try:
+            return int(self.I[_HEADER_FIELDS[name]])
+        except KeyError:
+            raise KeyError(
+                f"header has no field {name!r}; known fields: {', '.join(_HEADER_FIELDS)}"
+            ) from None
+
+    def _flat_index(self, family: str, which: str, i: int, name: str) -> int:
+        try:
+            off, count, size, fields = _FAMILIES[family][which]
+        except KeyError:
+            known = [f for f, d in _FAMILIES.items() if which in d]
+            raise KeyError(
+                f"no {'float' if which == 'P' else 'int'} record family {family!r}; "
+                f"known: {', '.join(known)}"
+            ) from None
+        try:
+            f = fields[name]
+        except KeyError:
+            raise KeyError(
+                f"{family} records have no {'float' if which == 'P' else 'int'} field "
+                f"{name!r}; known fields: {', '.join(fields)}"
+            ) from None
+        n = int(self.I[count])
+        if not -n <= i < n:
+            raise IndexError(f"{family} record {i} out of range ({n} records)")
+        return int(self.I[off]) + (i % n) * size + f
+
+    def mover_balance(self, m: int, q: float) -> tuple[float, float]:
+        """``(load, dL/dq)`` of dancer ``m`` (linear or pivot) at coordinate ``q``: the
+        kernel's generalised actuator + spring + torque + gravity force (N, or N m for a pivot
+        arm: cylinder force times its moment arm, torsion spring, torque motor, gravity of arm
+        and roller) and the sum of its two spans' length derivatives, the lever of their
+        tensions (m for a pivot). At rest with both spans at tension T: ``T = load / (dL/dq)``."""
+        kind = int(self.field("mover", m, "KIND"))
+        if kind == MoverKind.FESTOON:
+            raise ValueError(f"mover {m} is a festoon carriage, not a dancer")
+        mp = self.mover_p
+        load = kernels._mover_load(mp, m, kind, float(q))
+        _, dlu, _, dld = kernels.mover_lengths(mp, m, kind, float(q))
+        return float(load), float(dlu + dld)
+
     def node_param(self, k: int, name: str) -> float:
         """Parameter ``name`` (a :class:`NodeP` field, e.g. ``"TEFF"``) of node ``k``."""
-        return float(self.node_p[k, NodeP[name]])
+        return self.param("node", k, name)
 
     def set_node_param(self, k: int, name: str, value: float) -> None:
         """Set parameter ``name`` (a :class:`NodeP` field) of node ``k``."""
-        self.node_p[k, NodeP[name]] = value
+        self.set_param("node", k, name, value)
 
     # ---- the callbacks ------------------------------------------------------------------
     def make_rhs(self):
@@ -1262,5 +1410,5 @@ def _storage_slope(mp, kind, q):
     """d(stored length)/dq of a mover at q (sum over its spans)."""
     if kind == MoverKind.FESTOON:
         return mp[MoverP.NSTR]
-    _, dlu, _, dld = kernels.mover_lengths(mp.reshape(1, -1), 0, kind, q)  # one record
+    _, dlu, _, dld = kernels.mover_lengths(mp.reshape(1, -1), 0, int(kind), q)  # one record
     return dlu + dld

@@ -31,6 +31,7 @@ from .layout import (
     AUX_NODE,
     AUX_SENS,
     AUX_SPAN,
+    FROZEN,
     N_CTRL_I,
     N_CTRL_P,
     N_EVENT_I,
@@ -46,32 +47,40 @@ from .layout import (
     N_SPAN_P,
     N_TABLE_I,
     RUNTIME_MODE,
-    CtrlI,
-    CtrlKind,
-    CtrlP,
-    DriveKind,
-    EventI,
-    EventKind,
-    FaultP,
-    H,
-    JointP,
-    Mode,
-    MoverI,
-    MoverKind,
-    MoverP,
-    NodeI,
-    NodeKind,
-    NodeP,
-    SensorI,
-    SensorKind,
-    SensorP,
-    Shape,
-    SpanI,
-    SpanP,
-    TableI,
-    TableKind,
 )
 from .stamp import kernel_stamp
+
+# the record fields and kinds as plain-int namedtuples: numba reads them as constants with
+# every supported numba version (layout.frozen says why not the IntEnums themselves)
+CtrlI = FROZEN["CtrlI"]
+CtrlKind = FROZEN["CtrlKind"]
+CtrlP = FROZEN["CtrlP"]
+DriveKind = FROZEN["DriveKind"]
+EventI = FROZEN["EventI"]
+EventKind = FROZEN["EventKind"]
+FaultP = FROZEN["FaultP"]
+H = FROZEN["H"]
+JointP = FROZEN["JointP"]
+Mode = FROZEN["Mode"]
+MoverI = FROZEN["MoverI"]
+MoverKind = FROZEN["MoverKind"]
+MoverP = FROZEN["MoverP"]
+NodeI = FROZEN["NodeI"]
+NodeKind = FROZEN["NodeKind"]
+NodeP = FROZEN["NodeP"]
+SensorI = FROZEN["SensorI"]
+SensorKind = FROZEN["SensorKind"]
+SensorP = FROZEN["SensorP"]
+Shape = FROZEN["Shape"]
+SpanI = FROZEN["SpanI"]
+SpanP = FROZEN["SpanP"]
+TableI = FROZEN["TableI"]
+TableKind = FROZEN["TableKind"]
+
+#: index of the right-hand-side mode in RUNTIME_MODE, for compiled callers outside
+#: ``compile/`` (the integrator in ``solve/radau.py``): ``RUNTIME_MODE[MODE_RHS]`` is an int64,
+#: so numba compiles :func:`evaluate` once for it and Python's calls alike
+MODE_RHS = int(Mode.RHS)
 
 PI = math.pi
 

@@ -11,6 +11,7 @@ record views by name: ``node_p[k, NodeP.R]``. Kept in one module so the compiler
 kernel cannot disagree.
 """
 
+from collections import namedtuple
 from enum import IntEnum
 
 import numpy as np
@@ -410,11 +411,46 @@ class Mode(IntEnum):
 #: compile of the kernel is ~20 s of CPU on a cold start)
 RUNTIME_MODE = np.array([m.value for m in Mode], dtype=np.int64)
 
-# the event kinds under their former names, for r2rsim/solve/simulate.py until its body
-# uses EventKind (its owner's change; nothing else may use these)
-EV_SLACK, EV_BREAK, EV_CAPSTAN, EV_EMPTY = (
-    EventKind.SLACK,
-    EventKind.BREAK,
-    EventKind.CAPSTAN,
-    EventKind.EMPTY,
-)
+
+# ---- the fields for compiled code --------------------------------------------------------
+def frozen(enum: type[IntEnum]) -> tuple:
+    """The members of ``enum`` as a namedtuple of plain ints (``frozen(NodeP).R == 0``).
+
+    The kernel reads the fields through these twins of the enums: numba reads the fields of a
+    global namedtuple as constants with every numba version r2rsim supports, while an IntEnum
+    member as an array index needs numba 0.64 or newer (0.59 and 0.63 refuse it: "Unsupported
+    array index type IntEnum"). The machine code is that of an integer literal either way.
+    """
+    return namedtuple(enum.__name__, list(enum.__members__))(*(int(m) for m in enum))
+
+
+#: every enum above by name, as :func:`frozen` twins (what ``kernels.py`` imports)
+FROZEN = {
+    e.__name__: frozen(e)
+    for e in (
+        H,
+        NodeKind,
+        DriveKind,
+        NodeI,
+        NodeP,
+        SpanI,
+        SpanP,
+        SensorKind,
+        SensorI,
+        SensorP,
+        CtrlKind,
+        CtrlI,
+        CtrlP,
+        MoverKind,
+        MoverI,
+        MoverP,
+        JointP,
+        FaultP,
+        TableKind,
+        TableI,
+        Shape,
+        EventKind,
+        EventI,
+        Mode,
+    )
+}

@@ -22,39 +22,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..compile.compiler import EVENT_NAMES, CompiledLine
+from ..compile.compiler import EVENT_LABELS, CompiledLine
 from ..compile.faults import loop_sensor_ids
-from ..compile.layout import (
-    N_MOVER_P,
-    N_NODE_P,
-    CtrlI,
-    CtrlKind,
-    CtrlP,
-    EventI,
-    EventKind,
-    FaultP,
-    H,
-    JointP,
-    MoverI,
-    MoverP,
-    NodeI,
-    NodeP,
-    SensorI,
-    SensorKind,
-    SensorP,
-)
 
 #: joint length of new material that runs until the next roll change
 OPEN_JOINT = 1e9  # m: longer than any roll
 
 #: events whose handling changes the model (their flags are recomputed after a change)
-MODE_EVENTS = {
-    EventKind.STOP_LO,
-    EventKind.STOP_HI,
-    EventKind.JOINT_PASS,
-    EventKind.SPLICE_RADIUS,
-    EventKind.REFILL,
-}
+#: (by kind name, as ``cl.kind("event", m)`` gives it)
+MODE_EVENTS = {"STOP_LO", "STOP_HI", "JOINT_PASS", "SPLICE_RADIUS", "REFILL"}
 
 
 @dataclass(order=True)
@@ -157,7 +133,7 @@ class DiscreteLogic:
                     "(compile_line(line, programme, faults)) for the angle state"
                 )
             if idx not in self._slot:
-                if len(self._slot) >= cl.I[H.NFS]:
+                if len(self._slot) >= cl.header("NFS"):
                     raise ValueError(
                         f"fault '{f.id}': no parameter slot left; compile the "
                         "line with its faults (compile_line(..., faults=...))"
@@ -196,14 +172,14 @@ class DiscreteLogic:
 
     # ---- parameter access -------------------------------------------------------------------
     def _np(self, k, f):
-        return self.cl.I[H.OFF_NP] + k * N_NODE_P + f
+        return self.cl.param_index("node", k, f)
 
     def _ni(self, k, f):
-        return int(self.cl.node_i[k, f])
+        return self.cl.field("node", k, f)
 
     def _ctrls_on(self, k, types):
         for c in range(len(self.cl.controllers)):
-            if self.cl.ctrl_i[c, CtrlI.NODE] == k and self.cl.ctrl_i[c, CtrlI.TYPE] in types:
+            if self.cl.field("ctrl", c, "NODE") == k and self.cl.kind("ctrl", c) in types:
                 yield c
 
     # ---- scheduled actions ------------------------------------------------------------------
@@ -236,11 +212,11 @@ class DiscreteLogic:
             return y
         self.splicing[k] = "fill"
         P = self.cl.P
-        P[self._np(k, NodeP.VGAIN)] = 1.0 + sp.fill_overspeed
+        P[self._np(k, "VGAIN")] = 1.0 + sp.fill_overspeed
         for c in self._dancer_loops(k):
-            ix = int(self.cl.ctrl_i[c, CtrlI.X])
+            ix = int(self.cl.field("ctrl", c, "X"))
             self._saved_integral[c] = float(y[ix]) if ix >= 0 else 0.0
-            self.cl.ctrl_p[c, CtrlP.GATE] = 0.0
+            self.cl.set_param("ctrl", c, "GATE", 0.0)
         log.append(self._phase(t, k, "fill", f"fill: unwind at +{sp.fill_overspeed:.0%} speed"))
         self._push(t + sp.fill_time, "brake", k)
         return y
@@ -287,7 +263,7 @@ class DiscreteLogic:
         sp = self.line.elements[k].splicer
         self._set_ref(k, gain=1.0 + sp.fill_overspeed, off=0.0, slope=0.0, t0=t)
         for c in self._dancer_loops(k):
-            self.cl.ctrl_p[c, CtrlP.GATE] = -1.0  # armed: refill event
+            self.cl.set_param("ctrl", c, "GATE", -1.0)  # armed: refill event
         self.splicing[k] = "refill"
         log.append(self._phase(t, k, "refill", "refill the dancer/festoon"))
         self._push(t + sp.refill_timeout, "complete", k, {"timeout": True})
@@ -302,8 +278,8 @@ class DiscreteLogic:
     def _complete(self, t, y, k, log, timeout=False):
         self._set_ref(k, gain=1.0, off=0.0, slope=0.0, t0=t)
         for c in self._dancer_loops(k):
-            self.cl.ctrl_p[c, CtrlP.GATE] = 1.0
-            ix = int(self.cl.ctrl_i[c, CtrlI.X])
+            self.cl.set_param("ctrl", c, "GATE", 1.0)
+            ix = int(self.cl.field("ctrl", c, "X"))
             if ix >= 0:
                 y[ix] = self._saved_integral.get(c, 0.0)
         del self.splicing[k]
@@ -317,10 +293,12 @@ class DiscreteLogic:
     def _do_e_stop(self, t, y, a, log):
         decel = a.data["decel"]
         v = self._line_speed(t, -1)
-        I, P = self.cl.I, self.cl.P
-        mx = int(I[H.MAXPTS])
-        n = int(I[I[H.OFF_SCHN]])
-        bt, bv = int(I[H.OFF_SCHT]), int(I[H.OFF_SCHV])
+        cl = self.cl
+        I, P = cl.I, cl.P
+        # set-point channel 0 (line speed): its point count in I, its times and values in P
+        mx = cl.header("MAXPTS")
+        n = int(I[cl.header("OFF_SCHN")])
+        bt, bv = cl.header("OFF_SCHT"), cl.header("OFF_SCHV")
         keep = [m for m in range(n) if P[bt + m] <= t]
         times = [float(P[bt + m]) for m in keep] + [t, t + v / decel]
         vals = [float(P[bv + m]) for m in keep] + [v, 0.0]
@@ -329,13 +307,13 @@ class DiscreteLogic:
         P[bt : bt + mx] = math.inf
         P[bt : bt + len(times)] = times
         P[bv : bv + len(vals)] = vals
-        I[I[H.OFF_SCHN]] = len(times)
+        I[cl.header("OFF_SCHN")] = len(times)
         self.cl.programme.times[0], self.cl.programme.values[0] = times, vals
         self._breakpoints = [*self._breakpoints, t, t + v / decel]
         for k in list(self.splicing):  # an e-stop aborts a splice sequence
             self._set_ref(k, gain=1.0, off=0.0, slope=0.0, t0=t)
             for c in self._dancer_loops(k):
-                self.cl.ctrl_p[c, CtrlP.GATE] = 1.0
+                self.cl.set_param("ctrl", c, "GATE", 1.0)
             del self.splicing[k]
         log.append(
             Event(
@@ -358,10 +336,10 @@ class DiscreteLogic:
         return self._seize(t, y, a.target, log, "")
 
     def _seize(self, t, y, m, log, why):
-        """Mover m seizes where it is: q' = 0 and held (MoverP.MODE 2)."""
-        self.cl.mover_p[m, MoverP.MODE] = 2.0
-        y[self.cl.mover_i[m, MoverI.QD]] = 0.0
-        q = float(y[self.cl.mover_i[m, MoverI.Q]])
+        """Mover m seizes where it is: q' = 0 and held (mover field "MODE" 2)."""
+        self.cl.set_param("mover", m, "MODE", 2.0)
+        y[self.cl.field("mover", m, "QD")] = 0.0
+        q = float(y[self.cl.field("mover", m, "Q")])
         mid = self.cl.mover_ids[m]
         log.append(
             Event(
@@ -392,25 +370,18 @@ class DiscreteLogic:
             if cc != 0.0:
                 acc[2] += cc
                 acc[3] = tau
-        rec = self.cl.sensor_p[j]  # a view of sensor j's record: writes reach the kernel
-        was_stuck = rec[SensorP.STUCK] != 0.0
+        cl = self.cl  # writes reach the kernel at its next evaluation
+        was_stuck = cl.param("sensor", j, "STUCK") != 0.0
         if stuck and not was_stuck:  # hold the reading the controllers see now
-            rec[SensorP.SV] = self._seen(t, y, j)
-        rec[SensorP.STUCK] = 1.0 if stuck else 0.0
-        rec[SensorP.FT0] = t
-        (
-            rec[SensorP.BA],
-            rec[SensorP.BB],
-            rec[SensorP.BC],
-            rec[SensorP.BTAU],
-        ) = bias
-        (
-            rec[SensorP.GA],
-            rec[SensorP.GB],
-            rec[SensorP.GC],
-            rec[SensorP.GTAU],
-        ) = gain
-        rec[SensorP.FON] = 1.0 if (stuck or any(bias[:3]) or any(gain[:3])) else 0.0
+            cl.set_param("sensor", j, "SV", self._seen(t, y, j))
+        cl.set_param("sensor", j, "STUCK", 1.0 if stuck else 0.0)
+        cl.set_param("sensor", j, "FT0", t)
+        for name, v in zip(("BA", "BB", "BC", "BTAU"), bias, strict=True):
+            cl.set_param("sensor", j, name, v)
+        for name, v in zip(("GA", "GB", "GC", "GTAU"), gain, strict=True):
+            cl.set_param("sensor", j, name, v)
+        on = stuck or any(bias[:3]) or any(gain[:3])
+        cl.set_param("sensor", j, "FON", 1.0 if on else 0.0)
         return y
 
     # ---- faults that change the model ----------------------------------------------------
@@ -418,22 +389,21 @@ class DiscreteLogic:
         """(index in P, gain K) of a parameter fault: P = base + K·effect(t); None for the
         faults handled by a discrete action."""
         cl = self.cl
-        I = cl.I
         if f.kind.target == "dancer":
             m = cl.mover_ids.index(f.target)
             field_, K = {
-                "dancer.loss_of_loading": (MoverP.LOADF, -1.0),
-                "dancer.friction_increase": (MoverP.FRICF, 1.0),
+                "dancer.loss_of_loading": ("LOADF", -1.0),
+                "dancer.friction_increase": ("FRICF", 1.0),
             }.get(f.type, (None, 0))
-            return None if field_ is None else (I[H.OFF_MP] + m * N_MOVER_P + field_, K)
+            return None if field_ is None else (cl.param_index("mover", m, field_), K)
         k = cl.node_ids.index(f.target)
         field_, K = {
-            "actuator.bias": (NodeP.TBIAS, 1.0),
-            "actuator.loss_of_effectiveness": (NodeP.TEFF, -1.0),
-            "actuator.saturation": (NodeP.TMAX, 1.0),
-            "process.bearing_friction": (NodeP.FRICF, 1.0),
-            "process.draw_error": (NodeP.REFF, 1.0),
-            "process.eccentricity": (NodeP.ECC, 1.0),
+            "actuator.bias": ("TBIAS", 1.0),
+            "actuator.loss_of_effectiveness": ("TEFF", -1.0),
+            "actuator.saturation": ("TMAX", 1.0),
+            "process.bearing_friction": ("FRICF", 1.0),
+            "process.draw_error": ("REFF", 1.0),
+            "process.eccentricity": ("ECC", 1.0),
         }.get(f.type, (None, 0))
         return None if field_ is None else (self._np(k, field_), K)
 
@@ -462,19 +432,12 @@ class DiscreteLogic:
                 acc[3] = tau
         lengths = self._span_lengths(t, y) if ecc_node is not None else None
         P[idx] = value if value is not None else base + acc[0]
-        rec = self.cl.fault_p[self._slot[idx]]  # a view of the slot's record
-        (
-            rec[FaultP.IDX],
-            rec[FaultP.BASE],
-            rec[FaultP.T0],
-        ) = idx, base, t
-        (
-            rec[FaultP.A],
-            rec[FaultP.B],
-            rec[FaultP.C],
-            rec[FaultP.TAU],
-        ) = acc
-        rec[FaultP.ON] = 1.0 if (acc[1] != 0.0 or acc[2] != 0.0) and value is None else 0.0
+        slot = self._slot[idx]
+        names = ("IDX", "BASE", "T0", "A", "B", "C", "TAU")
+        for name, v in zip(names, (idx, base, t, *acc), strict=True):
+            self.cl.set_param("fault", slot, name, v)
+        on = (acc[1] != 0.0 or acc[2] != 0.0) and value is None
+        self.cl.set_param("fault", slot, "ON", 1.0 if on else 0.0)
         if lengths is not None:
             # the roller's centre jumps by the new eccentricity: each span keeps its
             # unstretched length (mass), so its strain follows its new length
@@ -495,10 +458,10 @@ class DiscreteLogic:
         k = self.cl.node_ids.index(f.target)
         on = f.p(np.array([t]))[0] > 0.0
         P = self.cl.P
-        if on and P[self._np(k, NodeP.TSTUCK)] == 0.0:
+        if on and P[self._np(k, "TSTUCK")] == 0.0:
             aux = self.cl.outputs(np.array([t]), y[None, :])[0]
-            P[self._np(k, NodeP.TSV)] = aux[self.cl.aux_index(f"{f.target}.torque_N_m")]
-        P[self._np(k, NodeP.TSTUCK)] = 1.0 if on else 0.0
+            P[self._np(k, "TSV")] = aux[self.cl.aux_index(f"{f.target}.torque_N_m")]
+        P[self._np(k, "TSTUCK")] = 1.0 if on else 0.0
         return y
 
     def _do_arm_stuck(self, t, y, a, log):
@@ -507,12 +470,11 @@ class DiscreteLogic:
         m = self.cl.mover_ids.index(f.target)
         if f.p(np.array([t]))[0] > 0.0:
             return self._seize(t, y, m, log, f" ({f.id})")
-        if self.cl.mover_p[m, MoverP.MODE] == 2.0:
+        if self.cl.param("mover", m, "MODE") == 2.0:
             mid = self.cl.mover_ids[m]
-            q = float(y[self.cl.mover_i[m, MoverI.Q]])
-            self.cl.mover_p[m, MoverP.MODE] = (
-                0.0  # free again; its end stops are re-detected as events
-            )
+            q = float(y[self.cl.field("mover", m, "Q")])
+            # free again; its end stops are re-detected as events
+            self.cl.set_param("mover", m, "MODE", 0.0)
             log.append(
                 Event(
                     t, "dancer_seized", mid, "end", f"{mid} is free again ({f.id})", {"position": q}
@@ -530,7 +492,7 @@ class DiscreteLogic:
         ratio, dl0 = self._material.get(k, (1.0, None))
         self._open_material(
             k,
-            y[self._ni(k, NodeI.U)],
+            y[self._ni(k, "U")],
             ratio * (1.0 + f.magnitude),
             f"fault '{f.id}': no splice-joint slot for the new material; "
             "compile the line with its faults (compile_line(..., faults=...))",
@@ -556,16 +518,17 @@ class DiscreteLogic:
         if slot is None:
             raise ValueError(no_slot)
         self._material[k] = (ea_ratio, dl0)
-        self.cl.joint_p[slot, JointP.ACTIVE] = 1.0
-        self.cl.joint_p[slot, JointP.MAT] = 1.0
-        self.cl.joint_p[slot, JointP.DL0] = self._first_dl0(k) if dl0 is None else dl0
-        self.cl.joint_p[slot, JointP.U0] = u_now
-        self.cl.joint_p[slot, JointP.LEN] = OPEN_JOINT
-        self.cl.joint_p[slot, JointP.RATIO] = ea_ratio
-        self.cl.joint_p[slot, JointP.TBRK] = 1e30  # no joint to break: the web's own break applies
-        self.cl.joint_p[slot, JointP.SPAN] = float(k)
-        self.cl.joint_p[slot, JointP.TSPAN] = float(k) - 1.0
-        self.cl.joint_p[slot, JointP.NODE] = float(k)
+        self.cl.set_param("joint", slot, "ACTIVE", 1.0)
+        self.cl.set_param("joint", slot, "MAT", 1.0)
+        self.cl.set_param("joint", slot, "DL0", self._first_dl0(k) if dl0 is None else dl0)
+        self.cl.set_param("joint", slot, "U0", u_now)
+        self.cl.set_param("joint", slot, "LEN", OPEN_JOINT)
+        self.cl.set_param("joint", slot, "RATIO", ea_ratio)
+        # no joint to break: the web's own break applies
+        self.cl.set_param("joint", slot, "TBRK", 1e30)
+        self.cl.set_param("joint", slot, "SPAN", float(k))
+        self.cl.set_param("joint", slot, "TSPAN", float(k) - 1.0)
+        self.cl.set_param("joint", slot, "NODE", float(k))
 
     def _first_dl0(self, k: int) -> float:
         """Relaxed-pitch offset of the first roll of the unwind at node k (0: not drawn)."""
@@ -575,7 +538,7 @@ class DiscreteLogic:
 
     def _free_joint_slot(self) -> int | None:
         for js in range(self.cl.n_joint_slots):
-            if self.cl.joint_p[js, JointP.ACTIVE] == 0.0:
+            if self.cl.param("joint", js, "ACTIVE") == 0.0:
                 return js
         return None
 
@@ -589,27 +552,27 @@ class DiscreteLogic:
     # ---- event handlers ---------------------------------------------------------------------
     def on_event(self, m: int, on: bool, t: float, y: np.ndarray):
         """Handle a change of event m's condition. Returns (y, log entries, handled)."""
-        kind = self.cl.event_kinds[m]
+        kind = self.cl.kind("event", m)
         comp = self.cl.event_components[m]
         log: list[Event] = []
-        if kind in (EventKind.STOP_LO, EventKind.STOP_HI):
-            self._on_stop(m, kind == EventKind.STOP_LO, on, t, y, comp, log)
-        elif kind == EventKind.JOINT_PASS and on:
+        if kind in ("STOP_LO", "STOP_HI"):
+            self._on_stop(m, kind == "STOP_LO", on, t, y, comp, log)
+        elif kind == "JOINT_PASS" and on:
             self._on_joint_pass(m, t, y, comp, log)
-        elif kind == EventKind.JOINT_BREAK and on:
+        elif kind == "JOINT_BREAK" and on:
             self._on_joint_break(m, t, y, log)
-        elif kind == EventKind.SPLICE_RADIUS and on:
+        elif kind == "SPLICE_RADIUS" and on:
             k = self._event_index(m)
             if k not in self.splicing:
                 self._push(t, "splice", k)
                 y, log = self.apply_due(t, y)
-        elif kind == EventKind.REFILL and on:
+        elif kind == "REFILL" and on:
             c = self._event_index(m)
-            k = int(self.cl.ctrl_i[c, CtrlI.NODE])
+            k = int(self.cl.field("ctrl", c, "NODE"))
             if self.splicing.get(k) == "refill":
                 y = self._complete(t, y, k, log)
         else:
-            return y, log, kind in MODE_EVENTS or kind == EventKind.JOINT_BREAK
+            return y, log, kind in MODE_EVENTS or kind == "JOINT_BREAK"
         return y, log, True
 
     def _on_stop(
@@ -618,30 +581,30 @@ class DiscreteLogic:
         """A dancer or festoon carriage reaches (on) or leaves (off) an end stop: it latches
         there at rest, then moves freely again."""
         mv = self._event_index(m)
-        iq = self.cl.mover_i[mv, MoverI.Q]
-        iqd = self.cl.mover_i[mv, MoverI.QD]
-        kind = EventKind.STOP_LO if lo else EventKind.STOP_HI
-        if on and self.cl.mover_p[mv, MoverP.MODE] == 0.0:
+        iq = self.cl.field("mover", mv, "Q")
+        iqd = self.cl.field("mover", mv, "QD")
+        kind = "STOP_LO" if lo else "STOP_HI"
+        if on and self.cl.param("mover", mv, "MODE") == 0.0:
             v = float(y[iqd])
-            self.cl.mover_p[mv, MoverP.MODE] = -1.0 if lo else 1.0
-            y[iq] = self.cl.mover_p[mv, MoverP.QMIN if lo else MoverP.QMAX]
+            self.cl.set_param("mover", mv, "MODE", -1.0 if lo else 1.0)
+            y[iq] = self.cl.param("mover", mv, "QMIN" if lo else "QMAX")
             y[iqd] = 0.0
             log.append(
                 Event(
                     t,
-                    EVENT_NAMES[kind],
+                    EVENT_LABELS[kind],
                     comp,
                     "start",
                     f"{comp} hits its {'lower' if lo else 'upper'} stop at {v:.3g}/s",
                     {"velocity": v},
                 )
             )
-        elif not on and self.cl.mover_p[mv, MoverP.MODE] in (-1.0, 1.0):
-            self.cl.mover_p[mv, MoverP.MODE] = 0.0
+        elif not on and self.cl.param("mover", mv, "MODE") in (-1.0, 1.0):
+            self.cl.set_param("mover", mv, "MODE", 0.0)
             log.append(
                 Event(
                     t,
-                    EVENT_NAMES[kind],
+                    EVENT_LABELS[kind],
                     comp,
                     "end",
                     f"{comp} leaves its {'lower' if lo else 'upper'} stop",
@@ -654,8 +617,8 @@ class DiscreteLogic:
         js = self._event_index(m)
         nS = len(self.cl.span_ids)
         if self._joint_lead_crossed(js, t, y):
-            self.cl.joint_p[js, JointP.SPAN] += 1.0
-            sp = int(self.cl.joint_p[js, JointP.SPAN])
+            self.cl.set_param("joint", js, "SPAN", self.cl.param("joint", js, "SPAN") + 1.0)
+            sp = int(self.cl.param("joint", js, "SPAN"))
             if sp < nS:
                 log.append(
                     Event(
@@ -667,9 +630,9 @@ class DiscreteLogic:
                     )
                 )
         else:  # the trail crossed a node: the joint has left a span
-            self.cl.joint_p[js, JointP.TSPAN] += 1.0
-            if int(self.cl.joint_p[js, JointP.TSPAN]) >= nS:
-                self.cl.joint_p[js, JointP.ACTIVE] = 0.0
+            self.cl.set_param("joint", js, "TSPAN", self.cl.param("joint", js, "TSPAN") + 1.0)
+            if int(self.cl.param("joint", js, "TSPAN")) >= nS:
+                self.cl.set_param("joint", js, "ACTIVE", 0.0)
                 log.append(
                     Event(
                         t,
@@ -683,7 +646,7 @@ class DiscreteLogic:
     def _on_joint_break(self, m: int, t: float, y: np.ndarray, log: list) -> None:
         """A weak splice joint breaks: the run ends with a web break."""
         js = self._event_index(m)
-        sp = int(self.cl.joint_p[js, JointP.SPAN])
+        sp = int(self.cl.param("joint", js, "SPAN"))
         span = self.cl.span_ids[sp]
         T = float(self.cl.outputs(t, y[None, :])[0][self.cl.aux_index(f"{span}.tension_N")])
         log.append(
@@ -700,20 +663,20 @@ class DiscreteLogic:
 
     # ---- helpers ----------------------------------------------------------------------------
     def _event_index(self, m):
-        return int(self.cl.event_i[m, EventI.INDEX])
+        return int(self.cl.field("event", m, "INDEX"))
 
     def _dancer_loops(self, k):
-        return list(self._ctrls_on(k, (CtrlKind.DANCER,)))
+        return list(self._ctrls_on(k, ("DANCER",)))
 
     def _phase(self, t, k, state, msg):
         return Event(t, "splice", self.cl.node_ids[k], state, msg)
 
     def _set_ref(self, k, gain, off, slope, t0):
         P = self.cl.P
-        P[self._np(k, NodeP.VGAIN)] = gain
-        P[self._np(k, NodeP.VOFF)] = off
-        P[self._np(k, NodeP.VSLOPE)] = slope
-        P[self._np(k, NodeP.VT0)] = t0
+        P[self._np(k, "VGAIN")] = gain
+        P[self._np(k, "VOFF")] = off
+        P[self._np(k, "VSLOPE")] = slope
+        P[self._np(k, "VT0")] = t0
 
     def _line_speed(self, t, k):
         from ..compile.kernels import setpoint
@@ -732,16 +695,15 @@ class DiscreteLogic:
         if name in self.cl.programme.names:  # a programmed draw
             draw = self.cl.programme.value(name, t)
         return (
-            self._line_speed(t, k) * (1.0 + draw) * P[self._np(k, NodeP.VGAIN)]
-            + P[self._np(k, NodeP.VOFF)]
-            + P[self._np(k, NodeP.VSLOPE)] * (t - P[self._np(k, NodeP.VT0)])
+            self._line_speed(t, k) * (1.0 + draw) * P[self._np(k, "VGAIN")]
+            + P[self._np(k, "VOFF")]
+            + P[self._np(k, "VSLOPE")] * (t - P[self._np(k, "VT0")])
         )
 
     def _joint_lead_crossed(self, js: int, t: float, y: np.ndarray) -> bool:
         """At a joint-pass event: True if the joint's lead reached a node, False if its
         trail did (whichever of the two is closer to its node)."""
         cl = self.cl
-        rec = cl.joint_p[js]  # the joint slot's record
         aux = cl.outputs(np.array([t]), y[None, :])[0]
         ell = np.array(
             [
@@ -751,9 +713,9 @@ class DiscreteLogic:
             ]
         )
         c = np.concatenate([[0.0], np.cumsum(ell)])  # node positions from the splice node
-        lead = y[self._ni(int(rec[JointP.NODE]), NodeI.U)] - rec[JointP.U0]
-        trail = lead - rec[JointP.LEN]
-        sp, st = int(rec[JointP.SPAN]), int(rec[JointP.TSPAN])
+        lead = y[self._ni(int(cl.param("joint", js, "NODE")), "U")] - cl.param("joint", js, "U0")
+        trail = lead - cl.param("joint", js, "LEN")
+        sp, st = int(cl.param("joint", js, "SPAN")), int(cl.param("joint", js, "TSPAN"))
         g_lead = abs(c[sp + 1] - lead) if sp < len(ell) else np.inf
         return g_lead <= abs(c[st + 1] - trail)
 
@@ -768,15 +730,15 @@ class DiscreteLogic:
             drawn = {r["parameter"]: r["value"] for r in self.rolls.rows[n_rows:]}
         R_old = float(self.cl.outputs(t, y[None, :])[0][self.cl.aux_index(f"{e.id}.radius_m")])
         self._load_roll(k, new)
-        y[self._ni(k, NodeI.S)] = 0.0
-        iw = self._ni(k, NodeI.W)
+        y[self._ni(k, "S")] = 0.0
+        iw = self._ni(k, "W")
         if iw >= 0:  # the new roll is brought up to the running web's surface speed
             v_web = R_old * float(y[iw])
             y[iw] = v_web * (1.0 + sp.speed_match_error) / new.outer_radius if flying else 0.0
         elif flying:  # an imposed-speed unwind keeps the new roll's speed error
-            self.cl.P[self._np(k, NodeP.VGAIN)] = 1.0 + sp.speed_match_error
+            self.cl.P[self._np(k, "VGAIN")] = 1.0 + sp.speed_match_error
         self._restart_loops(k, y, R_old, new)
-        u_now = y[self._ni(k, NodeI.U)]
+        u_now = y[self._ni(k, "U")]
         self._close_material_joints(k, u_now)
         slot = self._splice_joint(k, sp, u_now)
         self._material.pop(k, None)  # the new roll's web is the line's again, unless:
@@ -815,13 +777,13 @@ class DiscreteLogic:
         """The new roll's geometry, inertia, wound density and wound-in strain."""
         P, web = self.cl.P, self.line.web
         cw = new.build_per_wrap if new.build_per_wrap is not None else web.thickness
-        P[self._np(k, NodeP.R0)] = new.outer_radius
-        P[self._np(k, NodeP.R)] = new.outer_radius
-        P[self._np(k, NodeP.RC)] = new.core_radius
-        P[self._np(k, NodeP.JC)] = new.core_inertia
-        P[self._np(k, NodeP.CW)] = cw
-        P[self._np(k, NodeP.RHOW)] = web.density * web.thickness / cw * web.width
-        (P[self._np(k, NodeP.EPSW)], P[self._np(k, NodeP.EPSW1)], P[self._np(k, NodeP.EPSW2)]) = (
+        P[self._np(k, "R0")] = new.outer_radius
+        P[self._np(k, "R")] = new.outer_radius
+        P[self._np(k, "RC")] = new.core_radius
+        P[self._np(k, "JC")] = new.core_inertia
+        P[self._np(k, "CW")] = cw
+        P[self._np(k, "RHOW")] = web.density * web.thickness / cw * web.width
+        (P[self._np(k, "EPSW")], P[self._np(k, "EPSW1")], P[self._np(k, "EPSW2")]) = (
             new.wound_in_coefficients()
         )
 
@@ -830,54 +792,58 @@ class DiscreteLogic:
         speed loop's integrator, which holds the tension torque -T·R, is scaled to the new
         radius so the drive takes the web's pull from the first instant; the radius
         estimate (diameter-sensor filter) takes the new roll's measured diameter."""
-        for c in self._ctrls_on(k, (CtrlKind.TENSION_TORQUE, CtrlKind.TENSION_TRIM)):
-            ix = int(self.cl.ctrl_i[c, CtrlI.X])
+        for c in self._ctrls_on(k, ("TENSION_TORQUE", "TENSION_TRIM")):
+            ix = int(self.cl.field("ctrl", c, "X"))
             if ix >= 0:
                 y[ix] = 0.0
-        for c in self._ctrls_on(k, (CtrlKind.SPEED,)):
-            ix = int(self.cl.ctrl_i[c, CtrlI.X])
+        for c in self._ctrls_on(k, ("SPEED",)):
+            ix = int(self.cl.field("ctrl", c, "X"))
             if ix >= 0:
                 y[ix] *= new.outer_radius / R_old
         for j, s in enumerate(self.cl.sensors):
             if (
-                self.cl.sensor_i[j, SensorI.TYPE] == SensorKind.DIAMETER
-                and self.cl.sensor_i[j, SensorI.NODE] == k
-                and self.cl.sensor_i[j, SensorI.F] >= 0
+                self.cl.kind("sensor", j) == "DIAMETER"
+                and self.cl.field("sensor", j, "NODE") == k
+                and self.cl.field("sensor", j, "F") >= 0
             ):
-                y[self.cl.sensor_i[j, SensorI.F]] = s.gain * 2.0 * new.outer_radius + s.offset
+                y[self.cl.field("sensor", j, "F")] = s.gain * 2.0 * new.outer_radius + s.offset
 
     def _close_material_joints(self, k, u_now):
         """New material paid out since a modulus change ends here: close its joint."""
         for js in range(self.cl.n_joint_slots):
             if (
-                self.cl.joint_p[js, JointP.ACTIVE] != 0.0
-                and self.cl.joint_p[js, JointP.NODE] == k
-                and self.cl.joint_p[js, JointP.LEN] == OPEN_JOINT
+                self.cl.param("joint", js, "ACTIVE") != 0.0
+                and self.cl.param("joint", js, "NODE") == k
+                and self.cl.param("joint", js, "LEN") == OPEN_JOINT
             ):
-                self.cl.joint_p[js, JointP.LEN] = u_now - self.cl.joint_p[js, JointP.U0]
-                self.cl.joint_p[js, JointP.TSPAN] = float(k)  # its trail leaves the roll now
+                self.cl.set_param("joint", js, "LEN", u_now - self.cl.param("joint", js, "U0"))
+                # its trail leaves the roll now
+                self.cl.set_param("joint", js, "TSPAN", float(k))
 
     def _splice_joint(self, k, sp, u_now):
         """The splice joint, in a free slot (its index, or None when none is free)."""
         slot = self._free_joint_slot()
         if slot is None:
             return None
-        self.cl.joint_p[slot, JointP.ACTIVE] = 1.0
-        self.cl.joint_p[slot, JointP.MAT] = 0.0
-        self.cl.joint_p[slot, JointP.DL0] = 0.0
-        self.cl.joint_p[slot, JointP.U0] = u_now
-        self.cl.joint_p[slot, JointP.LEN] = sp.joint.length
-        self.cl.joint_p[slot, JointP.RATIO] = sp.joint.stiffness_ratio
-        self.cl.joint_p[slot, JointP.TBRK] = (
+        self.cl.set_param("joint", slot, "ACTIVE", 1.0)
+        self.cl.set_param("joint", slot, "MAT", 0.0)
+        self.cl.set_param("joint", slot, "DL0", 0.0)
+        self.cl.set_param("joint", slot, "U0", u_now)
+        self.cl.set_param("joint", slot, "LEN", sp.joint.length)
+        self.cl.set_param("joint", slot, "RATIO", sp.joint.stiffness_ratio)
+        self.cl.set_param(
+            "joint",
+            slot,
+            "TBRK",
             sp.joint.break_tension
             if sp.joint.break_tension is not None
-            else self.line.web.break_tension
+            else self.line.web.break_tension,
         )
         if k in self._weak_splice:
-            self.cl.joint_p[slot, JointP.TBRK] = self._weak_splice.pop(k)
-        self.cl.joint_p[slot, JointP.SPAN] = float(k)
-        self.cl.joint_p[slot, JointP.TSPAN] = float(k) - 1.0
-        self.cl.joint_p[slot, JointP.NODE] = float(k)
+            self.cl.set_param("joint", slot, "TBRK", self._weak_splice.pop(k))
+        self.cl.set_param("joint", slot, "SPAN", float(k))
+        self.cl.set_param("joint", slot, "TSPAN", float(k) - 1.0)
+        self.cl.set_param("joint", slot, "NODE", float(k))
         return slot
 
     def _joint_born_broken(self, t, y, k, slot, log):
@@ -885,7 +851,7 @@ class DiscreteLogic:
         event can only see a crossing, not a joint born past its limit)."""
         span = self.cl.span_ids[k]
         T = float(self.cl.outputs(t, y[None, :])[0][self.cl.aux_index(f"{span}.tension_N")])
-        if T >= self.cl.joint_p[slot, JointP.TBRK]:
+        if T >= self.cl.param("joint", slot, "TBRK"):
             log.append(
                 Event(
                     t,
@@ -893,7 +859,7 @@ class DiscreteLogic:
                     span,
                     "start",
                     f"web break at the new splice joint in {span}"
-                    f" at {T:.1f} N (joint strength {self.cl.joint_p[slot, JointP.TBRK]:.1f} N)",
+                    f" at {T:.1f} N (joint strength {self.cl.param('joint', slot, 'TBRK'):.1f} N)",
                     {"tension_N": T, "at_splice_joint": True},
                 )
             )

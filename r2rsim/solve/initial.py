@@ -8,7 +8,6 @@ import warnings
 import numpy as np
 
 from ..compile.compiler import CompiledLine
-from ..compile.layout import CtrlI, CtrlKind, CtrlP
 from ..errors import InputError
 
 
@@ -93,16 +92,16 @@ def _integrators(cl: CompiledLine, y: np.ndarray, needed_torque: dict) -> None:
     """Loop integrators such that the PI outputs produce the needed torque at zero error."""
     line = cl.line
     aux = cl.outputs(0.0, y[None, :])[0]
-    ctrl_i, ctrl_p = cl.ctrl_i, cl.ctrl_p
     for c_idx, c in enumerate(line.controllers):
-        ix = ctrl_i[c_idx, CtrlI.X]
+        ix = cl.field("ctrl", c_idx, "X")
         if ix < 0:
             continue
-        ki = ctrl_p[c_idx, CtrlP.KI]
+        ki = cl.param("ctrl", c_idx, "KI")
         eid = c.element
-        if ctrl_i[c_idx, CtrlI.TYPE] == CtrlKind.SPEED:
+        kind = cl.kind("ctrl", c_idx)
+        if kind == "SPEED":
             y[ix] = needed_torque.get(eid, 0.0) / ki
-        elif ctrl_i[c_idx, CtrlI.TYPE] == CtrlKind.TENSION_TORQUE:
+        elif kind == "TENSION_TORQUE":
             # torque = cmd_ff + sgn·R·u at u = 0; solve for u
             tau_ff = aux[cl.aux_index(f"{eid}.torque_command_N_m")]
             R = aux[cl.aux_index(f"{eid}.radius_m")]
@@ -179,7 +178,7 @@ def taut_guess(cl: CompiledLine, y: np.ndarray) -> np.ndarray | None:
         return None
     line = cl.line
     refs = [cl.programme.value(c.id, 0.0) for c in line.controllers if c.type == "tension_pi"]
-    refs += _mover_tensions(line)
+    refs += _mover_tensions(cl)
     refs = [r for r in refs if r > 0.0]
     eps = float(np.median(refs)) / line.web.EA if refs else 1e-4
     out = y.copy()
@@ -189,13 +188,22 @@ def taut_guess(cl: CompiledLine, y: np.ndarray) -> np.ndarray | None:
     return out
 
 
-def _mover_tensions(line) -> list[float]:
-    """Rough web tensions [N] that translating dancers and festoons hold at rest: the load
-    shared by their strands (a guess for Newton, not a result)."""
+def _mover_tensions(cl: CompiledLine) -> list[float]:
+    """Rough web tensions [N] that dancers and festoons hold at rest (a guess for Newton,
+    not a result): the load shared by the strands of a translating dancer or festoon; for a
+    pivot dancer, the tension of both spans whose moment about the pivot balances the arm's
+    load (cylinder force times its moment arm, torsion spring, torque motor, gravity of arm
+    and roller) at its initial arm angle, from the kernel's own load and span geometry."""
+    line = cl.line
     out = []
     for e in line.elements:
         if e.type == "dancer":
             out.append(0.5 * abs(e.load_force + e.mass * 9.81))
+        elif e.type == "pivot_dancer":
+            m = cl.mover_ids.index(e.id)
+            load, lever = cl.mover_balance(m, cl.mover_q0[m])
+            if lever != 0.0:
+                out.append(load / lever)
     for sp in line.spans:
         f = getattr(sp, "festoon", None)
         if f is not None:

@@ -23,8 +23,9 @@ from decimal import Decimal, localcontext
 import numpy as np
 from numba import njit
 
-from ..compile.kernels import evaluate, event_values, jac_values
-from ..compile.layout import RUNTIME_MODE, Mode
+# the evaluation mode comes with the kernel (kernels re-exports layout's RUNTIME_MODE), so
+# solve/ imports no record layout
+from ..compile.kernels import MODE_RHS, RUNTIME_MODE, evaluate, event_values, jac_values
 from ..compile.stamp import kernel_stamp
 
 # ---- the method --------------------------------------------------------------------------
@@ -301,7 +302,7 @@ def _build_initial_step(stamp):
         h0 = min(h0, interval)
         for i in range(n):
             y1[i] = y[i] + h0 * f[i]
-        evaluate(t + h0, y1, f1, J1, RUNTIME_MODE[Mode.RHS], I, Pl, W, GI, GC, GV, aux0)
+        evaluate(t + h0, y1, f1, J1, RUNTIME_MODE[MODE_RHS], I, Pl, W, GI, GC, GV, aux0)
         for i in range(n):
             df[i] = f1[i] - f[i]
         d2 = _rms(df, scale) / h0
@@ -421,7 +422,7 @@ def _build_integrate(stamp):
         newton_tol = max(10.0 * EPS / rtol, min(0.03, math.sqrt(rtol)))
 
         t = t0
-        rhs_mode = RUNTIME_MODE[Mode.RHS]  # an int64, not a literal: one compile of evaluate
+        rhs_mode = RUNTIME_MODE[MODE_RHS]  # an int64, not a literal: one compile of evaluate
         evaluate(t, y, f, J1, rhs_mode, I, Pl, W, GI, GC, GV, aux0)
         nfev += 1
         k_out = 0

@@ -22,8 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..compile.compiler import EVENT_NAMES, CompiledLine
-from ..compile.layout import EV_BREAK, EV_CAPSTAN, EV_EMPTY, EV_SLACK
+from ..compile.compiler import EVENT_LABELS, CompiledLine
 from ..errors import InputError
 from ..limits import run_size_problem
 from ..schema.scenario import SolverOptions
@@ -31,8 +30,9 @@ from .backends import Root, SolverBackend, backend_class, make_backend
 from .compilewatch import compile_seconds
 from .discrete import MODE_EVENTS, DiscreteLogic, Event
 
-TERMINAL = {EV_BREAK, EV_EMPTY}
-PHYSICAL = {EV_SLACK, EV_BREAK, EV_CAPSTAN, EV_EMPTY}
+#: event kinds by name (``cl.kind("event", m)``)
+TERMINAL = {"BREAK", "EMPTY"}
+PHYSICAL = {"SLACK", "BREAK", "CAPSTAN", "EMPTY"}
 
 
 SolverSettings = SolverOptions
@@ -99,21 +99,21 @@ class SimulationResult:
 ChunkCallback = Callable[[np.ndarray, np.ndarray, np.ndarray], None]
 
 
-def _message(cl: CompiledLine, kind: int, comp: str, on: bool, aux: np.ndarray) -> tuple:
+def _message(cl: CompiledLine, kind: str, comp: str, on: bool, aux: np.ndarray) -> tuple:
     """Event state label, message and values for the log."""
-    if kind == EV_SLACK:
+    if kind == "SLACK":
         return ("start" if on else "end", f"{comp} {'goes slack' if on else 'is taut again'}", {})
-    if kind == EV_BREAK:
+    if kind == "BREAK":
         T = aux[cl.aux_index(f"{comp}.tension_N")]
         return "start", f"web break in {comp} at {T:.1f} N", {"tension_N": float(T)}
-    if kind == EV_CAPSTAN:
+    if kind == "CAPSTAN":
         ratio = aux[cl.aux_index(f"{comp}.tension_ratio")]
         return (
             "start" if on else "end",
             f"{comp} {'reaches' if on else 'leaves'} its capstan limit (T_hi/T_lo = {ratio:.4f})",
             {"tension_ratio": float(ratio)},
         )
-    if kind == EV_EMPTY:
+    if kind == "EMPTY":
         return "start", f"{comp} roll is empty (core reached)", {}
     return "", "", {}
 
@@ -309,7 +309,9 @@ class _EventLoop:
         self.rows_per_chunk = max(
             16, int(s.chunk_memory_mb * 1e6 / 8 / max(cl.n_states + len(cl.aux_names), 1))
         )
-        self.mode_idx = np.array([m for m, k in enumerate(cl.event_kinds) if k in MODE_EVENTS], int)
+        self.mode_idx = np.array(
+            [m for m in range(len(cl.event_kinds)) if cl.kind("event", m) in MODE_EVENTS], int
+        )
         self.log: list[Event] = []
         self.t, self.y, self.flags = 0.0, None, None  # set by run
         self.k_next = 0  # next sample index to emit
@@ -330,7 +332,7 @@ class _EventLoop:
             self.k_next = _emit_samples(
                 self.emit, self.sample_t, self.k_next, np.array([0.0]), self.y[None, :]
             )
-            self.terminated, self.reason, self.t_term = True, EVENT_NAMES[EV_BREAK], 0.0
+            self.terminated, self.reason, self.t_term = True, EVENT_LABELS["BREAK"], 0.0
         while self.t < self.duration - 1e-12 and not self.terminated:
             if logic.next_time() <= self.t + 1e-12 and not self._apply_due():
                 break
@@ -478,15 +480,15 @@ def _broken_at_start(cl, y, flags, log: list) -> bool:
     changes of their functions, and its break condition is true from t = 0 on, so no change
     would ever report it (a 20 kN start on a 10.5 kN web ran on, and later logged "web
     break" when the tension fell through the limit)."""
-    broken = [m for m in np.nonzero(flags)[0] if cl.event_kinds[m] == EV_BREAK]
+    broken = [m for m in np.nonzero(flags)[0] if cl.kind("event", m) == "BREAK"]
     if broken:
         aux0 = cl.outputs(np.array([0.0]), y[None, :])[0]
         for m in broken:
-            state, msg, vals = _message(cl, EV_BREAK, cl.event_components[m], True, aux0)
+            state, msg, vals = _message(cl, "BREAK", cl.event_components[m], True, aux0)
             log.append(
                 Event(
                     0.0,
-                    EVENT_NAMES[EV_BREAK],
+                    EVENT_LABELS["BREAK"],
                     cl.event_components[m],
                     state,
                     msg + " (above the break tension from the start)",
@@ -531,13 +533,13 @@ def _fire(cl, logic, log: list, which, new_flags, t_ev: float, y_ev):
     y_ev = y_ev.copy()
     ended = None
     for m in which:
-        kind = cl.event_kinds[m]
+        kind = cl.kind("event", m)
         comp = cl.event_components[m]
         if kind in PHYSICAL:
             state, msg, vals = _message(cl, kind, comp, bool(new_flags[m]), aux_ev)
-            log.append(Event(t_ev, EVENT_NAMES[kind], comp, state, msg, vals))
+            log.append(Event(t_ev, EVENT_LABELS[kind], comp, state, msg, vals))
             if kind in TERMINAL and new_flags[m]:
-                ended = EVENT_NAMES[kind]
+                ended = EVENT_LABELS[kind]
             continue
         y_ev, entries, _ = logic.on_event(int(m), bool(new_flags[m]), t_ev, y_ev)
         log.extend(entries)
