@@ -483,21 +483,7 @@ def export_dataset(
         raise InputError(f"{path}: no such dataset directory")
     _check_output(out, path)
 
-    runs = read_runs(path, verify=verify, where=where or None)
-    if where and not runs:
-        raise InputError(
-            f"no run of {path} has " + ", ".join(f"{k} = {v}" for k, v in where.items())
-        )
-    if not runs:
-        raise InputError(f"dataset {path} holds no run")
-    sp = split_by_seed(runs)
-    roles = {r.run_id: role for role in ROLES for r in getattr(sp, role)}
-    selected = [r for r in runs if split == "all" or roles[r.run_id] == split]
-    if not selected:
-        raise InputError(
-            f"--split {split}: no run of {path} has that role ({sp.describe()}; "
-            f"every faulty run is a test run)"
-        )
+    runs, sp, roles, selected = _selected_runs(path, split, where, verify)
     chans = select_channels(list(runs[0].samples.columns), patterns)
     for r in selected:
         missing = [c for c in chans if c not in r.samples.columns]
@@ -505,24 +491,13 @@ def export_dataset(
             raise InputError(f"run {r.run_id} of {path} has no channel {missing[0]}")
         for c in chans:
             _numeric(r, c)
-
-    # TimeEval's training series of each operating condition: its first train run in the
-    # split's order (fault-free by construction)
-    trainer: dict[str, str | None] = {}
-    if format == "timeeval":
-        first_train: dict[str, Run] = {}
-        for r in sorted(sp.train, key=seed_order_key):
-            first_train.setdefault(r.mode, r)
-        for r in selected:
-            t = first_train.get(r.mode)
-            trainer[r.run_id] = t.run_id if t is not None else None
-    by_id = {r.run_id: r for r in runs}
+    trainer = _trainers(sp, selected) if format == "timeeval" else {}
     position = {r.run_id: i for i, r in enumerate(runs)}
     order = [r.run_id for r in selected]  # then the training series outside the selection
     order += sorted(
         {t for t in trainer.values() if t is not None} - set(order), key=position.__getitem__
     )
-
+    by_id = {r.run_id: r for r in runs}
     series = {}
     for rid in order:
         r = by_id[rid]
@@ -542,23 +517,62 @@ def export_dataset(
         roles={rid: roles[rid] for rid in order},
         exported=[r.run_id for r in selected],
     )
+    _write(out, series, trainer, roles, summary)
+    return summary
+
+
+def _selected_runs(path: Path, split: str, where: dict | None, verify: bool):
+    """The dataset's runs (checked), their split, each run's role and the runs of ``split``."""
+    runs = read_runs(path, verify=verify, where=where or None)
+    if where and not runs:
+        raise InputError(
+            f"no run of {path} has " + ", ".join(f"{k} = {v}" for k, v in where.items())
+        )
+    if not runs:
+        raise InputError(f"dataset {path} holds no run")
+    sp = split_by_seed(runs)
+    roles = {r.run_id: role for role in ROLES for r in getattr(sp, role)}
+    selected = [r for r in runs if split == "all" or roles[r.run_id] == split]
+    if not selected:
+        raise InputError(
+            f"--split {split}: no run of {path} has that role ({sp.describe()}; "
+            f"every faulty run is a test run)"
+        )
+    return runs, sp, roles, selected
+
+
+def _trainers(sp, selected: list[Run]) -> dict[str, str | None]:
+    """TimeEval's training series of each selected run: the first train run of its operating
+    condition in the split's order (fault-free by construction), or None."""
+    first_train: dict[str, Run] = {}
+    for r in sorted(sp.train, key=seed_order_key):
+        first_train.setdefault(r.mode, r)
+    trainer: dict[str, str | None] = {}
+    for r in selected:
+        t = first_train.get(r.mode)
+        trainer[r.run_id] = t.run_id if t is not None else None
+    return trainer
+
+
+def _write(out: Path, series: dict, trainer: dict, roles: dict, summary: ExportSummary) -> None:
+    """Write the files into a temporary directory next to ``out`` and move them into place
+    when all are written; on any failure (or Ctrl-C) the temporary directory is removed."""
     dest = Path(os.path.abspath(out))  # (``-o .``: its parent, not itself, holds the tmp)
     dest.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=dest.parent, prefix=f".{dest.name}.export-"))
     try:
-        if format == "timeeval":
-            _timeeval(tmp, series, summary.exported, trainer, chans, summary)
+        if summary.format == "timeeval":
+            _timeeval(tmp, series, summary.exported, trainer, summary.channels, summary)
         else:
-            _tsb_ad(tmp, series, summary.exported, roles, chans, summary)
+            _tsb_ad(tmp, series, summary.exported, roles, summary.channels, summary)
         os.chmod(tmp, 0o755)  # mkdtemp's 0700 is for the temporary directory only
         if not dest.exists():
             os.rename(tmp, dest)
-            return summary
+            return
         _move_into(tmp, dest, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    return summary
 
 
 def _move_into(tmp: Path, dest: Path, out: Path) -> None:
