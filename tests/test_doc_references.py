@@ -107,7 +107,7 @@ def _resolves(target: str, source: str) -> bool:
         try:
             p.relative_to(REPO)
         except ValueError:
-            continue  # outside the repository (../shared/...): not ours to point at
+            continue  # outside the repository: users do not have it
         if p.exists():
             return True
     return False
@@ -154,29 +154,47 @@ def test_every_mentioned_document_is_in_the_repository():
         ("physics.md", "lines/pet_film_line.yaml", True),  # bare name: found in docs/
         ("dataset.md#3-samples", "docs/model.md", True),  # same directory, anchor dropped
         ("docs/physics.md", "r2rsim/schema/line.py", True),  # path: against the root
-        ("../shared/docs/physics.md", "docs/model.md", False),  # outside the repository
-        ("DESIGN.md", "README.md", False),
+        ("../elsewhere/notes.md", "docs/model.md", False),  # outside the repository
+        ("NOT_IN_THE_REPO.md", "README.md", False),
     ],
 )
 def test_resolution_rules(target, source, ok):
     assert _resolves(target, source) is ok
 
 
-#: the project's design notes, which are not part of the repository, cited without ``.md``
-DESIGN_NOTES = re.compile(
-    r"\b(?:DESIGN|fdd-benchmarks|thesis-methods)\s*(?:§|\(?B\d)|"
-    r"\barchitecture\.md\b"
+#: a section cited by a document's name without ``.md`` ("NOTES §8", "some-notes §5"): an
+#: upper-case or hyphenated name before "§" must be a document of the repository
+#: (``README §2`` is README.md); a plain word ("thesis §3.5", "of §2") is not a name
+SECTION_OF = re.compile(r"\b([A-Z][A-Z0-9_]{2,}|[a-z0-9]+(?:-[a-z0-9]+)+)`?\s*§")
+
+
+def _unresolved_section_citations(name: str, text: str) -> list[str]:
+    return [
+        f"{name}:{no}: {line.strip()}"
+        for no, line in enumerate(text.splitlines(), 1)
+        for m in SECTION_OF.finditer(line)
+        if not _resolves(m.group(1) + ".md", name)
+    ]
+
+
+@pytest.mark.parametrize(
+    "line, found",
+    [
+        ("see NOTES §8", True),
+        ("the some-notes §5.5 protocol", True),
+        ("README §2", False),
+        ("thesis §3.5", False),
+        ("docs/dataset.md §8.2", False),
+    ],
 )
+def test_the_section_rule(line, found):
+    assert bool(_unresolved_section_citations("README.md", line)) is found
 
 
-def test_no_section_references_to_design_notes_outside_the_repository():
+def test_no_section_citation_of_a_document_outside_the_repository():
     bad = []
     for name, text in _texts():
-        bad += [
-            f"{name}:{no}: {line.strip()}"
-            for no, line in enumerate(text.splitlines(), 1)
-            if DESIGN_NOTES.search(line)
-        ]
+        bad += _unresolved_section_citations(name, text)
     assert not bad, "\n".join(bad)
 
 

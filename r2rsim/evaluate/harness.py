@@ -78,6 +78,7 @@ from .splits import (
 
 __all__ = [
     "METRICS",
+    "PRINTED_METRICS",
     "Evaluation",
     "Split",
     "acting_faults",
@@ -436,6 +437,37 @@ def _bootstrap(
 # --------------------------------------------------------------------------- evaluation
 
 
+#: the metrics ``r2rsim diagnose`` prints (and the report's summary table shows), in order
+PRINTED_METRICS = (
+    "far_ff",
+    "far_pre",
+    "fa_per_h",
+    "dr",
+    "dr_steady",
+    "pd",
+    "pd_null",
+    "dd_median_s",
+    "dd_p90_s",
+    "n_missed",
+    "pd_steady",
+    "pd_steady_null",
+    "dd_steady_median_s",
+    "roc_auc",
+    "pr_auc",
+    "vus_pr",
+    "ia",
+    "hit1",
+    "mdm90",
+    "far_ff_cal",
+    "dr_cal",
+    "dr_steady_cal",
+    "pd_cal",
+    "pd_null_cal",
+    "dd_median_cal_s",
+    "mdm90_cal",
+)
+
+
 @dataclass
 class Evaluation:
     """What :func:`evaluate` measured.
@@ -484,39 +516,7 @@ class Evaluation:
     def format(self) -> str:
         """The readable table printed by ``r2rsim diagnose``."""
         t = self.table()
-        show = [
-            c
-            for c in (
-                "n_runs",
-                "far_ff",
-                "far_pre",
-                "fa_per_h",
-                "dr",
-                "dr_steady",
-                "pd",
-                "pd_null",
-                "dd_median_s",
-                "dd_p90_s",
-                "n_missed",
-                "pd_steady",
-                "pd_steady_null",
-                "dd_steady_median_s",
-                "roc_auc",
-                "pr_auc",
-                "vus_pr",
-                "ia",
-                "hit1",
-                "mdm90",
-                "far_ff_cal",
-                "dr_cal",
-                "dr_steady_cal",
-                "pd_cal",
-                "pd_null_cal",
-                "dd_median_cal_s",
-                "mdm90_cal",
-            )
-            if c in t.columns
-        ]
+        show = ["n_runs", *(c for c in PRINTED_METRICS if c in t.columns)]
         st = self.settings
         own = {
             "val": f"own threshold recalibrated on val at alpha={st.get('alpha')}",

@@ -17,7 +17,7 @@ import pandas as pd
 from .._version import __version__
 from ..dataset.paths import read_json
 from ..errors import InputError
-from ..evaluate.harness import METRICS, fault_key
+from ..evaluate.harness import METRICS, PRINTED_METRICS, fault_key
 from ..evaluate.results import DATASETS_FILE, DATASETS_FILE_MAX_BYTES, REPORT_MARKER
 from ._diagnostics import (
     _metric_rows,
@@ -38,33 +38,6 @@ from ._mpl import require_matplotlib
 MARKER = REPORT_MARKER
 #: metrics drawn by condition and by fault, when the results have several of either
 FIGURE_METRICS = ("far_ff", "pd", "dd_median_s", "roc_auc")
-#: columns of the summary table, when present (as printed by ``r2rsim diagnose``)
-SUMMARY_METRICS = (
-    "far_ff",
-    "far_pre",
-    "fa_per_h",
-    "dr",
-    "dr_steady",
-    "pd",
-    "pd_null",
-    "dd_median_s",
-    "dd_p90_s",
-    "n_missed",
-    "pd_steady",
-    "pd_steady_null",
-    "roc_auc",
-    "pr_auc",
-    "vus_pr",
-    "ia",
-    "hit1",
-    "mdm90",
-    "far_ff_cal",
-    "dr_cal",
-    "pd_cal",
-    "pd_null_cal",
-    "dd_median_cal_s",
-    "mdm90_cal",
-)
 #: at most this many runs get a statistic plot (one per fault stratum)
 STATISTIC_RUNS = 6
 #: columns of the full table (the hashes go in the header)
@@ -202,10 +175,10 @@ def _header(src: Path, kind: str, table: pd.DataFrame) -> str:
 def _summary(table: pd.DataFrame) -> str:
     """One row per method × condition × fault (magnitude rows left out), the main metrics as
     columns."""
-    m = table[table["magnitude"].isna() & table["metric"].isin(SUMMARY_METRICS)]
+    m = table[table["magnitude"].isna() & table["metric"].isin(PRINTED_METRICS)]
     keys = ["series", "condition", "fault"]
     wide = m.pivot_table(index=keys, columns="metric", values="value", aggfunc="first", sort=False)
-    cols = [c for c in SUMMARY_METRICS if c in wide.columns]
+    cols = [c for c in PRINTED_METRICS if c in wide.columns]
     wide = wide[cols].rename_axis(columns=None).reset_index().rename(columns={"series": "method"})
     desc = "; ".join(f"{c}: {METRICS[c].description}" for c in cols if c in METRICS)
     return (
