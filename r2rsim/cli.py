@@ -23,17 +23,9 @@ EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, what a shell reports for a program kill
 EXIT_INTERRUPTED = 130  # 128 + SIGINT (Ctrl-C)
 EXIT_TERMINATED = 143  # 128 + SIGTERM
 
-ELEMENTS = {
-    "unwind": "roll paying out web: roll (core/outer radius, core inertia, build per wrap, "
-    "wound-in strain), friction, drive (torque with lag/saturation, or ideal_speed)",
-    "rewind": "roll taking up web (same keys as unwind)",
-    "idler": "undriven roller: radius, inertia, friction, wrap_angle, friction_coefficient",
-    "driven": "motor-driven roller: radius, inertia, friction, drive",
-    "nip": "nip pair as one degree of freedom: radius, inertia, drive, pressure_roller",
-    "dancer": "translating dancer: roller on a carriage (mass, load_force, spring, damping, "
-    "coulomb, travel_range end stops); span lengths from the geometry",
-    "pivot_dancer": "pivoted dancer: roller on an arm (pivot, arm_length, arm_inertia, "
-    "cylinder, torsion_spring, torque, gravity, angle_range end stops)",
+#: the entries of ``r2rsim list elements`` that are not element kinds (each kind's line is
+#: its ``summary``, r2rsim/schema/kinds/); listed after the kinds
+ELEMENT_EXTRAS = {
     "festoon (span)": "spans[i].festoon: carriage with n moving rollers, 2n lumped strands",
     "splicer (unwind)": "unwind.splicer + spare_roll: zero_speed (fill, brake, dwell, swap, "
     "accelerate, refill) or flying (speed_match_error); splice joint",
@@ -679,6 +671,43 @@ def _list_plugins(load: bool) -> int:
     return 0
 
 
+def _elements() -> dict[str, str]:
+    """The ``r2rsim list elements`` table: each element kind's ``summary`` in the kinds'
+    ``order``, then the extras. The kinds registered in this process (plug-ins too) when the
+    registry is loaded; else read from the kind modules' source, as ``list plugins`` reads
+    the plug-ins': importing them imports pydantic, which this quick command must not."""
+    registry = sys.modules.get("r2rsim.schema.kinds")
+    if registry is not None:
+        rows = [(k.order, k.name, k.summary) for k in registry.all_kinds()]
+    else:
+        rows = _kinds_in_source(Path(__file__).parent / "schema" / "kinds")
+    return {**{name: text for _, name, text in sorted(rows)}, **ELEMENT_EXTRAS}
+
+
+def _kinds_in_source(folder: Path) -> list[tuple[int, str, str]]:
+    """``(order, name, summary)`` of the kind classes in the public modules of ``folder``:
+    the classes that assign ``name`` and ``summary`` literals (``order`` defaults to the
+    base class's 1000)."""
+    import ast
+
+    rows = []
+    for path in sorted(folder.glob("[!_]*.py")):
+        for node in ast.parse(path.read_text(encoding="utf-8")).body:
+            if not isinstance(node, ast.ClassDef):
+                continue
+            values = {
+                stmt.targets[0].id: stmt.value
+                for stmt in node.body
+                if isinstance(stmt, ast.Assign) and isinstance(stmt.targets[0], ast.Name)
+            }
+            if "name" in values and "summary" in values:
+                order = ast.literal_eval(values["order"]) if "order" in values else 1000
+                rows.append(
+                    (order, ast.literal_eval(values["name"]), ast.literal_eval(values["summary"]))
+                )
+    return rows
+
+
 def _cmd_list(args) -> int:
     if args.what == "plugins":
         return _list_plugins(args.load)
@@ -702,7 +731,7 @@ def _cmd_list(args) -> int:
         if not args.line:
             raise InputError("name the line or scenario file: r2rsim list channels LINE|SCENARIO")
         return _list_channels(args.line)
-    tables = {"elements": ELEMENTS, "sensors": SENSORS, "controllers": CONTROLLERS}
+    tables = {"elements": _elements(), "sensors": SENSORS, "controllers": CONTROLLERS}
     for name, desc in tables[args.what].items():
         print(f"{name:<17} {desc}")
     return 0

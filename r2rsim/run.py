@@ -19,10 +19,10 @@ import numpy as np
 import pyarrow as pa
 import yaml
 
-from .compile import Programme, compile_line
+from .compile import CompiledLine, Programme, compile_line
 from .compile.disturbances import realise_disturbances, realise_pitch_variations
 from .compile.faults import realise_faults
-from .compile.variability import joint_slots_needed, realise_variability
+from .compile.variability import RollDraws, joint_slots_needed, realise_variability
 from .dataset import DatasetWriter, tables, true_state_columns
 from .dataset.labels import derive_labels
 from .dataset.validate import validate_dataset
@@ -283,7 +283,7 @@ def sample_columns(scenario, line, file: str | None = None) -> tuple[str, ...]:
     """The columns the samples of a run of ``scenario`` on ``line`` will have, without
     simulating (compiles the line: ~1 ms once numba's kernels are loaded). A sweep checks
     with it that all its runs fit one dataset; ``file`` names the scenario in errors."""
-    prog = Programme.from_steps(line, scenario.programme, file=file)
+    prog = Programme.from_steps(line, scenario.programme, file=file or "<scenario>")
     disturbances = realise_disturbances(scenario, line, np.random.SeedSequence(0))
     cl = compile_line(line, prog, scenario.faults, disturbances)
     cols = []
@@ -440,7 +440,7 @@ def execute(
         # the wall time and real-time factor without numba compiling (reported apart)
         wall = time.perf_counter() - wall0 - (compile_seconds() - compile_sim0)
         res.stats["compile_s"] = compile_seconds() - compile0
-        sim_end = res.termination_time if res.terminated else scenario.duration
+        sim_end = _end_time(res, scenario.duration)
 
         writer.write_table(
             "channels",
@@ -497,9 +497,9 @@ class _Prepared:
     """A run's realised line (variability drawn), its compiled form and initial state, and
     the random streams of the rest of the run."""
 
-    line: object
-    cl: object
-    rolls: object
+    line: Line
+    cl: CompiledLine
+    rolls: RollDraws | None
     variability_rows: list
     y0: np.ndarray
     init_mode: str
@@ -547,6 +547,13 @@ def channels_table(plan: RunPlan) -> pa.Table:
     return tables.channels_table(cl, measured, true_state_columns(cl), sensor_chan, rate)
 
 
+def _end_time(res, duration: float) -> float:
+    """Where the run's data ends [s]: where it terminated, else its duration."""
+    if res.terminated and res.termination_time is not None:
+        return float(res.termination_time)
+    return float(duration)
+
+
 def _prepare(plan: RunPlan) -> _Prepared:
     """Draw the run's variability and disturbances from its process stream, compile the
     line, find the initial state (steady, or nominal when none is found) and draw the
@@ -556,7 +563,12 @@ def _prepare(plan: RunPlan) -> _Prepared:
     line, cl, rolls, variability_rows, disturbances = _compiled(plan, ss_process)
     init = scenario.initial
     y0 = nominal_state(
-        cl, init.tension, init.span_tension, init.slack, init.position, file=plan.source
+        cl,
+        init.tension,
+        init.span_tension,
+        init.slack,
+        {k: float(v) for k, v in init.position.items()},  # numbers once loaded
+        file=plan.source,
     )
     for d in disturbances:  # an out-of-round roller starts at a random angle
         if d.type == "out_of_round":

@@ -20,7 +20,7 @@ from r2rsim.compile.disturbances import (
     autocorrelation,
     realise_disturbances,
 )
-from r2rsim.compile.layout import N_NODE_P, H, NodeP
+from r2rsim.compile.layout import NodeP
 from r2rsim.errors import InputError
 from r2rsim.schema.loader import load_scenario
 from r2rsim.schema.scenario import ProgrammeStep
@@ -247,7 +247,7 @@ def test_bearing_drag_cache_never_changes_a_value(tmp_path):
     plain = r2rsim.compile_line(line, prog)
     y = _state(cl, np.random.default_rng(3))
     iw = cl.index("idler1.speed")
-    inertia = cl.P[cl.I[H.OFF_NP] + cl.node_ids.index("idler1") * N_NODE_P + NodeP.J]
+    inertia = cl.node_p[cl.node_ids.index("idler1"), NodeP.J]
     start, end = kernels.scratch_layout(cl.I)
     times = [0.0, 0.3, 0.3, 0.1, 0.2, 0.3, 0.1, 0.2, 0.3, 0.3, 5.0, 0.7, 0.9, 0.1, 0.0]
     for t in times:

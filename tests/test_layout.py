@@ -150,11 +150,12 @@ def test_solve_imports_no_record_layout():
 def test_the_kernel_reads_plain_int_twins_of_the_enums():
     """The kernel's field names are namedtuples of ints with the enums' values: numba < 0.64
     (the lowest supported is 0.59) refuses an IntEnum member as an array index."""
-    from r2rsim.compile import kernels, layout
+    from r2rsim.compile import layout
+    from r2rsim.compile.model import base
 
     for name, twin in layout.FROZEN.items():
         enum = getattr(layout, name)
-        assert getattr(kernels, name) is twin
+        assert getattr(base, name) is twin
         assert isinstance(twin, tuple) and not isinstance(twin[0], IntEnum)
         assert twin._fields == tuple(enum.__members__)
         assert [type(v) for v in twin] == [int] * len(enum)

@@ -233,12 +233,15 @@ def test_cached_integrator_is_rebuilt_when_the_line_kernel_changes():
     # numba keys its cache on the function's own file and bytecode; the integrator inlines
     # the line kernel, so it is built in a closure over a hash of the kernel's sources (a
     # closure variable is part of the cache key). Editing compile/kernels.py alone left the
-    # cached integrator running the old right-hand side (seen while fixing eq. 1.4).
+    # cached integrator running the old right-hand side (seen while fixing eq. 1.4). The hash
+    # covers the orchestrator, the layout and every module of the phases (compile/model).
     from r2rsim.compile import kernels, layout
 
+    files = [Path(kernels.__file__), Path(layout.__file__)]
+    files += sorted((Path(kernels.__file__).parent / "model").glob("*.py"))
     h = hashlib.sha256()
-    for mod in (kernels, layout):
-        h.update(Path(mod.__file__).read_bytes())
+    for path in files:
+        h.update(path.read_bytes())
     stamp = int(h.hexdigest()[:15], 16)
     for fn in (radau.integrate, radau._initial_step):
         cells = [c.cell_contents for c in fn.py_func.__closure__ or ()]

@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from enum import IntEnum
 
 import numpy as np
 
 from ..errors import InputError
+from ..schema.kinds import kind_of
 from ..schema.line import (
-    DANCERS,
     Line,
     dancer_centre,
     dancer_offsets,
@@ -488,7 +489,7 @@ class CompiledLine:
         if kind == MoverKind.FESTOON:
             raise ValueError(f"mover {m} is a festoon carriage, not a dancer")
         mp = self.mover_p
-        load = kernels._mover_load(mp, m, kind, float(q))
+        load = kernels.mover_load(mp, m, kind, float(q))
         _, dlu, _, dld = kernels.mover_lengths(mp, m, kind, float(q))
         return float(load), float(dlu + dld)
 
@@ -588,7 +589,8 @@ class CompiledLine:
         Y = np.ascontiguousarray(Y, float)
         t = np.ascontiguousarray(np.broadcast_to(t, (Y.shape[0],)), float)
         AUX = np.empty((Y.shape[0], len(self.aux_names)))
-        kernels.outputs_rows(
+        kernels.rows(
+            kernels.ROWS_OUTPUTS,
             t,
             Y,
             AUX,
@@ -609,7 +611,8 @@ class CompiledLine:
         Y = np.atleast_2d(np.ascontiguousarray(Y, float))
         t = np.ascontiguousarray(np.broadcast_to(t, (Y.shape[0],)), float)
         G = np.empty((Y.shape[0], len(self.event_kinds)))
-        kernels.event_values_rows(
+        kernels.rows(
+            kernels.ROWS_EVENTS,
             t,
             Y,
             G,
@@ -790,7 +793,7 @@ class _Packer:
 
         # movers: dancers (on a node) and festoon carriages (on a span)
         self.span_ids = [sp.id for sp in line.spans]
-        self.mover_ids = [e.id for e in els if e.type in DANCERS] + [
+        self.mover_ids = [e.id for e in els if kind_of(e).is_mover] + [
             sp.id for sp in line.spans if sp.festoon is not None
         ]
         self.nM = len(self.mover_ids)
@@ -881,7 +884,7 @@ class _Packer:
     def element(self, k, e):
         """Element k's record, its states (roll lengths, speed, angle, drive torque) and,
         for a dancer, its mover."""
-        f = e.friction
+        f, kind = e.friction, kind_of(e)
         ni, npr = self.node_I[k], self.node_P[k]
         npr[NodeP.VGAIN] = 1.0
         npr[NodeP.TEFF] = npr[NodeP.FRICF] = 1.0
@@ -889,9 +892,7 @@ class _Packer:
         for d in self.disturbances:
             if d.type == "out_of_round" and d.element == e.id:
                 npr[NodeP.ECC] = d.eccentricity
-        ni[NodeI.KIND] = {"unwind": NodeKind.UNWIND, "rewind": NodeKind.REWIND}.get(
-            e.type, NodeKind.ROLLER
-        )
+        ni[NodeI.KIND] = NodeKind[kind.node_kind]
         drive = getattr(e, "drive", None)
         ni[NodeI.DRIVE] = (
             DriveKind.NONE
@@ -915,47 +916,20 @@ class _Packer:
                 npr[NodeP.RIPW] = 2.0 * math.pi * drive.torque_ripple.frequency
         if e.wrap_angle is not None and e.friction_coefficient is not None:
             npr[NodeP.EMB] = math.exp(e.friction_coefficient * e.wrap_angle)
-        if e.type in ("unwind", "rewind"):
-            self._roll(k, e)
-        elif e.type == "nip":
-            pr = e.pressure_roller
-            ratio = e.radius / pr.radius
-            npr[NodeP.R] = e.radius
-            npr[NodeP.J] = e.inertia + pr.inertia * ratio**2
-            npr[NodeP.B] = f.viscous + pr.friction.viscous * ratio**2
-            npr[NodeP.TC] = f.coulomb + pr.friction.coulomb * ratio
-        else:
-            npr[NodeP.R], npr[NodeP.J] = e.radius, e.inertia
+        # the kind's own fields (radius, inertia, a roll's geometry) after the common ones
+        kind.pack_node(e, _Fields(npr, NodeP, "node"), self.web)
+        for slot, name, unit, state_kind, atol in kind.states(e):  # e.g. a roll's lengths
+            ni[NodeI[slot]] = self.add(f"{e.id}.{name}", unit, state_kind, atol)
         if ni[NodeI.DRIVE] != DriveKind.IDEAL:
             ni[NodeI.W] = self.add(f"{e.id}.speed", "rad/s", "speed", 1e-6)
         if e.id in self.eccentric:
             ni[NodeI.TH] = self.add(f"{e.id}.angle", "rad", "angle", 1e-6)
         if ni[NodeI.DRIVE] == DriveKind.TORQUE and drive.torque_lag > 0:
             ni[NodeI.TAU] = self.add(f"{e.id}.drive_torque", "N*m", "torque", 1e-4)
-        if e.type in DANCERS:
-            mp, kind, q0, unit = _dancer_record(self.line, k)
-            self.add_mover(e.id, kind, k, k - 1, k, mp, q0, unit)
+        if kind.is_mover:
+            mp, mover_kind, q0, unit = _dancer_record(self.line, k)
+            self.add_mover(e.id, mover_kind, k, k - 1, k, mp, q0, unit)
             ni[NodeI.MOVER] = self.mover_idx[e.id]
-
-    def _roll(self, k, e):
-        """An unwind's or rewind's roll: geometry, wound density and strain, its states."""
-        web, npr, ni, r = self.web, self.node_P[k], self.node_I[k], e.roll
-        cw = r.build_per_wrap if r.build_per_wrap is not None else web.thickness
-        npr[NodeP.R0], npr[NodeP.RC], npr[NodeP.JC], npr[NodeP.CW] = (
-            r.outer_radius,
-            r.core_radius,
-            r.core_inertia,
-            cw,
-        )
-        # wound density from mass conservation: rho_r·c_w = rho·t_w (physics.md 1.4)
-        npr[NodeP.RHOW] = web.density * web.thickness / cw * web.width
-        npr[NodeP.EPSW], npr[NodeP.EPSW1], npr[NodeP.EPSW2] = r.wound_in_coefficients()
-        npr[NodeP.R] = r.outer_radius
-        sp_ = getattr(e, "splicer", None)
-        if sp_ is not None and sp_.trigger_radius is not None:
-            npr[NodeP.RTRIG] = sp_.trigger_radius
-        ni[NodeI.S] = self.add(f"{e.id}.length", "m", "roll_length", 1e-6)
-        ni[NodeI.U] = self.add(f"{e.id}.unstretched_length", "m", "material", 1e-6)
 
     def element_controllers(self, k, e):
         """The speed and tension loops acting on element k (dancer loops sit with their
@@ -985,7 +959,7 @@ class _Packer:
 
     def _tension_loop(self, k, e, c, ci, cp) -> float:
         """A tension loop's record; returns the tolerance of its output."""
-        roll = e.type in ("unwind", "rewind")
+        roll = kind_of(e).is_roll
         ci[CtrlI.TYPE] = (
             CtrlKind.TENSION_TORQUE
             if (roll and e.drive.type == "torque")
@@ -1107,7 +1081,7 @@ class _Packer:
         for k, e in enumerate(self.els):
             if 0 < k < self.nN - 1 and self.node_P[k, NodeP.EMB] > 0:
                 ev(EventKind.CAPSTAN, k, e.id)
-            if e.type == "unwind":
+            if kind_of(e).pays_out:
                 ev(EventKind.EMPTY, k, e.id)
             if k in self.splice_nodes:
                 ev(EventKind.SPLICE_RADIUS, k, e.id)
@@ -1341,8 +1315,9 @@ def _attach_pattern(cl: CompiledLine) -> None:
 
 
 def _dancer_record(line: Line, k: int):
-    """Mover parameters of the dancer at element k: (record, initial q, unit of q)."""
-    e = line.elements[k]
+    """Mover parameters of the dancer at element k: (record, mover kind, initial q, unit of
+    q). The neighbours, the span offsets and the friction here; the rest is the kind's."""
+    e, kind = line.elements[k], kind_of(line.elements[k])
     a, b = line.elements[k - 1], line.elements[k + 1]
     mp = np.zeros(N_MOVER_P)
     mp[MoverP.DU], mp[MoverP.DD] = dancer_offsets(line, k)
@@ -1350,44 +1325,34 @@ def _dancer_record(line: Line, k: int):
     mp[MoverP.BX], mp[MoverP.BY] = b.position
     mp[MoverP.EPS] = e.smoothing_speed
     mp[MoverP.C], mp[MoverP.FC] = e.damping, e.coulomb
-    gx, gy = e.gravity
-    if e.type == "dancer":
-        nx, ny = e.direction
-        nrm = math.hypot(nx, ny)
-        nx, ny = nx / nrm, ny / nrm
-        mp[MoverP.CX], mp[MoverP.CY] = e.position
-        mp[MoverP.NX], mp[MoverP.NY] = nx, ny
-        mp[MoverP.MASS] = e.mass
-        mp[MoverP.QMIN], mp[MoverP.QMAX] = e.travel_range
-        mp[MoverP.F0] = e.mass * (gx * nx + gy * ny)
-        mp[MoverP.FAIR] = e.load_force
-        mp[MoverP.K], mp[MoverP.Q0] = e.spring_stiffness, e.spring_free_travel
-        kind, q0, unit = MoverKind.LINEAR, e.initial_travel, "m"
-    else:
-        arm = e.arm_length
-        mp[MoverP.CX], mp[MoverP.CY] = e.pivot
-        mp[MoverP.NX] = arm
-        mp[MoverP.MASS] = e.arm_inertia + e.roller_mass * arm**2
-        mp[MoverP.QMIN], mp[MoverP.QMAX] = e.angle_range
-        mp[MoverP.F0] = e.torque
-        lever = e.roller_mass * arm + e.arm_mass * (
-            e.arm_com if e.arm_com is not None else 0.5 * arm
-        )
-        mp[MoverP.G1], mp[MoverP.G2] = lever * gy, -lever * gx
-        if e.torsion_spring is not None:
-            mp[MoverP.K], mp[MoverP.Q0] = e.torsion_spring.stiffness, e.torsion_spring.free_angle
-        if e.cylinder is not None:
-            mp[MoverP.CYLF] = e.cylinder.force
-            mp[MoverP.CYLX], mp[MoverP.CYLY] = e.cylinder.fixed_point
-            mp[MoverP.CYLA] = e.cylinder.arm_point
-        kind, q0, unit = MoverKind.PIVOT, e.arm_angle, "rad"
+    kind.pack_mover(e, _Fields(mp, MoverP, "mover"))
+    q0 = kind.mover_start(e)
     # reference directions of the two spans at the initial position: there L = free length
     # (the roller clears its neighbours over its whole range: checked at load)
     mp[MoverP.TUX], mp[MoverP.TUY], mp[MoverP.TDX], mp[MoverP.TDY] = 1.0, 0.0, 1.0, 0.0
     tu, td = _tangents(mp, dancer_centre(e, q0))
     mp[MoverP.TUX], mp[MoverP.TUY] = tu
     mp[MoverP.TDX], mp[MoverP.TDY] = td
-    return mp, kind, q0, unit
+    return mp, MoverKind[kind.mover_kind], q0, kind.coordinate_unit
+
+
+class _Fields:
+    """A record row addressed by field name, for the element kinds' packing hooks: the
+    schema stage cannot import this layout, so a kind writes ``node["R"] = r`` and this
+    writes ``row[NodeP.R]``."""
+
+    def __init__(self, row: np.ndarray, fields: type[IntEnum], record: str):
+        self._row, self._fields, self._record = row, fields, record
+
+    def __setitem__(self, name: str, value: float) -> None:
+        try:
+            index = self._fields[name]
+        except KeyError:
+            raise KeyError(
+                f"the {self._record} record has no field {name!r}; fields: "
+                f"{', '.join(self._fields.__members__)}"
+            ) from None
+        self._row[index] = value
 
 
 def _tangents(mp, centre):

@@ -13,6 +13,7 @@ kernel cannot disagree.
 
 from collections import namedtuple
 from enum import IntEnum
+from typing import Any
 
 import numpy as np
 
@@ -413,7 +414,7 @@ RUNTIME_MODE = np.array([m.value for m in Mode], dtype=np.int64)
 
 
 # ---- the fields for compiled code --------------------------------------------------------
-def frozen(enum: type[IntEnum]) -> tuple:
+def frozen(enum: type[IntEnum]) -> Any:
     """The members of ``enum`` as a namedtuple of plain ints (``frozen(NodeP).R == 0``).
 
     The kernel reads the fields through these twins of the enums: numba reads the fields of a
@@ -421,10 +422,11 @@ def frozen(enum: type[IntEnum]) -> tuple:
     member as an array index needs numba 0.64 or newer (0.59 and 0.63 refuse it: "Unsupported
     array index type IntEnum"). The machine code is that of an integer literal either way.
     """
-    return namedtuple(enum.__name__, list(enum.__members__))(*(int(m) for m in enum))
+    twin = namedtuple(enum.__name__, list(enum.__members__))  # type: ignore[misc]
+    return twin(*(int(m) for m in enum))
 
 
-#: every enum above by name, as :func:`frozen` twins (what ``kernels.py`` imports)
+#: every enum above by name, as :func:`frozen` twins (what the kernel imports, in model/base.py)
 FROZEN = {
     e.__name__: frozen(e)
     for e in (

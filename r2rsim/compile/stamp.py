@@ -5,8 +5,8 @@ else it compiles in is invisible to that key: the record fields of :mod:`.layout
 into the machine code as constants) and the njit functions of other modules the function
 calls (linked into its cached library). An edit of one of those files alone would leave the
 cached kernel, and every cached caller of it, running the old code. :func:`kernel_stamp`
-hashes all of them; the kernel's dispatchers (:mod:`.kernels`) add it to their cache key, and
-the integrator (:mod:`r2rsim.solve.radau`) is built in a closure over it.
+hashes all of them; every function compiled with :func:`.model.base.kernel` adds it to its
+cache key, and the integrator (:mod:`r2rsim.solve.radau`) is built in a closure over it.
 
 This module does not import numba (so it is not one of the files it stamps).
 """
@@ -39,11 +39,15 @@ def imports_numba(path: Path) -> bool:
 
 @functools.cache
 def stamped_files() -> tuple[Path, ...]:
-    """The files the stamp hashes: ``kernels.py`` and ``layout.py`` first (in that order, so
-    the stamp of a tree where they are the only ones is the hash of the two), then every
-    other module of ``r2rsim/compile`` that imports numba, by name."""
+    """The files the stamp hashes: ``kernels.py`` and ``layout.py`` first, then every module
+    of the kernel's phases (``model/``, which compile through ``model.base.kernel`` without
+    importing numba themselves) and every other module of ``r2rsim/compile`` that imports
+    numba, by path."""
     first = [HERE / "kernels.py", HERE / "layout.py"]
-    rest = sorted(p for p in HERE.glob("*.py") if p not in first and imports_numba(p))
+    phases = set((HERE / "model").glob("*.py"))
+    rest = sorted(
+        p for p in HERE.rglob("*.py") if p not in first and (p in phases or imports_numba(p))
+    )
     return (*first, *rest)  # cached: the files do not change under a running process
 
 

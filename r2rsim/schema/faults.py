@@ -16,7 +16,8 @@ from pydantic import BeforeValidator, Discriminator, Field, Tag, model_validator
 
 from ..errors import InputError
 from ..units import QuantityError, parse_quantity
-from .line import DANCERS, Id, Strict, dancer_reading_dimension, pair
+from .kinds import kind_of
+from .line import Id, Strict, dancer_reading_dimension, pair
 from .quantities import Frequency, NumberOrText, Time, number_or_text
 
 
@@ -434,7 +435,7 @@ def target_problem(ftype: str, target: str, line) -> str | None:
     kind = CATALOGUE[ftype].target
     sensors = {s.id for s in line.sensors}
     els = {e.id: (k, e) for k, e in enumerate(line.elements)}
-    movers = [e.id for e in line.elements if e.type in DANCERS] + [
+    movers = [e.id for e in line.elements if "dancer" in kind_of(e).fault_targets] + [
         sp.id for sp in line.spans if sp.festoon is not None
     ]
     if kind == "sensor":
@@ -464,6 +465,7 @@ def target_problem(ftype: str, target: str, line) -> str | None:
             f"{', '.join(els)})"
         )
     k, e = els[target]
+    targets = kind_of(e).fault_targets  # the fault families the element's kind may carry
     drive = getattr(e, "drive", None)
     if kind == "drive" and (drive is None or drive.type != "torque"):
         return f"{ftype} needs an element with a torque drive; '{target}' has none"
@@ -476,16 +478,18 @@ def target_problem(ftype: str, target: str, line) -> str | None:
     if kind == "roller" and e.friction.viscous == 0 and e.friction.coulomb == 0:
         return f"'{target}' has no bearing friction (friction: viscous, coulomb) to increase"
     if kind == "eccentric":
-        if e.type in ("unwind", "rewind"):
+        if "eccentric" not in targets:
             return f"{ftype} applies to a roller, not to the roll '{target}'"
         if not 0 < k < len(line.elements) - 1:
             return f"{ftype} needs a roller with a span on each side"
-    if kind == "speed_node" and (e.type not in ("driven", "nip") or drive is None):
+    if kind == "speed_node" and ("speed_node" not in targets or drive is None):
         return f"{ftype} applies to a driven roller or nip; '{target}' is a {e.type}"
-    if kind == "unwind" and e.type != "unwind":
+    if kind == "unwind" and "unwind" not in targets:
         return f"{ftype} applies to an unwind; '{target}' is a {e.type}"
     if kind == "splicer" and getattr(e, "splicer", None) is None:
         return f"{ftype} needs an unwind with a splicer; '{target}' has none"
+    if kind not in targets:  # a plug-in kind that opts out (the shipped ones are caught above)
+        return f"{ftype} does not apply to a {e.type} ('{target}')"
     return None
 
 

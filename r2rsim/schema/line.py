@@ -12,11 +12,37 @@ import math
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, WithJsonSchema, model_validator
+from pydantic import BeforeValidator, Field, WithJsonSchema, model_validator
 
 from ..limits import MAX_LINE_ITEMS
 from ..units import QuantityError, parse_quantity
+from .kinds import all_kinds, element_union, kind_of, kinds_in_family
+
+# the element models and their parts live in kinds/ and parts.py; re-exported (``X as X``)
+# for the code and the plug-ins that import them from here
+from .kinds.dancer import Dancer as Dancer
+from .kinds.driven import Driven as Driven
+from .kinds.idler import Idler as Idler
+from .kinds.nip import Nip as Nip
+from .kinds.nip import PressureRoller as PressureRoller
+from .kinds.pivot_dancer import Cylinder as Cylinder
+from .kinds.pivot_dancer import PivotDancer as PivotDancer
+from .kinds.pivot_dancer import TorsionSpring as TorsionSpring
+from .kinds.rewind import Rewind as Rewind
+from .kinds.unwind import Unwind as Unwind
 from .materials import MATERIALS
+from .parts import GRAVITY as GRAVITY
+from .parts import ID_PATTERN as ID_PATTERN
+from .parts import Drive as Drive
+from .parts import ElementBase as ElementBase
+from .parts import Friction as Friction
+from .parts import Id, NonNegTime, PosLength, Strict, pair
+from .parts import Roll as Roll
+from .parts import SpliceJoint as SpliceJoint
+from .parts import Splicer as Splicer
+from .parts import TorqueRipple as TorqueRipple
+from .parts import Vec2 as Vec2
+from .parts import Wrap as Wrap
 from .quantities import (
     Acceleration,
     Angle,
@@ -33,46 +59,8 @@ from .quantities import (
     NumberOrText,
     Pressure,
     Speed,
-    Stiffness,
     Time,
-    Torque,
-    ViscousTorque,
 )
-
-
-def _list_to_tuple(value):
-    return tuple(value) if isinstance(value, list) else value
-
-
-def pair(item):
-    """``[a, b]`` of two ``item`` values: a YAML list is accepted for the tuple (the items
-    stay strict). The list is turned into a tuple before validation: ``Field(strict=False)``
-    alone is not honoured inside a union before pydantic 2.11."""
-    return Annotated[tuple[item, item], BeforeValidator(_list_to_tuple)]
-
-
-ID_PATTERN = r"^[A-Za-z][A-Za-z0-9_]*$"
-Id = Annotated[str, Field(pattern=ID_PATTERN, max_length=64)]
-PosLength = Annotated[Length, Field(gt=0)]
-NonNegTime = Annotated[Time, Field(ge=0)]
-Vec2 = pair(Length)
-Wrap = Literal["cw", "ccw"]
-GRAVITY = (0.0, -9.81)
-
-
-class Strict(BaseModel):
-    """Base model of every line and scenario model: unknown keys are errors, and every
-    number is strict and finite.
-
-    ``strict``: a boolean is not a number (``std: true`` is refused, not read as 1.0), a
-    number is not a boolean, a string is not a plain number (quantities, which take unit
-    strings, convert them first); an integer is still accepted where a float is expected.
-    ``allow_inf_nan=False``: ``.nan``, ``.inf`` and ``-.inf`` are refused for every float
-    field, in lists and dict values too. Tuples (``[x, y]`` pairs) are declared with
-    :func:`pair`, which accepts the YAML list.
-    """
-
-    model_config = ConfigDict(extra="forbid", frozen=False, strict=True, allow_inf_nan=False)
 
 
 class Web(Strict):
@@ -122,351 +110,12 @@ class Web(Strict):
         return self.break_stress * self.area
 
 
-class Friction(Strict):
-    """Bearing friction tau_f = viscous·omega + coulomb·tanh(omega/smoothing_speed)."""
-
-    viscous: Annotated[ViscousTorque, Field(ge=0)] = Field(
-        0.0, description="viscous bearing friction coefficient: torque per angular speed [N m s]"
-    )
-    coulomb: Annotated[Torque, Field(ge=0)] = Field(
-        0.0, description="Coulomb (dry) bearing friction torque [N m]"
-    )
-    smoothing_speed: Annotated[AngularSpeed, Field(gt=0)] = Field(
-        1e-2, description="tanh smoothing of the Coulomb term near zero speed [rad/s]"
-    )
-
-
-class TorqueRipple(Strict):
-    """A sinusoidal disturbance torque amplitude·sin(2π·frequency·t) at a drive's shaft."""
-
-    amplitude: Annotated[Torque, Field(ge=0)] = Field(description="ripple torque amplitude [N m]")
-    frequency: Annotated[Frequency, Field(gt=0)] = Field(description="ripple frequency [Hz]")
-
-
-class Drive(Strict):
-    """A motor drive. ``torque``: first-order torque lag and saturation, commanded by the
-    element's controllers, or open loop by ``torque_command``. ``ideal_speed``: the surface
-    speed is imposed (line speed x (1 + draw) + trim), a kinematic node for verification and
-    idealised studies."""
-
-    type: Literal["torque", "ideal_speed"] = Field(
-        "torque",
-        description="torque: a motor with a first-order torque loop, commanded by a "
-        "controller or torque_command; ideal_speed: an imposed surface speed (line speed x (1 + "
-        "draw))",
-    )
-    torque_lag: NonNegTime = Field(1e-3, description="current/torque loop time constant [s]")
-    torque_max: Annotated[Torque, Field(gt=0)] | None = Field(
-        None, description="torque saturation |tau| <= torque_max [N m]"
-    )
-    draw: Dimensionless = Field(0.0, description="ideal_speed only: relative speed offset")
-    torque_ripple: TorqueRipple | None = Field(
-        None,
-        description="sinusoidal torque disturbance added at the shaft (cogging, "
-        "gear mesh, an eccentric load)",
-    )
-    torque_command: Torque | None = Field(
-        None,
-        description="torque drive without a controller: constant torque command [N m] "
-        "(positive drives the web forward); a scenario's programme can change it (torque:)",
-    )
-
-
-class Roll(Strict):
-    """A wound roll on an unwind or rewind."""
-
-    core_radius: PosLength = Field(description="radius of the empty core [m]")
-    outer_radius: PosLength = Field(description="radius at the start of the run [m]")
-    core_inertia: Annotated[Inertia, Field(ge=0)] = Field(
-        description="core + shaft + chucks + reflected rotor inertia [kg m^2]"
-    )
-    build_per_wrap: PosLength | None = Field(
-        None, description="radial build per wrap c_w [m]; default: the web thickness"
-    )
-    wound_in_strain: (
-        Dimensionless | Annotated[list[Dimensionless], Field(min_length=1, max_length=3)]
-    ) = Field(
-        0.0,
-        description="strain frozen into the roll when it was wound (the unwind's inflow "
-        "strain): a number, or polynomial coefficients [e0, e1, e2] of e0 + e1·R + e2·R^2 over "
-        "the roll radius R in m, so tension drifts over a roll (thesis eq. 2.22)",
-    )
-
-    def wound_in_coefficients(self) -> tuple[float, float, float]:
-        """(e0, e1, e2) of the wound-in strain e0 + e1·R + e2·R²."""
-        c = (
-            self.wound_in_strain
-            if isinstance(self.wound_in_strain, list)
-            else [self.wound_in_strain]
-        )
-        c = [*c, 0.0, 0.0, 0.0]
-        return float(c[0]), float(c[1]), float(c[2])
-
-
-class _Element(Strict):
-    id: Id = Field(
-        description="name of the element, unique in the line (letters, digits, _); sensors and "
-        "controllers refer to it"
-    )
-    stage: Annotated[int, Field(ge=1)] | None = Field(None, description="thesis stage 1..5")
-    friction: Friction = Field(
-        default_factory=Friction, description="bearing friction of the element's shaft"
-    )
-    wrap_angle: Annotated[Angle, Field(gt=0, le=2 * math.pi)] | None = Field(
-        None, description="wrap angle of the web on this element [rad]"
-    )
-    friction_coefficient: Annotated[Dimensionless, Field(gt=0)] | None = Field(
-        None,
-        description="web-roller friction coefficient mu; with wrap_angle enables the "
-        "capstan (slip-risk) monitor",
-    )
-    position: Vec2 | None = Field(
-        None,
-        description="roller centre [x, y] in m (y up); needed next to a dancer, whose "
-        "span lengths come from the geometry",
-    )
-    wrap: Wrap | None = Field(
-        None,
-        description="direction the web travels around this roller seen with x right and "
-        "y up: cw or ccw; needed with position",
-    )
-
-
-class SpliceJoint(Strict):
-    """The taped overlap a splice leaves in the web (physics.md eq. 1.19)."""
-
-    length: PosLength = Field(0.05, description="overlap length l_s [m]")
-    stiffness_ratio: Annotated[Dimensionless, Field(ge=1)] = Field(
-        2.0, description="(EA)_s / EA of the overlap (two webs plus tape: about 2)"
-    )
-    break_tension: Annotated[Force, Field(gt=0)] | None = Field(
-        None, description="break limit of the joint [N]; default the web's"
-    )
-
-
-class Splicer(Strict):
-    """Roll change on an unwind (physics.md §1.7). ``zero_speed``: fill the dancer/festoon,
-    brake the expiring roll to rest, splice during ``dwell``, accelerate the new roll, refill.
-    The unwind needs a speed_pi. ``flying``: the new roll is pre-accelerated to line speed
-    with a relative speed-match error and swapped in at once."""
-
-    type: Literal["zero_speed", "flying"] = Field(
-        description="zero_speed: the roll stops for the splice while a dancer or festoon feeds "
-        "the line; flying: the new roll is spliced on at line speed"
-    )
-    trigger_radius: PosLength | None = Field(
-        None,
-        description="splice when the running roll's radius falls to this [m]; "
-        "otherwise only at the scenario's splice events",
-    )
-    joint: SpliceJoint = Field(
-        default_factory=SpliceJoint, description="the splice joint that travels with the web"
-    )
-    fill_time: NonNegTime = Field(5.0, description="zero_speed: fill phase duration [s]")
-    fill_overspeed: Annotated[Dimensionless, Field(ge=0, le=0.5)] = Field(
-        0.08, description="zero_speed: relative overspeed of the unwind while filling/refilling"
-    )
-    brake_decel: Annotated[Acceleration, Field(gt=0)] = Field(
-        2.0, description="zero_speed: surface deceleration of the expiring roll [m/s^2]"
-    )
-    dwell: NonNegTime = Field(3.0, description="zero_speed: time at rest for the splice [s]")
-    accel: Annotated[Acceleration, Field(gt=0)] = Field(
-        2.0, description="zero_speed: surface acceleration of the new roll [m/s^2]"
-    )
-    refill_timeout: Annotated[Time, Field(gt=0)] = Field(
-        60.0,
-        description="zero_speed: the refill ends when the dancer/festoon is back at its "
-        "set-point, or after this time [s]",
-    )
-    speed_match_error: Annotated[Dimensionless, Field(gt=-0.5, lt=0.5)] = Field(
-        0.0,
-        description="flying: relative surface-speed error of the new roll (diameter "
-        "error), delta in omega_new = v(1 + delta)/R_new",
-    )
-
-
-class Unwind(_Element):
-    """Unwind stand: a roll paying out web; torque drive (default) or ideal speed. With a
-    ``splicer`` the expiring roll is replaced by a fresh ``spare_roll`` at every splice."""
-
-    type: Literal["unwind"] = Field(description="selects an unwind")
-    roll: Roll = Field(description="the roll the run starts with")
-    drive: Drive = Field(
-        default_factory=Drive, description="the unwind's motor (default: a torque drive)"
-    )
-    spare_roll: Roll | None = Field(None, description="the roll loaded at each splice")
-    splicer: Splicer | None = Field(None, description="roll changes; needs spare_roll")
-
-
-class Rewind(_Element):
-    """Rewind stand: a roll taking up web."""
-
-    type: Literal["rewind"] = Field(description="selects a rewind")
-    roll: Roll = Field(description="the roll (core and the web already wound) the run starts with")
-    drive: Drive = Field(
-        default_factory=Drive, description="the rewind's motor (default: a torque drive)"
-    )
-
-
-class Idler(_Element):
-    """Undriven roller."""
-
-    type: Literal["idler"] = Field(description="selects an idler")
-    radius: PosLength = Field(description="roller radius [m]")
-    inertia: Annotated[Inertia, Field(gt=0)] = Field(description="roller spin inertia [kg m^2]")
-
-
-class Driven(_Element):
-    """Motor-driven roller (pull roll, S-wrap roller, ...)."""
-
-    type: Literal["driven"] = Field(description="selects a driven roller")
-    radius: PosLength = Field(description="roller radius [m]")
-    inertia: Annotated[Inertia, Field(gt=0)] = Field(
-        description="roller and motor inertia [kg m^2]"
-    )
-    drive: Drive = Field(
-        default_factory=Drive, description="the roller's motor (default: a torque drive)"
-    )
-
-
-class PressureRoller(Strict):
-    """The undriven roller of a nip pair."""
-
-    radius: PosLength = Field(description="pressure roller radius [m]")
-    inertia: Annotated[Inertia, Field(ge=0)] = Field(
-        description="pressure roller spin inertia [kg m^2]"
-    )
-    friction: Friction = Field(
-        default_factory=Friction, description="bearing friction of the pressure roller"
-    )
-
-
-class Nip(_Element):
-    """Nip pair clamping the web (no slip): one degree of freedom with
-    J_eff = J1 + J2 (R1/R2)^2 (physics.md eq. 1.9). The drive acts on the main roller."""
-
-    type: Literal["nip"] = Field(description="selects a nip")
-    radius: PosLength = Field(description="radius of the main (driven) roller [m]")
-    inertia: Annotated[Inertia, Field(gt=0)] = Field(
-        description="spin inertia of the main roller [kg m^2]"
-    )
-    drive: Drive = Field(
-        default_factory=Drive, description="the main roller's motor (default: a torque drive)"
-    )
-    pressure_roller: PressureRoller = Field(
-        description="the undriven roller pressed on the main one; it turns with it without slip"
-    )
-
-
-class Dancer(_Element):
-    """Translating dancer: a roller on a carriage that moves along ``direction``
-    (physics.md eq. 1.15). The roller spins like an idler; the lengths of the spans on both
-    sides follow from the geometry (the neighbours need ``position`` and ``wrap``)."""
-
-    type: Literal["dancer"] = Field(description="selects a translating dancer")
-    radius: PosLength = Field(description="dancer roller radius [m]")
-    inertia: Annotated[Inertia, Field(gt=0)] = Field(description="roller spin inertia")
-    position: Vec2 = Field(description="roller centre at travel 0 [m]")
-    wrap: Wrap = Field(
-        description="direction the web travels around the dancer roller (x right, y up): cw or ccw"
-    )
-    direction: pair(float) = Field(
-        (0.0, -1.0), description="unit vector along which the travel x grows (normalised)"
-    )
-    travel_range: pair(Length) = Field(description="end stops [x_min, x_max] [m]")
-    initial_travel: Length = Field(0.0, description="travel x at t = 0 [m]")
-    mass: Annotated[Mass, Field(gt=0)] = Field(description="moving mass incl. roller [kg]")
-    load_force: Force = Field(
-        0.0, description="actuator force along direction (air cylinder at regulated pressure)"
-    )
-    spring_stiffness: Annotated[Stiffness, Field(ge=0)] = Field(
-        0.0,
-        description="spring on the carriage, force -spring_stiffness·(x - "
-        "spring_free_travel) [N/m]",
-    )
-    spring_free_travel: Length = Field(
-        0.0, description="travel x at which the spring exerts no force [m]"
-    )
-    damping: Annotated[Damping, Field(ge=0)] = Field(
-        0.0, description="viscous damping of the carriage [N s/m]"
-    )
-    coulomb: Annotated[Force, Field(ge=0)] = Field(0.0, description="carriage Coulomb friction")
-    smoothing_speed: Annotated[Speed, Field(gt=0)] = Field(
-        1e-3, description="tanh smoothing of the Coulomb friction [m/s]"
-    )
-    gravity: pair(Acceleration) = Field(
-        GRAVITY, description="gravity vector [g_x, g_y] acting on the moving mass [m/s^2] (y up)"
-    )
-
-
-class Cylinder(Strict):
-    """Air cylinder between a fixed point and a point on the arm; regulated pressure gives a
-    constant force (physics.md §1.5). Positive force pushes the two points apart."""
-
-    force: Force = Field(
-        description="constant cylinder force [N]; positive pushes the two points apart"
-    )
-    fixed_point: Vec2 = Field(description="the cylinder's fixed mounting point [x, y] [m]")
-    arm_point: PosLength = Field(description="distance of the rod end from the pivot [m]")
-
-
-class TorsionSpring(Strict):
-    """Torsion spring at the pivot: M = -stiffness·(angle - free_angle)."""
-
-    stiffness: Annotated[Torque, Field(ge=0)] = Field(description="[N m/rad]")
-    free_angle: Angle = Field(
-        0.0, description="arm angle at which the spring exerts no torque [rad]"
-    )
-
-
-class PivotDancer(_Element):
-    """Pivoted (pendulum) dancer: roller at the end of an arm (physics.md eq. 1.17), loaded by
-    an air cylinder, a torsion spring, a torque motor and/or gravity."""
-
-    type: Literal["pivot_dancer"] = Field(description="selects a pivoted dancer")
-    radius: PosLength = Field(description="dancer roller radius [m]")
-    inertia: Annotated[Inertia, Field(gt=0)] = Field(description="roller spin inertia")
-    wrap: Wrap = Field(
-        description="direction the web travels around the dancer roller (x right, y up): cw or ccw"
-    )
-    pivot: Vec2 = Field(description="arm pivot [x, y] [m]")
-    arm_length: PosLength = Field(description="pivot to roller centre [m]")
-    arm_angle: Angle = Field(description="arm angle from +x at t = 0 [rad]")
-    angle_range: pair(Angle) = Field(description="end stops [min, max] [rad]")
-    arm_inertia: Annotated[Inertia, Field(ge=0)] = Field(
-        description="arm inertia about the pivot, without the roller [kg m^2]"
-    )
-    roller_mass: Annotated[Mass, Field(ge=0)] = Field(
-        0.0,
-        description="mass of the roller at the arm's end [kg] (inertia about the pivot and "
-        "gravity)",
-    )
-    arm_mass: Annotated[Mass, Field(ge=0)] = Field(
-        0.0, description="mass of the arm [kg] (gravity, at arm_com)"
-    )
-    arm_com: Length | None = Field(
-        None, description="pivot to arm centre of mass; default half the arm length"
-    )
-    cylinder: Cylinder | None = Field(None, description="air cylinder loading the arm")
-    torsion_spring: TorsionSpring | None = Field(None, description="torsion spring at the pivot")
-    torque: Torque = Field(0.0, description="torque motor at the pivot (active dancer)")
-    damping: Annotated[ViscousTorque, Field(ge=0)] = Field(
-        0.0, description="viscous damping at the pivot [N m s/rad]"
-    )
-    coulomb: Annotated[Torque, Field(ge=0)] = Field(
-        0.0, description="Coulomb friction torque at the pivot [N m]"
-    )
-    smoothing_speed: Annotated[AngularSpeed, Field(gt=0)] = Field(
-        1e-3, description="tanh smoothing of the Coulomb friction [rad/s]"
-    )
-    gravity: pair(Acceleration) = Field(GRAVITY, description="gravity vector [g_x, g_y] [m/s^2]")
-
-
-Element = Annotated[
-    Unwind | Rewind | Idler | Driven | Nip | Dancer | PivotDancer, Field(discriminator="type")
-]
-DANCERS = ("dancer", "pivot_dancer")
-ROTATING_WITH_DRIVE = ("unwind", "rewind", "driven", "nip")
+#: the element kinds shipped with r2rsim (the registry, r2rsim/schema/kinds/, has the
+#: current ones, plug-ins included): kept for code that imported these names
+DANCERS = tuple(k.name for k in kinds_in_family("mover"))
+ROTATING_WITH_DRIVE = tuple(k.name for k in all_kinds() if k.has_drive)
+#: one entry of Line.elements: the union of the registered kinds' models (by ``type``)
+Element = element_union()
 
 
 class Festoon(Strict):
@@ -891,11 +540,21 @@ class Line(Strict):
         return next(e for e in self.elements if e.id == element_id)
 
 
+def rebuild_element_union() -> None:
+    """Rebuild :class:`Line` with the union of the kinds registered now (the registry calls
+    this when a kind is registered or removed): the field keeps its constraints and
+    description, only the type of an entry changes; the key reference and the loader's
+    did-you-mean read the field's annotation, so they follow."""
+    field = Line.model_fields["elements"]
+    field.annotation = list[element_union()]
+    Line.model_rebuild(force=True)
+
+
 def dancer_reading_dimension(line: Line, sensor) -> str:
     """Dimension of a dancer_position sensor's reading: the arm angle of a pivoted dancer,
     else the travel of a dancer or festoon carriage."""
     el = next((e for e in line.elements if e.id == sensor.element), None)
-    return "angle" if el is not None and el.type == "pivot_dancer" else "length"
+    return "angle" if el is not None and kind_of(el).coordinate_unit == "rad" else "length"
 
 
 def _dancer_readings_in_si(line: Line) -> None:
@@ -949,7 +608,7 @@ class _LineIndex:
         }
         return cls(
             by_id={e.id: (i, e) for i, e in enumerate(els)},
-            movers={e.id for e in els if e.type in DANCERS} | festoons,
+            movers={e.id for e in els if kind_of(e).is_mover} | festoons,
             sensors={s.id: s for s in line.sensors},
             span_names={sp.id or f"span{i + 1}" for i, sp in enumerate(line.spans)},
             speed_ctrl={
@@ -963,11 +622,11 @@ def _check_topology(line: Line) -> list[tuple[str, str]]:
     than their cores."""
     out: list[tuple[str, str]] = []
     els = line.elements
-    if els[0].type != "unwind":
+    if kind_of(els[0]).node_kind != "UNWIND":
         out.append(
             ("elements[0].type", f"the first element must be an unwind, got '{els[0].type}'")
         )
-    if els[-1].type != "rewind":
+    if kind_of(els[-1]).node_kind != "REWIND":
         out.append(
             (
                 f"elements[{len(els) - 1}].type",
@@ -975,7 +634,7 @@ def _check_topology(line: Line) -> list[tuple[str, str]]:
             )
         )
     for i, e in enumerate(els[1:-1], start=1):
-        if e.type in ("unwind", "rewind"):
+        if kind_of(e).is_roll:
             out.append((f"elements[{i}].type", f"'{e.type}' is allowed only at the line ends"))
     if len(line.spans) != len(els) - 1:
         out.append(
@@ -1000,7 +659,7 @@ def _check_topology(line: Line) -> list[tuple[str, str]]:
                 out.append((f"{group}[{i}].id", f"duplicate id '{item.id}' (also {seen[item.id]})"))
             seen[item.id] = f"{group}[{i}]"
     for i, e in enumerate(els):
-        if e.type in ("unwind", "rewind"):
+        if kind_of(e).is_roll:
             r = e.roll
             if r.core_radius >= r.outer_radius:
                 out.append(
@@ -1036,7 +695,7 @@ def _check_sensors(line: Line, ix: _LineIndex) -> list[tuple[str, str]]:
             out.append((f"sensors[{j}].element", _missing("element", s.element, by_id)))
             continue
         _, e = by_id[s.element]
-        if s.type == "roll_diameter" and e.type not in ("unwind", "rewind"):
+        if s.type == "roll_diameter" and not kind_of(e).is_roll:
             out.append(
                 (
                     f"sensors[{j}].element",
@@ -1249,7 +908,7 @@ def _check_tension_loops(line: Line, ix: _LineIndex) -> list[tuple[str, str]]:
                 )
             )
         tension_ctrl[c.element] = j
-        roll = e.type in ("unwind", "rewind")
+        roll = kind_of(e).is_roll
         if drive.type == "torque" and not roll and c.element not in ix.speed_ctrl:
             out.append(
                 (
@@ -1302,7 +961,7 @@ def _commanding_controller(line: Line, element_id: str):
     """(index, controller) of the speed_pi or torque-mode tension_pi that commands the torque
     of an element, or None."""
     e = line.element(element_id)
-    roll = e.type in ("unwind", "rewind")
+    roll = kind_of(e).is_roll
     for j, c in enumerate(line.controllers):
         if c.element != element_id:
             continue
@@ -1392,11 +1051,11 @@ def _check_pitch_law(j: int, s, by_id) -> list[tuple[str, str]]:
         if law.unwind not in by_id:
             return [(f"{p}.unwind", _missing("element", law.unwind, by_id))]
         e = by_id[law.unwind][1]
-        if e.type != "unwind":
+        if not kind_of(e).pays_out:
             return [(f"{p}.unwind", f"'{e.id}' is a {e.type}, not an unwind")]
     else:
         e = next(iter(by_id.values()))[1]
-        if e.type != "unwind":
+        if not kind_of(e).pays_out:
             return []  # reported for elements[0]
     rolls = [e.roll] + ([e.spare_roll] if e.spare_roll is not None else [])
     for r in rolls:
@@ -1421,8 +1080,8 @@ def _check_geometry(line: Line) -> list[tuple[str, str]]:
         if i + 1 >= len(els):
             break
         a, b = els[i], els[i + 1]
-        near_dancer = a.type in DANCERS or b.type in DANCERS
-        if a.type in DANCERS and b.type in DANCERS:
+        near_dancer = kind_of(a).is_mover or kind_of(b).is_mover
+        if kind_of(a).is_mover and kind_of(b).is_mover:
             out.append(
                 (
                     f"spans[{i}]",
@@ -1463,38 +1122,11 @@ def _check_geometry(line: Line) -> list[tuple[str, str]]:
                     )
                 )
     for i, e in enumerate(els):
-        if e.type not in DANCERS:
-            continue
+        kind = kind_of(e)
         p = f"elements[{i}]"
-        if e.type == "dancer":
-            lo, hi = e.travel_range
-            if math.hypot(*e.direction) < 1e-9:
-                out.append((f"{p}.direction", "must be a non-zero vector"))
-            if not lo < hi:
-                out.append((f"{p}.travel_range", "must be [x_min, x_max] with x_min < x_max"))
-            elif not lo <= e.initial_travel <= hi:
-                out.append(
-                    (
-                        f"{p}.initial_travel",
-                        f"{e.initial_travel:g} m is outside the travel range {[lo, hi]}",
-                    )
-                )
-        else:
-            lo, hi = e.angle_range
-            if e.position is not None:
-                out.append(
-                    (
-                        f"{p}.position",
-                        "a pivot dancer's roller position follows from "
-                        "pivot, arm_length and arm_angle; leave it out",
-                    )
-                )
-            if not lo < hi:
-                out.append((f"{p}.angle_range", "must be [min, max] with min < max"))
-            elif not lo <= e.arm_angle <= hi:
-                out.append(
-                    (f"{p}.arm_angle", f"{e.arm_angle:g} rad is outside the angle range {[lo, hi]}")
-                )
+        out += kind.check(e, p)
+        if not kind.is_mover:
+            continue
         placed = True
         for j in (i - 1, i + 1):
             n = els[j]
@@ -1519,7 +1151,7 @@ def wrap_sign(e) -> float:
 
 def roller_radius(e) -> float:
     """Outer radius of a roller, or of a roll (full for an unwind, as declared)."""
-    return e.roll.outer_radius if e.type in ("unwind", "rewind") else e.radius
+    return kind_of(e).surface_radius(e)
 
 
 def dancer_offsets(line: Line, k: int) -> tuple[float, float]:
@@ -1535,21 +1167,17 @@ def dancer_offsets(line: Line, k: int) -> tuple[float, float]:
 
 def dancer_centre(e, q: float) -> tuple[float, float]:
     """Roller centre of dancer ``e`` at travel q [m] (a linear dancer) or arm angle q [rad]
-    (a pivot dancer)."""
-    if e.type == "dancer":
-        nx, ny = e.direction
-        nrm = math.hypot(nx, ny)
-        nx, ny = nx / nrm, ny / nrm  # (as the compiled record holds them)
-        return e.position[0] + q * nx, e.position[1] + q * ny
-    return (e.pivot[0] + e.arm_length * math.cos(q), e.pivot[1] + e.arm_length * math.sin(q))
+    (a pivot dancer): its kind's geometry."""
+    return kind_of(e).centre(e, q)
 
 
 def dancer_overlap(line: Line, k: int) -> str | None:
     """Whether the dancer at element k, at either end of its range or where it starts,
     comes so close to a neighbour that the web has no tangent between them."""
     e = line.elements[k]
-    lo, hi = e.travel_range if e.type == "dancer" else e.angle_range
-    q0 = e.initial_travel if e.type == "dancer" else e.arm_angle
+    kind = kind_of(e)
+    lo, hi = kind.mover_range(e)
+    q0 = kind.mover_start(e)
     du, dd = dancer_offsets(line, k)
     for q in (lo, hi, q0):
         cx, cy = dancer_centre(e, q)

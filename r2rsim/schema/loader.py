@@ -22,7 +22,8 @@ from ..errors import InputError, PlausibilityWarning, R2RError
 from ..units import QuantityError, parse_quantity
 from . import plausibility
 from .faults import check_faults, target_problem
-from .line import DANCERS, Line, draw_problem, pitch_unwind, torque_problem
+from .kinds import kind_of
+from .line import Line, draw_problem, pitch_unwind, torque_problem
 from .scenario import Scenario
 from .variability import sensor_dimension
 
@@ -873,7 +874,7 @@ def check_scenario_against_line(scenario: Scenario, line: Line, file: str) -> No
 
 def _mover_ids(line) -> list[str]:
     """Ids of the line's dancers and festoon carriages, in line order."""
-    return [e.id for e in line.elements if e.type in DANCERS] + [
+    return [e.id for e in line.elements if kind_of(e).is_mover] + [
         s.id for s in line.spans if s.festoon is not None
     ]
 
@@ -890,12 +891,11 @@ def _check_initial_positions(scenario, line, file: str) -> None:
                 file=file,
                 path=path,
             )
-        el = next((e for e in line.elements if e.id == mid and e.type in DANCERS), None)
+        el = next((e for e in line.elements if e.id == mid and kind_of(e).is_mover), None)
         sp = next((s for s in line.spans if s.id == mid and s.festoon is not None), None)
-        if el is not None and el.type == "pivot_dancer":
-            dim, (lo, hi), what = "angle", el.angle_range, "angle_range"
-        elif el is not None:
-            dim, (lo, hi), what = "length", el.travel_range, "travel_range"
+        if el is not None:
+            kind = kind_of(el)
+            dim, (lo, hi), what = kind.coordinate_dimension, kind.mover_range(el), kind.range_key
         else:
             dim, (lo, hi), what = "length", sp.festoon.stroke, "stroke"
         try:
@@ -947,7 +947,7 @@ def check_disturbances(scenario, line, file: str) -> None:
                     f"'{d.element}' is out of round and also has a "
                     "process.eccentricity fault; give it one or the other"
                 )
-        elif d.type == "wound_in_strain" and e.type != "unwind":
+        elif d.type == "wound_in_strain" and not kind_of(e).pays_out:
             problem = f"wound_in_strain applies to an unwind; '{d.element}' is a {e.type}"
         elif (
             d.type == "wound_in_strain"
@@ -1025,7 +1025,7 @@ def check_variability(scenario, line, file: str) -> None:
             raise InputError("the spread must be a finite number >= 0", file=file, path=where)
         return w
 
-    unwinds = [e.id for e in line.elements if e.type == "unwind"]
+    unwinds = [e.id for e in line.elements if kind_of(e).pays_out]
     material = [uid for uid, r in var.rolls.items() if r.modulus or r.thickness or r.relaxed_pitch]
     for uid, r in var.rolls.items():
         where = f"variability.rolls.{uid}"

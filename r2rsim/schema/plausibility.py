@@ -32,6 +32,8 @@ import annotated_types
 from pydantic import BaseModel, WithJsonSchema
 
 from ..limits import MAX_DURATION_S
+from .kinds import kind_of
+from .kinds._roll import roll_inertia
 
 ERROR = "error"
 WARNING = "warning"
@@ -199,29 +201,6 @@ def _outside(what: str, value: float, unit: str, lo: float, hi: float, why: str)
     return f"{what} {shown} is outside {_amount(lo, unit)} .. {_amount(hi, unit)}: {why}"
 
 
-def _roll_inertia(roll, web) -> float:
-    """J(R) at the roll's starting radius (physics.md eq. 1.12), for order-of-magnitude use."""
-    cw = roll.build_per_wrap or web.thickness
-    rho_w = web.density * web.thickness / cw * web.width
-    return roll.core_inertia + 0.5 * math.pi * rho_w * (roll.outer_radius**4 - roll.core_radius**4)
-
-
-def _node_inertia(e, web) -> float | None:
-    """Inertia the element's drive turns [kg m^2] (None for a dancer)."""
-    if e.type in ("unwind", "rewind"):
-        return _roll_inertia(e.roll, web)
-    if e.type == "nip":
-        pr = e.pressure_roller
-        return e.inertia + pr.inertia * (e.radius / pr.radius) ** 2
-    return getattr(e, "inertia", None)
-
-
-def _radius(e) -> float | None:
-    if e.type in ("unwind", "rewind"):
-        return e.roll.outer_radius
-    return getattr(e, "radius", None)
-
-
 def _fmt(x: float) -> str:
     return f"{x:.3g}"
 
@@ -305,10 +284,9 @@ def _web_wraps(line, err, warn) -> None:
     web, els = line.web, line.elements
     radii = []  # (radius, path) of everything the web wraps
     for i, e in enumerate(els):
-        if e.type in ("unwind", "rewind"):
-            radii.append((e.roll.core_radius, f"elements[{i}].roll.core_radius"))
-        elif getattr(e, "radius", None) is not None:
-            radii.append((e.radius, f"elements[{i}].radius"))
+        smallest = kind_of(e).smallest_radius(e)
+        if smallest is not None:
+            radii.append((smallest[0], f"elements[{i}].{smallest[1]}"))
     if radii:
         r_min, where = min(radii)
         if web.thickness >= r_min:
@@ -401,10 +379,7 @@ def _span_lengths(line, err, warn) -> None:
 
 def _frictions(line, err, warn) -> None:
     for i, e in enumerate(line.elements):
-        frictions = [("friction", e.friction)]
-        if e.type == "nip":
-            frictions.append(("pressure_roller.friction", e.pressure_roller.friction))
-        for where, f in frictions:
+        for where, f in kind_of(e).frictions(e):
             for key, value, unit in (
                 ("coulomb", f.coulomb, "N m"),
                 ("viscous", f.viscous, "N m s"),
@@ -486,7 +461,7 @@ def _pitch_law(line, s, p, err) -> None:
 
     law = s.relaxed_pitch_law
     e = next((e for e in line.elements if e.id == pitch_unwind(line, s)), None)
-    if e is None or e.type != "unwind":
+    if e is None or not kind_of(e).pays_out:
         return  # reported by the schema
     for roll in [e.roll] + ([e.spare_roll] if e.spare_roll is not None else []):
         for R in (roll.core_radius, roll.outer_radius):
@@ -503,13 +478,13 @@ def _pitch_law(line, s, p, err) -> None:
 
 def _dancer_setpoints(line, err, warn) -> None:
     """A dancer loop's position set-point within the travel a carriage or arm can have."""
-    kinds = {e.id: e.type for e in line.elements}
+    units = {e.id: kind_of(e).coordinate_unit for e in line.elements}
     for j, c in enumerate(line.controllers):
         if c.type != "dancer_pi" or c.setpoint is None:
             continue
         hi, unit = (
             (MAGNITUDE_MAX["angle"][0], "rad")
-            if kinds.get(c.dancer) == "pivot_dancer"
+            if units.get(c.dancer) == "rad"
             else (TRAVEL_MAX, "m")
         )
         if not -hi <= c.setpoint <= hi:
@@ -675,7 +650,7 @@ def _torque_mode_roll(line, controller_id: str | None):
     drive = getattr(e, "drive", None)
     if (
         e is None
-        or e.type not in ("unwind", "rewind")
+        or not kind_of(e).is_roll
         or drive is None
         or drive.type != "torque"
         or drive.torque_max is None
@@ -705,12 +680,12 @@ def _break_by_torque(line, tension: float, controller_id: str | None) -> str:
     )
     if held0 >= T_break:
         return ": the web breaks"
-    if e.type == "unwind" and tau / core >= T_break:
+    if kind_of(e).pays_out and tau / core >= T_break:
         return (
             f": the web breaks only once the roll has unwound to a radius of "
             f"{_fmt(tau / T_break)} m (torque_max / break tension): {why}"
         )
-    if e.type == "unwind":
+    if kind_of(e).pays_out:
         why += f" and {_fmt(tau / core)} N at its core radius {_fmt(core)} m"
     else:
         why += " (less as the roll grows)"
@@ -798,7 +773,7 @@ def controller_problems(line) -> list[tuple[str, str, str]]:
         kp, ki = abs(c.kp), c.ki
         rates, kind, limit, why = None, "", None, ""  # rates: (from kp, from ki)
         if c.type == "speed_pi" and e is not None:
-            J = _node_inertia(e, web)
+            J = kind_of(e).drive_inertia(e, web)
             if J:
                 rates = (kp / J, math.sqrt(ki / J))
                 kind = f"speed loop (kp/J, J = {_fmt(J)} kg m^2)"
@@ -811,7 +786,7 @@ def controller_problems(line) -> list[tuple[str, str, str]]:
         elif c.type == "tension_pi" and e is not None:
             lengths = _sensor_spans(line, c.sensor)
             L = min(lengths) if lengths else None
-            roll = e.type in ("unwind", "rewind")
+            roll = kind_of(e).is_roll
             torque_mode = (
                 roll
                 and getattr(e, "drive", None) is not None
@@ -819,7 +794,8 @@ def controller_problems(line) -> list[tuple[str, str, str]]:
                 and c.element not in speed_ctrl
             )
             if L and torque_mode:
-                wn = _radius(e) * math.sqrt(web.EA / (_roll_inertia(e.roll, web) * L))
+                R, J = kind_of(e).surface_radius(e), roll_inertia(e.roll, web)
+                wn = R * math.sqrt(web.EA / (J * L))
                 rates = (math.sqrt(kp) * wn, (ki * wn * wn) ** (1 / 3))
                 kind = f"torque-mode tension loop (sqrt(kp)·ω_n, ω_n = {_fmt(wn)} rad/s)"
             elif L:

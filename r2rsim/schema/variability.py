@@ -16,6 +16,7 @@ from typing import Annotated
 from pydantic import Field, model_validator
 
 from ..units import parse_quantity
+from .kinds import kind_of
 from .line import Id, Strict
 from .quantities import Dimensionless, NumberOrText
 
@@ -177,6 +178,6 @@ _SENSOR_UNIT = {
 def sensor_dimension(line, sensor) -> tuple[str, str]:
     """(dimension, unit) of a sensor's reading (and calibration offset)."""
     if sensor.type == "dancer_position":
-        pivot = line.element(sensor.element).type == "pivot_dancer"
+        pivot = kind_of(line.element(sensor.element)).coordinate_unit == "rad"
         return ("angle", "rad") if pivot else ("length", "m")
     return _SENSOR_UNIT[sensor.type]

@@ -9,6 +9,7 @@ import numpy as np
 
 from ..compile.compiler import CompiledLine
 from ..errors import InputError
+from ..schema.kinds import kind_of
 
 
 def nominal_state(
@@ -75,7 +76,7 @@ def _speeds_in_balance(cl: CompiledLine, y: np.ndarray, T: list) -> dict[str, fl
         drive = getattr(e, "drive", None)
         if drive is not None and drive.type == "ideal_speed":
             continue
-        R = e.roll.outer_radius if e.type in ("unwind", "rewind") else e.radius
+        R = kind_of(e).surface_radius(e)
         om = V0 * (1.0 + draw.get(e.id, 0.0)) / R
         y[cl.index(f"{e.id}.speed")] = om
         Tup = T[k - 1] if k > 0 else 0.0
@@ -105,7 +106,7 @@ def _integrators(cl: CompiledLine, y: np.ndarray, needed_torque: dict) -> None:
             # torque = cmd_ff + sgn·R·u at u = 0; solve for u
             tau_ff = aux[cl.aux_index(f"{eid}.torque_command_N_m")]
             R = aux[cl.aux_index(f"{eid}.radius_m")]
-            sgn = -1.0 if line.element(eid).type == "unwind" else 1.0
+            sgn = -1.0 if kind_of(line.element(eid)).pays_out else 1.0
             u = (needed_torque.get(eid, 0.0) - tau_ff) / (sgn * R)
             y[ix] = u / ki
 
@@ -190,20 +191,16 @@ def taut_guess(cl: CompiledLine, y: np.ndarray) -> np.ndarray | None:
 
 def _mover_tensions(cl: CompiledLine) -> list[float]:
     """Rough web tensions [N] that dancers and festoons hold at rest (a guess for Newton,
-    not a result): the load shared by the strands of a translating dancer or festoon; for a
-    pivot dancer, the tension of both spans whose moment about the pivot balances the arm's
-    load (cylinder force times its moment arm, torsion spring, torque motor, gravity of arm
-    and roller) at its initial arm angle, from the kernel's own load and span geometry."""
+    not a result): each element's kind's guess (``ElementKind.rest_tension``: the load
+    shared by the strands of a translating dancer; for a pivot dancer, the tension of both
+    spans whose moment about the pivot balances the arm's load at its initial arm angle),
+    then the load shared by the strands of each festoon."""
     line = cl.line
     out = []
     for e in line.elements:
-        if e.type == "dancer":
-            out.append(0.5 * abs(e.load_force + e.mass * 9.81))
-        elif e.type == "pivot_dancer":
-            m = cl.mover_ids.index(e.id)
-            load, lever = cl.mover_balance(m, cl.mover_q0[m])
-            if lever != 0.0:
-                out.append(load / lever)
+        tension = kind_of(e).rest_tension(e, cl)
+        if tension is not None:
+            out.append(tension)
     for sp in line.spans:
         f = getattr(sp, "festoon", None)
         if f is not None:

@@ -273,11 +273,11 @@ def _any_crossed(active, g0, g):
 
 
 def _kernel_stamp() -> int:
-    """A hash of the sources the integrator compiles in (the line kernel, its layout and any
-    other module of ``r2rsim/compile`` with njit code: :func:`r2rsim.compile.stamp.kernel_stamp`).
+    """A hash of the sources the integrator compiles in (the line kernel, its phases, its
+    layout: :func:`r2rsim.compile.stamp.kernel_stamp`).
 
     numba caches a compiled function under its own file's time stamp and its own bytecode:
-    an edit of ``compile/kernels.py`` alone would leave the cached integrator running the old
+    an edit of a kernel module alone would leave the cached integrator running the old
     right-hand side. A closure variable is part of numba's cache key, so the two functions
     that call the kernel are built in closures over this hash and compile again when the
     kernel changes.

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import InputError
-from ...schema.line import DANCERS
+from ...schema.kinds import kind_of
 from ..line import named
 
 
@@ -116,12 +116,20 @@ ROLES = {
 }
 
 
-#: element roles: (element types, "a ...", plural, stage, what the model needs it for)
+#: element roles: (which element kinds may fill it, "a ...", plural, stage, what the model
+#: needs it for); the driven roller is the ``driven`` kind itself: the model's torque
+#: balance has one roller (a nip's pressure roller is not in it)
 _ELEMENT_ROLES = {
-    "unwind": (("unwind",), "an unwind", "unwinds", 1, "stage 1 (the unwind's torque balance)"),
-    "dancer": (DANCERS, "a dancer", "dancers", 3, "stage 3 (the dancer stage)"),
+    "unwind": (
+        lambda k: k.pays_out,
+        "an unwind",
+        "unwinds",
+        1,
+        "stage 1 (the unwind's torque balance)",
+    ),
+    "dancer": (lambda k: k.is_mover, "a dancer", "dancers", 3, "stage 3 (the dancer stage)"),
     "driven": (
-        ("driven",),
+        lambda k: k.name == "driven",
         "a driven roller",
         "driven rollers",
         4,
@@ -173,8 +181,8 @@ def _ids(items) -> str:
 def _find_element(line, role: str, given: str | None):
     """The element of an element role: the one named ``given`` (of the role's type), else
     the only one of the role's type with the role's ``stage:``."""
-    types, a, plural, stage, need = _ELEMENT_ROLES[role]
-    cands = [e for e in line.elements if e.type in types]
+    fits, a, plural, stage, need = _ELEMENT_ROLES[role]
+    cands = [e for e in line.elements if fits(kind_of(e))]
     if given is not None:
         return named(cands, given, "hybrid-sov", role, a, plural)
     if not cands:
@@ -228,26 +236,32 @@ def _find_sensor(
     return here[0]
 
 
+def _is_idler(e) -> bool:
+    kind = kind_of(e)
+    return kind.family == "roller" and not kind.has_drive
+
+
 def _idlers(line, index: dict, uw, dancer, drv) -> dict[int, list]:
     """The idlers of stages 2, 3 and 5: the idlers with ``stage: k``; for a stage no element
     is marked with, the idlers on the web path: between the unwind and the dancer (2),
     between the dancer and the driven roller (3), and those right after the driven roller
-    (5). The dancer's roller is always one of stage 3 (it spins like an idler)."""
+    (5). The dancer's roller is always one of stage 3 (it spins like an idler). An idler is
+    a roller without a drive (the ``idler`` kind, or a plug-in roller like it)."""
     els = line.elements
     path = {
-        2: [e for e in els[index[uw.id] + 1 : index[dancer.id]] if e.type == "idler"],
-        3: [e for e in els[index[dancer.id] + 1 : index[drv.id]] if e.type == "idler"],
+        2: [e for e in els[index[uw.id] + 1 : index[dancer.id]] if _is_idler(e)],
+        3: [e for e in els[index[dancer.id] + 1 : index[drv.id]] if _is_idler(e)],
         5: [],
     }
     for e in els[index[drv.id] + 1 :]:
-        if e.type != "idler":
+        if not _is_idler(e):
             break
         path[5].append(e)
     marked = {e.stage for e in els}
     out = {}
     for k in (2, 3, 5):
         if k in marked:
-            out[k] = [e for e in els if e.stage == k and e.type == "idler"]
+            out[k] = [e for e in els if e.stage == k and _is_idler(e)]
         else:
             out[k] = path[k]
     if dancer.id not in {e.id for e in out[3]}:
@@ -358,5 +372,5 @@ def load_stages(path, roles: dict | None = None) -> LineStages:
         dancer.id,
         sensors,
         relaxed,
-        "rad" if dancer.type == "pivot_dancer" else "m",
+        kind_of(dancer).coordinate_unit,
     )

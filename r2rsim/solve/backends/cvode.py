@@ -113,7 +113,20 @@ class CVODEBackend(SolverBackend):
         elif not res.success:
             failure = res.message
         fs = np.empty_like(ys)
-        kernels.rhs_rows(ts, ys, fs, cl.I, cl.P, cl._W, cl._GI, cl._GC, cl._GV, cl._J1, cl._aux0)
+        kernels.rows(
+            kernels.ROWS_RHS,
+            ts,
+            ys,
+            fs,
+            cl.I,
+            cl.P,
+            cl._W,
+            cl._GI,
+            cl._GC,
+            cl._GV,
+            cl._aux0,
+            cl._J1,
+        )
         if root is not None or failure is not None:  # the samples up to where it stopped
             keep = tspan <= ts[-1]
             out = np.empty((int(keep.sum()), cl.n_states))
