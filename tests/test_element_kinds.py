@@ -381,3 +381,15 @@ def test_unregistering_restores_the_shipped_union(toy_kind):
         assert "ToyRoller" not in Line.model_json_schema()["$defs"]
     finally:
         register(toy_kind)  # the fixture unregisters it
+
+
+def test_a_mover_kind_must_say_its_geometry():
+    class HalfMover(ElementKind):
+        name = "toy_roller"
+        model = ToyRoller
+        summary = "a mover kind without its geometry"
+        family = "mover"
+
+    with pytest.raises(ValueError, match="mover kind and needs mover_kind, coordinate_unit"):
+        register(HalfMover())
+    assert "toy_roller" not in kinds.kind_names()

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from enum import IntEnum
+from typing import cast
 
 import numpy as np
 
@@ -584,7 +585,7 @@ class CompiledLine:
         A = self.jacobian(t, y)
         return A, np.linalg.eigvals(A)
 
-    def outputs(self, t: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    def outputs(self, t: float | np.ndarray, Y: np.ndarray) -> np.ndarray:
         """Algebraic outputs (columns :attr:`aux_names`) for each row of a state matrix."""
         Y = np.ascontiguousarray(Y, float)
         t = np.ascontiguousarray(np.broadcast_to(t, (Y.shape[0],)), float)
@@ -792,7 +793,8 @@ class _Packer:
         self.tens_of = {c.element: j for j, c in enumerate(self.ctrls) if c.type == "tension_pi"}
 
         # movers: dancers (on a node) and festoon carriages (on a span)
-        self.span_ids = [sp.id for sp in line.spans]
+        # Span.id is optional in the file; Line's validator names every span (span1, ...)
+        self.span_ids = cast(list[str], [sp.id for sp in line.spans])
         self.mover_ids = [e.id for e in els if kind_of(e).is_mover] + [
             sp.id for sp in line.spans if sp.festoon is not None
         ]
@@ -1333,6 +1335,7 @@ def _dancer_record(line: Line, k: int):
     tu, td = _tangents(mp, dancer_centre(e, q0))
     mp[MoverP.TUX], mp[MoverP.TUY] = tu
     mp[MoverP.TDX], mp[MoverP.TDY] = td
+    assert kind.mover_kind is not None  # a mover kind names its MoverKind
     return mp, MoverKind[kind.mover_kind], q0, kind.coordinate_unit
 
 

@@ -74,7 +74,7 @@ class DisturbanceInstance:
     eccentricity: float = 0.0
     phase: float = 0.0
 
-    def value(self, s) -> np.ndarray:
+    def value(self, s) -> np.ndarray | np.float64:
         """The disturbance at ``s`` (time or unwound length), as the kernel evaluates it.
 
         Parameters
@@ -84,12 +84,15 @@ class DisturbanceInstance:
         Returns
         -------
         ndarray
+            (a numpy float for a scalar ``s``)
         """
         s = np.asarray(s, dtype=float)
         if self.shape == "sines":
+            assert self.omegas is not None and self.phases is not None  # set with "sines"
             ph = np.multiply.outer(s, self.omegas) + self.phases
             return np.sin(ph) @ self.amplitudes
         if self.shape == "table":
+            assert self.values is not None  # set with "table"
             grid = self.x0 + self.dx * np.arange(len(self.values))
             return np.interp(s, grid, self.values)
         raise ValueError(f"a {self.type} disturbance has no value")

@@ -64,10 +64,13 @@ class FaultInstance:
         if self.shape == "step":
             out = np.ones_like(t)
         elif self.shape == "ramp":
+            assert self.ramp is not None  # set with a ramp or exp profile
             out = np.clip(dt / self.ramp, 0.0, 1.0)
         elif self.shape == "exp":
+            assert self.ramp is not None
             out = -np.expm1(-np.maximum(dt, 0.0) / self.ramp)
         else:  # intermittent
+            assert self.period is not None and self.duty is not None  # set when intermittent
             phase = np.mod(np.maximum(dt, 0.0), self.period)
             out = (phase < self.duty * self.period - 1e-12).astype(float)
         return np.where(self.present(t), out, 0.0)
@@ -83,8 +86,10 @@ class FaultInstance:
         stop = min(self.end if self.end is not None else math.inf, duration)
         out = [self.onset]
         if self.shape == "ramp":
+            assert self.ramp is not None  # set with a ramp profile
             out.append(self.onset + self.ramp)
         if self.shape == "intermittent":
+            assert self.period is not None and self.duty is not None  # set when intermittent
             k = 0
             while True:
                 t_on = self.onset + k * self.period
@@ -104,9 +109,12 @@ class FaultInstance:
         m = self.magnitude
         if self.type == "sensor.drift":
             return m * (t - self.onset), m, 0.0, 1.0
-        if self.shape == "ramp" and t < self.onset + self.ramp - 1e-12:
-            return m * (t - self.onset) / self.ramp, m / self.ramp, 0.0, 1.0
+        if self.shape == "ramp":
+            assert self.ramp is not None  # set with a ramp profile
+            if t < self.onset + self.ramp - 1e-12:
+                return m * (t - self.onset) / self.ramp, m / self.ramp, 0.0, 1.0
         if self.shape == "exp":
+            assert self.ramp is not None  # set with an exp profile
             return m, 0.0, -m * math.exp(-(t - self.onset) / self.ramp), self.ramp
         return m * float(self.p(np.array([t]))[0]), 0.0, 0.0, 1.0
 

@@ -147,7 +147,7 @@ class RollDraws:
 def apply_roll(roll, values: dict[str, float]):
     """A copy of ``roll`` with the drawn starting radius, wound-in strain and (through the
     radial build) thickness."""
-    update = {}
+    update: dict[str, float | list[float]] = {}
     if "outer_radius" in values:
         update["outer_radius"] = values["outer_radius"]
     if "wound_in_strain" in values:

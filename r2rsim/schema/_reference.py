@@ -24,7 +24,8 @@ def _root(kind: str) -> type[BaseModel]:
     from .scenario import Scenario
     from .sweep import Sweep
 
-    return {"line": Line, "scenario": Scenario, "sweep": Sweep}[kind]
+    roots: dict[str, type[BaseModel]] = {"line": Line, "scenario": Scenario, "sweep": Sweep}
+    return roots[kind]
 
 
 def _models(model: type[BaseModel], found: dict | None = None) -> dict[str, type[BaseModel]]:

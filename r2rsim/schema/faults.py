@@ -17,7 +17,8 @@ from pydantic import BeforeValidator, Discriminator, Field, Tag, model_validator
 from ..errors import InputError
 from ..units import QuantityError, parse_quantity
 from .kinds import kind_of
-from .line import Id, Strict, dancer_reading_dimension, pair
+from .line import Id, Strict, dancer_reading_dimension
+from .parts import NumberOrTextPair
 from .quantities import Frequency, NumberOrText, Time, number_or_text
 
 
@@ -250,7 +251,7 @@ def superposable(a: str, b: str) -> bool:
 class Uniform(Strict):
     """A value drawn uniformly from [low, high] (seeded by the fault-sampling stream)."""
 
-    uniform: pair(NumberOrText) = Field(
+    uniform: NumberOrTextPair = Field(
         description="[low, high]: the value is drawn uniformly between them"
     )
 
@@ -258,7 +259,7 @@ class Uniform(Strict):
 class LogUniform(Strict):
     """A value whose logarithm is uniform on [log low, log high] (low, high > 0)."""
 
-    loguniform: pair(NumberOrText) = Field(
+    loguniform: NumberOrTextPair = Field(
         description="[low, high], both > 0: the logarithm of the value is drawn uniformly"
     )
 
@@ -275,7 +276,8 @@ def _sampled_kind(value) -> str | None:
     """Which distribution a mapping names (its one key), for the tagged union below."""
     if isinstance(value, dict):
         return next((k for k in ("uniform", "loguniform", "choice") if k in value), None)
-    return {Uniform: "uniform", LogUniform: "loguniform", Choice: "choice"}.get(type(value))
+    kinds: dict[type, str] = {Uniform: "uniform", LogUniform: "loguniform", Choice: "choice"}
+    return kinds.get(type(value))
 
 
 # Tagged by the distribution's key, so each form is validated once: an untagged union of
@@ -413,7 +415,7 @@ def magnitude_dimension(ftype: str, reading_dim: str | None) -> str | None:
         "rel": "dimensionless",
         "s": "time",
         "none": None,
-        "reading/s": RATE_OF.get(reading_dim),
+        "reading/s": None if reading_dim is None else RATE_OF.get(reading_dim),
         "N*m": "torque",
         "N": "force",
         "m": "length",
@@ -423,10 +425,9 @@ def magnitude_dimension(ftype: str, reading_dim: str | None) -> str | None:
 def magnitude_unit(ftype: str, reading_dim: str | None) -> str:
     """SI unit of a fault's magnitude as written to faults.parquet."""
     code = CATALOGUE[ftype].magnitude
-    if code == "reading":
-        return SI_UNIT[reading_dim]
-    if code == "reading/s":
-        return SI_UNIT[reading_dim] + "/s"
+    if code in ("reading", "reading/s"):
+        assert reading_dim is not None  # only sensor faults, whose reading has a dimension
+        return SI_UNIT[reading_dim] + ("/s" if code == "reading/s" else "")
     return {"rel": "rel", "none": ""}.get(code, code)
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Annotated, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal, TypeAlias
 
 from pydantic import BeforeValidator, Field, WithJsonSchema, model_validator
 
@@ -35,14 +35,15 @@ from .parts import GRAVITY as GRAVITY
 from .parts import ID_PATTERN as ID_PATTERN
 from .parts import Drive as Drive
 from .parts import ElementBase as ElementBase
+from .parts import FloatPair, Id, LengthPair, NonNegTime, PosLength, Strict
 from .parts import Friction as Friction
-from .parts import Id, NonNegTime, PosLength, Strict, pair
 from .parts import Roll as Roll
 from .parts import SpliceJoint as SpliceJoint
 from .parts import Splicer as Splicer
 from .parts import TorqueRipple as TorqueRipple
 from .parts import Vec2 as Vec2
 from .parts import Wrap as Wrap
+from .parts import pair as pair
 from .quantities import (
     Acceleration,
     Angle,
@@ -100,6 +101,7 @@ class Web(Strict):
     @property
     def EA(self) -> float:  # noqa: N802 - the physics symbol
         """Axial stiffness E·A [N]."""
+        assert self.modulus is not None  # _fill_from_preset fills it or refuses the web
         return self.modulus * self.area
 
     @property
@@ -115,7 +117,12 @@ class Web(Strict):
 DANCERS = tuple(k.name for k in kinds_in_family("mover"))
 ROTATING_WITH_DRIVE = tuple(k.name for k in all_kinds() if k.has_drive)
 #: one entry of Line.elements: the union of the registered kinds' models (by ``type``)
-Element = element_union()
+if TYPE_CHECKING:
+    # built at run time from the registry (plug-ins add kinds), so a type checker cannot
+    # know its members; like the kinds' hooks, it sees any element
+    Element: TypeAlias = Any
+else:
+    Element = element_union()
 
 
 class Festoon(Strict):
@@ -128,7 +135,7 @@ class Festoon(Strict):
     carriage_mass: Annotated[Mass, Field(gt=0)] = Field(
         description="moving mass of the carriage with its rollers [kg]"
     )
-    stroke: pair(Length) = Field(description="carriage end stops [x_min, x_max] [m]")
+    stroke: LengthPair = Field(description="carriage end stops [x_min, x_max] [m]")
     initial_position: Length = Field(description="carriage position x at t = 0 [m]")
     force: Force = Field(description="carriage actuator force along +x (storage grows) [N]")
     gravity: Acceleration = Field(
@@ -176,7 +183,7 @@ class _Sensor(Strict):
     )
     filter: NonNegTime = Field(0.0, description="first-order filter time constant [s]")
     gain: float = Field(1.0, description="calibration gain g in y = g·x + b")
-    range: pair(float) | None = Field(
+    range: FloatPair | None = Field(
         None,
         description="measuring range [low, high] in the reading's SI unit; recorded "
         "samples outside are clipped and flagged (censored data)",
@@ -325,7 +332,7 @@ class PitchLength(Strict):
         0.0, description="noise std of the pitch reading [m]"
     )
     offset: Length = Field(0.0, description="calibration offset b [m]")
-    range: pair(float) | None = Field(None, description="[low, high] in m")
+    range: FloatPair | None = Field(None, description="[low, high] in m")
     quantization: Annotated[float, Field(ge=0)] = Field(0.0, description="resolution [m]")
     delay: NonNegTime = Field(0.0, description="processing delay of the record [s]")
     noise_per_speed: Annotated[float, Field(ge=0)] = Field(0.0, description=NOISE_PER_SPEED_DOC)
@@ -546,7 +553,9 @@ def rebuild_element_union() -> None:
     description, only the type of an entry changes; the key reference and the loader's
     did-you-mean read the field's annotation, so they follow."""
     field = Line.model_fields["elements"]
-    field.annotation = list[element_union()]
+    # a union built at run time (a type checker cannot read list[...] of it); pydantic's
+    # FieldInfo.annotation is declared type[Any] | None but holds any annotation
+    field.annotation = list[element_union()]  # type: ignore[misc, assignment]
     Line.model_rebuild(force=True)
 
 
@@ -946,6 +955,7 @@ def _check_torque_commands(line: Line) -> list[tuple[str, str]]:
         drive = getattr(e, "drive", None)
         if drive is None or drive.torque_command is None:
             continue
+        problem: str | None
         if drive.type != "torque":
             problem = (
                 "an ideal_speed drive imposes the speed; a torque command needs a torque drive"

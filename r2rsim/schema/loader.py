@@ -12,10 +12,11 @@ import stat
 import types
 import warnings
 from pathlib import Path
-from typing import Annotated, Any, Literal, Union, get_args, get_origin
+from typing import TYPE_CHECKING, Annotated, Any, Literal, TypeAlias, Union, get_args, get_origin
 
 import yaml
 from pydantic import BaseModel, ValidationError
+from pydantic_core import ErrorDetails
 
 from .. import limits
 from ..errors import InputError, PlausibilityWarning, R2RError
@@ -39,7 +40,10 @@ class _Problem(yaml.YAMLError):
         self.problem_mark = mark
 
 
-_BaseLoader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml when it is there
+if TYPE_CHECKING:  # a type checker sees one class (a variable cannot be a base class)
+    _BaseLoader: TypeAlias = yaml.SafeLoader
+else:
+    _BaseLoader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml when it is there
 
 
 class _Loader(_BaseLoader):
@@ -109,6 +113,7 @@ def _read_bytes(path: Path) -> bytes:
         raise InputError("file not found", file=file) from None
     except OSError as exc:
         raise InputError(f"cannot read file ({exc.strerror})", file=file) from None
+    to_close: int | None = fd  # None once the file object owns the descriptor
     try:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
@@ -127,13 +132,13 @@ def _read_bytes(path: Path) -> bytes:
         if st.st_size > limits.MAX_FILE_BYTES:
             raise InputError(_too_big(st.st_size), file=file)
         with os.fdopen(fd, "rb") as f:
-            fd = None
+            to_close = None
             data = f.read(limits.MAX_FILE_BYTES + 1)
     except OSError as exc:
         raise InputError(f"cannot read file ({exc.strerror})", file=file) from None
     finally:
-        if fd is not None:
-            os.close(fd)
+        if to_close is not None:
+            os.close(to_close)
     if len(data) > limits.MAX_FILE_BYTES:  # it grew while being read
         raise InputError(_too_big(len(data)), file=file)
     return data
@@ -214,6 +219,10 @@ def _nesting_events(text: str, loader) -> None:
             depth -= 1
 
 
+#: one entry of :func:`_check_values`' walk: (node, depth, parent entry, key in the parent)
+_Entry: TypeAlias = "tuple[Any, int, _Entry | None, Any]"
+
+
 def _check_values(data: Any, file: str) -> None:
     """Walk the parsed data once, without recursion: refuse control characters (NUL,
     escape...) in strings and keys, nesting deeper than :data:`r2rsim.limits.MAX_NESTING`
@@ -228,7 +237,7 @@ def _check_values(data: Any, file: str) -> None:
             entry = entry[2]
         return "".join(reversed(parts)).lstrip(".") or None
 
-    stack = [(data, 0, None, None)]  # (node, depth, parent entry, key in the parent)
+    stack: list[_Entry] = [(data, 0, None, None)]
     count = 0
     while stack:
         entry = stack.pop()
@@ -352,7 +361,7 @@ def _yaml_path(loc: tuple, data: Any) -> str:
     return _locate(loc, data)[0]
 
 
-def _union_errors(errors: list[dict], data: Any) -> list[dict]:
+def _union_errors(errors: list[ErrorDetails], data: Any) -> list[ErrorDetails]:
     """Of the union members that each reported errors for one value, keep the ones that got
     furthest into the data, and of those the ones whose errors are not all plain type
     mismatches: ``wound_in_strain: [0.001, .inf]`` is about the .inf (the list member), not
@@ -375,7 +384,7 @@ def _union_errors(errors: list[dict], data: Any) -> list[dict]:
     return [e for i, e in enumerate(errors) if i not in drop]
 
 
-def _describe(err: dict) -> tuple[str, str | None]:
+def _describe(err: ErrorDetails) -> tuple[str, str | None]:
     """Return (message, extra path part) for one pydantic error."""
     kind = err["type"]
     ctx = err.get("ctx") or {}
@@ -544,7 +553,9 @@ def _did_you_mean(close: list[str]) -> str:
     return f" (did you mean {listed}?)"
 
 
-def _unknown_keys_first(errors: list[dict], model, data: Any) -> tuple[list[dict], dict]:
+def _unknown_keys_first(
+    errors: list[ErrorDetails], model, data: Any
+) -> tuple[list[ErrorDetails], dict]:
     """Suggestions for the unknown keys (``id(err) -> key``), the unknown keys that resemble
     a missing required key put first, and those missing-key errors dropped: the typo is the
     one problem (``durations: 60 s`` is an unknown key, not a missing ``duration``)."""
@@ -897,7 +908,9 @@ def _check_initial_positions(scenario, line, file: str) -> None:
             kind = kind_of(el)
             dim, (lo, hi), what = kind.coordinate_dimension, kind.mover_range(el), kind.range_key
         else:
+            assert sp is not None  # mid is one of the movers: a dancer or a festoon span
             dim, (lo, hi), what = "length", sp.festoon.stroke, "stroke"
+        assert dim is not None  # a mover kind's coordinate has a unit
         try:
             q = parse_quantity(value, dim)
         except QuantityError as exc:
@@ -1150,5 +1163,5 @@ def json_schema(kind: str) -> str:
     """JSON Schema of a ``line``, ``scenario`` or ``sweep`` file, for editors."""
     from .sweep import Sweep
 
-    model = {"line": Line, "scenario": Scenario, "sweep": Sweep}[kind]
-    return json.dumps(model.model_json_schema(), indent=2)
+    models: dict[str, type[BaseModel]] = {"line": Line, "scenario": Scenario, "sweep": Sweep}
+    return json.dumps(models[kind].model_json_schema(), indent=2)

@@ -20,6 +20,7 @@ from .quantities import (
     Frequency,
     Inertia,
     Length,
+    NumberOrText,
     Time,
     Torque,
     ViscousTorque,
@@ -47,10 +48,12 @@ if TYPE_CHECKING:  # a type checker cannot evaluate pair(...); it sees the tuple
     AnglePair: TypeAlias = tuple[float, float]
     AccelerationPair: TypeAlias = tuple[float, float]
     Vec2: TypeAlias = tuple[float, float]
+    NumberOrTextPair: TypeAlias = tuple[float | str, float | str]
 else:
     FloatPair, LengthPair = pair(float), pair(Length)
     AnglePair, AccelerationPair = pair(Angle), pair(Acceleration)
     Vec2 = LengthPair
+    NumberOrTextPair = pair(NumberOrText)
 Wrap = Literal["cw", "ccw"]
 GRAVITY = (0.0, -9.81)
 

@@ -9,6 +9,7 @@ that are missing on the way are created (``solver.rtol`` in a scenario without `
 from __future__ import annotations
 
 import re
+from typing import Any
 
 _PART = re.compile(r"([A-Za-z_][A-Za-z0-9_-]*|[0-9]+)|\[([0-9]+)\]")
 
@@ -74,10 +75,10 @@ def _shown(parts: list) -> str:
     return out or "the file"
 
 
-def resolve(data, parts: list, create: bool = False) -> tuple[object, object, str]:
+def resolve(data, parts: list, create: bool = False) -> tuple[dict[str, Any] | list[Any], Any, str]:
     """``(parent, key, index_path)`` of the value at ``parts``: the container holding it, its
-    key or index there, and the path with list elements by index (as validation errors name
-    them). With ``create``, missing mappings on the way are made."""
+    key (a str) or index (an int) there, and the path with list elements by index (as
+    validation errors name them). With ``create``, missing mappings on the way are made."""
     node = data
     done: list = []
     for i, part in enumerate(parts):

@@ -563,7 +563,7 @@ _OWN_BOUNDS = frozenset({"noise", "offset", "gain", "setpoint", "wound_in_strain
 
 
 @functools.cache
-def _field_info(model: type, name: str) -> tuple[str | None, str, bool]:
+def _field_info(model: type[BaseModel], name: str) -> tuple[str | None, str, bool]:
     """(dimension, SI unit, non-negative) of a field of a schema model, from its annotation:
     the ``x-dimension`` of its quantity type (:mod:`r2rsim.schema.quantities`; None for a
     plain number) and whether a ``ge``/``gt`` bound keeps it at or above 0."""
@@ -596,7 +596,7 @@ def _field_info(model: type, name: str) -> tuple[str | None, str, bool]:
     return found["dim"], found["unit"], found["nonneg"]
 
 
-def _numbers(value, path: str, model: type | None = None, name: str = ""):
+def _numbers(value, path: str, model: type[BaseModel] | None = None, name: str = ""):
     """``(yaml path, model, field name, number)`` of every number in a validated schema
     model, recursively; the items of a list or pair are reported at the field's path, the
     values of a mapping at ``path.key``."""

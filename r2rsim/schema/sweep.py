@@ -14,7 +14,8 @@ from typing import Annotated, Any, Literal
 from pydantic import AfterValidator, Field, model_validator
 
 from .. import limits
-from .line import Id, Strict, pair
+from .line import Id, Strict
+from .parts import NumberOrTextPair
 from .quantities import NumberOrText
 
 #: one component of an axis path: a key, a list index, or the id of a list element
@@ -91,10 +92,10 @@ class Axis(Strict):
         )
     )
     range: Range | None = Field(None, description="evenly spaced numbers")
-    uniform: pair(NumberOrText) | None = Field(
+    uniform: NumberOrTextPair | None = Field(
         None, description="[low, high]: drawn uniformly (combine: random)"
     )
-    loguniform: pair(NumberOrText) | None = Field(
+    loguniform: NumberOrTextPair | None = Field(
         None, description="[low, high] > 0: log drawn uniformly (combine: random)"
     )
 

@@ -18,9 +18,19 @@ import contextlib
 import threading
 import time
 from collections.abc import Callable, Iterator
+from typing import TypedDict
+
+
+class _State(TypedDict):
+    installed: bool
+    depth: int
+    t0: float
+    total: float
+    notify: Callable[[bool], None] | None
+
 
 _lock = threading.Lock()
-_state = {"installed": False, "depth": 0, "t0": 0.0, "total": 0.0, "notify": None}
+_state: _State = {"installed": False, "depth": 0, "t0": 0.0, "total": 0.0, "notify": None}
 
 
 def _install() -> None:

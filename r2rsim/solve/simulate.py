@@ -313,9 +313,13 @@ class _EventLoop:
             [m for m in range(len(cl.event_kinds)) if cl.kind("event", m) in MODE_EVENTS], int
         )
         self.log: list[Event] = []
-        self.t, self.y, self.flags = 0.0, None, None  # set by run
+        self.t = 0.0
+        self.y: np.ndarray  # the state and the event conditions (g < 0): set by run
+        self.flags: np.ndarray
         self.k_next = 0  # next sample index to emit
-        self.terminated, self.reason, self.t_term = False, None, None
+        self.terminated = False
+        self.reason: str | None = None
+        self.t_term: float | None = None
         self.restarts = 0
         self.hot = False
         self.resume = False  # the last chunk ended at a memory boundary only: continue

@@ -149,6 +149,16 @@ def _add(kind: ElementKind, replace: bool) -> None:
             f"element kind {kind.name!r}: its model {kind.model.__name__} needs "
             f'type: Literal["{kind.name}"]'
         )
+    if kind.is_mover:
+        missing = [
+            a
+            for a in ("mover_kind", "coordinate_unit", "range_key", "start_key")
+            if getattr(kind, a) is None
+        ]
+        if missing:
+            raise ValueError(
+                f"element kind {kind.name!r} is a mover kind and needs {', '.join(missing)}"
+            )
     if kind.name in _KINDS and not replace:
         raise ValueError(f"element kind {kind.name!r} is already registered")
     _KINDS[kind.name] = kind

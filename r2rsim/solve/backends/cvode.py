@@ -64,8 +64,9 @@ class CVODEBackend(SolverBackend):
             kernels.event_values(t, y, g, I, P, W, GI, GC, GV, yd, J1)
 
         if len(cl.event_kinds):
-            eventsfn.terminal = [True] * len(cl.event_kinds)
-            eventsfn.direction = [0] * len(cl.event_kinds)
+            # scikit-sundae reads these attributes of the event function
+            eventsfn.terminal = [True] * len(cl.event_kinds)  # type: ignore[attr-defined]
+            eventsfn.direction = [0] * len(cl.event_kinds)  # type: ignore[attr-defined]
             self.locator = CVODE(rhs, eventsfn=eventsfn, num_events=len(cl.event_kinds), **common)
 
     def _quiet(self, solve, *args):

@@ -102,8 +102,9 @@ class ScipyRadauBackend(SolverBackend):
             def ev(t, y, i=i):
                 return cl.events(t, y)[0][i]
 
-            ev.terminal = True
-            ev.direction = 0
+            # solve_ivp reads these attributes of an event function
+            ev.terminal = True  # type: ignore[attr-defined]
+            ev.direction = 0  # type: ignore[attr-defined]
             evs.append(ev)
         res = self._ivp(np.array([t0, t1]), y0, events=evs)
         self.nfev += int(res.nfev)
