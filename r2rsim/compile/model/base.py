@@ -230,10 +230,9 @@ def _header(context, builder, sig, args, slot):
 def _view(context, builder, aryty, ary, start, n, size=None):
     """A borrowed view of ``n`` records (rows of ``size``; 1-D without it) at ``start``."""
     retty = Borrowed(aryty.dtype, 1 if size is None else 2, "C")
-    intp = context.get_value_type(types.intp)
     dims = [n] if size is None else [n, context.get_constant(types.intp, size)]
     sig = retty(aryty, *([types.intp] * (1 + len(dims))))
-    return _view_codegen(retty.ndim)(context, builder, sig, [ary, start, *dims]), intp
+    return _view_codegen(retty.ndim)(context, builder, sig, [ary, start, *dims])
 
 
 #: the record families: (name, array (0: I, 1: P), header slot of the offset, of the count,
@@ -271,8 +270,7 @@ def _family(*names, doc):
                 which, off, count, size = RECORDS[n]
                 start = _header(context, builder, sig, args, off)
                 num = _header(context, builder, sig, args, count)
-                view, _ = _view(context, builder, sig.args[which], args[which], start, num, size)
-                out.append(view)
+                out.append(_view(context, builder, sig.args[which], args[which], start, num, size))
             if len(out) == 1:
                 return out[0]
             return context.make_tuple(builder, sig.return_type, out)
@@ -383,7 +381,7 @@ def scratch(typingctx, I, W):
             n = _header(context, builder, sig, args, count)
             if per != 1:
                 n = builder.mul(n, context.get_constant(types.intp, per))
-            views.append(_view(context, builder, sig.args[1], args[1], start, n)[0])
+            views.append(_view(context, builder, sig.args[1], args[1], start, n))
             start = builder.add(start, n)
         return context.make_tuple(builder, sig.return_type, views)
 
