@@ -12,6 +12,7 @@ import gc
 import os
 import signal
 import sys
+import threading
 from pathlib import Path
 
 from ._version import __version__
@@ -75,12 +76,35 @@ def _compile_notice(bar, quiet: bool):
     return on_stderr
 
 
+#: seconds after which a SIGTERM that arrived inside pydantic is delivered again
+SIGTERM_RETRY_S = 0.02
+
+
 def _raise_terminated(signum, frame):
     """SIGTERM handler of ``r2rsim run``: stop the run the way Ctrl-C does, so the dataset
     writer cleans up. A second SIGTERM kills at once (its temporary directory is removed by
-    the next run into the same directory)."""
+    the next run into the same directory).
+
+    Not inside pydantic: pydantic-core builds a model's validator in Rust, calling back into
+    Python, and an exception raised in such a callback makes it panic (pydantic 2.6: exit 1
+    with a Rust message instead of the line saying what was kept). There the signal is sent
+    again a moment later, until it arrives outside."""
+    if _inside_pydantic(frame):
+        timer = threading.Timer(SIGTERM_RETRY_S, os.kill, (os.getpid(), signum))
+        timer.daemon = True
+        timer.start()
+        return
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     raise Terminated()
+
+
+def _inside_pydantic(frame) -> bool:
+    """Whether ``frame`` or one of its callers is pydantic's code."""
+    while frame is not None:
+        if str(frame.f_globals.get("__name__", "")).startswith("pydantic"):
+            return True
+        frame = frame.f_back
+    return False
 
 
 @contextlib.contextmanager

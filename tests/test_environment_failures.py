@@ -211,6 +211,32 @@ def test_sigterm_at_any_moment_of_a_sweep_says_what_was_kept(tmp_path, delay_s):
     assert "kept" in lines[0]
 
 
+def test_the_sigterm_handler_defers_inside_pydantic_only(monkeypatch):
+    """A SIGTERM that arrives while pydantic runs (pydantic-core builds a validator in Rust
+    and calls back into Python: an exception there panicked with pydantic 2.6, exit 1, once
+    in CI when the signal met the schema's import) is sent again a moment later; anywhere
+    else it stops the command at once."""
+    from types import SimpleNamespace
+
+    from r2rsim import cli
+    from r2rsim.errors import Terminated
+
+    started = []
+    monkeypatch.setattr(
+        cli.threading, "Timer", lambda s, f, a: SimpleNamespace(start=lambda: started.append(a))
+    )
+    monkeypatch.setattr(cli.signal, "signal", lambda *a: None)
+    outer = SimpleNamespace(
+        f_globals={"__name__": "pydantic._internal._generate_schema"}, f_back=None
+    )
+    inner = SimpleNamespace(f_globals={"__name__": "r2rsim.schema.line"}, f_back=outer)
+    cli._raise_terminated(signal.SIGTERM, inner)  # deferred: sent again later
+    assert started == [(os.getpid(), signal.SIGTERM)]
+    plain = SimpleNamespace(f_globals={"__name__": "r2rsim.sweep.runner"}, f_back=None)
+    with pytest.raises(Terminated):
+        cli._raise_terminated(signal.SIGTERM, plain)
+
+
 def test_liveness_sends_no_signal_on_windows(monkeypatch):
     asked = []
     monkeypatch.setattr(paths.os, "name", "nt")
