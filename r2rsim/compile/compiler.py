@@ -50,15 +50,13 @@ from .layout import (
     N_SPAN_I,
     N_SPAN_P,
     N_TABLE_I,
+    RECORD_BLOCKS,
     CtrlI,
     CtrlKind,
     CtrlP,
     DriveKind,
-    EventI,
     EventKind,
-    FaultP,
     H,
-    JointP,
     Mode,
     MoverI,
     MoverKind,
@@ -84,32 +82,10 @@ def _names(enum) -> dict[str, int]:
 
 
 #: record families by name: "I"/"P" -> (header slot of the block offset, of the count,
-#: record size, field name -> offset), built once from the layout's enums
-_FAMILIES = {
-    "node": {
-        "I": (H.OFF_NI, H.NN, N_NODE_I, _names(NodeI)),
-        "P": (H.OFF_NP, H.NN, N_NODE_P, _names(NodeP)),
-    },
-    "span": {
-        "I": (H.OFF_SI, H.NS, N_SPAN_I, _names(SpanI)),
-        "P": (H.OFF_SP, H.NS, N_SPAN_P, _names(SpanP)),
-    },
-    "sensor": {
-        "I": (H.OFF_SEI, H.NSE, N_SENSOR_I, _names(SensorI)),
-        "P": (H.OFF_SEP, H.NSE, N_SENSOR_P, _names(SensorP)),
-    },
-    "ctrl": {
-        "I": (H.OFF_CI, H.NC, N_CTRL_I, _names(CtrlI)),
-        "P": (H.OFF_CP, H.NC, N_CTRL_P, _names(CtrlP)),
-    },
-    "mover": {
-        "I": (H.OFF_MI, H.NM, N_MOVER_I, _names(MoverI)),
-        "P": (H.OFF_MP, H.NM, N_MOVER_P, _names(MoverP)),
-    },
-    "joint": {"P": (H.OFF_JP, H.NJ, N_JOINT_P, _names(JointP))},
-    "fault": {"P": (H.OFF_FS, H.NFS, N_FAULT_P, _names(FaultP))},
-    "event": {"I": (H.OFF_EV, H.NEV, N_EVENT_I, _names(EventI))},
-}
+#: record size, field name -> offset), from the layout's one declaration of the blocks
+_FAMILIES: dict[str, dict[str, tuple]] = {}
+for (_family, _array), (_off, _count, _fields) in RECORD_BLOCKS.items():
+    _FAMILIES.setdefault(_family, {})[_array] = (_off, _count, len(_fields), _names(_fields))
 
 
 def _kind_names(enum) -> dict[int, str]:

@@ -426,6 +426,26 @@ def frozen(enum: type[IntEnum]) -> Any:
     return twin(*(int(m) for m in enum))
 
 
+#: the record blocks of ``I`` and ``P``, declared once: (family, "I" or "P") -> (header slot of
+#: the block's offset, header slot of the record count, the record's fields). The kernel's
+#: views (model/base.py) and the compiler's accessors by name are built from it.
+RECORD_BLOCKS = {
+    ("node", "I"): (H.OFF_NI, H.NN, NodeI),
+    ("node", "P"): (H.OFF_NP, H.NN, NodeP),
+    ("span", "I"): (H.OFF_SI, H.NS, SpanI),
+    ("span", "P"): (H.OFF_SP, H.NS, SpanP),
+    ("sensor", "I"): (H.OFF_SEI, H.NSE, SensorI),
+    ("sensor", "P"): (H.OFF_SEP, H.NSE, SensorP),
+    ("ctrl", "I"): (H.OFF_CI, H.NC, CtrlI),
+    ("ctrl", "P"): (H.OFF_CP, H.NC, CtrlP),
+    ("mover", "I"): (H.OFF_MI, H.NM, MoverI),
+    ("mover", "P"): (H.OFF_MP, H.NM, MoverP),
+    ("joint", "P"): (H.OFF_JP, H.NJ, JointP),
+    ("fault", "P"): (H.OFF_FS, H.NFS, FaultP),
+    ("event", "I"): (H.OFF_EV, H.NEV, EventI),
+}
+
+
 #: every enum above by name, as :func:`frozen` twins (what the kernel imports, in model/base.py)
 FROZEN = {
     e.__name__: frozen(e)

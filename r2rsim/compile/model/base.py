@@ -32,22 +32,7 @@ from numba.core.datamodel.models import ArrayModel
 from numba.extending import intrinsic, register_model
 from numba.np.arrayobj import make_array, populate_array
 
-from ..layout import (
-    FROZEN,
-    N_CTRL_I,
-    N_CTRL_P,
-    N_EVENT_I,
-    N_FAULT_P,
-    N_JOINT_P,
-    N_MOVER_I,
-    N_MOVER_P,
-    N_NODE_I,
-    N_NODE_P,
-    N_SENSOR_I,
-    N_SENSOR_P,
-    N_SPAN_I,
-    N_SPAN_P,
-)
+from ..layout import FROZEN, RECORD_BLOCKS
 from ..stamp import kernel_stamp
 
 # the record fields and kinds as plain-int namedtuples: numba reads them as constants with
@@ -235,22 +220,11 @@ def _view(context, builder, aryty, ary, start, n, size=None):
     return _view_codegen(retty.ndim)(context, builder, sig, [ary, start, *dims])
 
 
-#: the record families: (name, array (0: I, 1: P), header slot of the offset, of the count,
-#: fields per record)
+#: the record families by view name (``node_p``): (array, 0 for I or 1 for P, header slot of
+#: the offset, of the count, fields per record), from layout.RECORD_BLOCKS
 RECORDS = {
-    "node_i": (0, H.OFF_NI, H.NN, N_NODE_I),
-    "node_p": (1, H.OFF_NP, H.NN, N_NODE_P),
-    "span_i": (0, H.OFF_SI, H.NS, N_SPAN_I),
-    "span_p": (1, H.OFF_SP, H.NS, N_SPAN_P),
-    "sensor_i": (0, H.OFF_SEI, H.NSE, N_SENSOR_I),
-    "sensor_p": (1, H.OFF_SEP, H.NSE, N_SENSOR_P),
-    "ctrl_i": (0, H.OFF_CI, H.NC, N_CTRL_I),
-    "ctrl_p": (1, H.OFF_CP, H.NC, N_CTRL_P),
-    "mover_i": (0, H.OFF_MI, H.NM, N_MOVER_I),
-    "mover_p": (1, H.OFF_MP, H.NM, N_MOVER_P),
-    "joint_p": (1, H.OFF_JP, H.NJ, N_JOINT_P),
-    "fault_p": (1, H.OFF_FS, H.NFS, N_FAULT_P),
-    "event_i": (0, H.OFF_EV, H.NEV, N_EVENT_I),
+    f"{family}_{array.lower()}": (0 if array == "I" else 1, off, count, len(fields))
+    for (family, array), (off, count, fields) in RECORD_BLOCKS.items()
 }
 
 
