@@ -17,7 +17,19 @@ also gives the accuracy they cost: the largest difference of any true span tensi
 (``state.*.tension_N``) from a reference run of the same seed at rtol 1e-9, against sensor
 A's noise (1.5 N).
 
+With ``--fair`` (issue 40) it measures the calibrated set's base run against a baseline
+that is not at rest: the same line, realistic sensors and run-to-run variability under a
+speed programme that visits the set's three operating conditions (OC1 -> OC2 -> OC3 -> OC1,
+20 s ramps), disturbances off; then each disturbance alone, all of them, and all of them
+with the bearing drags band-limited (``--band-limit``, default 5 Hz). For each: CPU time
+of the whole ``r2rsim run`` and of the solver alone (``simulate`` with its outputs), solver
+steps, RHS and Jacobian evaluations, LU factorisations, the states that limit the step size
+(share of accepted steps whose largest scaled error estimate is that state's), and the
+accuracy: the largest difference of any true span tension from a reference run of the same
+case at rtol 1e-9 (``--no-accuracy`` skips the references).
+
     python benchmarks/bench_disturbances.py
+    python benchmarks/bench_disturbances.py --fair --repeat 3
     python benchmarks/bench_disturbances.py --duration 60 --repeat 1
     python benchmarks/bench_disturbances.py --realistic --repeat 3
     python benchmarks/bench_disturbances.py --realistic --rtol 1e-4 --atol-scale 100
@@ -177,6 +189,155 @@ def realistic(repeat: int, rtol: float | None = None, atol_scale: float | None =
     )
 
 
+#: the calibrated set's operating conditions (scenarios/thesis_realistic/registration.yaml)
+CONDITIONS = {"OC1": (0.5, 130.0), "OC2": (1.0, 160.0), "OC3": (0.75, 145.0)}
+
+
+def _moving_programme(duration: float) -> list[dict]:
+    """OC1, then OC2, OC3 and OC1 again, each reached by a 20 s ramp, at even intervals."""
+    steps = []
+    for j, mode in enumerate(("OC1", "OC2", "OC3", "OC1")):
+        v, T = CONDITIONS[mode]
+        step = {
+            "at": round(j * duration / 4.0, 6),
+            "line_speed": v,
+            "tension": {"registration_loop": T, "unwind_tension": T},
+            "mode": mode,
+        }
+        if j:
+            step["ramp"] = min(20.0, duration / 8.0)
+        steps.append(step)
+    return steps
+
+
+def _fair_cases(base: dict, band_limit: float) -> dict[str, list]:
+    """Disturbance lists by case: none, each alone, all, all with band-limited drags."""
+    dist = base["disturbances"]
+    cases: dict[str, list] = {"baseline (off)": []}
+    for d in dist:
+        cases[f"{d['type']} {d['element']}"] = [d]
+    cases["all"] = dist
+    if band_limit > 0:
+        cases[f"all, drags <= {band_limit:g} Hz"] = [
+            dict(d, band_limit=f"{band_limit} Hz") if d["type"] == "bearing_drag" else d
+            for d in dist
+        ]
+    return cases
+
+
+def _count(stats, key) -> str:
+    """A solver counter, '-' where the backend (or an older r2rsim) reports none."""
+    v = stats.get(key)
+    return "-" if v is None else str(v)
+
+
+def simulate_as_run(path: Path, *, outputs: bool = True, keep: bool = True):
+    """``simulate`` a scenario file as ``r2rsim run`` integrates it (variability and
+    disturbances drawn, the steady start, its events and faults), without the dataset;
+    returns (CPU s of ``simulate``, its result, the compiled line). ``keep=False`` hands the
+    samples to a callback that drops them, as a run's writer takes them."""
+    from r2rsim.run import _prepare, plan_from_file
+
+    plan = plan_from_file(path)
+    prep = _prepare(plan)
+    sc = plan.scenario
+    c0 = time.process_time()
+    res = r2rsim.simulate(
+        prep.cl,
+        sc.duration,
+        sc.record_rate,
+        prep.y0,
+        sc.solver,
+        on_chunk=None if keep else (lambda t, Y, A: None),
+        initial_state_mode=prep.init_mode,
+        outputs=outputs,
+        events=sc.events,
+        faults=prep.faults,
+        rolls=prep.rolls,
+    )
+    return time.process_time() - c0, res, prep.cl
+
+
+def _solver_stats(path: Path, repeat: int):
+    """(median solver CPU s, stats, state names, true span tensions) of ``simulate`` with
+    outputs (:func:`simulate_as_run`)."""
+    runs = [simulate_as_run(path) for _ in range(repeat)]
+    _, res, cl = runs[-1]
+    spans = [res[f"{s}.tension_N"] for s in cl.span_ids]
+    cpu = sorted(r[0] for r in runs)[repeat // 2]
+    return cpu, res.stats, cl.state_names, np.column_stack(spans)
+
+
+def _limits(stats, names, top: int = 3) -> str:
+    lim = stats.get("step_limits")
+    if lim is None or lim.sum() == 0:
+        return "-"
+    order = np.argsort(lim)[::-1][:top]
+    return ", ".join(f"{names[i]} {100 * lim[i] / lim.sum():.0f}%" for i in order if lim[i])
+
+
+def fair(repeat: int, duration: float, band_limit: float, accuracy: bool) -> None:
+    """Issue 40's benchmark: a baseline that is not at rest, per-disturbance costs, solver
+    counters, the states that limit the step size and the accuracy of each case."""
+    base = yaml.safe_load(
+        (ROOT / "scenarios" / "thesis_realistic" / "registration.yaml").read_text()
+    )
+    base["line"] = str(ROOT / "lines" / "registration_realistic.yaml")
+    base["duration"] = duration
+    base["programme"] = _moving_programme(duration)
+    cases = _fair_cases(base, band_limit)
+    rows = {}
+    with tempfile.TemporaryDirectory() as td:
+        tmp = Path(td)
+        paths = {}
+        for j, (label, dist) in enumerate(cases.items()):
+            paths[label] = tmp / f"case{j}.yaml"
+            paths[label].write_text(yaml.safe_dump(dict(base, name=f"case{j}", disturbances=dist)))
+        r2rsim.run_scenario(paths["all"], output=tmp / "warm", overwrite=True)  # compile
+        runs: dict[str, list[float]] = {k: [] for k in cases}
+        for _ in range(repeat):  # alternated, so that machine load hits all cases alike
+            for label, path in paths.items():
+                c0 = time.process_time()
+                r2rsim.run_scenario(path, output=tmp / "out", overwrite=True)
+                runs[label].append(time.process_time() - c0)
+        for label, path in paths.items():
+            cpu, stats, names, T = _solver_stats(path, repeat)
+            err = float("nan")
+            if accuracy:
+                ref = yaml.safe_load(path.read_text())
+                ref["solver"] = {**ref.get("solver", {}), "rtol": 1e-9, "atol_scale": 1e-3}
+                ref_path = tmp / f"ref_{path.name}"
+                ref_path.write_text(yaml.safe_dump(ref))
+                T_ref = _solver_stats(ref_path, 1)[3]
+                n = min(len(T), len(T_ref))
+                err = float(np.max(np.abs(T[:n] - T_ref[:n])))
+            rows[label] = (sorted(runs[label])[repeat // 2], cpu, stats, names, err)
+    b_run, b_cpu = rows["baseline (off)"][:2]
+    print(
+        f"calibrated set base run on a moving programme (OC1->OC2->OC3->OC1, 20 s ramps), "
+        f"{duration:g} s at 100 Hz, realistic sensors and variability; CPU s, median of "
+        f"{repeat}; max |dT|: true span tensions against rtol 1e-9 (sensor A noise 1.5 N)"
+    )
+    print(
+        f"{'case':<28} {'run s':>6} {'x base':>6} {'solver s':>8} {'x base':>6} {'steps':>6} "
+        f"{'RHS':>7} {'Jac':>4} {'LU':>5} {'max|dT| N':>9}  step size limited by"
+    )
+    for label, (run_cpu, cpu, st, names, err) in rows.items():
+        print(
+            f"{label:<28} {run_cpu:6.3f} {run_cpu / b_run:6.2f} {cpu:8.3f} {cpu / b_cpu:6.1f} "
+            f"{st['steps']:6d} {st['nfev']:7d} {st['njev']:4d} {_count(st, 'nlu'):>5} "
+            f"{err:9.4f}  "
+            f"{_limits(st, names)}"
+        )
+    worst = rows["all"][0] / b_run
+    limited = rows.get(f"all, drags <= {band_limit:g} Hz")
+    print(
+        f"bar: whole run with all disturbances <= 2x the moving baseline: "
+        f"{'PASS' if worst <= 2.0 else 'FAIL'} (x{worst:.2f}"
+        + (f"; band-limited x{limited[0] / b_run:.2f})" if limited else ")")
+    )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=120.0)
@@ -189,7 +350,29 @@ def main() -> None:
     )
     ap.add_argument("--rtol", type=float, help="with --realistic: both runs' rtol")
     ap.add_argument("--atol-scale", type=float, help="with --realistic: both runs' atol_scale")
+    ap.add_argument(
+        "--fair",
+        action="store_true",
+        help="issue 40's benchmark: a moving baseline, per-disturbance costs, counters",
+    )
+    ap.add_argument(
+        "--band-limit",
+        type=float,
+        default=5.0,
+        help="with --fair: the drags' band limit [Hz] (0: no band-limited case)",
+    )
+    ap.add_argument(
+        "--no-accuracy", action="store_true", help="with --fair: skip the reference runs"
+    )
     args = ap.parse_args()
+    if args.fair:
+        fair(
+            args.repeat,
+            300.0 if args.duration == 120.0 else args.duration,
+            args.band_limit,
+            not args.no_accuracy,
+        )
+        return
     if args.realistic:
         realistic(args.repeat, args.rtol, args.atol_scale)
         return

@@ -324,6 +324,18 @@ def test_out_of_round_idler_ripples_at_its_rotation_frequency(tmp_path):
             {"type": "bearing_drag", "element": "idler1", "std": "2 N", "bandwidth": 1.0},
             "dimension",
         ),
+        ({**DRAG, "band_limit": "1 Hz"}, "below the bandwidth (2 Hz)"),
+        ({**DRAG, "shape": "table", "band_limit": "5 Hz"}, "of shape sines only"),
+        (
+            {
+                "type": "wound_in_strain",
+                "element": "unwind",
+                "std": 1e-5,
+                "correlation_length": 1.0,
+                "band_limit": "5 Hz",
+            },
+            "bearing_drag disturbance of shape sines only",
+        ),
     ],
 )
 def test_bad_disturbances_are_rejected(tmp_path, dist, message):
@@ -340,3 +352,27 @@ def test_bad_disturbances_are_rejected(tmp_path, dist, message):
         r2rsim.run_scenario(path, output=tmp_path / "out")
     assert message in str(exc.value) and "disturbances[0]" in str(exc.value)
     assert not (tmp_path / "out").exists()
+
+
+def test_band_limit_drops_the_terms_above_it_and_keeps_the_rest(tmp_path):
+    # the same seed draws the same 32 terms; a band limit keeps those at or below it, so a
+    # band-limited run is the full one minus its high-frequency part
+    seeds = range(1, 9)
+    full = _realise(tmp_path, DRAG, seeds)
+    limited = _realise(tmp_path, {**DRAG, "band_limit": "5 Hz"}, seeds)
+    kept_total = 0
+    for f, b in zip(full, limited, strict=True):
+        keep = f.omegas <= 2 * np.pi * 5.0
+        assert 0 < keep.sum() < 32
+        np.testing.assert_array_equal(b.omegas, f.omegas[keep])
+        np.testing.assert_array_equal(b.phases, f.phases[keep])
+        np.testing.assert_array_equal(b.amplitudes, f.amplitudes[keep])
+        # its mean square over a long record is std^2 * kept / 32 (equal-power terms)
+        t = np.arange(0.0, 2000.0, 0.01)
+        assert np.mean(b.value(t) ** 2) == pytest.approx(0.02**2 * keep.sum() / 32, rel=0.03)
+        kept_total += keep.sum()
+    # stratified frequencies: the share of terms below 5 Hz is the share of the truncated
+    # first-order spectrum there, atan(5/2) / atan(10), up to one term per draw
+    assert kept_total / (32 * len(full)) == pytest.approx(
+        np.arctan(2.5) / np.arctan(10), abs=1 / 32
+    )

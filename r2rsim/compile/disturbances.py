@@ -22,6 +22,10 @@ is uniform in ``theta`` on ``[0, atan(CUTOFF)]``; the range is cut into N bins o
 power and ``f_k = f_c·tan(theta_k)`` with ``theta_k`` uniform in bin k, so every term
 carries the same power std²/N. Phases ``phi_k`` are uniform on [0, 2·pi).
 
+* Band limit (``band_limit``, bearing drag only, optional): the terms above it are dropped
+  after the draw, so the terms below are the ones the same seed gives without a limit (the
+  band-limited run is the full run minus its high-frequency part) and the variance falls to
+  std²·(terms kept)/N.
 * Variance: sum a²/2 = std² exactly, so the mean square of every realisation over a long
   record is std² (not only its ensemble average). Over a record shorter than 1/f_c the
   sample std scatters, as for any first-order process.
@@ -205,6 +209,9 @@ def realise_disturbances(scenario, line, seed_sequence) -> list[DisturbanceInsta
                 else 1.0 / (2.0 * math.pi * d.correlation_length)
             )
             a, w, ph = _sines(rng, d.std_si(), f_c)
+            if d.band_limit is not None:  # the same terms, those above the limit dropped
+                keep = w <= 2.0 * math.pi * d.band_limit
+                a, w, ph = a[keep], w[keep], ph[keep]
             out.append(
                 DisturbanceInstance(d.type, d.element, shape, amplitudes=a, omegas=w, phases=ph)
             )

@@ -28,10 +28,12 @@ from .model.movers import mover_lengths, mover_load
 from .model.programme import setpoint
 
 __all__ = [
+    "MODE_OUTPUTS",
     "MODE_RHS",
     "STAMP",
     "evaluate",
     "event_values",
+    "event_values_after_rhs",
     "hermite",
     "jac_values",
     "mover_lengths",
@@ -45,6 +47,8 @@ __all__ = [
 #: ``compile/`` (the integrator in ``solve/radau.py``): ``RUNTIME_MODE[MODE_RHS]`` is an int64,
 #: so numba compiles :func:`evaluate` once for it and Python's calls alike
 MODE_RHS = int(Mode.RHS)
+#: likewise, the outputs mode (the algebraic outputs of recorded samples)
+MODE_OUTPUTS = int(Mode.OUTPUTS)
 
 
 @kernel
@@ -75,7 +79,9 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
         Jacobian (``Mode.JAC``: pattern entries are zeroed then filled; ``Mode.TOUCH``: pattern
         entries are set to 1). Ignored for ``Mode.RHS``.
     mode : int
-        ``Mode.RHS``, ``Mode.JAC`` or ``Mode.TOUCH``.
+        ``Mode.RHS``, ``Mode.JAC``, ``Mode.TOUCH`` or ``Mode.OUTPUTS`` (the outputs into
+        ``aux``, skipping the disturbance sums that only dy/dt needs; ``yd`` is then not
+        dy/dt).
     I, P : ndarray
         The compiled line (layout in :mod:`r2rsim.compile.layout`).
     W, GI, GC, GV : ndarray
@@ -87,7 +93,7 @@ def evaluate(t, y, yd, JJ, mode, I, P, W, GI, GC, GV, aux):
     # counting), and are inlined here
     y_, yd_, JJ_, I_, P_, W_ = borrow(y), borrow(yd), borrow(JJ), borrow(I), borrow(P), borrow(W)
     GI_, GC_, GV_, aux_ = borrow(GI), borrow(GC), borrow(GV), borrow(aux)
-    if mode != Mode.RHS:
+    if mode == Mode.JAC or mode == Mode.TOUCH:
         _start(JJ_, mode, I_, GC_)
     V, A = setpoint(I_, P_, 0, t)
     faults.fault_profiles(t, I_, P_)
@@ -120,6 +126,14 @@ def event_values(t, y, g, I, P, W, GI, GC, GV, yd, JJ):
     event_functions(t, borrow(y), borrow(g), borrow(I), borrow(P), borrow(W))
 
 
+@kernel(inline=False)
+def event_values_after_rhs(t, y, g, I, P, W):
+    """The event functions at (t, y) from the intermediates an RHS evaluation at that same
+    (t, y) has just left in ``W``: what :func:`event_values` returns, without evaluating the
+    right-hand side again (the integrator evaluates dy/dt at every step's end anyway)."""
+    event_functions(t, borrow(y), borrow(g), borrow(I), borrow(P), borrow(W))
+
+
 #: what :func:`rows` evaluates for each row
 ROWS_RHS, ROWS_OUTPUTS, ROWS_EVENTS = 0, 1, 2
 
@@ -131,11 +145,12 @@ def rows(what, T, Y, OUT, I, P, W, GI, GC, GV, yd, JJ):
     (``ROWS_EVENTS``). One function rather than three: every compiled caller of
     :func:`evaluate` optimises the kernel again when it is first compiled."""
     rhs = RUNTIME_MODE[Mode.RHS]
+    out = RUNTIME_MODE[Mode.OUTPUTS]
     for r in range(Y.shape[0]):
         if what == ROWS_RHS:
             evaluate(T[r], Y[r], OUT[r], JJ, rhs, I, P, W, GI, GC, GV, yd[:0])
         elif what == ROWS_OUTPUTS:
-            evaluate(T[r], Y[r], yd, JJ, rhs, I, P, W, GI, GC, GV, OUT[r])
+            evaluate(T[r], Y[r], yd, JJ, out, I, P, W, GI, GC, GV, OUT[r])
         else:
             event_values(T[r], Y[r], OUT[r], I, P, W, GI, GC, GV, yd, JJ)
 

@@ -401,9 +401,12 @@ AUX_JOINT = 2  # leading-edge position (unstretched, from the unwind), span inde
 
 # ---- evaluation modes ----
 class Mode(IntEnum):
-    RHS = 0
-    JAC = 1
-    TOUCH = 2
+    RHS = 0  # dy/dt
+    JAC = 1  # dy/dt and the Jacobian
+    TOUCH = 2  # the Jacobian's pattern
+    # the algebraic outputs: every intermediate they read, without the terms only dy/dt
+    # needs (the bearing-drag and wound-in-strain sums); yd is then not dy/dt
+    OUTPUTS = 3
 
 
 #: the modes as a constant array, for compiled callers: ``evaluate(..., RUNTIME_MODE[Mode.RHS],

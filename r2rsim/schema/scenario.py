@@ -281,6 +281,15 @@ class Disturbance(Strict):
         None,
         description="out_of_round: distance of the axis of rotation from the roller's centre [m]",
     )
+    band_limit: Annotated[Frequency, Field(gt=0)] | None = Field(
+        None,
+        description="bearing_drag with shape sines, optional: drop the terms above this "
+        "frequency [Hz] (at least the bandwidth). The terms below it are those the same seed "
+        "draws without it, so the run is the full one minus its high-frequency part; the "
+        "standard deviation falls to std*sqrt(kept/32). Default none: the spectrum reaches "
+        "10 times the bandwidth. A limit below the web's resonances lets the solver take "
+        "longer steps (docs/model.md, 'Band-limited disturbances')",
+    )
     shape: Literal["sines", "table"] | None = Field(
         None,
         description="bearing_drag and wound_in_strain: 'sines' (default), a smooth sum "
@@ -307,6 +316,17 @@ class Disturbance(Strict):
                 )
         if self.type == "out_of_round" and self.shape is not None:
             raise ValueError("an out_of_round disturbance takes no 'shape'")
+        if self.band_limit is not None:
+            if self.type != "bearing_drag" or self.shape == "table":
+                raise ValueError(
+                    "'band_limit' applies to a bearing_drag disturbance of shape sines only"
+                )
+            assert self.bandwidth is not None  # a bearing_drag needs it (checked above)
+            if self.band_limit < self.bandwidth:
+                raise ValueError(
+                    f"band_limit ({self.band_limit:g} Hz) is below the bandwidth "
+                    f"({self.bandwidth:g} Hz): it would remove most of the declared process"
+                )
         return self
 
     def std_si(self) -> float:

@@ -25,7 +25,15 @@ from numba import njit
 
 # the evaluation mode comes with the kernel (kernels re-exports layout's RUNTIME_MODE), so
 # solve/ imports no record layout
-from ..compile.kernels import MODE_RHS, RUNTIME_MODE, evaluate, event_values, jac_values
+from ..compile.kernels import (
+    MODE_OUTPUTS,
+    MODE_RHS,
+    RUNTIME_MODE,
+    evaluate,
+    event_values,
+    event_values_after_rhs,
+    jac_values,
+)
 from ..compile.stamp import kernel_stamp
 
 # ---- the method --------------------------------------------------------------------------
@@ -343,6 +351,8 @@ def _build_integrate(stamp):
         vals,
         h_init,
         jac_ready,
+        limits,
+        aux_out,
     ):
         """Integrate the compiled line from ``(t0, y0)`` to ``t_end``.
 
@@ -375,6 +385,9 @@ def _build_integrate(stamp):
             boundary where nothing changes) passes the step the last call proposed.
         jac_ready : bool
             ``vals`` holds a recent Jacobian: reuse it (it is evaluated again if Newton fails).
+        limits : ndarray (n,) of int64
+            Incremented, for every accepted step, at the state with the largest scaled error
+            (``|err_i| / scale_i``): the state that limits the step size.
 
         Returns
         -------
@@ -426,8 +439,14 @@ def _build_integrate(stamp):
         evaluate(t, y, f, J1, rhs_mode, I, Pl, W, GI, GC, GV, aux0)
         nfev += 1
         k_out = 0
+        want_aux = aux_out.shape[1] > 0
+        out_mode = RUNTIME_MODE[MODE_OUTPUTS]
         while k_out < tq.shape[0] and tq[k_out] <= t0:
             out[k_out, :] = y
+            if want_aux:
+                evaluate(
+                    tq[k_out], out[k_out], yd, J1, out_mode, I, Pl, W, GI, GC, GV, aux_out[k_out]
+                )
             k_out += 1
         for i in range(n):
             # nan compares false everywhere below: the step control would loop or accept it
@@ -602,6 +621,11 @@ def _build_integrate(stamp):
                     accepted = True
 
             nsteps += 1
+            i_lim = 0
+            for i in range(n):
+                if abs(err[i]) / scale[i] > abs(err[i_lim]) / scale[i_lim]:
+                    i_lim = i
+            limits[i_lim] += 1
             recompute_jac = n_iter > 2 and rate > 1e-3
             factor = min(MAX_FACTOR, safety * _predict(h_abs, h_abs_old, err_norm, err_old))
             if not recompute_jac and factor < 1.2:
@@ -610,6 +634,8 @@ def _build_integrate(stamp):
                 lu_valid = False
             evaluate(t_new, y_new, f_new, J1, rhs_mode, I, Pl, W, GI, GC, GV, aux0)
             nfev += 1
+            if nev:  # from what that evaluation left in W, before a Jacobian overwrites it
+                event_values_after_rhs(t_new, y_new, g_new, I, Pl, W)
             if recompute_jac:
                 jac_values(t_new, y_new, JJ, I, Pl, W, GI, GC, GV, yd, vals)
                 njev += 1
@@ -625,7 +651,6 @@ def _build_integrate(stamp):
             # events: a sign change of an active event function over the step, located by
             # bisection on the collocation polynomial to CVODE's time tolerance
             if nev:
-                event_values(t_new, y_new, g_new, I, Pl, W, GI, GC, GV, yd, J1)
                 if _any_crossed(active, g_start, g_new):
                     tl, tr = t, t_new
                     ttol = 100.0 * EPS * (abs(t_new) + h)
@@ -646,6 +671,11 @@ def _build_integrate(stamp):
                             dirs[m] = 1 if g_r[m] > g_start[m] else -1
                     while k_out < tq.shape[0] and tq[k_out] <= tr:
                         _dense(Q, y, (tq[k_out] - t) / h, out[k_out])
+                        if want_aux:
+                            evaluate(
+                                tq[k_out], out[k_out], yd, J1, out_mode, I, Pl, W, GI, GC, GV,
+                                aux_out[k_out],
+                            )  # fmt: skip
                         k_out += 1
                     return ROOT, tr, k_out, nfev, njev, nlu, nsteps, h_abs
                 for m in range(nev):
@@ -656,6 +686,11 @@ def _build_integrate(stamp):
             # samples covered by this step
             while k_out < tq.shape[0] and tq[k_out] <= t_new:
                 _dense(Q, y, (tq[k_out] - t) / h, out[k_out])
+                if want_aux:
+                    evaluate(
+                        tq[k_out], out[k_out], yd, J1, out_mode, I, Pl, W, GI, GC, GV,
+                        aux_out[k_out],
+                    )  # fmt: skip
                 k_out += 1
 
             Q_prev[:, :] = Q

@@ -60,7 +60,10 @@ class SimulationResult:
         The run ended before its duration (web break, roll empty, solver failure).
     termination_reason, termination_time
     stats : dict
-        ``nfev`` (right-hand-side evaluations), ``njev``, ``restarts``, ``wall_s``.
+        ``nfev`` (right-hand-side evaluations), ``njev``, ``restarts``, ``wall_s``,
+        ``steps``; with the radau5 backend also ``nlu`` (LU factorisations) and
+        ``step_limits`` (per state, the accepted steps whose largest scaled error estimate
+        was that state's).
     initial_state_mode : str
         ``steady`` or ``nominal`` (what was actually used).
     """
@@ -178,6 +181,7 @@ def simulate(
         initial_state_mode = "nominal"
     y0 = np.array(y0, dtype=float)
     backend = make_backend(cl, s)
+    backend.record_outputs = outputs
     dt = 1.0 / record_rate
     n_samples = int(math.floor(duration * record_rate + 1e-9)) + 1
     sample_t = np.arange(n_samples) * dt
@@ -232,10 +236,14 @@ def _run(
     keep = on_chunk is None
     kept_t, kept_y, kept_a = [], [], []
 
-    def emit(t, Y):
+    def emit(t, Y, A=None):
+        # A: the outputs the backend evaluated with the samples (Chunk.aux), else None
         if len(t) == 0:
             return
-        A = cl.outputs(t, Y) if outputs else None
+        if not outputs:
+            A = None
+        elif A is None:
+            A = cl.outputs(t, Y)
         if keep:
             kept_t.append(t.copy())
             kept_y.append(Y.copy())
@@ -265,6 +273,10 @@ def _run(
         "restarts": loop.restarts,
         "wall_s": wall,
         "steps": backend.steps if backend.reports_steps else None,
+        # LU factorisations and, per state, the accepted steps it limited (the largest
+        # scaled error estimate): reported by the compiled Radau IIA, None otherwise
+        "nlu": getattr(backend, "nlu", None),
+        "step_limits": getattr(backend, "step_limits", None),
         "solver": describe_settings(s),
         "n_samples": int(loop.k_next),
         "solver_messages": list(backend.messages)[:20],
@@ -321,6 +333,7 @@ class _EventLoop:
         self.reason: str | None = None
         self.t_term: float | None = None
         self.restarts = 0
+        self.aux: np.ndarray | None = None  # the current chunk's outputs (Chunk.aux)
         self.hot = False
         self.resume = False  # the last chunk ended at a memory boundary only: continue
 
@@ -347,6 +360,10 @@ class _EventLoop:
             self.k_next = _emit_samples(
                 self.emit, self.sample_t, 0, np.array([0.0]), y_start[None, :]
             )
+
+    def _aux(self, rows):
+        """The current chunk's outputs at ``rows`` (None when the backend gave none)."""
+        return None if self.aux is None else self.aux[rows]
 
     def _refresh_mode_flags(self, t, y, flags):
         # after a discrete change the mode events' functions mean something new: re-read
@@ -390,6 +407,7 @@ class _EventLoop:
         k_hi = min(k_end, self.k_next + self.rows_per_chunk)
         tspan = _chunk_times(t, self.sample_t, self.k_next, k_hi, k_end, t_seg_end)
         chunk = self.backend.advance(tspan, self.y, find_events=self.hot, resume=self.resume)
+        self.aux = chunk.aux
         self.resume = False
         self.restarts += 1
         err = chunk.failure
@@ -404,7 +422,7 @@ class _EventLoop:
             )
         if err is not None:
             self.k_next = _emit_samples(
-                self.emit, self.sample_t, self.k_next, chunk.t, chunk.y, k_end
+                self.emit, self.sample_t, self.k_next, chunk.t, chunk.y, k_end, chunk.aux
             )
             self.terminated, self.reason = True, f"solver_failure: {err}"
             self.t_term = float(chunk.t_steps[-1]) if len(chunk.t_steps) else t
@@ -422,7 +440,9 @@ class _EventLoop:
         if len(which):
             return t_ev, y_ev, which, tt, Y
         before = tt < t_ev - 1e-12
-        self.k_next = _emit_samples(self.emit, self.sample_t, self.k_next, tt[before], Y[before])
+        self.k_next = _emit_samples(
+            self.emit, self.sample_t, self.k_next, tt[before], Y[before], None, self._aux(before)
+        )
         if t_ev <= self.t + 1e-12:  # stuck on a root at the start: step past it
             self.hot = False
         self.t, self.y = t_ev, y_ev.copy()
@@ -438,7 +458,9 @@ class _EventLoop:
             else None
         )
         if hit is None:
-            self.k_next = _emit_samples(self.emit, self.sample_t, self.k_next, tt, Y, k_end)
+            self.k_next = _emit_samples(
+                self.emit, self.sample_t, self.k_next, tt, Y, k_end, self.aux
+            )
             self.t, self.y = float(tt[-1]), Y[-1].copy()
             self.resume = k_hi < k_end and not self.hot
             self.hot = False
@@ -463,7 +485,9 @@ class _EventLoop:
         discrete logic act on them."""
         self.hot = True
         before = tt < t_ev - 1e-12
-        self.k_next = _emit_samples(self.emit, self.sample_t, self.k_next, tt[before], Y[before])
+        self.k_next = _emit_samples(
+            self.emit, self.sample_t, self.k_next, tt[before], Y[before], None, self._aux(before)
+        )
         new_flags = self.flags.copy()
         new_flags[which] = ~self.flags[which]
         y_ev, ended = _fire(self.cl, self.logic, self.log, which, new_flags, t_ev, y_ev)
@@ -583,9 +607,9 @@ def _over_budget(
     return None
 
 
-def _emit_samples(emit, sample_t, k_next, tt, Y, k_stop=None) -> int:
-    """Emit the rows of (tt, Y) that fall on the sample grid from index k_next on (and
-    before index k_stop)."""
+def _emit_samples(emit, sample_t, k_next, tt, Y, k_stop=None, A=None) -> int:
+    """Emit the rows of (tt, Y) (and of their outputs A, when the backend evaluated them)
+    that fall on the sample grid from index k_next on (and before index k_stop)."""
     if len(tt) == 0:
         return k_next
     idx = np.searchsorted(sample_t, tt - 1e-9)
@@ -595,6 +619,6 @@ def _emit_samples(emit, sample_t, k_next, tt, Y, k_stop=None) -> int:
         & (idx >= k_next)
     )
     if np.any(ok):
-        emit(tt[ok], Y[ok])
+        emit(tt[ok], Y[ok], None if A is None else A[ok])
         return int(idx[ok][-1]) + 1
     return k_next

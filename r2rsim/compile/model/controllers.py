@@ -77,7 +77,7 @@ def _loop_error(c, t, y, I, P, w):
 def tension_loops(t, y, yd, JJ, mode, I, P, W, GI, GC, GV):
     """Phase 4: tension and dancer PI loops, u = clip(kp·e + ki·x), dx/dt = e + kaw·(u - upi)
     (back-calculation), and the speed trims they add to their elements."""
-    jac = mode != Mode.RHS
+    jac = mode == Mode.JAC or mode == Mode.TOUCH
     maxd = I[H.MAXD]
     w = scratch(I, W)
     qid = quantity_ids(I)
@@ -238,7 +238,7 @@ def _torque_mode(c, k, t, V, A, I, P, w, qid, jac, GI, GC, GV, maxd):
 def torque_commands(t, V, A, y, yd, JJ, mode, I, P, W, GI, GC, GV):
     """Phase 5: the torque commands of speed loops and of torque-mode tension control, then
     open-loop torque set-points (a set-point channel; no state dependence)."""
-    jac = mode != Mode.RHS
+    jac = mode == Mode.JAC or mode == Mode.TOUCH
     maxd = I[H.MAXD]
     w = scratch(I, W)
     qid = quantity_ids(I)

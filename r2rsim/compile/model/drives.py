@@ -28,7 +28,7 @@ def drive_torques(t, y, yd, JJ, mode, I, P, W, GI, GC, GV):
     dτ/dt = (τ_applied - τ)/lag) of every torque drive; the applied torque carries the
     actuator faults (efficiency TEFF, bias, stuck), which the controller does not see (its
     anti-windup knows only the limit). A speed loop's integrator sees the saturation."""
-    jac = mode != Mode.RHS
+    jac = mode == Mode.JAC or mode == Mode.TOUCH
     maxd = I[H.MAXD]
     w = scratch(I, W)
     qid = quantity_ids(I)

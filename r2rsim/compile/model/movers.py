@@ -113,7 +113,7 @@ def mover_load(mover_p, m, kind, q):
 def mover_spans(t, y, yd, JJ, mode, I, P, W, GI, GC, GV):
     """Phase 0 (movers): the lengths of the spans a mover carries and their rates, L(q) and
     dL/dt = dL/dq·q' (a festoon's strands lumped into one span: L0 + n·q)."""
-    jac = mode != Mode.RHS
+    jac = mode == Mode.JAC or mode == Mode.TOUCH
     maxd = I[H.MAXD]
     w = scratch(I, W)
     qid = quantity_ids(I)
@@ -156,7 +156,7 @@ def mover_spans(t, y, yd, JJ, mode, I, P, W, GI, GC, GV):
 def mover_dynamics(t, y, yd, JJ, mode, I, P, W, GI, GC, GV):
     """Phase 2b: the mover's equation of motion (module docstring); the web force and the
     net force without friction are kept for the outputs and the end-stop events."""
-    jac = mode != Mode.RHS
+    jac = mode == Mode.JAC or mode == Mode.TOUCH
     maxd = I[H.MAXD]
     w = scratch(I, W)
     qid = quantity_ids(I)

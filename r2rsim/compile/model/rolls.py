@@ -68,7 +68,7 @@ def eccentric_lengths(t, y, yd, JJ, mode, I, P, W, GI, GC, GV):
     the roller angle th (state ``NodeI.TH``, dth/dt = ω), so L_up += ECC·cos(th) and
     L_dn -= ECC·cos(th - wrap) (physics.md §1.2, non-ideal rollers); the web still leaves the
     roller surface at ω·R."""
-    jac = mode != Mode.RHS
+    jac = mode == Mode.JAC or mode == Mode.TOUCH
     maxd = I[H.MAXD]
     w = scratch(I, W)
     qid = quantity_ids(I)
@@ -102,7 +102,7 @@ def eccentric_lengths(t, y, yd, JJ, mode, I, P, W, GI, GC, GV):
 def roll_geometry(t, y, yd, JJ, mode, I, P, W, GI, GC, GV):
     """Phase 2: radius and inertia of every node, its angular speed state, and the drive
     torques the later phases accumulate set to zero."""
-    jac = mode != Mode.RHS
+    jac = mode == Mode.JAC or mode == Mode.TOUCH
     maxd = I[H.MAXD]
     w = scratch(I, W)
     qid = quantity_ids(I)
@@ -138,7 +138,7 @@ def surface_speeds(t, V, A, y, yd, JJ, mode, I, P, W, GI, GC, GV):
     """Phase 7: surface speeds, ω·R of a node with a speed state, else imposed (the line
     speed V times draw and gain, an offset and slope, and a controller's trim); a draw error
     (``NodeP.REFF``) makes the effective radius R·(1 + REFF)."""
-    jac = mode != Mode.RHS
+    jac = mode == Mode.JAC or mode == Mode.TOUCH
     maxd = I[H.MAXD]
     w = scratch(I, W)
     qid = quantity_ids(I)
@@ -176,7 +176,7 @@ def surface_speeds(t, V, A, y, yd, JJ, mode, I, P, W, GI, GC, GV):
 def torque_balance(t, y, yd, JJ, mode, I, P, W, GI, GC, GV):
     """Phase 9: J(R)·dω/dt = R_e·(T_out - T_in) + τ_m - τ_f (+ torque ripple, bearing drag,
     an eccentric roller's pull) for every node with a speed state (physics.md eq. 1.7)."""
-    jac = mode != Mode.RHS
+    jac = mode == Mode.JAC or mode == Mode.TOUCH
     maxd = I[H.MAXD]
     w = scratch(I, W)
     qid = quantity_ids(I)
@@ -201,7 +201,9 @@ def torque_balance(t, y, yd, JJ, mode, I, P, W, GI, GC, GV):
         num = Re * (Tdn - Tup) + w.torque[k] - tf
         if node_p[k, NodeP.RIPA] != 0.0:
             num += node_p[k, NodeP.RIPA] * math.sin(node_p[k, NodeP.RIPW] * t)
-        if I[H.NTB] > 0:  # random bearing drag torque (a process disturbance)
+        # random bearing drag torque (a process disturbance); it enters dω/dt only, which
+        # no output reads: the outputs of a sample skip its sum of sinusoids
+        if I[H.NTB] > 0 and mode != Mode.OUTPUTS:
             num -= _drag(I, P, w, k, t)
         # eccentric roller: the web's pull on the moving centre, -sum T·dL/dth
         ith = node_i[k, NodeI.TH]
@@ -236,7 +238,7 @@ def roll_lengths(t, y, yd, JJ, mode, I, P, W, GI, GC, GV):
     """Phase 10: a roll's web length through its tangent point, ds/dt = v, and the
     unstretched length paid out or taken up, du/dt = the flux through the roll's node (an
     unwind's web arrives at its wound-in strain)."""
-    jac = mode != Mode.RHS
+    jac = mode == Mode.JAC or mode == Mode.TOUCH
     w = scratch(I, W)
     node_i, node_p = nodes(I, P)
     linear = I[H.MODEL] == 1
@@ -251,7 +253,9 @@ def roll_lengths(t, y, yd, JJ, mode, I, P, W, GI, GC, GV):
         if kind == NodeKind.UNWIND:
             sp = node_i[k, NodeI.SPAN_DN]
             esrc_fwd, desrc = roll_wound_in_strain(node_p, k, w.radius[k])
-            if I[H.NTB] > 0:
+            # the wound-in strain along the web enters du/dt and the first span's de/dt
+            # only, which no output reads: the outputs of a sample skip its sum
+            if I[H.NTB] > 0 and mode != Mode.OUTPUTS:
                 esrc_fwd += table_value(I, P, TableKind.WOUND, k, y[iU])
             # kept for the first span (spans.span_balance): its sum of sinusoids costs as
             # much as the rest of the evaluation

@@ -62,9 +62,10 @@ def _pitch_material(span, rn, sensor_p, j, joint_p):
 
 
 @kernel
-def _pitch_l0(j, rn, P, sensor_p, sensor_i, node_i, w, y):
+def _pitch_l0(j, rn, P, sensor_p, sensor_i, node_i, w, y, jac):
     """Relaxed pitch of pitch sensor j with a law/variation: L0 = q0 + q1·R³ + the sum of
-    cosines in the unwound length u of unwind rn; returns (L0, dL0/dR, dL0/du, state of u)."""
+    cosines in the unwound length u of unwind rn; returns (L0, dL0/dR, dL0/du, state of u).
+    dL0/du (a sum of as many sines) only with ``jac``: the Jacobian alone reads it."""
     R = w.radius[rn]
     q1 = sensor_p[j, SensorP.Q1]
     L0 = sensor_p[j, SensorP.CIN] + q1 * R * R * R
@@ -80,7 +81,8 @@ def _pitch_l0(j, rn, P, sensor_p, sensor_i, node_i, w, y):
             kap = P[ov + 3 * m + 1]
             ph = kap * u + P[ov + 3 * m + 2]
             L0 += a * math.cos(ph)
-            dL0du -= a * kap * math.sin(ph)
+            if jac:
+                dL0du -= a * kap * math.sin(ph)
     return L0, dL0dR, dL0du, iU
 
 
@@ -101,7 +103,7 @@ def _pitch_reading(j, node, g, y, I, P, w, qid, jac, GI, GC, GV, maxd):
             g_axpy(GI, GC, GV, maxd, qid.raw + j, g * L0 / ES, qid.tension + node)
         return
     # L0 = q0 + q1·R³ of the unwind's radius + the printing variation in u
-    L0, dL0dR, dL0du, iU = _pitch_l0(j, rn, P, sensor_p, sensor_i, node_i, w, y)
+    L0, dL0dR, dL0du, iU = _pitch_l0(j, rn, P, sensor_p, sensor_i, node_i, w, y, jac)
     L0 += dl0
     h = g * (w.tension[node] / ES + 1.0)
     w.raw[j] = h * L0 + sensor_p[j, SensorP.OFF]
@@ -172,7 +174,7 @@ def sensor_readings(t, y, yd, JJ, mode, I, P, W, GI, GC, GV):
     """Phase 3: every reading that does not need an imposed speed (encoders on imposed-speed
     nodes are read in :func:`imposed_speed_encoders`, after the speeds), with its fault, and
     what the controllers see (the filter state, or the reading itself)."""
-    jac = mode != Mode.RHS
+    jac = mode == Mode.JAC or mode == Mode.TOUCH
     maxd = I[H.MAXD]
     w = scratch(I, W)
     qid = quantity_ids(I)
@@ -213,7 +215,7 @@ def sensor_readings(t, y, yd, JJ, mode, I, P, W, GI, GC, GV):
 @kernel
 def imposed_speed_encoders(t, y, yd, JJ, mode, I, P, W, GI, GC, GV):
     """Phase 8: encoders on imposed-speed nodes, read once the speeds are known."""
-    jac = mode != Mode.RHS
+    jac = mode == Mode.JAC or mode == Mode.TOUCH
     maxd = I[H.MAXD]
     w = scratch(I, W)
     qid = quantity_ids(I)
@@ -237,7 +239,7 @@ def imposed_speed_encoders(t, y, yd, JJ, mode, I, P, W, GI, GC, GV):
 @kernel
 def sensor_filters(t, y, yd, JJ, mode, I, P, W, GI, GC, GV):
     """Phase 12: first-order sensor filters, dy_f/dt = (raw - y_f)/tau."""
-    jac = mode != Mode.RHS
+    jac = mode == Mode.JAC or mode == Mode.TOUCH
     maxd = I[H.MAXD]
     w = scratch(I, W)
     qid = quantity_ids(I)

@@ -50,7 +50,7 @@ def fixed_lengths(t, y, yd, JJ, mode, I, P, W, GI, GC, GV):
 def span_tensions(t, y, yd, JJ, mode, I, P, W, GI, GC, GV):
     """Phase 1: tension from the strain (slack: geometric strain < 0 carries none). The
     strain carried through the nodes is that of the plain web, T/EA."""
-    jac = mode != Mode.RHS
+    jac = mode == Mode.JAC or mode == Mode.TOUCH
     maxd = I[H.MAXD]
     w = scratch(I, W)
     qid = quantity_ids(I)
@@ -83,7 +83,7 @@ def _upstream_strain(a, y, I, P, node_i, node_p, w, ntb):
 def span_balance(t, y, yd, JJ, mode, I, P, W, GI, GC, GV):
     """Phase 11: mass conservation with the geometric strain as the state,
     de/dt = fac·(q_b - q_a) + g·dL/dt (physics.md eq. 1.4/1.5)."""
-    jac = mode != Mode.RHS
+    jac = mode == Mode.JAC or mode == Mode.TOUCH
     w = scratch(I, W)
     node_i, node_p = nodes(I, P)
     span_i, span_p = spans(I, P)

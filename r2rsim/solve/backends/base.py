@@ -78,6 +78,10 @@ class Chunk(NamedTuple):
     t_steps: np.ndarray
     y_steps: np.ndarray
     root: Root | None
+    aux: np.ndarray | None = None
+    """The algebraic outputs at ``t`` (columns ``CompiledLine.aux_names``), when the backend
+    evaluated them as it wrote the samples (:attr:`SolverBackend.record_outputs`); None:
+    the caller evaluates them."""
 
 
 class Located(NamedTuple):
@@ -127,6 +131,10 @@ class SolverBackend(abc.ABC):
         False); counted against the run's step budget.
     messages : list of str
         The solver's own diagnostic messages, the first few (``stats["solver_messages"]``).
+    record_outputs : bool
+        Set by the caller: the algebraic outputs of the samples are wanted. A backend that
+        can evaluate them as it writes the samples returns them in ``Chunk.aux``; the others
+        leave ``Chunk.aux`` None and the caller evaluates them.
     """
 
     name: ClassVar[str]
@@ -141,6 +149,7 @@ class SolverBackend(abc.ABC):
         self.njev = 0
         self.steps = 0
         self.messages: list[str] = []
+        self.record_outputs = False
 
     @staticmethod
     @abc.abstractmethod

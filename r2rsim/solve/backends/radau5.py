@@ -18,9 +18,9 @@ ARITHMETIC = -1
 
 class Radau5Backend(SolverBackend):
     """r2rsim's compiled Radau IIA (``solver.backend: radau5``): the integration, the dense
-    output at the samples and the location of events all run in one numba kernel, which
-    reports the samples only (``Chunk.t_steps is Chunk.t``: events are located in the kernel,
-    at every step)."""
+    output at the samples, their algebraic outputs (:attr:`record_outputs`) and the location
+    of events all run in one numba kernel, which reports the samples only
+    (``Chunk.t_steps is Chunk.t``: events are located in the kernel, at every step)."""
 
     name = "radau5"
 
@@ -66,13 +66,16 @@ class Radau5Backend(SolverBackend):
         self.vals = np.zeros(len(self.rows))  # Jacobian on the pattern, kept between calls
         self.h_next = 0.0
         self.nlu = 0
+        #: accepted steps limited by each state (the largest scaled error estimate)
+        self.step_limits = np.zeros(n, np.int64)
         self.arithmetic_error = ""
 
-    def _integrate(self, tspan, y0, resume=False):
+    def _integrate(self, tspan, y0, resume=False, outputs=False):
         r = self.radau
         cl = self.cl
         tq = np.ascontiguousarray(tspan, float)
         out = np.empty((len(tq), cl.n_states))
+        aux = np.empty((len(tq), len(cl.aux_names) if outputs else 0))
         warm = resume and self.h_next > 0.0
         try:
             status, t_reached, n_out, nfev, njev, nlu, nsteps, self.h_next = r.integrate(
@@ -96,6 +99,8 @@ class Radau5Backend(SolverBackend):
                 self.vals,
                 self.h_next if warm else 0.0,
                 warm,
+                self.step_limits,
+                aux,
             )
         except ArithmeticError as exc:
             # a division by zero in the compiled code (numba raises as Python does): values
@@ -106,12 +111,12 @@ class Radau5Backend(SolverBackend):
                 f"{type(exc).__name__} in the compiled integrator "
                 f"({exc}): the states left the range of floating point"
             )
-            return ARITHMETIC, float(tq[0]), tq[:0], out[:0]
+            return ARITHMETIC, float(tq[0]), tq[:0], out[:0], None
         self.nfev += nfev
         self.njev += njev
         self.nlu += nlu
         self.steps += nsteps
-        return status, t_reached, tq[:n_out], out[:n_out]
+        return status, t_reached, tq[:n_out], out[:n_out], aux[:n_out] if outputs else None
 
     def advance(self, tspan, y0, find_events=False, resume=False) -> Chunk:
         """Samples at ``tspan``. Events are always located (at every step, in the kernel):
@@ -120,20 +125,20 @@ class Radau5Backend(SolverBackend):
         ``resume``: the previous call ended here and nothing changed since (a memory chunk
         boundary), so its proposed step size and its Jacobian are reused. See
         :meth:`SolverBackend.advance`."""
-        status, t_reached, tt, Y = self._integrate(tspan, y0, resume)
+        status, t_reached, tt, Y, A = self._integrate(tspan, y0, resume, self.record_outputs)
         if status == self.radau.ROOT:
             root = Root(t_reached, self.y_root.copy(), self.dirs.copy())
-            return Chunk(tt, Y, None, tt, Y, root)
+            return Chunk(tt, Y, None, tt, Y, root, A)
         if status == ARITHMETIC:
             return Chunk(tt, Y, self.arithmetic_error, tt, Y, None)
         if status != self.radau.DONE:
-            return Chunk(tt, Y, self.radau.MESSAGES[status], tt, Y, None)
-        return Chunk(tt, Y, None, tt, Y, None)
+            return Chunk(tt, Y, self.radau.MESSAGES[status], tt, Y, None, A)
+        return Chunk(tt, Y, None, tt, Y, None, A)
 
     def locate(self, t0, y0, t1) -> Located | None:
         """Integrate [t0, t1] locating events in the kernel; see
         :meth:`SolverBackend.locate`."""
-        status, t_reached, _, _ = self._integrate(np.array([t0, t1]), y0)
+        status, t_reached, _, _, _ = self._integrate(np.array([t0, t1]), y0)
         if status == self.radau.ROOT:
             return Located(t_reached, self.y_root.copy(), np.nonzero(self.dirs)[0])
         return None
