@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import platform
 import shutil
@@ -107,6 +108,10 @@ VARIABILITY_SCHEMA = pa.schema(
 #: can be a few rows long (they end at every event); one row group each would make the
 #: Parquet footer, which the writer keeps in memory until it closes, grow with run length.
 ROW_GROUP_BYTES = 16 << 20
+#: the samples' codec (docs/dataset.md, "Compression"; benchmarks/bench_codecs.py measures
+#: the others)
+COMPRESSION = "zstd"
+COMPRESSION_LEVEL = 3
 
 __all__ = [
     "DatasetWriter",
@@ -191,7 +196,8 @@ def undefined_as_null(name: str) -> bool:
 
 def _converter(arrow_type: pa.DataType, example, name: str = ""):
     """A function turning one chunk's column (like ``example``) into an Arrow array of
-    ``arrow_type``; chosen once per file, since it runs for every column of every chunk."""
+    ``arrow_type``: the columns :class:`_Collector` does not keep as numpy (Arrow arrays,
+    lists, values of another type than the field's), converted chunk by chunk."""
     if pa.types.is_dictionary(arrow_type):
         return lambda a: pa.array(a, type=pa.string()).dictionary_encode().cast(arrow_type)
     if isinstance(example, pa.Array):
@@ -212,40 +218,171 @@ def _converter(arrow_type: pa.DataType, example, name: str = ""):
     return lambda a: pa.array(a, type=arrow_type, from_pandas=False)
 
 
-def _nonfinite_finder(fields):
-    """A function ``find(t, arrays)`` giving ``(t_s, column)`` of the first sample of a chunk
-    (its Arrow arrays, as written) where a ``true.``, ``state.``, ``act.`` or ``cmd.`` column
-    is not finite, or None; None instead of a function when there is no such column.
+def _bitmap_bytes(n: int) -> int:
+    """Bytes of an Arrow bitmap of ``n`` bits (a bool array's values, a validity buffer)."""
+    return (n + 7) // 8
 
-    The arrays are the float32 ones written, so a value beyond float32's range (3.4e38),
-    stored as inf, counts. A null (a value that is not defined, :func:`undefined_as_null`)
-    does not. A finite chunk costs one concatenation and one ``isfinite`` over all the
-    checked columns."""
-    names = [f.name for f in fields]
-    checked = [
-        i
-        for i, f in enumerate(fields)
-        if f.type == pa.float32() and f.name.startswith(("true.", "state.", "act.", "cmd."))
-    ]
-    if not checked:
+
+#: the most distinct strings a dictionary column holds (its indices are int8)
+_INT8_CODES = 127
+
+
+class _Collector:
+    """One column's chunks of the row group being collected, as numpy arrays where the column
+    allows it, built into one Arrow array per row group (:meth:`finish`).
+
+    An Arrow array per column and chunk costs a few microseconds whatever the chunk's
+    length, and the solver's chunks can be a few rows long (they end at every event); the
+    numpy arrays are copied (the solver may reuse its buffers) and concatenated once. Each
+    chunk's size is counted as the Arrow array it replaces would count it (``nbytes``), so
+    that a row group ends where it did when every chunk was converted to Arrow.
+
+    Parameters
+    ----------
+    field : pyarrow.Field
+        The column as written.
+    example
+        The column of the first chunk (chooses numpy or Arrow).
+    """
+
+    def __init__(self, field: pa.Field, example):
+        self.field = field
+        self.name = field.name
+        t = field.type
+        self.undefined = t == pa.float32() and undefined_as_null(field.name)
+        if isinstance(example, (pa.Array, list)):
+            self.kind = "arrow"
+        elif pa.types.is_dictionary(t) and t == pa.dictionary(pa.int8(), pa.string()):
+            self.kind = "dict"
+        elif t == pa.float32():
+            self.kind = "float32"
+        elif pa.types.is_boolean(t) or pa.types.is_integer(t) or pa.types.is_floating(t):
+            self.kind = "numeric"
+            self.dtype = np.dtype(t.to_pandas_dtype())
+        else:
+            self.kind = "arrow"
+        self.convert = _converter(t, example, field.name)
+        self.chunks: list = []
+        self.masks: list = []  # float32 columns written with nulls: where, per chunk (or None)
+
+    def add(self, a) -> int:
+        """Keep one chunk's column; the bytes its Arrow array would hold (``nbytes``)."""
+        kind = self.kind
+        if kind == "numeric" and isinstance(a, np.ndarray) and a.dtype == self.dtype:
+            x = a.copy()  # the caller's buffer may be reused for the next chunk
+            self.chunks.append(x)
+            return _bitmap_bytes(len(x)) if x.dtype == bool else x.nbytes
+        if kind == "float32":
+            x = np.array(a, dtype=np.float32)  # a copy; float64 beyond 3.4e38 is inf
+            self.chunks.append(x)
+            if not self.undefined:
+                return x.nbytes
+            undefined = ~np.isfinite(x)
+            has = bool(undefined.any())
+            self.masks.append(undefined if has else None)
+            return x.nbytes + (_bitmap_bytes(len(x)) if has else 0)
+        if kind == "dict" and isinstance(a, np.ndarray):
+            coded = _dictionary_codes(a)
+            if coded is not None:
+                self.chunks.append(coded)
+                codes, values = coded
+                return codes.nbytes + pa.array(values, type=pa.string()).nbytes
+        # anything else: an Arrow array per chunk, of the field's type
+        arr = self.convert(a)
+        self.chunks.append(arr)
+        if self.undefined:
+            self.masks.append(None)
+        return arr.nbytes
+
+    def finish(self) -> pa.Array | pa.ChunkedArray:
+        """The row group's column as one Arrow array (its chunks are let go)."""
+        chunks, masks = self.chunks, self.masks
+        self.chunks, self.masks = [], []
+        if any(isinstance(c, pa.Array) for c in chunks):
+            # a chunk that did not fit the numpy path (another dtype, a value that is not
+            # a string): every chunk as Arrow, as the writer did before (rare)
+            return pa.chunked_array(
+                [self._as_arrow(c, masks[i] if masks else None) for i, c in enumerate(chunks)],
+                type=self.field.type,
+            )
+        if self.kind == "dict":
+            return _dictionary_array(chunks)
+        mask = None
+        if any(m is not None for m in masks):
+            mask = np.concatenate(
+                [
+                    np.zeros(len(c), bool) if m is None else m
+                    for c, m in zip(chunks, masks, strict=True)
+                ]
+            )
+        x = chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
+        if mask is not None:
+            return pa.array(x, mask=mask)
+        return pa.array(x) if self.kind == "float32" else pa.array(x, type=self.field.type)
+
+    def _as_arrow(self, c, mask) -> pa.Array:
+        if isinstance(c, pa.Array):
+            return c
+        if self.kind == "dict":
+            return _dictionary_array([c])
+        if mask is not None:
+            return pa.array(c, mask=mask)
+        return pa.array(c, type=self.field.type)
+
+
+def _dictionary_codes(a: np.ndarray) -> tuple[np.ndarray, list[str]] | None:
+    """A string column's chunk as int8 codes into its distinct values, in the order they
+    first occur (as Arrow's ``dictionary_encode`` orders them); None when a value is not a
+    string (None, a number) or there are more than 127: Arrow converts those, and raises
+    where it did before."""
+    values = a.tolist()
+    first = dict.fromkeys(values)
+    if len(first) > _INT8_CODES or not all(type(v) is str for v in first):
         return None
+    lookup = {v: i for i, v in enumerate(first)}
+    codes = np.fromiter(map(lookup.__getitem__, values), dtype=np.int8, count=len(values))
+    return codes, list(first)
 
-    def find(t, arrays):
-        joined = pa.concat_arrays([arrays[i] for i in checked])
-        flat = joined.to_numpy(zero_copy_only=False)  # nulls as NaN
-        bad = ~np.isfinite(flat)
-        if not bad.any():
-            return None
-        if joined.null_count:
-            bad &= ~joined.is_null().to_numpy(zero_copy_only=False)
-        bad = bad.reshape(len(checked), -1)
-        rows = bad.any(axis=0)
-        if not rows.any():
-            return None
-        r = int(np.argmax(rows))
-        return float(np.asarray(t)[r]), names[checked[int(np.argmax(bad[:, r]))]]
 
-    return find
+def _dictionary_array(
+    chunks: list[tuple[np.ndarray, list[str]]],
+) -> pa.DictionaryArray | pa.ChunkedArray:
+    """The chunks' codes as one dictionary array, its dictionary the distinct strings in the
+    order they first occur in the row group (what ``unify_dictionaries`` of the chunks'
+    own dictionaries gave)."""
+    merged: dict[str, int] = {}
+    parts = []
+    for codes, values in chunks:
+        remap = np.array([merged.setdefault(v, len(merged)) for v in values], dtype=np.int8)
+        parts.append(remap[codes] if len(remap) else codes)
+    if len(merged) > _INT8_CODES:  # too many for int8: unify_dictionaries raises, as it did
+        return pa.chunked_array([_dictionary_array([c]) for c in chunks])
+    codes = parts[0] if len(parts) == 1 else np.concatenate(parts)
+    return pa.DictionaryArray.from_arrays(pa.array(codes), pa.array(list(merged), pa.string()))
+
+
+def _nonfinite_column(c) -> int | None:
+    """The first row of one chunk's column (float32 as written: numpy, or an Arrow array)
+    whose value is not finite; a null does not count."""
+    if isinstance(c, np.ndarray):
+        # one pass: a float64 sum of float32 values cannot overflow, so it is finite
+        # exactly when every value is
+        with np.errstate(invalid="ignore"):  # inf - inf: nan, found below
+            total = c.sum(dtype=np.float64)
+        if math.isfinite(total):
+            return None
+        return int(np.argmax(~np.isfinite(c)))
+    flat = c.to_numpy(zero_copy_only=False)  # nulls as NaN
+    bad = ~np.isfinite(flat)
+    if c.null_count:
+        bad &= ~c.is_null().to_numpy(zero_copy_only=False)
+    return int(np.argmax(bad)) if bad.any() else None
+
+
+def _checked(field: pa.Field) -> bool:
+    """Whether a column must be finite in a run that ended well (:func:`undefined_as_null`:
+    a value that is not defined there is written as null, and never counts)."""
+    return field.type == pa.float32() and field.name.startswith(("true.", "state.", "act.", "cmd."))
 
 
 class DatasetWriter:
@@ -295,9 +432,11 @@ class DatasetWriter:
         self.metadata = {k: str(v) for k, v in metadata.items()}
         self.tmp = self.output.parent / f".{self.output.name}.tmp-{os.getpid()}"
         self._writer: pq.ParquetWriter | None = None
-        self._schema = None
-        self._converters: list = []
-        self._pending: list[pa.Table] = []  # chunks of the row group being collected
+        self._schema: pa.Schema | None = None
+        # the columns of the row group being collected, and its size as Arrow counts it
+        self._columns: list[_Collector] = []
+        self._checked: list[int] = []  # the columns that must be finite (_checked)
+        self._pending_rows = 0
         self._pending_bytes = 0
         self._trash: Path | None = None  # the dataset being replaced, during the swap
         self._committed = False
@@ -326,61 +465,97 @@ class DatasetWriter:
 
     def write_chunk(self, columns: dict[str, np.ndarray | pa.Array]) -> None:
         """Append one chunk of samples (same columns in the same order every time; a column
-        given as an Arrow array keeps its type)."""
+        given as an Arrow array keeps its type).
+
+        The chunk is kept (numpy arrays, copied; float columns already as float32) until
+        the row group it belongs to holds :data:`ROW_GROUP_BYTES`, and then written as one
+        Arrow table. Its values that are not finite are looked for now, so that
+        :attr:`first_nonfinite` holds the earliest one seen so far.
+        """
         if self._writer is None:
-            fields = []
-            for name, arr in columns.items():
-                if name in ("k",):
-                    fields.append(pa.field(name, pa.int64()))
-                elif name == "t_s":
-                    fields.append(pa.field(name, pa.float64()))
-                elif isinstance(arr, pa.Array):
-                    fields.append(pa.field(name, arr.type))
-                elif isinstance(arr, list):
-                    fields.append(pa.field(name, pa.list_(pa.string())))
-                elif arr.dtype.kind in "iu":
-                    fields.append(pa.field(name, pa.from_numpy_dtype(arr.dtype)))
-                elif arr.dtype == bool:
-                    fields.append(pa.field(name, pa.bool_()))
-                elif arr.dtype.kind in "OU":
-                    fields.append(pa.field(name, pa.dictionary(pa.int8(), pa.string())))
-                else:
-                    fields.append(pa.field(name, pa.float32()))
-            meta = {k.encode(): v.encode() for k, v in self.metadata.items()}
-            self._schema = pa.schema(fields, metadata=meta)
-            float_cols = [f.name for f in fields if f.type in (pa.float32(), pa.float64())]
-            self._converters = [
-                (f.name, _converter(f.type, columns[f.name], f.name)) for f in fields
-            ]
-            self._find_nonfinite = _nonfinite_finder(fields)
-            self._writer = pq.ParquetWriter(
-                self._samples,
-                self._schema,
-                compression="zstd",
-                compression_level=3,
-                use_dictionary=[f.name for f in fields if pa.types.is_dictionary(f.type)],
-                use_byte_stream_split=float_cols,
-                write_statistics=True,
-            )
+            self._open(columns)
+        n = len(columns["t_s"])
+        size = 0
         with np.errstate(over="ignore"):  # beyond float32's range is inf, as Arrow casts
-            arrays = [convert(columns[name]) for name, convert in self._converters]
-        if self.first_nonfinite is None and self._find_nonfinite is not None:
+            for col in self._columns:
+                size += col.add(columns[col.name])
+        if self.first_nonfinite is None and self._checked:
             # chunks come in time order: the first one found is the earliest
-            self.first_nonfinite = self._find_nonfinite(columns["t_s"], arrays)
-        table = pa.Table.from_arrays(arrays, schema=self._schema)
-        self._pending.append(table)
-        self._pending_bytes += table.nbytes
+            self.first_nonfinite = self._find_nonfinite(columns["t_s"])
+        self._pending_rows += n
+        self._pending_bytes += size
         if self._pending_bytes >= ROW_GROUP_BYTES:
             self._flush_row_group()
-        self.n_rows += len(columns["t_s"])
+        self.n_rows += n
+
+    def _open(self, columns: dict) -> None:
+        """Choose the schema from the first chunk and open the samples file."""
+        fields = []
+        for name, arr in columns.items():
+            if name in ("k",):
+                fields.append(pa.field(name, pa.int64()))
+            elif name == "t_s":
+                fields.append(pa.field(name, pa.float64()))
+            elif isinstance(arr, pa.Array):
+                fields.append(pa.field(name, arr.type))
+            elif isinstance(arr, list):
+                fields.append(pa.field(name, pa.list_(pa.string())))
+            elif arr.dtype.kind in "iu":
+                fields.append(pa.field(name, pa.from_numpy_dtype(arr.dtype)))
+            elif arr.dtype == bool:
+                fields.append(pa.field(name, pa.bool_()))
+            elif arr.dtype.kind in "OU":
+                fields.append(pa.field(name, pa.dictionary(pa.int8(), pa.string())))
+            else:
+                fields.append(pa.field(name, pa.float32()))
+        meta = {k.encode(): v.encode() for k, v in self.metadata.items()}
+        self._schema = pa.schema(fields, metadata=meta)
+        float_cols = [f.name for f in fields if f.type in (pa.float32(), pa.float64())]
+        self._columns = [_Collector(f, columns[f.name]) for f in fields]
+        # a column written with nulls for its undefined values has no other non-finite one
+        self._checked = [
+            i
+            for i, c in enumerate(self._columns)
+            if _checked(c.field) and not (c.undefined and c.kind == "float32")
+        ]
+        self._writer = pq.ParquetWriter(
+            self._samples,
+            self._schema,
+            compression=COMPRESSION,
+            compression_level=COMPRESSION_LEVEL,
+            use_dictionary=[f.name for f in fields if pa.types.is_dictionary(f.type)],
+            use_byte_stream_split=float_cols,
+            write_statistics=True,
+        )
+
+    def _find_nonfinite(self, t) -> tuple[float, str] | None:
+        """``(t_s, column)`` of the first sample of the chunk just added where a checked
+        column is not finite as written (float32: beyond 3.4e38 is inf; a null does not
+        count), the first such column on a tie; None if there is none."""
+        best: tuple[int, str] | None = None
+        for i in self._checked:
+            col = self._columns[i]
+            r = _nonfinite_column(col.chunks[-1])
+            if r is not None and (best is None or r < best[0]):
+                best = (r, col.name)
+        if best is None:
+            return None
+        return float(np.asarray(t)[best[0]]), best[1]
 
     def _flush_row_group(self) -> None:
-        """Write the collected chunks as one row group."""
-        if self._pending:
+        """Write the collected chunks as one row group: one Arrow array per column."""
+        if self._pending_rows:  # chunks without rows make no row group (Parquet refuses one)
             assert self._writer is not None  # opened by the first chunk
-            table = pa.concat_tables(self._pending).unify_dictionaries()
+            # column by column, each column's chunks let go as it is built: memory stays
+            # within the row group and one column more
+            arrays = [c.finish() for c in self._columns]
+            table = pa.Table.from_arrays(arrays, schema=self._schema)
+            if any(isinstance(a, pa.ChunkedArray) for a in arrays):
+                table = table.unify_dictionaries()  # chunks converted one by one (rare)
             self._writer.write_table(table, row_group_size=table.num_rows)
-        self._pending, self._pending_bytes = [], 0
+        for col in self._columns:  # what is left: chunks without rows
+            col.chunks, col.masks = [], []
+        self._pending_rows, self._pending_bytes = 0, 0
 
     def write_table(self, name: str, table: pa.Table) -> None:
         """Write ``<name>.parquet``, one of the layout's tables
@@ -490,7 +665,8 @@ class DatasetWriter:
                 self._writer.close()
         except Exception:  # noqa: BLE001 - cleaning up after a failure
             pass
-        self._pending = []
+        for col in self._columns:
+            col.chunks, col.masks = [], []
         if not self._committed:
             try:
                 self._restore()
