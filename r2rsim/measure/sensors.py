@@ -189,8 +189,12 @@ class MeasurementModel:
                 if f.type == "sensor.noise":  # drawn at every tick: the stream stays aligned
                     vals += eff * rng.standard_normal(nf)
                 elif f.type == "sensor.spike":
-                    hit = rng.random(nf) < f.rate / ch["rate"]
-                    sign = np.where(rng.random(nf) < 0.5, -1.0, 1.0)
+                    # a tick's two draws (hit, sign) side by side, so that the stream is
+                    # consumed tick by tick whatever the chunks (hit for a whole chunk and
+                    # then sign moved the draws with the chunk boundaries)
+                    u = rng.random((nf, 2))
+                    hit = u[:, 0] < f.rate / ch["rate"]
+                    sign = np.where(u[:, 1] < 0.5, -1.0, 1.0)
                     vals += np.where(hit & on, sign * eff, 0.0)
                 elif f.type == "sensor.quantization":
                     quant = np.where(on, np.maximum(quant, eff), quant)
