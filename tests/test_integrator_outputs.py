@@ -141,7 +141,7 @@ def test_cvode_reports_no_step_limits_and_still_records_outputs():
     assert np.all(res.outputs[:, tension] > 100.0)  # quickstart's webs run taut
 
 
-def _lines_with_every_disturbance(tmp_path):
+def _lines_with_every_disturbance():
     """Compiled lines whose disturbances include every kind (the calibrated set's base run
     has all three; the test bed's variant has drags and an eccentric drive)."""
     out = []
@@ -152,12 +152,12 @@ def _lines_with_every_disturbance(tmp_path):
     return out
 
 
-def test_outputs_mode_skips_only_what_no_output_reads(tmp_path):
+def test_outputs_mode_skips_only_what_no_output_reads():
     # Mode.OUTPUTS leaves out the bearing-drag and wound-in-strain sums (dy/dt's only); the
     # outputs must be those of a full right-hand-side evaluation, to the bit
     rng = np.random.default_rng(5)
     rhs, outputs = (kernels.RUNTIME_MODE[m] for m in (kernels.MODE_RHS, kernels.MODE_OUTPUTS))
-    for cl in _lines_with_every_disturbance(tmp_path):
+    for cl in _lines_with_every_disturbance():
         n, na = cl.n_states, len(cl.aux_names)
         y0 = r2rsim.nominal_state(cl)
         yd = np.zeros(n)
