@@ -76,32 +76,54 @@ def _compile_notice(bar, quiet: bool):
     return on_stderr
 
 
-#: seconds after which a SIGTERM that arrived inside pydantic is delivered again
-SIGTERM_RETRY_S = 0.02
+#: seconds after which a stop signal that arrived where it must not interrupt is sent again
+STOP_RETRY_S = 0.02
+
+#: modules whose code a stop signal must not interrupt (the handler sends it again a moment
+#: later, until it arrives outside them):
+#:
+#: - pydantic: pydantic-core builds a model's validator in Rust, calling back into Python,
+#:   and an exception raised in such a callback makes it panic (pydantic 2.6: exit 1 with a
+#:   Rust message instead of the line saying what was kept);
+#: - multiprocessing and concurrent.futures.process: a sweep's worker process is started by
+#:   writing its start-up data down a pipe after the process exists; stopped in between, the
+#:   new worker reads a closed pipe and prints a traceback (``EOFError``), and a worker not yet
+#:   entered in the pool's table is not stopped with the others.
+UNINTERRUPTIBLE_MODULES = ("pydantic", "multiprocessing", "concurrent.futures.process")
 
 
-def _raise_terminated(signum, frame):
-    """SIGTERM handler of ``r2rsim run``: stop the run the way Ctrl-C does, so the dataset
-    writer cleans up. A second SIGTERM kills at once (its temporary directory is removed by
-    the next run into the same directory).
-
-    Not inside pydantic: pydantic-core builds a model's validator in Rust, calling back into
-    Python, and an exception raised in such a callback makes it panic (pydantic 2.6: exit 1
-    with a Rust message instead of the line saying what was kept). There the signal is sent
-    again a moment later, until it arrives outside."""
-    if _inside_pydantic(frame):
-        timer = threading.Timer(SIGTERM_RETRY_S, os.kill, (os.getpid(), signum))
+def _stop_handler(signum, frame, stop: type[BaseException], after) -> None:
+    """Raise ``stop`` (the command then stops, cleans up and says what it kept), unless the
+    signal arrived inside :data:`UNINTERRUPTIBLE_MODULES`: then it is sent again
+    :data:`STOP_RETRY_S` later. ``after`` is the signal's handler from then on."""
+    if _inside_uninterruptible(frame):
+        timer = threading.Timer(STOP_RETRY_S, os.kill, (os.getpid(), signum))
         timer.daemon = True
         timer.start()
         return
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    raise Terminated()
+    signal.signal(signum, after)
+    raise stop()
 
 
-def _inside_pydantic(frame) -> bool:
-    """Whether ``frame`` or one of its callers is pydantic's code."""
+def _raise_terminated(signum, frame):
+    """SIGTERM handler of the commands: stop the way Ctrl-C does, so the dataset writer cleans
+    up. A second SIGTERM kills at once (its temporary directory is removed by the next run
+    into the same directory)."""
+    _stop_handler(signum, frame, Terminated, signal.SIG_DFL)
+
+
+def _raise_interrupted(signum, frame):
+    """SIGINT (Ctrl-C) handler of the commands: Python's own (``KeyboardInterrupt``), except
+    that it waits to be outside :data:`UNINTERRUPTIBLE_MODULES`. A second Ctrl-C is Python's
+    own handler's."""
+    _stop_handler(signum, frame, KeyboardInterrupt, signal.default_int_handler)
+
+
+def _inside_uninterruptible(frame) -> bool:
+    """Whether ``frame`` or one of its callers is code of :data:`UNINTERRUPTIBLE_MODULES`."""
     while frame is not None:
-        if str(frame.f_globals.get("__name__", "")).startswith("pydantic"):
+        module = str(frame.f_globals.get("__name__", ""))
+        if any(module == m or module.startswith(m + ".") for m in UNINTERRUPTIBLE_MODULES):
             return True
         frame = frame.f_back
     return False
@@ -109,18 +131,23 @@ def _inside_pydantic(frame) -> bool:
 
 @contextlib.contextmanager
 def _sigterm_as_interrupt():
-    """Within the block, SIGTERM stops the work the way Ctrl-C does (:func:`_raise_terminated`);
-    the previous handler is put back after it. Outside the main thread (embedded use) SIGTERM
-    is left alone."""
+    """Within the block, SIGTERM stops the work the way Ctrl-C does (:func:`_raise_terminated`)
+    and neither of them interrupts the code of :data:`UNINTERRUPTIBLE_MODULES`; the previous
+    handlers are put back after it. Outside the main thread (embedded use) the signals are
+    left alone, and so is a SIGINT that is ignored (a background job's) or handled by the
+    caller."""
     try:
-        previous = signal.signal(signal.SIGTERM, _raise_terminated)
+        previous = {signal.SIGTERM: signal.signal(signal.SIGTERM, _raise_terminated)}
     except ValueError:
         yield
         return
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        previous[signal.SIGINT] = signal.signal(signal.SIGINT, _raise_interrupted)
     try:
         yield
     finally:  # None: a handler not set from Python, i.e. the default
-        signal.signal(signal.SIGTERM, previous if previous is not None else signal.SIG_DFL)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler if handler is not None else signal.SIG_DFL)
 
 
 def _cmd_run(args) -> int:
@@ -1290,6 +1317,19 @@ def main(argv: list[str] | None = None) -> int:
             return _main(args)
         except KeyboardInterrupt as exc:  # Terminated too
             return _stopped(getattr(args, "command", None), exc)
+        finally:
+            _forget_interrupts_caught_in_eval()
+
+
+def _forget_interrupts_caught_in_eval() -> None:
+    """Keep the exit status ours after an interrupt the command caught.
+
+    CPython (3.11) marks a KeyboardInterrupt that leaves code run by ``exec``/``eval`` of a
+    string (numba, dataclasses and namedtuple generate code that way) as unhandled, even when
+    a caller catches it; under ``python -m r2rsim.cli`` the interpreter then kills itself with
+    SIGINT as it exits (status -2 where 130 or 143 was returned). Each evaluation of a string
+    clears that mark first, so evaluating one more clears it."""
+    eval("None")
 
 
 def _main(args) -> int:

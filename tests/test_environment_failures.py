@@ -211,30 +211,123 @@ def test_sigterm_at_any_moment_of_a_sweep_says_what_was_kept(tmp_path, delay_s):
     assert "kept" in lines[0]
 
 
-def test_the_sigterm_handler_defers_inside_pydantic_only(monkeypatch):
-    """A SIGTERM that arrives while pydantic runs (pydantic-core builds a validator in Rust
-    and calls back into Python: an exception there panicked with pydantic 2.6, exit 1, once
-    in CI when the signal met the schema's import) is sent again a moment later; anywhere
-    else it stops the command at once."""
+@pytest.mark.parametrize(
+    "module, deferred",
+    [
+        ("pydantic._internal._generate_schema", True),
+        ("multiprocessing.popen_spawn_posix", True),
+        ("concurrent.futures.process", True),
+        ("concurrent.futures._base", False),  # waiting for results: stops at once
+        ("multiprocessingx", False),
+        ("r2rsim.sweep._execute", False),
+    ],
+)
+@pytest.mark.parametrize("signum, stop", [(signal.SIGTERM, "Terminated"), (signal.SIGINT, "KI")])
+def test_the_stop_handlers_defer_inside_uninterruptible_code_only(
+    monkeypatch, module, deferred, signum, stop
+):
+    """A stop signal that arrives while pydantic runs (pydantic-core builds a validator in
+    Rust and calls back into Python: an exception there panicked with pydantic 2.6, exit 1,
+    once in CI when the signal met the schema's import) or while a worker process is being
+    started (its start-up data half-sent: the worker printed an EOFError traceback, once in
+    CI) is sent again a moment later; anywhere else it stops the command at once."""
     from types import SimpleNamespace
 
     from r2rsim import cli
     from r2rsim.errors import Terminated
 
-    started = []
+    started, installed = [], []
     monkeypatch.setattr(
         cli.threading, "Timer", lambda s, f, a: SimpleNamespace(start=lambda: started.append(a))
     )
-    monkeypatch.setattr(cli.signal, "signal", lambda *a: None)
-    outer = SimpleNamespace(
-        f_globals={"__name__": "pydantic._internal._generate_schema"}, f_back=None
-    )
+    monkeypatch.setattr(cli.signal, "signal", lambda *a: installed.append(a))
+    handler = cli._raise_terminated if signum == signal.SIGTERM else cli._raise_interrupted
+    outer = SimpleNamespace(f_globals={"__name__": module}, f_back=None)
     inner = SimpleNamespace(f_globals={"__name__": "r2rsim.schema.line"}, f_back=outer)
-    cli._raise_terminated(signal.SIGTERM, inner)  # deferred: sent again later
-    assert started == [(os.getpid(), signal.SIGTERM)]
-    plain = SimpleNamespace(f_globals={"__name__": "r2rsim.sweep.runner"}, f_back=None)
-    with pytest.raises(Terminated):
-        cli._raise_terminated(signal.SIGTERM, plain)
+    if deferred:
+        handler(signum, inner)
+        assert started == [(os.getpid(), signum)] and installed == []
+    else:
+        with pytest.raises(KeyboardInterrupt) as exc:
+            handler(signum, inner)
+        assert isinstance(exc.value, Terminated) == (stop == "Terminated")
+        assert started == [] and len(installed) == 1  # the next one: the default's
+
+
+#: a script run as ``python -m stopper <how> <r2rsim arguments>``: it stops the command at a
+#: chosen moment, as a signal from outside would
+STOPPER = """
+import os, signal, sys, time
+from multiprocessing import util
+from r2rsim import cli
+
+
+def main():
+    how, argv = sys.argv[1], sys.argv[2:]
+    spawn, workers = util.spawnv_passfds, []
+
+    def spawn_then_stop(path, args, passfds):
+        pid = spawn(path, args, passfds)
+        if any("spawn_main" in os.fsdecode(a) for a in args) and not workers:
+            workers.append(pid)
+            if how == "ctrl-c":  # the terminal signals the whole group, the new worker too
+                time.sleep(1.0)  # it has started and waits for its start-up data
+                os.killpg(0, signal.SIGINT)
+            else:
+                os.kill(os.getpid(), getattr(signal, how))
+            time.sleep(0.2)  # the handler runs here, the start-up data not yet sent
+        return pid
+
+    util.spawnv_passfds = spawn_then_stop
+    if how == "exec":  # an interrupt raised inside exec'd code, and caught
+        cli._run_command = lambda args: exec("raise KeyboardInterrupt")
+    sys.exit(cli.main(argv))
+
+
+if __name__ == "__main__":
+    main()
+"""
+
+
+def _stopped_command(tmp_path, how, *argv):
+    (tmp_path / "stopper.py").write_text(STOPPER)
+    proc = subprocess.run(
+        [sys.executable, "-m", "stopper", how, *argv],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        start_new_session=True,  # os.killpg(0, ...) reaches this command and its workers only
+    )
+    return proc.returncode, [ln for ln in proc.stderr.splitlines() if ln.strip()]
+
+
+@pytest.mark.parametrize(
+    "how, code, said",
+    [
+        ("SIGTERM", 143, "terminated (SIGTERM)"),
+        ("SIGINT", 130, "interrupted"),
+        ("ctrl-c", 130, "interrupted"),
+    ],
+)
+def test_a_stop_while_a_worker_starts_says_one_line(tmp_path, how, code, said):
+    """Stopped between a worker's start and the sending of its start-up data, the sweep
+    finishes starting it, stops it and says one line; a worker interrupted as it starts
+    (Ctrl-C reaches the whole group) prints nothing. Before, the worker printed an EOFError
+    or KeyboardInterrupt traceback."""
+    rc, lines = _stopped_command(
+        tmp_path, how, "sweep", str(SWEEP), "-o", str(tmp_path / "ds"), "-q", "--workers", "2"
+    )
+    assert rc == code and len(lines) == 1 and lines[0].startswith(said), (rc, lines)
+
+
+def test_an_interrupt_caught_inside_exec_keeps_the_exit_status(tmp_path):
+    """CPython 3.11 marks a KeyboardInterrupt leaving exec'd code as unhandled even when it
+    is caught, and under ``python -m`` then dies of SIGINT at exit (status -2, seen once in
+    every few Ctrl-Cs of a starting sweep); the command's own status is kept."""
+    rc, lines = _stopped_command(tmp_path, "exec", "run", str(QUICKSTART), "-o", "x")
+    assert rc == 130 and lines == ["interrupted; no dataset written"], (rc, lines)
+    assert not (tmp_path / "x").exists()
 
 
 def test_liveness_sends_no_signal_on_windows(monkeypatch):

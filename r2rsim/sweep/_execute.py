@@ -154,8 +154,11 @@ PARENT_POLL_S = 0.5
 
 
 def _worker_init(parent: int) -> None:
-    # the parent decides what an interrupt does (it stops the workers)
+    # the parent decides what an interrupt does (it stops the workers). SIGINT was blocked
+    # until now (_worker_start): one that came meanwhile is dropped here
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     # end without the collector's passes over numba's objects at shutdown (~0.3 s of each
     # worker's exit, which the sweep waits for); its runs are committed by then
     atexit.register(gc.freeze)
@@ -211,13 +214,14 @@ def _died(spec, attempts: dict) -> dict | None:
 
 
 def _pool(workers: int):
-    import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
+
+    from ._worker_start import worker_context
 
     with _one_thread_each():
         return ProcessPoolExecutor(
             workers,
-            mp_context=multiprocessing.get_context("spawn"),
+            mp_context=worker_context(),
             initializer=_worker_init,
             initargs=(os.getpid(),),
         )
