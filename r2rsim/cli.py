@@ -13,6 +13,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from pathlib import Path
 
 from ._version import __version__
@@ -78,6 +79,9 @@ def _compile_notice(bar, quiet: bool):
 
 #: seconds after which a stop signal that arrived where it must not interrupt is sent again
 STOP_RETRY_S = 0.02
+#: seconds after which a stop signal that keeps arriving there interrupts all the same (that
+#: code is short where r2rsim runs it; this bounds the wait should it ever block)
+STOP_DEFER_MAX_S = 2.0
 
 #: modules whose code a stop signal must not interrupt (the handler sends it again a moment
 #: later, until it arrives outside them):
@@ -92,15 +96,23 @@ STOP_RETRY_S = 0.02
 UNINTERRUPTIBLE_MODULES = ("pydantic", "multiprocessing", "concurrent.futures.process")
 
 
+#: when each stop signal was first deferred (:func:`_stop_handler`), by signal number
+_deferred_since: dict[int, float] = {}
+
+
 def _stop_handler(signum, frame, stop: type[BaseException], after) -> None:
     """Raise ``stop`` (the command then stops, cleans up and says what it kept), unless the
     signal arrived inside :data:`UNINTERRUPTIBLE_MODULES`: then it is sent again
-    :data:`STOP_RETRY_S` later. ``after`` is the signal's handler from then on."""
+    :data:`STOP_RETRY_S` later, for at most :data:`STOP_DEFER_MAX_S`. ``after`` is the
+    signal's handler from then on."""
+    now = time.monotonic()
     if _inside_uninterruptible(frame):
-        timer = threading.Timer(STOP_RETRY_S, os.kill, (os.getpid(), signum))
-        timer.daemon = True
-        timer.start()
-        return
+        if now - _deferred_since.setdefault(signum, now) < STOP_DEFER_MAX_S:
+            timer = threading.Timer(STOP_RETRY_S, os.kill, (os.getpid(), signum))
+            timer.daemon = True
+            timer.start()
+            return
+    _deferred_since.pop(signum, None)
     signal.signal(signum, after)
     raise stop()
 
@@ -141,6 +153,7 @@ def _sigterm_as_interrupt():
     except ValueError:
         yield
         return
+    _deferred_since.clear()  # a deferral left over from an earlier command is not this one's
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         previous[signal.SIGINT] = signal.signal(signal.SIGINT, _raise_interrupted)
     try:

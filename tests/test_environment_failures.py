@@ -241,6 +241,7 @@ def test_the_stop_handlers_defer_inside_uninterruptible_code_only(
         cli.threading, "Timer", lambda s, f, a: SimpleNamespace(start=lambda: started.append(a))
     )
     monkeypatch.setattr(cli.signal, "signal", lambda *a: installed.append(a))
+    monkeypatch.setattr(cli, "_deferred_since", {})
     handler = cli._raise_terminated if signum == signal.SIGTERM else cli._raise_interrupted
     outer = SimpleNamespace(f_globals={"__name__": module}, f_back=None)
     inner = SimpleNamespace(f_globals={"__name__": "r2rsim.schema.line"}, f_back=outer)
@@ -252,6 +253,31 @@ def test_the_stop_handlers_defer_inside_uninterruptible_code_only(
             handler(signum, inner)
         assert isinstance(exc.value, Terminated) == (stop == "Terminated")
         assert started == [] and len(installed) == 1  # the next one: the default's
+
+
+def test_a_stop_is_deferred_for_a_bounded_time(monkeypatch):
+    """Stuck inside uninterruptible code, a stop signal interrupts after STOP_DEFER_MAX_S."""
+    from types import SimpleNamespace
+
+    from r2rsim import cli
+
+    clock = [100.0]
+    started = []
+    monkeypatch.setattr(cli, "time", SimpleNamespace(monotonic=lambda: clock[0]))
+    monkeypatch.setattr(
+        cli.threading, "Timer", lambda s, f, a: SimpleNamespace(start=lambda: started.append(a))
+    )
+    monkeypatch.setattr(cli.signal, "signal", lambda *a: None)
+    monkeypatch.setattr(cli, "_deferred_since", {})
+    inside = SimpleNamespace(f_globals={"__name__": "multiprocessing.connection"}, f_back=None)
+    cli._raise_interrupted(signal.SIGINT, inside)
+    clock[0] += cli.STOP_DEFER_MAX_S * 0.9
+    cli._raise_interrupted(signal.SIGINT, inside)
+    assert len(started) == 2  # sent again twice
+    clock[0] += cli.STOP_DEFER_MAX_S * 0.2
+    with pytest.raises(KeyboardInterrupt):
+        cli._raise_interrupted(signal.SIGINT, inside)
+    assert len(started) == 2 and cli._deferred_since == {}
 
 
 #: a script run as ``python -m stopper <how> <r2rsim arguments>``: it stops the command at a
