@@ -208,7 +208,9 @@ def test_sigterm_at_any_moment_of_a_sweep_says_what_was_kept(tmp_path, delay_s):
     assert proc.returncode == 143, (proc.returncode, err)
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("terminated (SIGTERM)"), err
-    assert "kept" in lines[0]
+    # what was kept, or (stopped while its arguments were still being read: a loaded machine
+    # at 0.15 s) that nothing was written
+    assert "kept" in lines[0] or lines[0] == "terminated (SIGTERM); nothing written", err
 
 
 @pytest.mark.parametrize(
