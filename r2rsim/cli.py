@@ -142,7 +142,7 @@ def _inside_uninterruptible(frame) -> bool:
 
 
 @contextlib.contextmanager
-def _sigterm_as_interrupt():
+def _stop_signals_as_interrupts():
     """Within the block, SIGTERM stops the work the way Ctrl-C does (:func:`_raise_terminated`)
     and neither of them interrupts the code of :data:`UNINTERRUPTIBLE_MODULES`; the previous
     handlers are put back after it. Outside the main thread (embedded use) the signals are
@@ -186,7 +186,7 @@ def _cmd_run(args) -> int:
             bar.refresh()
 
     try:
-        with _sigterm_as_interrupt(), notify_compiling(_compile_notice(bar, args.quiet)):
+        with _stop_signals_as_interrupts(), notify_compiling(_compile_notice(bar, args.quiet)):
             summary = run_scenario(
                 args.scenario,
                 output=args.output,
@@ -236,7 +236,7 @@ def _cmd_sweep(args) -> int:
     try:
         from .sweep import run_sweep
 
-        with _sigterm_as_interrupt():
+        with _stop_signals_as_interrupts():
             summary = run_sweep(
                 args.sweep,
                 output=args.output,
@@ -1322,7 +1322,7 @@ def main(argv: list[str] | None = None) -> int:
     From its first line SIGTERM stops a command the way Ctrl-C does, so every stop ends with
     one line on stderr saying what was kept (exit 143 and 130)."""
     args = None
-    with _sigterm_as_interrupt():
+    with _stop_signals_as_interrupts():
         try:
             args = build_parser().parse_args(argv)
             if argv is None and args.command in ("run", "sweep"):
