@@ -5,6 +5,7 @@ uses end to end (validated, compiled, simulated)."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from types import SimpleNamespace
 from typing import Annotated, Any, Literal
 
@@ -393,3 +394,106 @@ def test_a_mover_kind_must_say_its_geometry():
     with pytest.raises(ValueError, match="mover kind and needs mover_kind, coordinate_unit"):
         register(HalfMover())
     assert "toy_roller" not in kinds.kind_names()
+
+
+# ---- kinds registered in a sweep's process reach its worker processes -------------------------
+TOY_SCENARIO = """\
+name: toy
+line: toy.yaml
+duration: 1 s
+record_rate: 50 Hz
+seed: 1
+initial: {state: steady}
+programme:
+  - {at: 0 s, line_speed: 1 m/s}
+"""
+
+TOY_SWEEP = """\
+name: toy_sweep
+scenario: toy_scenario.yaml
+axes:
+  - {name: speed, path: 'programme[0].line_speed', values: [1 m/s, 2 m/s]}
+seeds: 1
+"""
+
+
+def _toy_sweep(tmp_path) -> Path:
+    (tmp_path / "toy.yaml").write_text(TOY_LINE)
+    (tmp_path / "toy_scenario.yaml").write_text(TOY_SCENARIO)
+    (tmp_path / "toy_sweep.yaml").write_text(TOY_SWEEP)
+    return tmp_path / "toy_sweep.yaml"
+
+
+def test_added_kinds_are_the_ones_registered_from_outside(toy_kind):
+    assert kinds.added_kinds() == (toy_kind,)
+    idler = kind_named("idler")
+    register(idler, replace=True)  # the package's own object again: nothing added
+    assert kinds.added_kinds() == (toy_kind,)
+    unregister("toy_roller")
+    assert kinds.added_kinds() == ()
+    register(toy_kind)  # the fixture unregisters it
+
+
+@pytest.mark.parametrize(
+    "executor", [{"workers": 2}, {"workers": 1, "scheduler": "local"}], ids=["local", "dask"]
+)
+def test_a_sweeps_workers_know_the_kinds_registered_in_its_process(tmp_path, toy_kind, executor):
+    """A worker process imports r2rsim afresh: the kinds registered in the sweep's process
+    are sent to it. Before, every run failed there (unknown type 'toy_roller')."""
+    from r2rsim.dataset.validate import validate_dataset
+    from r2rsim.sweep import run_sweep
+
+    sweep = _toy_sweep(tmp_path)
+    in_workers = run_sweep(sweep, tmp_path / "workers", **executor)
+    here = run_sweep(sweep, tmp_path / "here", workers=0)
+    assert (in_workers.done, in_workers.failed, in_workers.ok) == (2, 0, True), in_workers
+    assert here.ok
+    assert validate_dataset(tmp_path / "workers") == []
+    files = sorted(f for f in (tmp_path / "here" / "samples").rglob("*") if f.is_file())
+    assert len(files) == 2
+    for f in files:
+        there = tmp_path / "workers" / f.relative_to(tmp_path / "here")
+        assert there.read_bytes() == f.read_bytes()
+
+
+def test_kinds_the_workers_cannot_load_stop_the_sweep_with_one_message(tmp_path):
+    """Kind classes the workers cannot import (here: their module is gone; in practice a
+    notebook's or a script's `if __name__ == "__main__":` block) stop the sweep with one
+    message saying what to do, rather than failing every run."""
+    import importlib
+    import sys
+
+    from r2rsim.sweep import run_sweep
+    from r2rsim.sweep._execute import WorkerSetupError
+
+    (tmp_path / "gone_kinds.py").write_text(
+        "from test_element_kinds import ToyRoller, ToyRollerKind\n\n\n"
+        "class GoneKind(ToyRollerKind):\n    pass\n"
+    )
+    sys.path.insert(0, str(tmp_path))
+    try:
+        gone = importlib.import_module("gone_kinds")
+        register(gone.GoneKind())
+        (tmp_path / "gone_kinds.py").unlink()
+        with pytest.raises(WorkerSetupError, match="cannot load the element kinds registered"):
+            run_sweep(_toy_sweep(tmp_path), tmp_path / "ds", workers=1)
+    finally:
+        sys.path.remove(str(tmp_path))
+        sys.modules.pop("gone_kinds", None)
+        unregister("toy_roller")
+    assert not (tmp_path / "ds" / "manifest.json").exists()
+
+
+def test_kinds_that_cannot_be_pickled_are_refused_before_the_workers_start():
+    from r2rsim.sweep._execute import kinds_for_workers
+
+    class LocalKind(ToyRollerKind):  # a class inside a function: not picklable
+        pass
+
+    register(LocalKind())
+    try:
+        with pytest.raises(InputError, match=r"\('toy_roller'\) cannot be sent to the sweep"):
+            kinds_for_workers()
+    finally:
+        unregister("toy_roller")
+    assert kinds_for_workers() == b""

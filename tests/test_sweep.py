@@ -1395,7 +1395,7 @@ class _FakeClient:
     def __init__(self, outcomes, status="running"):
         self.outcomes, self.status = outcomes, status
 
-    def submit(self, fn, spec, work, key, pure):
+    def submit(self, fn, spec, work, kinds, key, pure):
         return _FakeFuture(key, self.outcomes[spec.run_id])
 
 

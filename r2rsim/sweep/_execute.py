@@ -11,6 +11,7 @@ from __future__ import annotations
 import atexit
 import contextlib
 import errno
+import functools
 import gc
 import os
 import signal
@@ -61,7 +62,70 @@ def environment_error(exc: BaseException | None) -> OSError | None:
     return None
 
 
-def run_one(spec, work: str) -> dict:
+class WorkerSetupError(R2RError):
+    """A worker process cannot run any of the sweep's runs: the sweep stops (its finished
+    runs kept) instead of recording every run as failed."""
+
+
+def kinds_for_workers() -> bytes:
+    """The element kinds :func:`~r2rsim.schema.kinds.register` added in this process,
+    pickled for the worker processes (they import r2rsim afresh and would not know them);
+    empty when there are none.
+
+    Raises
+    ------
+    InputError
+        If a kind cannot be pickled (a class defined inside a function).
+    """
+    import pickle
+
+    from ..schema.kinds import added_kinds
+
+    kinds = added_kinds()
+    if not kinds:
+        return b""
+    try:
+        return pickle.dumps(kinds)
+    except (pickle.PicklingError, AttributeError, TypeError) as exc:
+        names = ", ".join(repr(k.name) for k in kinds)
+        raise InputError(
+            f"the element kinds registered in this process ({names}) cannot be sent to the "
+            f"sweep's worker processes ({type(exc).__name__}: {exc}): define each kind's "
+            f"classes at the top level of a module, or run the sweep in this process "
+            f"(workers=0)"
+        ) from None
+
+
+#: the pickled kinds this worker has registered (:func:`_register_kinds`)
+_kinds_registered = b""
+
+
+def _register_kinds(kinds: bytes) -> None:
+    """Register in this worker the kinds the sweep's process registered
+    (:func:`kinds_for_workers`), once per worker."""
+    global _kinds_registered
+    if not kinds or kinds == _kinds_registered:
+        return
+    import pickle
+
+    from ..schema.kinds import register
+
+    try:
+        loaded = pickle.loads(kinds)
+    except Exception as exc:  # noqa: BLE001 - whatever the unpickling raises, said once
+        raise WorkerSetupError(
+            f"a worker process cannot load the element kinds registered in the sweep's "
+            f"process ({type(exc).__name__}: {exc}): define each kind's classes at the top "
+            f"level of a module the workers can import (not under `if __name__ == "
+            f'"__main__":`, not in a notebook), or run the sweep in this process '
+            f"(workers=0). The finished runs are kept"
+        ) from None
+    for kind in loaded:
+        register(kind, replace=True)
+    _kinds_registered = kinds
+
+
+def run_one(spec, work: str, kinds: bytes = b"") -> dict:
     """Run one sweep run into ``<work>/<run_id>/`` (in a worker).
 
     A run that raises is recorded as failed in ``<work>/<run_id>.failed.json`` and reported;
@@ -70,7 +134,10 @@ def run_one(spec, work: str) -> dict:
     its finished runs kept. Returns a small record: ``run_id``, ``status`` (done or
     failed), ``reason``, ``simulated_s``, ``solver_s`` (the simulation's wall time, numba
     compilation excluded), ``wall_s`` (the whole run in the worker) and ``has_data``.
+    ``kinds``: :func:`kinds_for_workers` of the sweep's process (a :class:`WorkerSetupError`
+    when they cannot be loaded here).
     """
+    _register_kinds(kinds)
     from ..run import RunPlan, execute
     from ..schema.loader import build_scenario
     from ._store import failed_reason, finished, run_columns, write_failure
@@ -254,7 +321,7 @@ def run_processes(specs, work: str, on_result, workers: int, task=None) -> None:
     from concurrent.futures import FIRST_COMPLETED, wait
     from concurrent.futures.process import BrokenProcessPool
 
-    task = task or run_one
+    task = task or functools.partial(run_one, kinds=kinds_for_workers())
     queue = list(reversed(specs))
     suspects: list = []  # in flight when a pool broke: each runs alone next
     attempts: dict[str, int] = {}
@@ -355,6 +422,7 @@ def run_dask(specs, work: str, on_result, scheduler: str, workers: int) -> None:
     import logging
 
     _distributed()
+    kinds = kinds_for_workers()
     from dask import config as dask_config
     from distributed import Client, LocalCluster, as_completed
 
@@ -394,6 +462,7 @@ def run_dask(specs, work: str, on_result, scheduler: str, workers: int) -> None:
                 work,
                 on_result,
                 max(2 * workers, 2 * len(client.nthreads() or {0: 1})),
+                kinds,
             )
         finally:
             client.close()
@@ -430,10 +499,13 @@ def _scheduler_lost(exc: BaseException) -> bool:
     ).__name__ in ("CommClosedError", "FutureCancelledError")
 
 
-def _dask_loop(client, as_completed, specs, work, on_result, window: int) -> None:
+def _dask_loop(
+    client, as_completed, specs, work, on_result, window: int, kinds: bytes = b""
+) -> None:
     """At most ``window`` runs on the cluster at a time, their results as they come. A lost
     scheduler stops the sweep (it waited for ever; the runs in flight were recorded as
-    failed), and the finished runs are kept."""
+    failed), and the finished runs are kept; so does a :class:`WorkerSetupError`. ``kinds``:
+    :func:`kinds_for_workers`."""
     queue = list(reversed(specs))
     pending: dict[str, RunSpec] = {}  # future key -> its run
     ac = as_completed()
@@ -445,7 +517,7 @@ def _dask_loop(client, as_completed, specs, work, on_result, window: int) -> Non
     def submit():
         while queue and len(pending) < window:
             spec = queue.pop()
-            f = client.submit(run_one, spec, work, key=f"r2rsim-{spec.run_id}", pure=False)
+            f = client.submit(run_one, spec, work, kinds, key=f"r2rsim-{spec.run_id}", pure=False)
             pending[f.key] = spec
             ac.add(f)
 
@@ -463,6 +535,8 @@ def _dask_loop(client, as_completed, specs, work, on_result, window: int) -> Non
             except Exception as exc:  # noqa: BLE001 - KilledWorker and the like: recorded
                 if _scheduler_lost(exc):
                     raise lost from None
+                if isinstance(exc, WorkerSetupError):
+                    raise exc from None
                 env = environment_error(exc)
                 if env is not None:  # a full or read-only disk: the sweep stops
                     raise env from None

@@ -53,6 +53,7 @@ __all__ = [
     "ElementKind",
     "Family",
     "RecordWriter",
+    "added_kinds",
     "all_kinds",
     "element_union",
     "kind_named",
@@ -64,6 +65,8 @@ __all__ = [
 ]
 
 _KINDS: dict[str, ElementKind] = {}
+#: the kinds this package's modules define, as found (:func:`_discover`)
+_FOUND: dict[str, ElementKind] = {}
 
 
 def all_kinds() -> tuple[ElementKind, ...]:
@@ -98,6 +101,13 @@ def kind_of(element: Any) -> ElementKind:
 def kinds_in_family(family: Family) -> tuple[ElementKind, ...]:
     """The kinds of one family (``"roll"``, ``"roller"`` or ``"mover"``), in order."""
     return tuple(k for k in all_kinds() if k.family == family)
+
+
+def added_kinds() -> tuple[ElementKind, ...]:
+    """The kinds :func:`register` added or replaced (the registry holds them, not the
+    package's modules), in order: what a process that imports r2rsim afresh (a sweep's
+    worker) must be given to read the same lines."""
+    return tuple(k for k in all_kinds() if _FOUND.get(k.name) is not k)
 
 
 def element_union() -> Any:
@@ -179,6 +189,7 @@ def _discover() -> None:
             continue
         module = importlib.import_module(f"{__name__}.{info.name}")
         _add(module.KIND, replace=False)
+        _FOUND[module.KIND.name] = module.KIND
 
 
 _discover()
