@@ -484,16 +484,20 @@ def test_kinds_the_workers_cannot_load_stop_the_sweep_with_one_message(tmp_path)
     assert not (tmp_path / "ds" / "manifest.json").exists()
 
 
-def test_kinds_that_cannot_be_pickled_are_refused_before_the_workers_start():
+def test_kinds_that_cannot_be_pickled_are_refused_before_anything_is_written(tmp_path):
+    from r2rsim.sweep import run_sweep
     from r2rsim.sweep._execute import kinds_for_workers
 
     class LocalKind(ToyRollerKind):  # a class inside a function: not picklable
         pass
 
     register(LocalKind())
+    sweep = _toy_sweep(tmp_path)
     try:
         with pytest.raises(InputError, match=r"\('toy_roller'\) cannot be sent to the sweep"):
-            kinds_for_workers()
+            run_sweep(sweep, tmp_path / "ds", workers=1)
+        assert not (tmp_path / "ds").exists()
+        assert run_sweep(sweep, tmp_path / "here", workers=0).ok  # in this process: fine
     finally:
         unregister("toy_roller")
     assert kinds_for_workers() == b""

@@ -236,6 +236,9 @@ def run_sweep(
     check_writable(out, inside_out=True)  # a full or read-only disk: before any work
     if scheduler is not None and todo:
         _execute.check_scheduler(scheduler)  # before anything is written
+    # the element kinds registered here, for the workers (refused now if they cannot go)
+    in_workers = bool(todo) and (scheduler is not None or workers > 0)
+    kinds = _execute.kinds_for_workers() if in_workers else b""
     store.begin()
     try:
         for spec in todo:
@@ -259,11 +262,13 @@ def run_sweep(
                 "; the changed sweep file applied)" if store.mode == "reopen" else ")"
             )
         elif scheduler is not None:
-            _execute.run_dask(todo, work, on_result, scheduler, min(workers, len(todo)))
+            _execute.run_dask(
+                todo, work, on_result, scheduler, min(workers, len(todo)), kinds=kinds
+            )
         elif workers == 0:
             _execute.run_serial(todo, work, on_result)
         else:
-            _execute.run_processes(todo, work, on_result, min(workers, len(todo)))
+            _execute.run_processes(todo, work, on_result, min(workers, len(todo)), kinds=kinds)
         store.finalise(outcomes)
         summary.complete = True
     finally:

@@ -309,19 +309,19 @@ def _workers_start() -> bool:
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-def run_processes(specs, work: str, on_result, workers: int, task=None) -> None:
+def run_processes(specs, work: str, on_result, workers: int, task=None, kinds: bytes = b"") -> None:
     """The runs on ``workers`` local processes (spawned, one BLAS thread each).
 
     When a worker dies (killed, out of memory), the pool breaks and every run in flight is
     lost, with no telling whose worker died. Those runs are then suspects: each runs again
     alone, so a death is charged to the run that caused it (``MAX_ATTEMPTS`` deaths and it
     is recorded as failed), never to the runs beside it. ``task`` stands in for
-    :func:`run_one` (tests).
+    :func:`run_one` (tests); ``kinds``: :func:`kinds_for_workers`.
     """
     from concurrent.futures import FIRST_COMPLETED, wait
     from concurrent.futures.process import BrokenProcessPool
 
-    task = task or functools.partial(run_one, kinds=kinds_for_workers())
+    task = task or functools.partial(run_one, kinds=kinds)
     queue = list(reversed(specs))
     suspects: list = []  # in flight when a pool broke: each runs alone next
     attempts: dict[str, int] = {}
@@ -415,14 +415,14 @@ def _connect(scheduler: str):
         ) from None
 
 
-def run_dask(specs, work: str, on_result, scheduler: str, workers: int) -> None:
+def run_dask(specs, work: str, on_result, scheduler: str, workers: int, kinds: bytes = b"") -> None:
     """The runs on a Dask cluster: ``scheduler`` is an address (``tcp://host:8786``) or
     ``local`` to start a :class:`distributed.LocalCluster` of ``workers`` processes. The
-    output directory must be on a file system every worker sees."""
+    output directory must be on a file system every worker sees. ``kinds``:
+    :func:`kinds_for_workers`."""
     import logging
 
     _distributed()
-    kinds = kinds_for_workers()
     from dask import config as dask_config
     from distributed import Client, LocalCluster, as_completed
 
